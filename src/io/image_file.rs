@@ -1,0 +1,146 @@
+//! Images on disk (SPEC §5): linear values, no sRGB curve either way.
+//!
+//! - `.exr`: float32 linear RGB, values as rendered (no clamp).
+//! - `.png`: 8-bit stores `round(255 clamp(C, 0, 1))`, 16-bit `round(65535 clamp(C, 0, 1))`,
+//!   rounding half away from zero.
+//!
+//! Reading returns `value / (2^bits - 1)` for integer files and the stored value for float
+//! files; an image with alpha is composited over a background colour, `a C + (1 - a) b`.
+
+use std::io::{Seek, Write};
+use std::path::Path;
+
+use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
+
+use crate::error::{Error, Result};
+use crate::io::write_atomically;
+use crate::raster::Image;
+
+/// Bits per channel of an integer image file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BitDepth {
+    /// 8 bits per channel.
+    #[default]
+    Eight,
+    /// 16 bits per channel.
+    Sixteen,
+}
+
+/// An image file format, from the file's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageKind {
+    /// OpenEXR, float32 linear RGB.
+    Exr,
+    /// PNG, 8 or 16 bits.
+    Png,
+}
+
+impl ImageKind {
+    /// The format for `path`'s extension (case-insensitive), or an error naming it.
+    pub fn from_path(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("exr") => Ok(ImageKind::Exr),
+            Some("png") => Ok(ImageKind::Png),
+            _ => Err(Error::Usage(format!(
+                "{}: unsupported image extension (use .png or .exr)",
+                path.display()
+            ))),
+        }
+    }
+}
+
+/// `round(max · clamp(c, 0, 1))`, rounding half away from zero; NaN stores 0.
+#[must_use]
+pub fn quantize(c: f32, max: u16) -> u16 {
+    let v = f64::from(c).clamp(0.0, 1.0) * f64::from(max);
+    if v.is_nan() { 0 } else { v.round() as u16 }
+}
+
+/// Encodes `image` in `kind` to a seekable writer.
+pub fn encode_image<W: Write + Seek>(
+    image: &Image,
+    kind: ImageKind,
+    depth: BitDepth,
+    out: &mut W,
+) -> image::ImageResult<()> {
+    let (w, h) = (image.width, image.height);
+    match (kind, depth) {
+        (ImageKind::Exr, _) => {
+            let buf: ImageBuffer<Rgb<f32>, Vec<f32>> =
+                ImageBuffer::from_raw(w, h, image.pixels.clone())
+                    .expect("image size matches its pixels");
+            buf.write_to(out, ImageFormat::OpenExr)
+        }
+        (ImageKind::Png, BitDepth::Eight) => {
+            let data = image
+                .pixels
+                .iter()
+                .map(|&c| quantize(c, 255) as u8)
+                .collect();
+            let buf: ImageBuffer<Rgb<u8>, Vec<u8>> =
+                ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
+            buf.write_to(out, ImageFormat::Png)
+        }
+        (ImageKind::Png, BitDepth::Sixteen) => {
+            let data = image.pixels.iter().map(|&c| quantize(c, 65535)).collect();
+            let buf: ImageBuffer<Rgb<u16>, Vec<u16>> =
+                ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
+            buf.write_to(out, ImageFormat::Png)
+        }
+    }
+}
+
+/// Writes `image` to `path` (format from the extension), atomically.
+pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
+    let kind = ImageKind::from_path(path)?;
+    write_atomically(path, |w| {
+        encode_image(image, kind, depth, w).map_err(std::io::Error::other)
+    })
+}
+
+/// Reads an image file as linear RGB, compositing any alpha over `background`.
+pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
+    let origin = path.display().to_string();
+    ImageKind::from_path(path)?;
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, "cannot read image", e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, "cannot read image", e))?;
+    let decoded = reader
+        .decode()
+        .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
+    Ok(to_linear_rgb(&decoded, background))
+}
+
+/// Converts a decoded image to linear RGB f32 (integers divided by `2^bits - 1`), alpha
+/// composited over `background`.
+#[must_use]
+pub fn to_linear_rgb(decoded: &DynamicImage, background: [f32; 3]) -> Image {
+    let (w, h) = (decoded.width(), decoded.height());
+    let rgba: Vec<[f32; 4]> = match decoded {
+        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => {
+            decoded.to_rgba32f().pixels().map(|p| p.0).collect()
+        }
+        // 8-bit values v become 257 v exactly, so v/255 = 257 v/65535.
+        _ => decoded
+            .to_rgba16()
+            .pixels()
+            .map(|p| p.0.map(|v| (f64::from(v) / 65535.0) as f32))
+            .collect(),
+    };
+    let mut pixels = Vec::with_capacity(3 * rgba.len());
+    for [r, g, b, a] in rgba {
+        for (c, bg) in [r, g, b].into_iter().zip(background) {
+            pixels.push(if a == 1.0 { c } else { a * c + (1.0 - a) * bg });
+        }
+    }
+    Image {
+        width: w,
+        height: h,
+        pixels,
+    }
+}

@@ -1,0 +1,40 @@
+//! splat4d: dynamic scenes as 4D Gaussian kernels over (x, y, z, t), rendered and fitted on
+//! the CPU. The math is fixed by `SPEC.md` (shared with independent implementations).
+//!
+//! The forward renderer is four stages, each a function from plain struct-of-arrays data
+//! to plain data, run by a [`RenderContext`] that owns the buffers:
+//!
+//! 1. [`slice`]: each 4D kernel at time τ → a 3D Gaussian and its amplitude (SPEC §2), with
+//!    temporal culling;
+//! 2. [`project`]: EWA projection through a pinhole [`Camera`] → a screen ellipse (SPEC §4);
+//! 3. [`tiles`]: ellipses → kernel lists per 16×16 tile, in kernel order;
+//! 4. [`raster`]: the additive sum per pixel, no sorting (SPEC §5).
+//!
+//! [`reference`] is the slow f64 twin that every fast stage is tested against.
+//!
+//! ```
+//! use splat4d::{Camera, Kernel, RenderOptions, Scene, render};
+//! let blob = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0, 1.0, 1.0]);
+//! let scene = Scene::from_kernels(&[blob], [0.0; 3], "<example>").unwrap();
+//! let camera = Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 64, 48).unwrap();
+//! let image = render(&scene, &camera, 0.0, &RenderOptions::default()).unwrap();
+//! assert!(image.pixel(32, 24)[0] > 0.9);
+//! ```
+
+pub mod camera;
+pub mod error;
+pub mod io;
+pub mod project;
+pub mod raster;
+pub mod reference;
+pub mod render;
+pub mod scene;
+pub mod slice;
+pub mod synthetic;
+pub mod tiles;
+
+pub use camera::Camera;
+pub use error::{Error, Result};
+pub use raster::Image;
+pub use render::{RenderContext, RenderOptions, RenderStats, render};
+pub use scene::{Kernel, Scene};

@@ -1,0 +1,198 @@
+//! Stage 2: EWA projection of each sliced 3D Gaussian to a screen-space ellipse (SPEC §4).
+//!
+//! Camera space has OpenCV axes; screen space is pixels with centres at `i + 0.5`.
+//!
+//! ```text
+//! (x, y, z) = Rc m + tc                      culled unless near ≤ z ≤ far
+//! Σc   = Rc Σ3 Rcᵀ
+//! lim_x⁺ = (W - cx)/fx + 0.15 W/fx           lim_x⁻ = cx/fx + 0.15 W/fx   (y likewise, H, fy)
+//! tx   = z clamp(x/z, -lim_x⁻, lim_x⁺)       ty = z clamp(y/z, -lim_y⁻, lim_y⁺)
+//! J    = [[fx/z, 0, -fx tx/z²], [0, fy/z, -fy ty/z²]]
+//! Σ2   = J Σc Jᵀ + s I                       s: dilation, px²
+//! m2   = (fx x/z + cx, fy y/z + cy)          unclamped
+//! Q    = Σ2⁻¹                                culled unless det Σ2 is finite and > 0 and Q finite
+//! ```
+//!
+//! The exact axis-aligned bound of the ellipse `q ≤ qmax` is `|Δu| ≤ √(qmax Σ2xx)`,
+//! `|Δv| ≤ √(qmax Σ2yy)` (SPEC §5). For the per-pixel loop the quadratic form is also
+//! written as a sum of two squares, `q = Qxx (Δu + k Δv)² + Δv²/Σ2yy` with
+//! `k = -Σ2xy/Σ2yy`: no cancellation however thin the ellipse, and each row's span of
+//! pixels inside the ellipse follows from one square root. Everything here is f64.
+
+use crate::camera::Camera;
+use crate::slice::SlicedKernels;
+
+/// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
+/// `p` of every array is one projected kernel, in ascending scene order.
+#[derive(Clone, Debug, Default)]
+pub struct ProjectedKernels {
+    /// Index into the [`SlicedKernels`] it came from.
+    pub slice_from_proj: Vec<u32>,
+    /// Scene index, ascending.
+    pub kernel_from_proj: Vec<u32>,
+    /// 2D centre `m2`, pixels.
+    pub means: Vec<[f64; 2]>,
+    /// Screen covariance `Σ2` as `[xx, xy, yy]`, px².
+    pub covariances: Vec<[f64; 3]>,
+    /// Conic `Q = Σ2⁻¹` as `[xx, xy, yy]`, 1/px².
+    pub conics: Vec<[f64; 3]>,
+    /// Cut-off `qmax` (from the slice stage).
+    pub qmax: Vec<f64>,
+    /// Half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of the ellipse `q ≤ qmax`, pixels.
+    pub radii: Vec<[f64; 2]>,
+    /// Sliced amplitude `a(τ)`, f32 for the per-pixel loop.
+    pub amplitudes: Vec<[f32; 3]>,
+}
+
+impl ProjectedKernels {
+    /// Number of projected kernels.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.kernel_from_proj.len()
+    }
+
+    /// True when nothing is on screen.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.kernel_from_proj.is_empty()
+    }
+
+    /// Empties every buffer, keeping its capacity.
+    pub fn reset(&mut self) {
+        self.slice_from_proj.clear();
+        self.kernel_from_proj.clear();
+        self.means.clear();
+        self.covariances.clear();
+        self.conics.clear();
+        self.qmax.clear();
+        self.radii.clear();
+        self.amplitudes.clear();
+    }
+}
+
+/// One kernel's projection: everything the later stages (and the backward pass) need.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Projection {
+    /// Camera-space centre `(x, y, z)`.
+    pub camera_mean: [f64; 3],
+    /// `(tx, ty)` of the clamped Jacobian.
+    pub clamped_xy: [f64; 2],
+    /// Which of `tx`, `ty` hit a clamp limit (x/z strictly outside its limits).
+    pub clamped: [bool; 2],
+    /// The Jacobian `J` (2×3, row-major).
+    pub jacobian: [[f64; 3]; 2],
+    /// Camera-space covariance `Σc` (3×3).
+    pub camera_covariance: [[f64; 3]; 3],
+    /// `Σ2` as `[xx, xy, yy]`.
+    pub covariance: [f64; 3],
+    /// `Q = Σ2⁻¹` as `[xx, xy, yy]`.
+    pub conic: [f64; 3],
+    /// `m2`, pixels.
+    pub mean: [f64; 2],
+}
+
+/// The clamp limits `[lim_x⁻, lim_x⁺, lim_y⁻, lim_y⁺]` of SPEC §4.
+#[must_use]
+pub fn clamp_limits(camera: &Camera) -> [f64; 4] {
+    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+    let margin_x = 0.3 * 0.5 * w / camera.fx;
+    let margin_y = 0.3 * 0.5 * h / camera.fy;
+    [
+        camera.cx / camera.fx + margin_x,
+        (w - camera.cx) / camera.fx + margin_x,
+        camera.cy / camera.fy + margin_y,
+        (h - camera.cy) / camera.fy + margin_y,
+    ]
+}
+
+/// Projects one 3D Gaussian (world-space centre and covariance `[xx, xy, xz, yy, yz, zz]`),
+/// or `None` when it is culled (outside `[near, far]`, degenerate or non-finite `Σ2`).
+#[must_use]
+pub fn project_one(
+    camera: &Camera,
+    dilation: f64,
+    mean: [f64; 3],
+    cov: [f64; 6],
+) -> Option<Projection> {
+    let rc = camera.rotation();
+    let tc = camera.translation();
+    let p: [f64; 3] = std::array::from_fn(|r| {
+        rc[r][0] * mean[0] + rc[r][1] * mean[1] + rc[r][2] * mean[2] + tc[r]
+    });
+    let [x, y, z] = p;
+    if !(z >= camera.near && z <= camera.far) {
+        return None;
+    }
+    let sigma = [
+        [cov[0], cov[1], cov[2]],
+        [cov[1], cov[3], cov[4]],
+        [cov[2], cov[4], cov[5]],
+    ];
+    // Σc = Rc Σ3 Rcᵀ
+    let rs: [[f64; 3]; 3] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| (0..3).map(|k| rc[i][k] * sigma[k][j]).sum())
+    });
+    let sc: [[f64; 3]; 3] =
+        std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| rs[i][k] * rc[j][k]).sum()));
+    let [lxm, lxp, lym, lyp] = clamp_limits(camera);
+    let (u, v) = (x / z, y / z);
+    let clamped = [u < -lxm || u > lxp, v < -lym || v > lyp];
+    let tx = z * u.clamp(-lxm, lxp);
+    let ty = z * v.clamp(-lym, lyp);
+    let (fx, fy) = (camera.fx, camera.fy);
+    let jac = [
+        [fx / z, 0.0, -fx * tx / (z * z)],
+        [0.0, fy / z, -fy * ty / (z * z)],
+    ];
+    // Σ2 = J Σc Jᵀ + s I
+    let js: [[f64; 3]; 2] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| (0..3).map(|k| jac[i][k] * sc[k][j]).sum())
+    });
+    let s2 = |i: usize, j: usize| (0..3).map(|k| js[i][k] * jac[j][k]).sum::<f64>();
+    let covariance = [s2(0, 0) + dilation, s2(0, 1), s2(1, 1) + dilation];
+    let det = covariance[0] * covariance[2] - covariance[1] * covariance[1];
+    if !(det.is_finite() && det > 0.0) {
+        return None;
+    }
+    let conic = [
+        covariance[2] / det,
+        -covariance[1] / det,
+        covariance[0] / det,
+    ];
+    if !conic.iter().all(|c| c.is_finite()) {
+        return None;
+    }
+    Some(Projection {
+        camera_mean: p,
+        clamped_xy: [tx, ty],
+        clamped,
+        jacobian: jac,
+        camera_covariance: sc,
+        covariance,
+        conic,
+        mean: [fx * x / z + camera.cx, fy * y / z + camera.cy],
+    })
+}
+
+/// Projects every sliced kernel into `out` (reset first). `dilation` is `s` of SPEC §4, px².
+pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
+    out.reset();
+    for s in 0..sliced.len() {
+        let Some(proj) = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
+        else {
+            continue;
+        };
+        let qmax = sliced.qmax[s];
+        out.slice_from_proj.push(s as u32);
+        out.kernel_from_proj.push(sliced.kernel_from_slice[s]);
+        out.means.push(proj.mean);
+        out.covariances.push(proj.covariance);
+        out.conics.push(proj.conic);
+        out.qmax.push(qmax);
+        out.radii.push([
+            (qmax * proj.covariance[0]).sqrt(),
+            (qmax * proj.covariance[2]).sqrt(),
+        ]);
+        out.amplitudes.push(sliced.amplitudes[s].map(|a| a as f32));
+    }
+}

@@ -1,0 +1,215 @@
+//! Scenes of 4D Gaussian kernels (SPEC §1), stored as struct-of-arrays, and their JSON file.
+//!
+//! A kernel has a space-time mean `[x, y, z, t]`, standard deviations `[sx, sy, sz, st]`
+//! (all > 0; `sx, sy, sz` are the conditional spreads of the slice at a fixed time), an
+//! unnormalised peak amplitude `[r, g, b]` (any finite real), a Hamilton quaternion
+//! `[w, x, y, z]` turning the spatial axes (normalised on load; active rotation, the columns
+//! of R are the kernel's axes in world space) and a velocity `[vx, vy, vz]` in world units per
+//! time unit (not rotated). Parameters are stored in f64: the per-kernel stage of the
+//! renderer works in f64 (SPEC §5, precision).
+//!
+//! File format (keys in this order, `rotation`, `velocity` and `background` optional):
+//! `{"kernels":[{"mean":[x,y,z,t],"scale":[sx,sy,sz,st],"amplitude":[r,g,b],
+//! "rotation":[w,x,y,z],"velocity":[vx,vy,vz]}],"background":[r,g,b]}`. Unknown keys are
+//! errors, so that a typo never silently falls back to a default.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// One 4D kernel, as read from or written to a file. The renderer works on [`Scene`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Kernel {
+    /// Centre `[x, y, z, t]`: world space and scene time.
+    pub mean: [f64; 4],
+    /// Standard deviations `[sx, sy, sz, st]`, all > 0.
+    pub scale: [f64; 4],
+    /// Peak intensity per channel `[r, g, b]`.
+    pub amplitude: [f64; 3],
+    /// Hamilton quaternion `[w, x, y, z]`.
+    #[serde(default = "identity_rotation")]
+    pub rotation: [f64; 4],
+    /// World units per time unit.
+    #[serde(default)]
+    pub velocity: [f64; 3],
+}
+
+fn identity_rotation() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+impl Kernel {
+    /// An axis-aligned, static kernel.
+    #[must_use]
+    pub fn new(mean: [f64; 4], scale: [f64; 4], amplitude: [f64; 3]) -> Self {
+        Kernel {
+            mean,
+            scale,
+            amplitude,
+            rotation: identity_rotation(),
+            velocity: [0.0; 3],
+        }
+    }
+}
+
+/// A scene: kernels as struct-of-arrays (index `i` of every array is kernel `i`) and a
+/// background colour added to every pixel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// `[x, y, z, t]` per kernel.
+    pub means: Vec<[f64; 4]>,
+    /// `[sx, sy, sz, st]` per kernel.
+    pub scales: Vec<[f64; 4]>,
+    /// `[r, g, b]` per kernel.
+    pub amplitudes: Vec<[f64; 3]>,
+    /// Unit quaternions `[w, x, y, z]` per kernel.
+    pub rotations: Vec<[f64; 4]>,
+    /// `[vx, vy, vz]` per kernel.
+    pub velocities: Vec<[f64; 3]>,
+    /// `[r, g, b]`, linear.
+    pub background: [f64; 3],
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile<K> {
+    kernels: Vec<K>,
+    #[serde(default)]
+    background: [f64; 3],
+}
+
+impl Scene {
+    /// A scene from kernels; rotations are normalised and everything is validated.
+    /// `origin` names the data in error messages.
+    pub fn from_kernels(kernels: &[Kernel], background: [f64; 3], origin: &str) -> Result<Self> {
+        let mut scene = Scene {
+            background,
+            ..Scene::default()
+        };
+        check_finite(origin, "scene", "background", &background)?;
+        for (index, kernel) in kernels.iter().enumerate() {
+            scene.push_checked(kernel, index, origin)?;
+        }
+        Ok(scene)
+    }
+
+    fn push_checked(&mut self, kernel: &Kernel, index: usize, origin: &str) -> Result<()> {
+        let item = format!("kernel {index}");
+        check_finite(origin, &item, "mean", &kernel.mean)?;
+        check_finite(origin, &item, "scale", &kernel.scale)?;
+        check_finite(origin, &item, "amplitude", &kernel.amplitude)?;
+        check_finite(origin, &item, "rotation", &kernel.rotation)?;
+        check_finite(origin, &item, "velocity", &kernel.velocity)?;
+        if let Some(c) = kernel.scale.iter().position(|&s| s <= 0.0) {
+            return Err(Error::invalid(
+                origin,
+                item,
+                "scale",
+                format!("scale[{c}] = {} must be > 0", kernel.scale[c]),
+            ));
+        }
+        let norm = kernel.rotation.iter().map(|q| q * q).sum::<f64>().sqrt();
+        if !(norm > 0.0 && norm.is_finite()) {
+            return Err(Error::invalid(
+                origin,
+                item,
+                "rotation",
+                "the quaternion is zero (or its norm overflows) and cannot be normalised",
+            ));
+        }
+        self.means.push(kernel.mean);
+        self.scales.push(kernel.scale);
+        self.amplitudes.push(kernel.amplitude);
+        self.rotations.push(kernel.rotation.map(|q| q / norm));
+        self.velocities.push(kernel.velocity);
+        Ok(())
+    }
+
+    /// Number of kernels.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// True when the scene has no kernel.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Kernel `i` as a [`Kernel`].
+    #[must_use]
+    pub fn kernel(&self, i: usize) -> Kernel {
+        Kernel {
+            mean: self.means[i],
+            scale: self.scales[i],
+            amplitude: self.amplitudes[i],
+            rotation: self.rotations[i],
+            velocity: self.velocities[i],
+        }
+    }
+
+    /// All kernels, in order.
+    #[must_use]
+    pub fn kernels(&self) -> Vec<Kernel> {
+        (0..self.len()).map(|i| self.kernel(i)).collect()
+    }
+
+    /// Checks every value (finite, scales > 0, unit quaternions): for scenes changed in code.
+    pub fn validate(&self, origin: &str) -> Result<()> {
+        Scene::from_kernels(&self.kernels(), self.background, origin).map(|_| ())
+    }
+
+    /// Parses a scene JSON document. `origin` names it in error messages.
+    pub fn from_json_str(text: &str, origin: &str) -> Result<Self> {
+        // Parse the outer document first, then each kernel alone, so that a type error or
+        // an unknown field is reported with the index of the kernel it is in.
+        let file: SceneFile<serde_json::Value> = serde_json::from_str(text)
+            .map_err(|e| Error::malformed(origin, format!("malformed scene JSON: {e}")))?;
+        let mut kernels = Vec::with_capacity(file.kernels.len());
+        for (index, value) in file.kernels.into_iter().enumerate() {
+            let kernel: Kernel = serde_json::from_value(value)
+                .map_err(|e| Error::malformed(origin, format!("kernel {index}: {e}")))?;
+            kernels.push(kernel);
+        }
+        Scene::from_kernels(&kernels, file.background, origin)
+    }
+
+    /// Reads a scene JSON file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read scene", e))?;
+        Scene::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// The scene as a JSON document (the format of [`Scene::from_json_str`]).
+    #[must_use]
+    pub fn to_json_string(&self) -> String {
+        let file = SceneFile {
+            kernels: self.kernels(),
+            background: self.background,
+        };
+        serde_json::to_string_pretty(&file).expect("a scene of finite numbers serialises")
+    }
+
+    /// Writes the scene as JSON, atomically (a temporary file renamed into place).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        crate::io::write_bytes_atomically(path, self.to_json_string().as_bytes())
+    }
+}
+
+/// Error naming `field` of `item` unless every value is finite.
+pub(crate) fn check_finite(origin: &str, item: &str, field: &str, values: &[f64]) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(c) => Err(Error::invalid(
+            origin,
+            item,
+            field,
+            format!("{field}[{c}] = {} is not finite", values[c]),
+        )),
+    }
+}

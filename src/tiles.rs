@@ -1,0 +1,144 @@
+//! Stage 3: bin projected ellipses into 16×16 pixel tiles (counting sort, no depth order).
+//!
+//! A kernel goes to every tile that meets the pixel rectangle of its ellipse `q ≤ qmax`
+//! (SPEC §5: `|Δu| ≤ √(qmax Σ2xx)`, `|Δv| ≤ √(qmax Σ2yy)`), clipped to the image. The
+//! rectangle is taken for a slightly larger cut-off, [`padded_qmax`], so that no pixel whose
+//! f32 test in the raster stage could pass is left out; which pairs are summed is decided by
+//! that per-pixel test alone, never by the tiles. Within each tile the kernels are listed in
+//! ascending scene order (the fill pass runs in that order), which makes every pixel's sum
+//! order, and so the image, independent of threads.
+
+use crate::project::ProjectedKernels;
+
+/// Tile side in pixels.
+pub const TILE_SIZE: u32 = 16;
+
+/// The cut-off used for bounds: a little above `qmax` (relative 2e-4, absolute 2e-4), wider
+/// than the band `|q - qmax| ≤ 1e-4 max(1, qmax)` in which implementations may differ.
+#[must_use]
+pub fn padded_qmax(qmax: f64) -> f64 {
+    qmax * (1.0 + 2e-4) + 2e-4
+}
+
+/// The pixels `i` in `[lo, hi)` whose centres satisfy `|i + 0.5 - centre| ≤ half_width`, as a
+/// half-open range, or `None` when there are none (or the inputs are NaN).
+#[must_use]
+pub fn pixel_span(centre: f64, half_width: f64, lo: u32, hi: u32) -> Option<(u32, u32)> {
+    let first = (centre - half_width - 0.5).ceil().max(f64::from(lo));
+    let last = (centre + half_width - 0.5).floor().min(f64::from(hi) - 1.0);
+    // NaN fails both comparisons.
+    if first <= last && first >= f64::from(lo) {
+        Some((first as u32, last as u32 + 1))
+    } else {
+        None
+    }
+}
+
+/// Kernel lists per tile, as offsets into one flat array (CSR layout).
+#[derive(Clone, Debug, Default)]
+pub struct TileBins {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Tiles per row.
+    pub tiles_x: u32,
+    /// Tile rows.
+    pub tiles_y: u32,
+    /// Per projected kernel: its pixel rectangle `[x0, x1, y0, y1]` (half-open, clipped to
+    /// the image; empty when it misses the image).
+    pub pixel_bounds: Vec<[u32; 4]>,
+    /// Tile `t` lists `proj_from_entry[tile_offsets[t]..tile_offsets[t + 1]]`.
+    pub tile_offsets: Vec<u32>,
+    /// Projected-kernel indices, grouped by tile, ascending within a tile.
+    pub proj_from_entry: Vec<u32>,
+    /// Scratch for the fill pass: the next free slot of each tile.
+    fill_cursor: Vec<u32>,
+}
+
+impl TileBins {
+    /// Number of tiles.
+    #[must_use]
+    pub fn tile_count(&self) -> usize {
+        self.tiles_x as usize * self.tiles_y as usize
+    }
+
+    /// The projected kernels listed in tile `t`.
+    #[must_use]
+    pub fn tile_entries(&self, t: usize) -> &[u32] {
+        &self.proj_from_entry[self.tile_offsets[t] as usize..self.tile_offsets[t + 1] as usize]
+    }
+
+    /// The pixel rectangle `[x0, x1, y0, y1]` (half-open) of tile `t`, clipped to the image.
+    #[must_use]
+    pub fn tile_rect(&self, t: usize) -> [u32; 4] {
+        let (tx, ty) = (
+            (t % self.tiles_x as usize) as u32,
+            (t / self.tiles_x as usize) as u32,
+        );
+        [
+            tx * TILE_SIZE,
+            ((tx + 1) * TILE_SIZE).min(self.width),
+            ty * TILE_SIZE,
+            ((ty + 1) * TILE_SIZE).min(self.height),
+        ]
+    }
+}
+
+/// Bins `proj` for a `width × height` image into `out`, reusing its buffers.
+pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins) {
+    out.width = width;
+    out.height = height;
+    out.tiles_x = width.div_ceil(TILE_SIZE);
+    out.tiles_y = height.div_ceil(TILE_SIZE);
+    let tiles_x = out.tiles_x as usize;
+    out.pixel_bounds.clear();
+    for p in 0..proj.len() {
+        let [mx, my] = proj.means[p];
+        let [sxx, _, syy] = proj.covariances[p];
+        let q = padded_qmax(proj.qmax[p]);
+        let bounds = match (
+            pixel_span(mx, (q * sxx).sqrt(), 0, width),
+            pixel_span(my, (q * syy).sqrt(), 0, height),
+        ) {
+            (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1],
+            _ => [0, 0, 0, 0],
+        };
+        out.pixel_bounds.push(bounds);
+    }
+    let tile_ranges = |b: &[u32; 4]| {
+        let tx = b[0] / TILE_SIZE..b[1].div_ceil(TILE_SIZE);
+        let ty = b[2] / TILE_SIZE..b[3].div_ceil(TILE_SIZE);
+        (tx, ty)
+    };
+    // Count, prefix-sum, fill: kernels enter each tile's list in ascending order.
+    out.tile_offsets.clear();
+    out.tile_offsets.resize(out.tile_count() + 1, 0);
+    for b in &out.pixel_bounds {
+        let (txs, tys) = tile_ranges(b);
+        for ty in tys {
+            for tx in txs.clone() {
+                out.tile_offsets[ty as usize * tiles_x + tx as usize + 1] += 1;
+            }
+        }
+    }
+    for t in 0..out.tile_count() {
+        out.tile_offsets[t + 1] += out.tile_offsets[t];
+    }
+    out.proj_from_entry.clear();
+    out.proj_from_entry
+        .resize(out.tile_offsets[out.tile_count()] as usize, 0);
+    out.fill_cursor.clear();
+    out.fill_cursor
+        .extend_from_slice(&out.tile_offsets[..out.tile_count()]);
+    for (p, b) in out.pixel_bounds.iter().enumerate() {
+        let (txs, tys) = tile_ranges(b);
+        for ty in tys {
+            for tx in txs.clone() {
+                let slot = &mut out.fill_cursor[ty as usize * tiles_x + tx as usize];
+                out.proj_from_entry[*slot as usize] = p as u32;
+                *slot += 1;
+            }
+        }
+    }
+}
