@@ -229,7 +229,7 @@ impl Camera {
             ));
         }
         let det = glam::DMat3::from_cols_array_2d(&self.rotation()).determinant();
-        if !(det.abs() >= 1e-9) {
+        if det.abs() < 1e-9 {
             return Err(Error::invalid(
                 origin,
                 item,
@@ -258,8 +258,7 @@ impl Camera {
 
     /// Parses and validates a camera JSON document.
     pub fn from_json_str(text: &str, origin: &str) -> Result<Self> {
-        let camera: Camera = serde_json::from_str(text)
-            .map_err(|e| Error::malformed(origin, format!("malformed camera JSON: {e}")))?;
+        let camera: Camera = crate::io::json::parse_json(text, origin, "camera")?;
         camera.validate(origin)?;
         Ok(camera)
     }
@@ -280,5 +279,107 @@ impl Camera {
     /// Writes the camera as JSON, atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
         crate::io::write_bytes_atomically(path, self.to_json_string().as_bytes())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn project(camera: &Camera, p: [f64; 3]) -> [f64; 3] {
+        let m = &camera.world_to_camera;
+        let c: [f64; 3] =
+            std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3]);
+        [
+            camera.fx * c[0] / c[2] + camera.cx,
+            camera.fy * c[1] / c[2] + camera.cy,
+            c[2],
+        ]
+    }
+
+    #[test]
+    fn look_at_puts_the_target_at_the_centre_with_up_up() {
+        let camera = Camera::look_at(
+            [1.0, 2.0, 3.0],
+            [0.0, 0.5, 0.0],
+            [0.0, 1.0, 0.0],
+            60.0,
+            64,
+            48,
+        )
+        .unwrap();
+        let [u, v, z] = project(&camera, [0.0, 0.5, 0.0]);
+        assert!((u - 32.0).abs() < 1e-12 && (v - 24.0).abs() < 1e-12 && z > 0.0);
+        // A point above the target appears higher in the image (smaller v: y is down).
+        assert!(project(&camera, [0.0, 0.6, 0.0])[1] < 24.0);
+        // The vertical field of view: a point at the top edge of the frustum maps to v = 0.
+        assert!((camera.fy - 24.0 / 30f64.to_radians().tan()).abs() < 1e-12);
+        let centre = camera.centre();
+        assert!(
+            centre
+                .iter()
+                .zip([1.0, 2.0, 3.0])
+                .all(|(a, b)| (a - b).abs() < 1e-12)
+        );
+    }
+
+    #[test]
+    fn opengl_camera_to_world_round_trips() {
+        let camera = Camera::look_at(
+            [0.3, -2.0, 1.5],
+            [0.1, 0.2, -0.4],
+            [0.0, 0.0, 1.0],
+            40.0,
+            32,
+            32,
+        )
+        .unwrap();
+        let c2w = camera.opengl_camera_to_world();
+        // OpenGL: the camera looks down its -z axis, so -z (third column, negated) points at the target.
+        let forward = [-c2w[0][2], -c2w[1][2], -c2w[2][2]];
+        let to_target = [0.1 - 0.3, 0.2 + 2.0, -0.4 - 1.5];
+        let n = to_target.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(
+            forward
+                .iter()
+                .zip(to_target)
+                .all(|(f, t)| (f - t / n).abs() < 1e-12)
+        );
+        let back = Camera::from_opengl_camera_to_world(
+            32,
+            32,
+            [camera.fx, camera.fy, camera.cx, camera.cy],
+            c2w,
+        )
+        .unwrap();
+        for (a, b) in back
+            .world_to_camera
+            .iter()
+            .flatten()
+            .zip(camera.world_to_camera.iter().flatten())
+        {
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn shipped_camera_frames_the_whole_blob_path_with_3_sigma_margin() {
+        let camera = Camera::from_json_str(
+            include_str!("../data/blob_camera.json"),
+            "data/blob_camera.json",
+        )
+        .unwrap();
+        for t in [0.0, 0.25, 0.5, 0.75, 1.0] {
+            let [u, v, z] = project(&camera, [t, t, t]);
+            let margin = 3.0 * 0.1 * camera.fx / z;
+            assert!(
+                u - margin > 0.0 && u + margin < f64::from(camera.width),
+                "t = {t}: u = {u}"
+            );
+            assert!(
+                v - margin > 0.0 && v + margin < f64::from(camera.height),
+                "t = {t}: v = {v}"
+            );
+        }
     }
 }

@@ -54,10 +54,10 @@ struct RenderArgs {
 #[derive(Debug, clap::Args)]
 struct RenderFlags {
     /// Variance added to each screen-space covariance, px² (SPEC §4).
-    #[arg(long, default_value_t = DEFAULT_DILATION)]
+    #[arg(long, default_value_t = DEFAULT_DILATION, allow_negative_numbers = true)]
     dilation: f64,
     /// Cut-off ε on a kernel's value; 0 disables truncation (SPEC §5).
-    #[arg(long, default_value_t = DEFAULT_CUTOFF)]
+    #[arg(long, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
     cutoff: f64,
     /// Worker threads (default: one per core). The output does not depend on it.
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]

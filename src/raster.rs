@@ -103,7 +103,7 @@ fn rasterize_tile(
             let dv = f64::from(j) + 0.5 - my;
             let row_q = dv * dv * inv_syy;
             let reach = q_reach - row_q;
-            if !(reach >= 0.0) {
+            if reach.is_nan() || reach < 0.0 {
                 continue;
             }
             let centre = mx - shear * dv;

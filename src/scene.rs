@@ -74,9 +74,12 @@ pub struct Scene {
 }
 
 #[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SceneFile<K> {
-    kernels: Vec<K>,
+#[serde(
+    deny_unknown_fields,
+    expecting = "a scene object {\"kernels\": [...], \"background\": [r, g, b]}"
+)]
+struct SceneFile {
+    kernels: Vec<Kernel>,
     #[serde(default)]
     background: [f64; 3],
 }
@@ -165,17 +168,8 @@ impl Scene {
 
     /// Parses a scene JSON document. `origin` names it in error messages.
     pub fn from_json_str(text: &str, origin: &str) -> Result<Self> {
-        // Parse the outer document first, then each kernel alone, so that a type error or
-        // an unknown field is reported with the index of the kernel it is in.
-        let file: SceneFile<serde_json::Value> = serde_json::from_str(text)
-            .map_err(|e| Error::malformed(origin, format!("malformed scene JSON: {e}")))?;
-        let mut kernels = Vec::with_capacity(file.kernels.len());
-        for (index, value) in file.kernels.into_iter().enumerate() {
-            let kernel: Kernel = serde_json::from_value(value)
-                .map_err(|e| Error::malformed(origin, format!("kernel {index}: {e}")))?;
-            kernels.push(kernel);
-        }
-        Scene::from_kernels(&kernels, file.background, origin)
+        let file: SceneFile = crate::io::json::parse_json(text, origin, "scene")?;
+        Scene::from_kernels(&file.kernels, file.background, origin)
     }
 
     /// Reads a scene JSON file.

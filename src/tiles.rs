@@ -24,14 +24,13 @@ pub fn padded_qmax(qmax: f64) -> f64 {
 /// half-open range, or `None` when there are none (or the inputs are NaN).
 #[must_use]
 pub fn pixel_span(centre: f64, half_width: f64, lo: u32, hi: u32) -> Option<(u32, u32)> {
-    let first = (centre - half_width - 0.5).ceil().max(f64::from(lo));
-    let last = (centre + half_width - 0.5).floor().min(f64::from(hi) - 1.0);
-    // NaN fails both comparisons.
-    if first <= last && first >= f64::from(lo) {
-        Some((first as u32, last as u32 + 1))
-    } else {
-        None
+    let (from, to) = (centre - half_width - 0.5, centre + half_width - 0.5);
+    if from.is_nan() || to.is_nan() {
+        return None;
     }
+    let first = from.ceil().max(f64::from(lo));
+    let last = to.floor().min(f64::from(hi) - 1.0);
+    (first <= last).then(|| (first as u32, last as u32 + 1))
 }
 
 /// Kernel lists per tile, as offsets into one flat array (CSR layout).
@@ -140,5 +139,23 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
                 *slot += 1;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_span_includes_centres_on_the_boundary_and_clips() {
+        // Centres 0.5, 1.5, 2.5, 3.5: |c - 2| ≤ 1.5 holds for 0.5 and 3.5 exactly.
+        assert_eq!(pixel_span(2.0, 1.5, 0, 10), Some((0, 4)));
+        assert_eq!(pixel_span(2.0, 1.49, 0, 10), Some((1, 3)));
+        assert_eq!(pixel_span(2.0, 100.0, 1, 3), Some((1, 3)));
+        assert_eq!(pixel_span(-5.0, 1.0, 0, 10), None);
+        assert_eq!(pixel_span(50.0, 1.0, 0, 10), None);
+        assert_eq!(pixel_span(f64::NAN, 1.0, 0, 10), None);
+        assert_eq!(pixel_span(0.0, f64::INFINITY, 0, 10), Some((0, 10)));
+        assert_eq!(pixel_span(1e300, 1e300, 0, 10), Some((0, 10)));
     }
 }

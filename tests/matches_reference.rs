@@ -88,11 +88,10 @@ fn without_dilation_and_with_a_large_cutoff() {
 #[test]
 fn a_sheared_non_orthonormal_camera_matches_reference() {
     let mut camera = test_camera(64, 48);
-    let m = &mut camera.world_to_camera;
-    for c in 0..3 {
-        m[0][c] = 1.3 * m[0][c] + 0.2 * m[1][c];
-        m[1][c] *= 0.8;
-    }
+    let [row0, row1, _, _] = camera.world_to_camera;
+    // Stretch and shear the first row, shrink the second; translations included.
+    camera.world_to_camera[0] = std::array::from_fn(|c| 1.3 * row0[c] + 0.2 * row1[c]);
+    camera.world_to_camera[1] = row1.map(|v| 0.8 * v);
     camera.validate("<sheared>").unwrap();
     let scene = hard_random_scene(&test_camera(64, 48), 5, 150);
     let options = RenderOptions::default();

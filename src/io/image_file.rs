@@ -144,3 +144,46 @@ pub fn to_linear_rgb(decoded: &DynamicImage, background: [f32; 3]) -> Image {
         pixels,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantize_clamps_and_rounds_half_away_from_zero() {
+        assert_eq!(quantize(-0.2, 255), 0);
+        assert_eq!(quantize(1.7, 255), 255);
+        assert_eq!(quantize(f32::NAN, 255), 0);
+        assert_eq!(quantize(0.5, 255), 128); // 127.5 rounds up
+        assert_eq!(quantize(0.5, 65535), 32768);
+        assert_eq!(quantize(1.0 / 255.0, 255), 1);
+    }
+
+    #[test]
+    fn alpha_is_composited_over_the_background() {
+        let rgba = image::RgbaImage::from_raw(1, 1, vec![255, 0, 0, 51]).unwrap();
+        let image = to_linear_rgb(&DynamicImage::ImageRgba8(rgba), [0.0, 0.0, 1.0]);
+        let expected = [0.2, 0.0, 0.8];
+        assert!(
+            image
+                .pixels
+                .iter()
+                .zip(expected)
+                .all(|(a, b)| (a - b).abs() < 1e-6),
+            "{:?}",
+            image.pixels
+        );
+    }
+
+    #[test]
+    fn unsupported_extensions_are_named() {
+        let message = ImageKind::from_path(Path::new("a/b.jpg"))
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("b.jpg") && message.contains("unsupported"));
+        assert_eq!(
+            ImageKind::from_path(Path::new("x.EXR")).unwrap(),
+            ImageKind::Exr
+        );
+    }
+}

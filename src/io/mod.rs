@@ -1,6 +1,7 @@
 //! Files: atomic writes and images. Nothing here knows about the command line.
 
 pub mod image_file;
+pub mod json;
 
 use std::io::{BufWriter, Write};
 use std::path::Path;

@@ -128,7 +128,9 @@ pub fn worst_ratio(fast: &Image, reference: &ReferenceImage, cutoff: f64) -> (f6
             + RTOL * reference.abs_sum[k]
             + cutoff * 1.01 * f64::from(reference.borderline[k / 3]);
         let ratio = (f64::from(fast.pixels[k]) - reference.pixels[k]).abs() / bound;
-        if !(ratio <= worst.0) {
+        // A NaN anywhere is the worst possible result.
+        let ratio = if ratio.is_nan() { f64::INFINITY } else { ratio };
+        if ratio > worst.0 {
             worst = (ratio, k);
         }
     }

@@ -1,0 +1,49 @@
+//! JSON documents with errors that say where: a parse error inside the `kernels` array
+//! becomes "kernel 3: field `scale[1]`: ...", anything else names its path in the document.
+
+use serde::de::DeserializeOwned;
+use serde_path_to_error::Segment;
+
+use crate::error::{Error, Result};
+
+/// Parses `text` as a `T`. `origin` (a file name) and `what` (the document's item name, such
+/// as `camera`) go into error messages.
+pub fn parse_json<T: DeserializeOwned>(text: &str, origin: &str, what: &str) -> Result<T> {
+    let mut deserializer = serde_json::Deserializer::from_str(text);
+    let value: T =
+        serde_path_to_error::deserialize(&mut deserializer).map_err(|e| locate(e, origin, what))?;
+    deserializer
+        .end()
+        .map_err(|e| Error::malformed(origin, format!("malformed JSON after the {what}: {e}")))?;
+    Ok(value)
+}
+
+fn locate(error: serde_path_to_error::Error<serde_json::Error>, origin: &str, what: &str) -> Error {
+    let segments: Vec<&Segment> = error.path().iter().collect();
+    let (item, rest) = match segments.as_slice() {
+        [Segment::Map { key }, Segment::Seq { index }, rest @ ..] if key == "kernels" => {
+            (format!("kernel {index}"), rest)
+        }
+        _ => (what.to_owned(), segments.as_slice()),
+    };
+    let mut field = String::new();
+    for segment in rest {
+        match segment {
+            Segment::Seq { index } => field.push_str(&format!("[{index}]")),
+            Segment::Map { key } => {
+                if !field.is_empty() {
+                    field.push('.');
+                }
+                field.push_str(key);
+            }
+            Segment::Enum { variant } => field.push_str(variant),
+            Segment::Unknown => {}
+        }
+    }
+    let message = error.inner().to_string();
+    if field.is_empty() {
+        Error::malformed(origin, format!("{item}: {message}"))
+    } else {
+        Error::invalid(origin, item, &field, message)
+    }
+}
