@@ -21,8 +21,10 @@
 //! assert!(image.pixel(32, 24)[0] > 0.9);
 //! ```
 
+pub mod backward;
 pub mod camera;
 pub mod error;
+pub mod fit;
 pub mod io;
 pub mod project;
 pub mod raster;
@@ -33,6 +35,7 @@ pub mod slice;
 pub mod synthetic;
 pub mod tiles;
 
+pub use backward::Gradients;
 pub use camera::Camera;
 pub use error::{Error, Result};
 pub use raster::Image;

@@ -73,6 +73,91 @@ pub fn rasterize(
     pairs
 }
 
+/// One row of one kernel inside one tile: the pixels `i0..i1` of row `j` that may hold a
+/// pair, and what the per-pixel f32 loop needs.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RowSpan {
+    /// Pixel row.
+    pub j: u32,
+    /// First pixel column of the span.
+    pub i0: u32,
+    /// One past the last pixel column.
+    pub i1: u32,
+    /// `t = Δu + k Δv` at pixel `i0`, rounded once from f64.
+    pub t0: f32,
+    /// `Δv = j + 0.5 - m2y`.
+    pub dv: f32,
+    /// `Δv²/Σ2yy`, the row's part of `q`.
+    pub row_q: f32,
+}
+
+/// The per-pixel constants of projected kernel `p`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PixelKernel {
+    /// `Qxx`.
+    pub qxx: f32,
+    /// `qmax` (may be `+∞`).
+    pub qmax: f32,
+    /// `a(τ)`.
+    pub amplitude: [f32; 3],
+}
+
+impl PixelKernel {
+    /// `q` at the `n`-th pixel of `row`.
+    #[inline(always)]
+    pub fn q(&self, row: &RowSpan, n: u32) -> f32 {
+        let t = row.t0 + n as f32;
+        self.qxx * t * t + row.row_q
+    }
+}
+
+/// Calls `visit` for each row span of projected kernel `p` inside the pixel rectangle
+/// `[x0, x1) × [y0, y1)` (a tile), in ascending rows. Forward and backward both walk pairs
+/// through here, so they sum exactly the same pairs.
+#[inline]
+pub(crate) fn for_each_row_span(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    p: usize,
+    [tx0, tx1, ty0, ty1]: [u32; 4],
+    mut visit: impl FnMut(&PixelKernel, RowSpan),
+) {
+    let [bx0, bx1, by0, by1] = bins.pixel_bounds[p];
+    let (x_lo, x_hi) = (bx0.max(tx0), bx1.min(tx1));
+    let [mx, my] = proj.means[p];
+    let [_, sxy, syy] = proj.covariances[p];
+    let qxx = proj.conics[p][0];
+    let shear = -sxy / syy;
+    let inv_syy = 1.0 / syy;
+    let q_reach = padded_qmax(proj.qmax[p]);
+    let kernel = PixelKernel {
+        qxx: qxx as f32,
+        qmax: proj.qmax[p] as f32,
+        amplitude: proj.amplitudes[p],
+    };
+    for j in by0.max(ty0)..by1.min(ty1) {
+        let dv = f64::from(j) + 0.5 - my;
+        let row_q = dv * dv * inv_syy;
+        let reach = q_reach - row_q;
+        if reach.is_nan() || reach < 0.0 {
+            continue;
+        }
+        let centre = mx - shear * dv;
+        let Some((i0, i1)) = pixel_span(centre, (reach / qxx).sqrt(), x_lo, x_hi) else {
+            continue;
+        };
+        let row = RowSpan {
+            j,
+            i0,
+            i1,
+            t0: (f64::from(i0) + 0.5 - centre) as f32,
+            dv: dv as f32,
+            row_q: row_q as f32,
+        };
+        visit(&kernel, row);
+    }
+}
+
 /// Sums tile `t` into `block` (its 16×16 RGB pixels, row-major within the tile).
 fn rasterize_tile(
     proj: &ProjectedKernels,
@@ -84,48 +169,24 @@ fn rasterize_tile(
     for px in block.chunks_exact_mut(3) {
         px.copy_from_slice(&background);
     }
-    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+    let rect = bins.tile_rect(t);
+    let [tx0, _, ty0, _] = rect;
     let mut pairs = 0_u64;
     for &p in bins.tile_entries(t) {
-        let p = p as usize;
-        let [bx0, bx1, by0, by1] = bins.pixel_bounds[p];
-        let (x_lo, x_hi) = (bx0.max(tx0), bx1.min(tx1));
-        let [mx, my] = proj.means[p];
-        let [_, sxy, syy] = proj.covariances[p];
-        let qxx = proj.conics[p][0];
-        let shear = -sxy / syy;
-        let inv_syy = 1.0 / syy;
-        let qmax = proj.qmax[p];
-        let q_reach = padded_qmax(qmax);
-        let amp = proj.amplitudes[p];
-        let (qxx32, qmax32) = (qxx as f32, qmax as f32);
-        for j in by0.max(ty0)..by1.min(ty1) {
-            let dv = f64::from(j) + 0.5 - my;
-            let row_q = dv * dv * inv_syy;
-            let reach = q_reach - row_q;
-            if reach.is_nan() || reach < 0.0 {
-                continue;
-            }
-            let centre = mx - shear * dv;
-            let Some((i0, i1)) = pixel_span(centre, (reach / qxx).sqrt(), x_lo, x_hi) else {
-                continue;
-            };
-            let t0 = (f64::from(i0) + 0.5 - centre) as f32;
-            let row_q32 = row_q as f32;
-            let row = ((j - ty0) * TILE_SIZE) as usize;
-            for (n, i) in (i0..i1).enumerate() {
-                let t = t0 + n as f32;
-                let q = qxx32 * t * t + row_q32;
-                if q <= qmax32 {
+        for_each_row_span(proj, bins, p as usize, rect, |kernel, row| {
+            let base = ((row.j - ty0) * TILE_SIZE + (row.i0 - tx0)) as usize;
+            for n in 0..row.i1 - row.i0 {
+                let q = kernel.q(&row, n);
+                if q <= kernel.qmax {
                     let g = (-0.5 * q).exp();
-                    let k = 3 * (row + (i - tx0) as usize);
-                    block[k] += amp[0] * g;
-                    block[k + 1] += amp[1] * g;
-                    block[k + 2] += amp[2] * g;
+                    let k = 3 * (base + n as usize);
+                    block[k] += kernel.amplitude[0] * g;
+                    block[k + 1] += kernel.amplitude[1] * g;
+                    block[k + 2] += kernel.amplitude[2] * g;
                     pairs += 1;
                 }
             }
-        }
+        });
     }
     pairs
 }

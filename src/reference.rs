@@ -6,8 +6,9 @@
 //! error bound `atol + rtol·Σ|a|`), the number of pairs summed, and the number of pairs in
 //! the band `|q - qmax| ≤ 1e-4 max(1, qmax)` where SPEC §5 lets implementations differ.
 
-use glam::{DMat3, DQuat, DVec2, DVec3};
+use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 
+use crate::backward::Gradients;
 use crate::camera::Camera;
 use crate::render::RenderOptions;
 use crate::scene::Scene;
@@ -28,6 +29,18 @@ pub struct ReferenceKernel {
     pub qmax: f64,
     /// `a(τ)`.
     pub amplitude: [f64; 3],
+    /// Camera-space slice centre `(x, y, z)`.
+    pub camera_mean: [f64; 3],
+    /// Which of x/z, y/z lie strictly outside the clamp limits (SPEC §4).
+    pub clamped: [bool; 2],
+    /// Clamped `(tx, ty)`.
+    pub clamped_xy: [f64; 2],
+    /// `Σc = Rc Σ3 Rcᵀ`.
+    pub camera_covariance: DMat3,
+    /// Temporal weight `w(τ)`.
+    pub weight: f64,
+    /// `d = (τ - t)/st`.
+    pub d: f64,
 }
 
 /// Output of [`render_reference`].
@@ -123,6 +136,15 @@ pub fn reference_kernel(
         conic,
         qmax,
         amplitude: amp.map(|a| a * w),
+        camera_mean: p.into(),
+        clamped: [
+            p.x / p.z < -lim_x_neg || p.x / p.z > lim_x_pos,
+            p.y / p.z < -lim_y_neg || p.y / p.z > lim_y_pos,
+        ],
+        clamped_xy: [tx, ty],
+        camera_covariance: sigma_c,
+        weight: w,
+        d,
     })
 }
 
@@ -199,4 +221,179 @@ pub fn render_reference(
         }
     }
     out
+}
+
+/// Which pixels a kernel's indicator `[q ≤ qmax]` includes, row-major; used to freeze the
+/// pair set while differencing (SPEC §6: the indicator counts as a constant).
+pub type PairMask = Vec<bool>;
+
+/// Kernel `kernel`'s contribution `[q ≤ qmax] a exp(-½ q)` to every pixel (RGB, row-major),
+/// with the indicator taken from `mask` when given, and the mask it used.
+#[must_use]
+pub fn kernel_contribution(
+    kernel: &ReferenceKernel,
+    camera: &Camera,
+    mask: Option<&PairMask>,
+) -> (Vec<f64>, PairMask) {
+    let n = camera.pixel_count();
+    let mut image = vec![0.0; 3 * n];
+    let mut used = vec![false; n];
+    for j in 0..camera.height {
+        for i in 0..camera.width {
+            let k = j as usize * camera.width as usize + i as usize;
+            let q = quadratic_form(kernel, i, j);
+            let inside = mask.map_or(q <= kernel.qmax, |m| m[k]);
+            if inside {
+                let g = (-0.5 * q).exp();
+                for c in 0..3 {
+                    image[3 * k + c] = kernel.amplitude[c] * g;
+                }
+                used[k] = true;
+            }
+        }
+    }
+    (image, used)
+}
+
+/// `MSE = mean over pixels and channels of (C - C_gt)²` (SPEC §6, one view), in f64.
+#[must_use]
+pub fn mse(image: &[f64], target: &[f32]) -> f64 {
+    assert_eq!(image.len(), target.len(), "image and target sizes differ");
+    image
+        .iter()
+        .zip(target)
+        .map(|(c, &t)| (c - f64::from(t)).powi(2))
+        .sum::<f64>()
+        / image.len() as f64
+}
+
+/// The MSE of the f64 render against `target` (RGB, row-major) and its exact gradient
+/// (SPEC §6), by the chain rule written with whole matrices:
+///
+/// ```text
+/// ∂L/∂Q  = Σ_pairs ∂L/∂q d dᵀ,  ∂L/∂m2 = Σ_pairs ∂L/∂q (-2 Q d),  ∂L/∂q = -½ G Σ_c ∂L/∂C_c a_c
+/// ∂L/∂Σ2 = -Q (∂L/∂Q) Q,        ∂L/∂J = 2 (∂L/∂Σ2) J Σc
+/// ∂L/∂p  = Σ_(r,c) (∂L/∂J)_rc ∂J_rc/∂p + (∂m2/∂p)ᵀ ∂L/∂m2,   ∂L/∂m = Rcᵀ ∂L/∂p
+/// ```
+///
+/// then through the slice as SPEC §6 lists.
+#[must_use]
+pub fn reference_loss_and_gradients(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    target: &[f32],
+) -> (f64, Gradients) {
+    let image = render_reference(scene, camera, tau, options);
+    let loss = mse(&image.pixels, target);
+    let n = scene.len();
+    let mut grads = Gradients::zeros(n);
+    let scale = 2.0 / image.pixels.len() as f64;
+    let v_image: Vec<f64> = image
+        .pixels
+        .iter()
+        .zip(target)
+        .map(|(c, &t)| scale * (c - f64::from(t)))
+        .collect();
+    let rc = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
+    for kernel in reference_kernels(scene, camera, tau, options) {
+        let q_mat = DMat2::from_cols_array_2d(&kernel.conic).transpose();
+        let mut v_q = DMat2::ZERO;
+        let mut v_m2 = DVec2::ZERO;
+        let mut v_a = [0.0; 3];
+        for j in 0..camera.height {
+            for i in 0..camera.width {
+                let q = quadratic_form(&kernel, i, j);
+                if q > kernel.qmax {
+                    continue;
+                }
+                let k = 3 * (j as usize * camera.width as usize + i as usize);
+                let g = (-0.5 * q).exp();
+                let mut v_q_scalar = 0.0;
+                for c in 0..3 {
+                    v_a[c] += v_image[k + c] * g;
+                    v_q_scalar += -0.5 * g * v_image[k + c] * kernel.amplitude[c];
+                }
+                let d =
+                    DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5) - DVec2::from(kernel.mean);
+                v_q += v_q_scalar * DMat2::from_cols(d * d.x, d * d.y);
+                v_m2 += v_q_scalar * (-2.0 * (q_mat * d));
+            }
+        }
+        // Σ2 = J Σc Jᵀ + s I; as 3×3 with a zero third row of J.
+        let [x, y, z] = kernel.camera_mean;
+        let [tx, ty] = kernel.clamped_xy;
+        let (fx, fy) = (camera.fx, camera.fy);
+        let j_of = |entries: [[f64; 3]; 2]| {
+            DMat3::from_cols_array_2d(&[
+                [entries[0][0], entries[1][0], 0.0],
+                [entries[0][1], entries[1][1], 0.0],
+                [entries[0][2], entries[1][2], 0.0],
+            ])
+        };
+        let jac = j_of([
+            [fx / z, 0.0, -fx * tx / (z * z)],
+            [0.0, fy / z, -fy * ty / (z * z)],
+        ]);
+        let v_sigma2 = -(q_mat * v_q * q_mat);
+        let v_sigma2_3 = DMat3::from_cols_array_2d(&[
+            [v_sigma2.x_axis.x, v_sigma2.x_axis.y, 0.0],
+            [v_sigma2.y_axis.x, v_sigma2.y_axis.y, 0.0],
+            [0.0; 3],
+        ]);
+        let v_jac = 2.0 * v_sigma2_3 * jac * kernel.camera_covariance;
+        // ∂J/∂x, ∂J/∂y, ∂J/∂z with tx = x (unclamped) or z·lim (clamped), SPEC §6.
+        let (dtx_dx, dtx_dz) = if kernel.clamped[0] {
+            (0.0, tx / z)
+        } else {
+            (1.0, 0.0)
+        };
+        let (dty_dy, dty_dz) = if kernel.clamped[1] {
+            (0.0, ty / z)
+        } else {
+            (1.0, 0.0)
+        };
+        let dj_dx = j_of([[0.0, 0.0, -fx * dtx_dx / (z * z)], [0.0; 3]]);
+        let dj_dy = j_of([[0.0; 3], [0.0, 0.0, -fy * dty_dy / (z * z)]]);
+        let dj_dz = j_of([
+            [
+                -fx / (z * z),
+                0.0,
+                -fx * dtx_dz / (z * z) + 2.0 * fx * tx / (z * z * z),
+            ],
+            [
+                0.0,
+                -fy / (z * z),
+                -fy * dty_dz / (z * z) + 2.0 * fy * ty / (z * z * z),
+            ],
+        ]);
+        let frobenius = |a: DMat3, b: DMat3| {
+            a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+        };
+        let dm2_dp = [
+            [fx / z, 0.0, -fx * x / (z * z)],
+            [0.0, fy / z, -fy * y / (z * z)],
+        ];
+        let v_p = DVec3::new(
+            frobenius(v_jac, dj_dx) + v_m2.x * dm2_dp[0][0] + v_m2.y * dm2_dp[1][0],
+            frobenius(v_jac, dj_dy) + v_m2.x * dm2_dp[0][1] + v_m2.y * dm2_dp[1][1],
+            frobenius(v_jac, dj_dz) + v_m2.x * dm2_dp[0][2] + v_m2.y * dm2_dp[1][2],
+        );
+        let v_m = rc.transpose() * v_p;
+        // Slice (SPEC §6).
+        let i = kernel.index;
+        let amplitude = scene.amplitudes[i];
+        let velocity = DVec3::from(scene.velocities[i]);
+        let st = scene.scales[i][3];
+        let dt = tau - scene.means[i][3];
+        let v_t = (0..3)
+            .map(|c| amplitude[c] * kernel.weight * (kernel.d / st) * v_a[c])
+            .sum::<f64>()
+            - velocity.dot(v_m);
+        grads.v_means[i] = [v_m.x, v_m.y, v_m.z, v_t];
+        grads.v_amplitudes[i] = v_a.map(|v| kernel.weight * v);
+        grads.v_velocities[i] = (dt * v_m).into();
+    }
+    (loss, grads)
 }

@@ -6,6 +6,10 @@
 //! thread pool (install a pool to choose the thread count); the image is identical bit for
 //! bit whatever the number of threads.
 
+use crate::backward::project::project_backward;
+use crate::backward::raster::rasterize_backward;
+use crate::backward::slice::slice_backward;
+use crate::backward::{BackwardBuffers, Gradients};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::project::{ProjectedKernels, project};
@@ -82,6 +86,8 @@ pub struct RenderContext {
     pub projected: ProjectedKernels,
     /// Stage 3 output.
     pub bins: TileBins,
+    /// Buffers of the backward pass.
+    pub backward: BackwardBuffers,
     tile_buffer: Vec<f32>,
     image: Image,
 }
@@ -128,6 +134,38 @@ impl RenderContext {
             tile_entries: self.bins.proj_from_entry.len(),
             pairs,
         })
+    }
+
+    /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
+    /// rendered (RGB, row-major, like the image). Call it right after [`Self::render`] with the
+    /// same scene, camera, time and options: it reuses that frame's slices, ellipses and bins.
+    /// `grads` must be sized for the scene ([`Gradients::zeros`]).
+    pub fn backward(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        v_image: &[f32],
+        grads: &mut Gradients,
+    ) {
+        let buffers = &mut self.backward;
+        rasterize_backward(
+            &self.projected,
+            &self.bins,
+            v_image,
+            &mut buffers.entry_partials,
+            &mut buffers.screen,
+        );
+        project_backward(
+            &self.sliced,
+            &self.projected,
+            camera,
+            options.dilation,
+            &buffers.screen,
+            &mut buffers.sliced,
+        );
+        slice_backward(scene, tau, &self.sliced, &buffers.sliced, grads);
     }
 
     /// The last rendered image.

@@ -153,3 +153,119 @@ pub fn assert_within_bound(fast: &Image, reference: &ReferenceImage, cutoff: f64
         reference.borderline[pixel]
     );
 }
+
+/// Parameter names of one kernel, in the order of [`params`].
+pub const PARAM_NAMES: [&str; 10] = ["x", "y", "z", "t", "r", "g", "b", "vx", "vy", "vz"];
+
+/// The 10 differentiable parameters of kernel `i`: mean (4), amplitude (3), velocity (3).
+pub fn params(scene: &Scene, i: usize) -> [f64; 10] {
+    let (m, a, v) = (scene.means[i], scene.amplitudes[i], scene.velocities[i]);
+    [m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2]]
+}
+
+fn set_param(scene: &mut Scene, i: usize, p: usize, value: f64) {
+    match p {
+        0..4 => scene.means[i][p] = value,
+        4..7 => scene.amplitudes[i][p - 4] = value,
+        _ => scene.velocities[i][p - 7] = value,
+    }
+}
+
+/// The gradient in the same layout as [`params`].
+pub fn grad_of(grads: &splat4d::Gradients, i: usize) -> [f64; 10] {
+    let (m, a, v) = (
+        grads.v_means[i],
+        grads.v_amplitudes[i],
+        grads.v_velocities[i],
+    );
+    [m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2]]
+}
+
+/// Central finite differences (f64) of the reference MSE against `target`, per kernel and
+/// parameter, with every kernel's pair set frozen at the unperturbed scene (SPEC §6: the
+/// indicator is a constant). `None` where a step changes whether the kernel is culled.
+pub fn finite_difference_gradients(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &splat4d::RenderOptions,
+    target: &[f32],
+) -> Vec<[Option<f64>; 10]> {
+    use splat4d::reference::{kernel_contribution, mse, reference_kernel};
+    let n_px = 3 * camera.pixel_count();
+    let mut base: Vec<f64> = (0..n_px).map(|k| scene.background[k % 3]).collect();
+    let mut parts = Vec::new();
+    for i in 0..scene.len() {
+        let part = reference_kernel(scene, i, camera, tau, options)
+            .map(|k| kernel_contribution(&k, camera, None));
+        if let Some((image, _)) = &part {
+            base.iter_mut().zip(image).for_each(|(b, c)| *b += c);
+        }
+        parts.push(part);
+    }
+    let mut out = Vec::new();
+    for (i, part) in parts.iter().enumerate() {
+        let mut row = [None; 10];
+        let theta = params(scene, i);
+        for p in 0..10 {
+            // Steps follow the scale on which the loss varies: σt for the time mean, the
+            // smallest spatial σ for the spatial mean, and that over |τ - t| for the velocity.
+            let [sx, sy, sz, st] = scene.scales[i];
+            let spatial = 1e-4 * sx.min(sy).min(sz).min(0.01);
+            let h = match p {
+                0..3 => spatial,
+                3 => 1e-5 * st.min(1.0),
+                4..7 => 1e-6 * theta[p].abs().max(1.0),
+                _ => spatial / (tau - theta[3]).abs().clamp(1e-2, 1.0),
+            };
+            let mut losses = [0.0; 2];
+            let mut ok = true;
+            for (side, sign) in [1.0, -1.0].into_iter().enumerate() {
+                let mut moved = scene.clone();
+                set_param(&mut moved, i, p, theta[p] + sign * h);
+                let kernel = reference_kernel(&moved, i, camera, tau, options);
+                let image: Vec<f64> = match (part, kernel) {
+                    (Some((old, mask)), Some(k)) => {
+                        let (new, _) = kernel_contribution(&k, camera, Some(mask));
+                        base.iter()
+                            .zip(old)
+                            .zip(&new)
+                            .map(|((b, o), n)| b - o + n)
+                            .collect()
+                    }
+                    (None, None) => base.clone(),
+                    _ => {
+                        ok = false;
+                        break;
+                    }
+                };
+                losses[side] = mse(&image, target);
+            }
+            if ok {
+                row[p] = Some((losses[0] - losses[1]) / (2.0 * h));
+            }
+        }
+        out.push(row);
+    }
+    out
+}
+
+/// A target image: the reference render of `scene` with jittered means and amplitudes.
+pub fn jittered_target(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &splat4d::RenderOptions,
+    seed: u64,
+) -> Vec<f32> {
+    let mut rng = seeded_rng(seed);
+    let mut moved = scene.clone();
+    for i in 0..moved.len() {
+        for c in 0..3 {
+            moved.means[i][c] += rng.random_range(-0.03..0.03);
+            moved.amplitudes[i][c] *= rng.random_range(0.7..1.1);
+        }
+    }
+    let image = splat4d::reference::render_reference(&moved, camera, tau, options);
+    image.pixels.iter().map(|&v| v as f32).collect()
+}

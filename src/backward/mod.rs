@@ -1,0 +1,69 @@
+//! The backward pass (SPEC §6): the exact derivative of the forward render, stage by stage
+//! in reverse, with the indicator `[q ≤ qmax]` held constant:
+//!
+//! 1. [`raster`]: `∂L/∂C` per pixel → per projected kernel `∂L/∂a(τ)`, `∂L/∂m2`, `∂L/∂Q`
+//!    (tile-parallel, over exactly the forward's pairs, deterministic reduction);
+//! 2. [`project`]: → `∂L/∂m(τ)`, the world-space slice centre, through `Q = Σ2⁻¹`, the EWA
+//!    Jacobian (including its clamp) and the 2D mean;
+//! 3. [`slice`]: → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v` of each scene kernel.
+//!
+//! Names follow the `v_x = ∂L/∂x` convention. Gradients are f64 and accumulate (`+=`), so a
+//! batch of views sums into one [`Gradients`].
+
+pub mod project;
+pub mod raster;
+pub mod slice;
+
+/// Gradients of a loss with respect to every kernel's parameters, in scene order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gradients {
+    /// `∂L/∂(x, y, z, t)`.
+    pub v_means: Vec<[f64; 4]>,
+    /// `∂L/∂(r, g, b)` of the peak amplitude.
+    pub v_amplitudes: Vec<[f64; 3]>,
+    /// `∂L/∂(vx, vy, vz)`.
+    pub v_velocities: Vec<[f64; 3]>,
+}
+
+impl Gradients {
+    /// Zero gradients for `n` kernels.
+    #[must_use]
+    pub fn zeros(n: usize) -> Self {
+        let mut grads = Gradients::default();
+        grads.reset(n);
+        grads
+    }
+
+    /// Sets every gradient to zero, for `n` kernels.
+    pub fn reset(&mut self, n: usize) {
+        self.v_means.clear();
+        self.v_means.resize(n, [0.0; 4]);
+        self.v_amplitudes.clear();
+        self.v_amplitudes.resize(n, [0.0; 3]);
+        self.v_velocities.clear();
+        self.v_velocities.resize(n, [0.0; 3]);
+    }
+
+    /// Number of kernels.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.v_means.len()
+    }
+
+    /// True when there is no kernel.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.v_means.is_empty()
+    }
+}
+
+/// Reusable buffers of the backward pass.
+#[derive(Debug, Default)]
+pub struct BackwardBuffers {
+    /// Per (tile, kernel) entry: partial sums of one tile.
+    pub(crate) entry_partials: Vec<[f32; 8]>,
+    /// Stage 1 output.
+    pub screen: raster::ScreenGradients,
+    /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.
+    pub sliced: project::SliceGradients,
+}

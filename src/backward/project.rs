@@ -1,0 +1,104 @@
+//! Backward of stage 2, the EWA projection (SPEC §4, §6): from `∂L/∂Σ2` and `∂L/∂m2` to
+//! `∂L/∂m(τ)`, the world-space slice centre. Σ3 (scale, rotation) is held fixed. (The
+//! conic's gradient `∂L/∂Σ2 = -Q (∂L/∂Q) Q` is already formed by the raster backward.)
+//!
+//! ```text
+//! ∂L/∂J  = 2 (∂L/∂Σ2) J Σc              (2×3, Σ2 = J Σc Jᵀ + s I)
+//! J = [[fx/z, 0, -fx tx/z²], [0, fy/z, -fy ty/z²]],   tx = x, or z·lim where x/z is clamped
+//! ∂L/∂x  = ∂L/∂J02 (-fx ∂tx/∂x / z²) + ∂L/∂m2x fx/z
+//! ∂L/∂y  = ∂L/∂J12 (-fy ∂ty/∂y / z²) + ∂L/∂m2y fy/z
+//! ∂L/∂z  = -∂L/∂J00 fx/z² - ∂L/∂J11 fy/z² + ∂L/∂J02 (2 fx tx/z³ - fx ∂tx/∂z / z²)
+//!          + ∂L/∂J12 (2 fy ty/z³ - fy ∂ty/∂z / z²) - ∂L/∂m2x fx x/z² - ∂L/∂m2y fy y/z²
+//! ∂L/∂m  = Rcᵀ ∂L/∂(x, y, z)
+//! ```
+//!
+//! with `∂tx/∂x = 1, ∂tx/∂z = 0` unclamped and `∂tx/∂x = 0, ∂tx/∂z = lim = tx/z` clamped
+//! (likewise y). All f64; the per-kernel projection is recomputed from the slice.
+
+use crate::backward::raster::ScreenGradients;
+use crate::camera::Camera;
+use crate::project::{ProjectedKernels, Projection, project_one};
+use crate::slice::SlicedKernels;
+
+/// Per sliced kernel: gradients at the slice (zero for kernels culled by the projection).
+#[derive(Clone, Debug, Default)]
+pub struct SliceGradients {
+    /// `∂L/∂m(τ)`, world space.
+    pub v_means: Vec<[f64; 3]>,
+    /// `∂L/∂a(τ)` per channel.
+    pub v_amplitudes: Vec<[f64; 3]>,
+}
+
+/// `∂L/∂(x, y, z)` in camera space of one kernel from its screen gradients.
+#[must_use]
+pub fn camera_mean_gradient(
+    camera: &Camera,
+    proj: &Projection,
+    v_mean2: [f64; 2],
+    v_covariance2: [f64; 3],
+) -> [f64; 3] {
+    let [vxx, vxy, vyy] = v_covariance2;
+    let v_sigma2 = [[vxx, vxy], [vxy, vyy]];
+    // ∂L/∂J = 2 V_Σ2 J Σc
+    let jac = proj.jacobian;
+    let sc = proj.camera_covariance;
+    let js: [[f64; 3]; 2] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| (0..3).map(|k| jac[i][k] * sc[k][j]).sum())
+    });
+    let v_jac: [[f64; 3]; 2] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| 2.0 * (v_sigma2[i][0] * js[0][j] + v_sigma2[i][1] * js[1][j]))
+    });
+    let [x, y, z] = proj.camera_mean;
+    let [tx, ty] = proj.clamped_xy;
+    let (fx, fy) = (camera.fx, camera.fy);
+    let (dtx_dx, dtx_dz) = if proj.clamped[0] {
+        (0.0, tx / z)
+    } else {
+        (1.0, 0.0)
+    };
+    let (dty_dy, dty_dz) = if proj.clamped[1] {
+        (0.0, ty / z)
+    } else {
+        (1.0, 0.0)
+    };
+    let (z2, z3) = (z * z, z * z * z);
+    let v_x = v_jac[0][2] * (-fx * dtx_dx / z2) + v_mean2[0] * fx / z;
+    let v_y = v_jac[1][2] * (-fy * dty_dy / z2) + v_mean2[1] * fy / z;
+    let v_z = -v_jac[0][0] * fx / z2 - v_jac[1][1] * fy / z2
+        + v_jac[0][2] * (2.0 * fx * tx / z3 - fx * dtx_dz / z2)
+        + v_jac[1][2] * (2.0 * fy * ty / z3 - fy * dty_dz / z2)
+        - v_mean2[0] * fx * x / z2
+        - v_mean2[1] * fy * y / z2;
+    [v_x, v_y, v_z]
+}
+
+/// Carries `screen` (per projected kernel) back to the slice, into `out` (one entry per
+/// sliced kernel, reset first).
+pub fn project_backward(
+    sliced: &SlicedKernels,
+    proj: &ProjectedKernels,
+    camera: &Camera,
+    dilation: f64,
+    screen: &ScreenGradients,
+    out: &mut SliceGradients,
+) {
+    out.v_means.clear();
+    out.v_means.resize(sliced.len(), [0.0; 3]);
+    out.v_amplitudes.clear();
+    out.v_amplitudes.resize(sliced.len(), [0.0; 3]);
+    let rc = camera.rotation();
+    for p in 0..proj.len() {
+        let s = proj.slice_from_proj[p] as usize;
+        let projection = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
+            .expect("a kernel that was projected projects again");
+        let v_p = camera_mean_gradient(
+            camera,
+            &projection,
+            screen.v_means[p],
+            screen.v_covariances[p],
+        );
+        // p_cam = Rc m + tc  →  ∂L/∂m = Rcᵀ ∂L/∂p_cam
+        out.v_means[s] = std::array::from_fn(|c| (0..3).map(|r| rc[r][c] * v_p[r]).sum());
+        out.v_amplitudes[s] = screen.v_amplitudes[p];
+    }
+}
