@@ -5,9 +5,17 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
-use splat4d::io::image_file::{BitDepth, ImageKind, save_image};
+use indicatif::{ProgressBar, ProgressStyle};
+use splat4d::fit::adam::LearningRates;
+use splat4d::fit::dataset::{DatasetSpec, frame_count, render_dataset};
+use splat4d::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
+use splat4d::fit::loss::{psnr, view_loss_and_gradients};
+use splat4d::fit::train::{FitOptions, evaluate, fit};
+use splat4d::io::dataset::{SPLITS, load_dataset, write_split};
+use splat4d::io::image_file::{BitDepth, ImageKind, load_image, save_image};
+use splat4d::io::write_bytes_atomically;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION};
-use splat4d::{Camera, RenderContext, RenderOptions, Scene};
+use splat4d::{Camera, Gradients, RenderContext, RenderOptions, Scene};
 
 /// The shipped seed blob (SPEC §7) and a camera that frames its path, for the default job.
 const BLOB_SCENE: &str = include_str!("../data/blob.json");
@@ -27,6 +35,140 @@ pub struct Cli {
 enum Command {
     /// Render a scene through a camera at one time into a PNG or EXR image.
     Render(RenderArgs),
+    /// The MSE of a render against a target image, and its gradient per kernel, as JSON.
+    Grad(GradArgs),
+    /// Render a multi-view dataset (D-NeRF / Blender layout) of a scene.
+    Dataset(DatasetArgs),
+    /// Fit kernels to a multi-view dataset with Adam.
+    Fit(Box<FitArgs>),
+}
+
+#[derive(Debug, clap::Args)]
+struct GradArgs {
+    /// Scene JSON file.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Camera JSON file.
+    #[arg(long)]
+    camera: PathBuf,
+    /// Scene time τ.
+    #[arg(long, allow_negative_numbers = true)]
+    time: f64,
+    /// Target image (`.exr` or `.png`), the camera's size.
+    #[arg(long)]
+    target: PathBuf,
+    /// Output JSON: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3], "velocity": [3]}]}`.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+#[derive(Debug, clap::Args)]
+struct DatasetArgs {
+    /// Scene JSON file.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Training cameras, seeded on a sphere around the scene.
+    #[arg(long)]
+    views: usize,
+    /// Training times, evenly spread over the time range.
+    #[arg(long)]
+    times: usize,
+    /// Image size, `WxH`.
+    #[arg(long, value_parser = parse_size)]
+    size: (u32, u32),
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed of the cameras.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Also write float32 EXR images beside the 16-bit PNGs.
+    #[arg(long)]
+    exr: bool,
+    /// Time range `t0,t1`.
+    #[arg(long, value_parser = parse_list::<2>, default_value = "0,1", allow_hyphen_values = true)]
+    time_range: [f64; 2],
+    /// Vertical field of view of the cameras, degrees.
+    #[arg(long, default_value_t = 40.0)]
+    fov: f64,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+#[derive(Debug, clap::Args)]
+struct FitArgs {
+    /// Dataset folder (D-NeRF layout: transforms_train.json, and val/test for held-out views).
+    #[arg(long)]
+    views: PathBuf,
+    /// Initial scene: a scene JSON file, or `random:N` for N kernels in the box.
+    #[arg(long)]
+    init: String,
+    /// Adam steps.
+    #[arg(long)]
+    steps: usize,
+    /// Output scene JSON.
+    #[arg(long)]
+    out: PathBuf,
+    /// Box for `random:N`: `x0,y0,z0,x1,y1,z1` (default: from the cameras).
+    #[arg(long, value_parser = parse_list::<6>, allow_hyphen_values = true)]
+    r#box: Option<[f64; 6]>,
+    /// Time range for `random:N`: `t0,t1` (default: the training times' range).
+    #[arg(long, value_parser = parse_list::<2>, allow_hyphen_values = true)]
+    time_range: Option<[f64; 2]>,
+    /// Scales for `random:N`: `sx,sy,sz,st` (default: from the box and N).
+    #[arg(long, value_parser = parse_list::<4>)]
+    init_scale: Option<[f64; 4]>,
+    /// Amplitude of every channel for `random:N`.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
+    init_amplitude: f64,
+    /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
+    #[arg(long)]
+    log: Option<PathBuf>,
+    /// Learning rate of the spatial means.
+    #[arg(long, default_value_t = 2e-3)]
+    lr_mean: f64,
+    /// Learning rate of the time means.
+    #[arg(long, default_value_t = 2e-3)]
+    lr_time: f64,
+    /// Learning rate of the amplitudes.
+    #[arg(long, default_value_t = 1e-2)]
+    lr_amplitude: f64,
+    /// Learning rate of the velocities (used with --fit-velocity).
+    #[arg(long, default_value_t = 2e-3)]
+    lr_velocity: f64,
+    /// Learning rates at the last step as a fraction of the first (exponential decay).
+    #[arg(long, default_value_t = 0.05)]
+    lr_final: f64,
+    /// Fit the velocities too (frozen by default, as in the seed paper).
+    #[arg(long)]
+    fit_velocity: bool,
+    /// Keep the spatial means fixed.
+    #[arg(long)]
+    freeze_mean: bool,
+    /// Keep the time means fixed.
+    #[arg(long)]
+    freeze_time: bool,
+    /// Keep the amplitudes fixed.
+    #[arg(long)]
+    freeze_amplitude: bool,
+    /// Views per step.
+    #[arg(long, default_value_t = 8)]
+    batch: usize,
+    /// Held-out evaluation period, steps (0: only at the end).
+    #[arg(long, default_value_t = 50)]
+    eval_every: usize,
+    /// Seed of the batch order and of `random:N`.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Background `r,g,b`: RGBA images are composited over it and the fitted scene uses it
+    /// (default: white when the images have alpha, as D-NeRF does; otherwise the initial
+    /// scene's, black for `random:N`).
+    #[arg(long, value_parser = parse_list::<3>)]
+    background: Option<[f64; 3]>,
+    #[command(flatten)]
+    render: RenderFlags,
 }
 
 #[derive(Debug, clap::Args)]
@@ -75,6 +217,43 @@ impl RenderFlags {
     }
 }
 
+fn parse_list<const N: usize>(text: &str) -> Result<[f64; N], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("`{v}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    let array: [f64; N] = values
+        .try_into()
+        .map_err(|v: Vec<f64>| format!("expected {N} comma-separated numbers, got {}", v.len()))?;
+    match array.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(format!("{v} is not finite")),
+        None => Ok(array),
+    }
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{text}` is not WxH"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|&n| n > 0);
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("`{text}` is not WxH with W, H ≥ 1")),
+    }
+}
+
+fn progress_bar(len: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} ({per_sec}) {msg}",
+        )
+        .expect("a valid template"),
+    );
+    bar.set_prefix(what.to_owned());
+    bar
+}
+
 fn parse_bit_depth(text: &str) -> Result<u8, String> {
     match text {
         "8" => Ok(8),
@@ -102,6 +281,9 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         None => default_job(),
         Some(Command::Render(args)) => render_command(&args),
+        Some(Command::Grad(args)) => grad_command(&args),
+        Some(Command::Dataset(args)) => dataset_command(&args),
+        Some(Command::Fit(args)) => fit_command(&args),
     }
 }
 
@@ -131,6 +313,202 @@ fn render_command(args: &RenderArgs) -> Result<()> {
         scene.len(),
         stats.pairs
     );
+    Ok(())
+}
+
+fn grad_command(args: &GradArgs) -> Result<()> {
+    let options = args.render.options()?;
+    let scene = Scene::load(&args.scene)?;
+    let camera = Camera::load(&args.camera)?;
+    let background = scene.background.map(|b| b as f32);
+    let target = load_image(&args.target, background)?;
+    if (target.width, target.height) != (camera.width, camera.height) {
+        anyhow::bail!(
+            "{}: the target is {}×{} but {} is {}×{}",
+            args.target.display(),
+            target.width,
+            target.height,
+            args.camera.display(),
+            camera.width,
+            camera.height
+        );
+    }
+    let mut context = RenderContext::new();
+    let mut grads = Gradients::zeros(scene.len());
+    let loss = with_threads(args.render.threads, || {
+        view_loss_and_gradients(
+            &mut context,
+            &scene,
+            &camera,
+            args.time,
+            &options,
+            &target,
+            &mut grads,
+        )
+    })??;
+    write_bytes_atomically(&args.out, grads.to_json_string(loss).as_bytes())?;
+    println!(
+        "{}: loss {loss:e} (PSNR {:.2} dB), gradients of {} kernels",
+        args.out.display(),
+        psnr(loss),
+        scene.len()
+    );
+    Ok(())
+}
+
+fn dataset_command(args: &DatasetArgs) -> Result<()> {
+    let options = args.render.options()?;
+    let scene = Scene::load(&args.scene)?;
+    let spec = DatasetSpec {
+        views: args.views,
+        times: args.times,
+        width: args.size.0,
+        height: args.size.1,
+        time_range: args.time_range,
+        fov_y_degrees: args.fov,
+        seed: args.seed,
+    };
+    let bar = progress_bar(frame_count(&spec), "render");
+    let dataset = with_threads(args.render.threads, || {
+        render_dataset(&scene, &spec, &options, || bar.inc(1))
+    })??;
+    bar.finish_and_clear();
+    for (split, views) in SPLITS
+        .iter()
+        .zip([&dataset.train, &dataset.val, &dataset.test])
+    {
+        write_split(&args.out, split, views, args.exr)?;
+    }
+    println!(
+        "{}: {} train, {} val, {} test frames ({}×{})",
+        args.out.display(),
+        dataset.train.len(),
+        dataset.val.len(),
+        dataset.test.len(),
+        spec.width,
+        spec.height
+    );
+    Ok(())
+}
+
+fn fit_command(args: &FitArgs) -> Result<()> {
+    let render = args.render.options()?;
+    let composite_on = args.background.unwrap_or([1.0; 3]).map(|b| b as f32);
+    let dataset = load_dataset(&args.views, composite_on)?;
+    let train_times = dataset.train.iter().map(|v| v.time);
+    let time_range = args.time_range.unwrap_or_else(|| {
+        let (lo, hi) = train_times.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+        [lo, hi]
+    });
+    let mut scene = match args.init.strip_prefix("random:") {
+        Some(count) => {
+            let n: usize =
+                count.parse().ok().filter(|&n| n > 0).with_context(|| {
+                    format!("--init {}: N must be a whole number ≥ 1", args.init)
+                })?;
+            let bounds = match args.r#box {
+                Some([x0, y0, z0, x1, y1, z1]) => {
+                    if !(x0 < x1 && y0 < y1 && z0 < z1) {
+                        anyhow::bail!("--box: need x0 < x1, y0 < y1, z0 < z1");
+                    }
+                    SpaceTimeBox {
+                        min: [x0, y0, z0],
+                        max: [x1, y1, z1],
+                        time: time_range,
+                    }
+                }
+                None => {
+                    let cameras: Vec<Camera> = dataset.train.iter().map(|v| v.camera).collect();
+                    box_from_cameras(&cameras, time_range)?
+                }
+            };
+            if let Some(scale) = args.init_scale
+                && scale.iter().any(|&s| s <= 0.0)
+            {
+                anyhow::bail!("--init-scale: every scale must be > 0");
+            }
+            random_scene(n, &bounds, args.init_scale, args.init_amplitude, args.seed)?
+        }
+        None => Scene::load(Path::new(&args.init))?,
+    };
+    if let Some(background) = args.background {
+        scene.background = background;
+    } else if dataset.had_alpha {
+        scene.background = [1.0; 3];
+    }
+    let rate = |frozen: bool, lr: f64| if frozen { 0.0 } else { lr };
+    let options = FitOptions {
+        steps: args.steps,
+        batch_size: args.batch,
+        learning_rates: LearningRates {
+            mean: rate(args.freeze_mean, args.lr_mean),
+            time: rate(args.freeze_time, args.lr_time),
+            amplitude: rate(args.freeze_amplitude, args.lr_amplitude),
+            velocity: rate(!args.fit_velocity, args.lr_velocity),
+        },
+        final_rate_factor: args.lr_final,
+        eval_every: args.eval_every,
+        seed: args.seed,
+        render,
+        ..FitOptions::default()
+    };
+    let heldout = if dataset.val.is_empty() {
+        &dataset.test
+    } else {
+        &dataset.val
+    };
+    let bar = progress_bar(args.steps, "fit");
+    let mut last_heldout = None;
+    let records = with_threads(args.render.threads, || {
+        fit(&mut scene, &dataset.train, heldout, &options, |record| {
+            if record.heldout_psnr.is_some() {
+                last_heldout = record.heldout_psnr;
+            }
+            let heldout = last_heldout.map_or(String::new(), |p| format!(", held-out {p:.2} dB"));
+            bar.set_message(format!(
+                "loss {:.3e}, PSNR {:.2} dB{heldout}",
+                record.train_loss,
+                psnr(record.train_loss)
+            ));
+            bar.inc(1);
+        })
+    })??;
+    bar.finish_and_clear();
+    scene.save(&args.out)?;
+    if let Some(log) = &args.log {
+        let mut lines = String::new();
+        for record in &records {
+            lines.push_str(&serde_json::to_string(record)?);
+            lines.push('\n');
+        }
+        write_bytes_atomically(log, lines.as_bytes())?;
+    }
+    let seconds = records.last().map_or(0.0, |r| r.seconds);
+    println!(
+        "{}: {} kernels fitted in {} steps, {seconds:.1} s",
+        args.out.display(),
+        scene.len(),
+        args.steps
+    );
+    let mut context = RenderContext::new();
+    for (split, views) in [
+        ("train", &dataset.train),
+        ("val", &dataset.val),
+        ("test", &dataset.test),
+    ] {
+        if !views.is_empty() {
+            let mse = with_threads(args.render.threads, || {
+                evaluate(&scene, views, &render, &mut context)
+            })??;
+            println!(
+                "  {split}: {} views, MSE {mse:.3e}, PSNR {:.2} dB",
+                views.len(),
+                psnr(mse)
+            );
+        }
+    }
     Ok(())
 }
 

@@ -87,3 +87,74 @@ pub fn bench_camera(width: u32, height: u32) -> Camera {
     )
     .expect("a valid look-at")
 }
+
+/// The sphere that holds every kernel's slice centre at `times`, widened by 3 of its
+/// largest spatial σ: `(centre, radius)`.
+#[must_use]
+pub fn bounding_sphere(scene: &Scene, times: &[f64]) -> ([f64; 3], f64) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let centres = |i: usize| {
+        times.iter().map(move |&tau| {
+            let dt = tau - scene.means[i][3];
+            std::array::from_fn::<f64, 3, _>(|c| scene.means[i][c] + scene.velocities[i][c] * dt)
+        })
+    };
+    for i in 0..scene.len() {
+        for m in centres(i) {
+            for c in 0..3 {
+                lo[c] = lo[c].min(m[c]);
+                hi[c] = hi[c].max(m[c]);
+            }
+        }
+    }
+    if scene.is_empty() {
+        return ([0.0; 3], 1.0);
+    }
+    let centre: [f64; 3] = std::array::from_fn(|c| 0.5 * (lo[c] + hi[c]));
+    let mut radius: f64 = 0.0;
+    for i in 0..scene.len() {
+        let sigma = scene.scales[i][..3].iter().cloned().fold(0.0, f64::max);
+        for m in centres(i) {
+            let d = (0..3)
+                .map(|c| (m[c] - centre[c]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            radius = radius.max(d + 3.0 * sigma);
+        }
+    }
+    (centre, radius)
+}
+
+/// `n` seeded cameras on a sphere around `centre`, each looking at it with +y up, far enough
+/// for a ball of `radius` to fill its `fov_y_degrees` with a 5% margin. Directions are
+/// uniform over the sphere away from the poles (|y| < 0.9 of the distance).
+pub fn sphere_cameras(
+    centre: [f64; 3],
+    radius: f64,
+    n: usize,
+    fov_y_degrees: f64,
+    width: u32,
+    height: u32,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Camera> {
+    let half_fov = 0.5
+        * fov_y_degrees
+            .to_radians()
+            .min(2.0 * (f64::from(width) / f64::from(height)).atan());
+    let distance = 1.05 * radius / half_fov.sin();
+    let mut cameras = Vec::with_capacity(n);
+    while cameras.len() < n {
+        let y: f64 = rng.random_range(-0.9..0.9);
+        let phi: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let r = (1.0 - y * y).sqrt();
+        let dir = [r * phi.cos(), y, r * phi.sin()];
+        let eye = std::array::from_fn(|c| centre[c] + distance * dir[c]);
+        if let Ok(camera) =
+            Camera::look_at(eye, centre, [0.0, 1.0, 0.0], fov_y_degrees, width, height)
+        {
+            cameras.push(camera);
+        }
+    }
+    cameras
+}

@@ -208,3 +208,278 @@ fn bad_flags_exit_2() {
         assert!(files_in(dir.path()).is_empty());
     }
 }
+
+fn shared_testdata(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/testdata")
+        .join(name)
+}
+
+#[test]
+fn grad_matches_the_independent_gradient_vectors() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["toy_blob", "random_200"] {
+        let data = shared_testdata(name);
+        let tau = std::fs::read_to_string(data.join("tau.txt")).unwrap();
+        let out = dir.path().join(format!("{name}.json"));
+        let path = |f: &str| data.join(f).to_str().unwrap().to_owned();
+        let args = [
+            "grad",
+            "--scene",
+            &path("scene.json"),
+            "--camera",
+            &path("camera.json"),
+            "--time",
+            tau.trim(),
+            "--target",
+            &path("grad_target.exr"),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        let output = splat4d(&args, dir.path());
+        assert!(output.status.success(), "{name}: {}", stderr(&output));
+        let read = |p: &Path| {
+            splat4d::Gradients::from_json_str(&std::fs::read_to_string(p).unwrap(), "x").unwrap()
+        };
+        let (loss, ours) = read(&out);
+        let (expected_loss, expected) = read(&data.join("grad_expected.json"));
+        assert!(
+            (loss - expected_loss).abs() <= 1e-5 * expected_loss,
+            "{name}: loss {loss} vs {expected_loss}"
+        );
+        assert_eq!(ours.len(), expected.len());
+        let flat = |g: &splat4d::Gradients| -> Vec<f64> {
+            (0..g.len())
+                .flat_map(|i| {
+                    g.v_means[i]
+                        .into_iter()
+                        .chain(g.v_amplitudes[i])
+                        .chain(g.v_velocities[i])
+                })
+                .collect()
+        };
+        let (ours, expected) = (flat(&ours), flat(&expected));
+        let scale = expected.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        for (k, (a, e)) in ours.iter().zip(&expected).enumerate() {
+            assert!(
+                (a - e).abs() <= 1e-5 * scale + 1e-5 * e.abs(),
+                "{name}: entry {k}: {a} vs {e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn grad_refuses_a_target_of_the_wrong_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = shared_testdata("toy_blob");
+    let other = shared_testdata("random_200").join("grad_target.exr");
+    let (scene, camera) = (data.join("scene.json"), data.join("camera.json"));
+    let args = [
+        "grad",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--target",
+        other.to_str().unwrap(),
+        "--out",
+        "g.json",
+    ];
+    let output = splat4d(&args, dir.path());
+    assert_eq!(output.status.code(), Some(2));
+    let message = stderr(&output);
+    assert!(
+        message.contains("grad_target.exr")
+            && message.contains("128×96")
+            && message.contains("96×72"),
+        "{message}"
+    );
+    assert!(files_in(dir.path()).is_empty());
+}
+
+#[test]
+fn dataset_then_fit_as_a_new_user_would() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let args = [
+        "dataset",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--views",
+        "6",
+        "--times",
+        "3",
+        "--size",
+        "48x40",
+        "--out",
+        "set",
+        "--seed",
+        "3",
+        "--exr",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_eq!(
+        files_in(&d.join("set")),
+        [
+            "test",
+            "train",
+            "transforms_test.json",
+            "transforms_train.json",
+            "transforms_val.json",
+            "val"
+        ]
+    );
+    assert_eq!(
+        files_in(&d.join("set/train")).len(),
+        2 * 18,
+        "PNG and EXR per frame"
+    );
+
+    // Start from the blob displaced by 0.03 and fit its mean and amplitude back.
+    let mut start = Scene::load(&blob).unwrap();
+    start.means[0][0] += 0.03;
+    start.amplitudes[0] = [0.8; 3];
+    start.save(&d.join("start.json")).unwrap();
+    let args = [
+        "fit",
+        "--views",
+        "set",
+        "--init",
+        "start.json",
+        "--steps",
+        "200",
+        "--out",
+        "fitted.json",
+        "--log",
+        "log.jsonl",
+        "--lr-mean",
+        "5e-3",
+        "--freeze-time",
+        "--lr-final",
+        "0.01",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let fitted = Scene::load(&d.join("fitted.json")).unwrap();
+    assert!(
+        (fitted.means[0][0] - 0.5).abs() < 1e-3,
+        "{:?}",
+        fitted.means[0]
+    );
+    let log = std::fs::read_to_string(d.join("log.jsonl")).unwrap();
+    let rows: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), 200);
+    assert_eq!(rows[199]["step"], 200);
+    let first = rows[0]["train_loss"].as_f64().unwrap();
+    let last = rows[199]["train_loss"].as_f64().unwrap();
+    assert!(last < 1e-3 * first, "loss {first} → {last}");
+    assert!(
+        rows[199]["heldout_psnr"].as_f64().unwrap() > 50.0,
+        "{}",
+        rows[199]
+    );
+    let report = String::from_utf8_lossy(&output.stdout);
+    assert!(report.contains("test: 4 views"), "{report}");
+
+    // random:N with the box inferred from the cameras runs and writes N kernels.
+    let args = [
+        "fit",
+        "--views",
+        "set",
+        "--init",
+        "random:7",
+        "--steps",
+        "5",
+        "--out",
+        "random.json",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_eq!(Scene::load(&d.join("random.json")).unwrap().len(), 7);
+}
+
+#[test]
+fn fit_refuses_bad_views_and_flags_with_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("missing_image")).unwrap();
+    std::fs::write(
+        d.join("missing_image/transforms_train.json"),
+        r#"{"camera_angle_x": 0.7, "frames": [{"file_path": "./train/r_000", "time": 0, "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,3],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
+    let blob = data("blob.json");
+    let args = [
+        "dataset",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--views",
+        "2",
+        "--times",
+        "2",
+        "--size",
+        "8x8",
+        "--out",
+        "set",
+    ];
+    assert!(splat4d(&args, d).status.success());
+    let cases: [(&[&str], &[&str]); 6] = [
+        (&["--views", "nowhere", "--init", "random:3"], &["nowhere"]),
+        (
+            &["--views", "missing_image", "--init", "random:3"],
+            &["transforms_train.json", "frame 0", "file_path", "r_000"],
+        ),
+        (
+            &["--views", "set", "--init", "random:0"],
+            &["random:0", "N must be"],
+        ),
+        (
+            &[
+                "--views",
+                "set",
+                "--init",
+                "random:3",
+                "--box",
+                "1,0,0,0,1,1",
+            ],
+            &["--box", "x0 < x1"],
+        ),
+        (
+            &[
+                "--views",
+                "set",
+                "--init",
+                "random:3",
+                "--init-scale",
+                "0.1,0,0.1,0.1",
+            ],
+            &["--init-scale", "> 0"],
+        ),
+        (
+            &["--views", "set", "--init", "nothere.json"],
+            &["nothere.json"],
+        ),
+    ];
+    for (extra, parts) in cases {
+        let mut args = vec!["fit", "--steps", "3", "--out", "out.json"];
+        args.extend(extra);
+        let output = splat4d(&args, d);
+        assert_eq!(output.status.code(), Some(2), "{extra:?}");
+        let message = stderr(&output);
+        for part in parts {
+            assert!(
+                message.contains(part),
+                "{extra:?}: `{message}` should mention `{part}`"
+            );
+        }
+        assert_eq!(files_in(d), ["missing_image", "set"]);
+    }
+}

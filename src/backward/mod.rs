@@ -67,3 +67,49 @@ pub struct BackwardBuffers {
     /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.
     pub sliced: project::SliceGradients,
 }
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KernelGradientEntry {
+    mean: [f64; 4],
+    amplitude: [f64; 3],
+    velocity: [f64; 3],
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GradientFile {
+    loss: f64,
+    kernels: Vec<KernelGradientEntry>,
+}
+
+impl Gradients {
+    /// The `splat4d grad` file: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3],
+    /// "velocity": [3]}]}`, kernels in scene order.
+    #[must_use]
+    pub fn to_json_string(&self, loss: f64) -> String {
+        let file = GradientFile {
+            loss,
+            kernels: (0..self.len())
+                .map(|i| KernelGradientEntry {
+                    mean: self.v_means[i],
+                    amplitude: self.v_amplitudes[i],
+                    velocity: self.v_velocities[i],
+                })
+                .collect(),
+        };
+        serde_json::to_string_pretty(&file).expect("finite numbers serialise")
+    }
+
+    /// Parses a `splat4d grad` file into the loss and the gradients.
+    pub fn from_json_str(text: &str, origin: &str) -> crate::Result<(f64, Self)> {
+        let file: GradientFile = crate::io::json::parse_json(text, origin, "gradients")?;
+        let mut grads = Gradients::zeros(file.kernels.len());
+        for (i, k) in file.kernels.iter().enumerate() {
+            grads.v_means[i] = k.mean;
+            grads.v_amplitudes[i] = k.amplitude;
+            grads.v_velocities[i] = k.velocity;
+        }
+        Ok((file.loss, grads))
+    }
+}

@@ -45,3 +45,27 @@ pub fn mse_with_gradient(
 pub fn psnr(mse: f64) -> f64 {
     -10.0 * mse.log10()
 }
+
+/// The MSE of one view against `target` and its gradient, accumulated into `grads` (sized
+/// for the scene): what `splat4d grad` computes. The target must have the camera's size.
+pub fn view_loss_and_gradients(
+    context: &mut crate::RenderContext,
+    scene: &crate::Scene,
+    camera: &crate::Camera,
+    tau: f64,
+    options: &crate::RenderOptions,
+    target: &Image,
+    grads: &mut crate::Gradients,
+) -> crate::Result<f64> {
+    if (target.width, target.height) != (camera.width, camera.height) {
+        return Err(crate::Error::Usage(format!(
+            "the target image is {}×{} but the camera is {}×{}",
+            target.width, target.height, camera.width, camera.height
+        )));
+    }
+    context.render(scene, camera, tau, options)?;
+    let mut v_image = Vec::new();
+    let loss = mse_with_gradient(context.image(), target, 1.0, &mut v_image);
+    context.backward(scene, camera, tau, options, &v_image, grads);
+    Ok(loss)
+}

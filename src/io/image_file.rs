@@ -104,6 +104,11 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
 
 /// Reads an image file as linear RGB, compositing any alpha over `background`.
 pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
+    load_image_with_alpha(path, background).map(|(image, _)| image)
+}
+
+/// [`load_image`], also telling whether the file had an alpha channel.
+pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image, bool)> {
     let origin = path.display().to_string();
     ImageKind::from_path(path)?;
     let reader = image::ImageReader::open(path)
@@ -113,7 +118,10 @@ pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     let decoded = reader
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
-    Ok(to_linear_rgb(&decoded, background))
+    Ok((
+        to_linear_rgb(&decoded, background),
+        decoded.color().has_alpha(),
+    ))
 }
 
 /// Converts a decoded image to linear RGB f32 (integers divided by `2^bits - 1`), alpha

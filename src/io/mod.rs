@@ -1,5 +1,6 @@
 //! Files: atomic writes and images. Nothing here knows about the command line.
 
+pub mod dataset;
 pub mod image_file;
 pub mod json;
 

@@ -1,0 +1,104 @@
+//! Initial scenes for fitting: N kernels spread uniformly (seeded) over a space-time box,
+//! and the box a user would expect from the cameras when none is given.
+
+use glam::{DMat3, DVec3};
+use rand::RngExt;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::scene::{Kernel, Scene};
+use crate::synthetic::seeded_rng;
+
+/// An axis-aligned space-time box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpaceTimeBox {
+    /// Lower corner `(x, y, z)`.
+    pub min: [f64; 3],
+    /// Upper corner `(x, y, z)`.
+    pub max: [f64; 3],
+    /// Time range `[t0, t1]`.
+    pub time: [f64; 2],
+}
+
+/// The point nearest (least squares) to every camera's optical axis, and a cube around it
+/// half as wide as the median camera sees at that distance (its vertical field of view):
+/// what the cameras are looking at. Needs two cameras with different viewing directions.
+pub fn box_from_cameras(cameras: &[Camera], time: [f64; 2]) -> Result<SpaceTimeBox> {
+    let mut normal = DMat3::ZERO;
+    let mut rhs = DVec3::ZERO;
+    let axes: Vec<(DVec3, DVec3)> = cameras
+        .iter()
+        .map(|c| {
+            let rows = c.rotation();
+            // The optical axis is the third row of Rc (camera z in world), normalised.
+            let dir = DVec3::from(rows[2]).normalize();
+            (DVec3::from(c.centre()), dir)
+        })
+        .collect();
+    for (centre, dir) in &axes {
+        // Projector onto the plane orthogonal to the axis.
+        let p = DMat3::IDENTITY - DMat3::from_cols(*dir * dir.x, *dir * dir.y, *dir * dir.z);
+        normal += p;
+        rhs += p * *centre;
+    }
+    let det = normal.determinant();
+    if !det.is_finite() || det.abs() <= 1e-9 {
+        return Err(Error::Usage(
+            "cannot infer a box from the cameras (fewer than two distinct viewing directions): pass --box".into(),
+        ));
+    }
+    let target = normal.inverse() * rhs;
+    let mut half_widths: Vec<f64> = cameras
+        .iter()
+        .zip(&axes)
+        .map(|(c, (centre, _))| {
+            0.5 * (target - *centre).length() * 0.5 * f64::from(c.height) / c.fy
+        })
+        .collect();
+    half_widths.sort_by(f64::total_cmp);
+    let half = half_widths[half_widths.len() / 2];
+    Ok(SpaceTimeBox {
+        min: (target - DVec3::splat(half)).into(),
+        max: (target + DVec3::splat(half)).into(),
+        time,
+    })
+}
+
+/// `n` kernels with means uniform in `bounds` (seeded), axis-aligned, static, grey
+/// `amplitude`, and scales `scale = [sx, sy, sz, st]`, or by default a quarter of the box's
+/// mean side and time range per `n^(1/4)` (kernels spread over four dimensions).
+pub fn random_scene(
+    n: usize,
+    bounds: &SpaceTimeBox,
+    scale: Option<[f64; 4]>,
+    amplitude: f64,
+    seed: u64,
+) -> Result<Scene> {
+    let side = (0..3).map(|c| bounds.max[c] - bounds.min[c]).sum::<f64>() / 3.0;
+    let span = bounds.time[1] - bounds.time[0];
+    let per_axis = (n.max(1) as f64).powf(0.25);
+    let scale = scale.unwrap_or_else(|| {
+        let s = 0.5 * side / per_axis;
+        [s, s, s, (0.5 * span / per_axis).max(1e-3)]
+    });
+    let mut rng = seeded_rng(seed);
+    let mut uniform = |lo: f64, hi: f64| {
+        if hi > lo {
+            rng.random_range(lo..hi)
+        } else {
+            lo
+        }
+    };
+    let kernels: Vec<Kernel> = (0..n)
+        .map(|_| {
+            let mean = [
+                uniform(bounds.min[0], bounds.max[0]),
+                uniform(bounds.min[1], bounds.max[1]),
+                uniform(bounds.min[2], bounds.max[2]),
+                uniform(bounds.time[0], bounds.time[1]),
+            ];
+            Kernel::new(mean, scale, [amplitude; 3])
+        })
+        .collect();
+    Scene::from_kernels(&kernels, [0.0; 3], "<random initial scene>")
+}
