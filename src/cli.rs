@@ -17,6 +17,15 @@ use splat4d::io::write_bytes_atomically;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION};
 use splat4d::{Camera, Gradients, RenderContext, RenderOptions, Scene};
 
+/// Prints a line of the report to stdout. A closed stdout (`splat4d … | head`) is not an
+/// error: the work is done and written, only the report has no reader.
+macro_rules! report {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
 /// The shipped seed blob (SPEC §7) and a camera that frames its path, for the default job.
 const BLOB_SCENE: &str = include_str!("../data/blob.json");
 const BLOB_CAMERA: &str = include_str!("../data/blob_camera.json");
@@ -303,7 +312,7 @@ fn render_command(args: &RenderArgs) -> Result<()> {
         context.render(&scene, &camera, args.time, &options)
     })??;
     save_image(context.image(), &args.out, depth)?;
-    println!(
+    report!(
         "{}: {}×{} at t = {}, {} of {} kernels on screen, {} pairs",
         args.out.display(),
         camera.width,
@@ -347,7 +356,7 @@ fn grad_command(args: &GradArgs) -> Result<()> {
         )
     })??;
     write_bytes_atomically(&args.out, grads.to_json_string(loss).as_bytes())?;
-    println!(
+    report!(
         "{}: loss {loss:e} (PSNR {:.2} dB), gradients of {} kernels",
         args.out.display(),
         psnr(loss),
@@ -379,7 +388,7 @@ fn dataset_command(args: &DatasetArgs) -> Result<()> {
     {
         write_split(&args.out, split, views, args.exr)?;
     }
-    println!(
+    report!(
         "{}: {} train, {} val, {} test frames ({}×{})",
         args.out.display(),
         dataset.train.len(),
@@ -486,7 +495,7 @@ fn fit_command(args: &FitArgs) -> Result<()> {
         write_bytes_atomically(log, lines.as_bytes())?;
     }
     let seconds = records.last().map_or(0.0, |r| r.seconds);
-    println!(
+    report!(
         "{}: {} kernels fitted in {} steps, {seconds:.1} s",
         args.out.display(),
         scene.len(),
@@ -502,7 +511,7 @@ fn fit_command(args: &FitArgs) -> Result<()> {
             let mse = with_threads(args.render.threads, || {
                 evaluate(&scene, views, &render, &mut context)
             })??;
-            println!(
+            report!(
                 "  {split}: {} views, MSE {mse:.3e}, PSNR {:.2} dB",
                 views.len(),
                 psnr(mse)
@@ -523,7 +532,7 @@ fn default_job() -> Result<()> {
         context.render(&scene, &camera, tau, &options)?;
         let path = out.join(format!("blob_t{tau:.2}.png"));
         save_image(context.image(), &path, BitDepth::Eight)?;
-        println!("wrote {} (the seed blob at t = {tau})", path.display());
+        report!("wrote {} (the seed blob at t = {tau})", path.display());
     }
     Ok(())
 }

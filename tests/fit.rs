@@ -61,3 +61,35 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
     assert_eq!(scene.velocities[0], [1.0; 3], "velocity frozen");
     assert!(records.last().unwrap().heldout_psnr.is_some());
 }
+
+#[test]
+fn a_diverging_fit_stops_with_an_error() {
+    let truth = seed_blob();
+    let spec = DatasetSpec {
+        views: 2,
+        times: 2,
+        width: 16,
+        height: 16,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let mut scene = truth.clone();
+    let options = FitOptions {
+        steps: 50,
+        learning_rates: LearningRates {
+            mean: 0.0,
+            time: 0.0,
+            amplitude: 1e300,
+            velocity: 0.0,
+        },
+        ..FitOptions::default()
+    };
+    scene.amplitudes[0] = [0.5; 3];
+    let error = fit(&mut scene, &dataset.train, &[], &options, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("diverged") && error.contains("learning rates"),
+        "{error}"
+    );
+}

@@ -155,6 +155,11 @@ pub fn fit(
                 &mut grads,
             );
         }
+        if !batch_loss.is_finite() {
+            return Err(Error::Usage(format!(
+                "fitting diverged at step {step}: the loss is {batch_loss}; lower the learning rates"
+            )));
+        }
         let progress = if options.steps > 1 {
             (step - 1) as f64 / (options.steps - 1) as f64
         } else {

@@ -1,0 +1,81 @@
+//! One training step on the seeded bench scenes at 512×512: forward, backward (after a
+//! forward), and the whole step (forward + loss + backward + Adam). Prints backward time over
+//! forward time per scene. Machine and flags: `benches/README.md`.
+
+use std::time::Instant;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use splat4d::fit::adam::{Adam, AdamConfig, LearningRates};
+use splat4d::fit::loss::mse_with_gradient;
+use splat4d::synthetic::{bench_camera, bench_scene};
+use splat4d::{Gradients, RenderContext, RenderOptions};
+
+const SIZES: [usize; 3] = [1_000, 10_000, 100_000];
+const TAU: f64 = 0.5;
+
+fn training_step(c: &mut Criterion) {
+    let camera = bench_camera(512, 512);
+    let options = RenderOptions::default();
+    let rates = LearningRates {
+        mean: 1e-3,
+        time: 1e-3,
+        amplitude: 1e-3,
+        velocity: 1e-3,
+    };
+    let mut group = c.benchmark_group("train_512x512");
+    group.sample_size(10);
+    for n in SIZES {
+        let scene = bench_scene(n, 42);
+        let mut context = RenderContext::new();
+        // Target: the same scene at another time, so residuals are non-zero everywhere.
+        context.render(&scene, &camera, 0.3, &options).unwrap();
+        let target = context.image().clone();
+        let stats = context.render(&scene, &camera, TAU, &options).unwrap();
+        let mut v_image = Vec::new();
+        mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
+        let mut grads = Gradients::zeros(n);
+        group.throughput(Throughput::Elements(stats.pairs));
+
+        // Backward over forward, measured directly as well (criterion reports each alone).
+        let repeats = (2_000_000 / n).clamp(3, 200);
+        let start = Instant::now();
+        for _ in 0..repeats {
+            context.render(&scene, &camera, TAU, &options).unwrap();
+        }
+        let forward = start.elapsed().as_secs_f64() / repeats as f64;
+        let start = Instant::now();
+        for _ in 0..repeats {
+            context.backward(&scene, &camera, TAU, &options, &v_image, &mut grads);
+        }
+        let backward = start.elapsed().as_secs_f64() / repeats as f64;
+        eprintln!(
+            "{n} kernels: {} pairs; forward {:.2} ms, backward {:.2} ms, backward/forward = {:.2}",
+            stats.pairs,
+            1e3 * forward,
+            1e3 * backward,
+            backward / forward
+        );
+
+        group.bench_function(BenchmarkId::new("forward", n), |b| {
+            b.iter(|| context.render(&scene, &camera, TAU, &options).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("backward", n), |b| {
+            b.iter(|| context.backward(&scene, &camera, TAU, &options, &v_image, &mut grads))
+        });
+        let mut fitted = scene.clone();
+        let mut adam = Adam::new(n, AdamConfig::default());
+        group.bench_function(BenchmarkId::new("step", n), |b| {
+            b.iter(|| {
+                context.render(&fitted, &camera, TAU, &options).unwrap();
+                mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
+                grads.reset(n);
+                context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
+                adam.step(&mut fitted, &grads, &rates);
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, training_step);
+criterion_main!(benches);
