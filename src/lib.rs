@@ -30,10 +30,13 @@ pub mod project;
 pub mod raster;
 pub mod reference;
 pub mod render;
+pub mod report;
 pub mod scene;
 pub mod slice;
 pub mod synthetic;
 pub mod tiles;
+pub mod toy;
+pub mod volume;
 
 pub use backward::Gradients;
 pub use camera::Camera;

@@ -102,6 +102,23 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     })
 }
 
+/// Writes 8-bit RGB bytes (`3 width height`, row-major) as a PNG, atomically: for charts and
+/// figures drawn directly in 8 bits.
+pub fn save_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
+    let buf: ImageBuffer<Rgb<u8>, &[u8]> =
+        ImageBuffer::from_raw(width, height, bytes).ok_or_else(|| {
+            Error::Usage(format!(
+                "{}: {} bytes do not make a {width}×{height} RGB image",
+                path.display(),
+                bytes.len()
+            ))
+        })?;
+    write_atomically(path, |w| {
+        buf.write_to(w, ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+}
+
 /// Reads an image file as linear RGB, compositing any alpha over `background`.
 pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     load_image_with_alpha(path, background).map(|(image, _)| image)

@@ -1,0 +1,327 @@
+//! Charts and figures for reports, drawn with plotters into an 8-bit RGB buffer (text with
+//! ab_glyph and the DejaVu Sans font shipped in `data/fonts/`, so no system font is needed)
+//! and written as PNG.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::prelude::*;
+use plotters::style::colors::colormaps::ViridisRGB;
+
+use crate::error::{Error, Result};
+use crate::io::image_file::save_rgb8_png;
+
+const FONT: &str = "sans-serif";
+
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The bytes are a valid TrueType font shipped with the crate.
+        let _ = plotters::style::register_font(
+            FONT,
+            FontStyle::Normal,
+            include_bytes!("../../data/fonts/DejaVuSans.ttf"),
+        );
+    });
+}
+
+fn chart_error(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::Usage(format!("{}: cannot draw the chart: {e}", path.display()))
+}
+
+/// Colour of series `i`.
+fn colour(i: usize) -> RGBColor {
+    const COLOURS: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
+        RGBColor(255, 127, 14),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
+    ];
+    COLOURS[i % COLOURS.len()]
+}
+
+/// Draws into a fresh `width × height` white buffer and writes it to `path`.
+fn draw_png(
+    path: &Path,
+    (width, height): (u32, u32),
+    draw: impl FnOnce(
+        &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    ) -> std::result::Result<(), Box<dyn std::error::Error>>,
+) -> Result<()> {
+    register_font();
+    let mut buffer = vec![255_u8; 3 * width as usize * height as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
+        draw(&root).map_err(|e| chart_error(path, e))?;
+        root.present().map_err(|e| chart_error(path, e))?;
+    }
+    save_rgb8_png(path, width, height, &buffer)
+}
+
+/// One named polyline.
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// Legend entry.
+    pub label: String,
+    /// `(x, y)` points; non-finite points are skipped.
+    pub points: Vec<(f64, f64)>,
+    /// Draw a marker at every point.
+    pub markers: bool,
+}
+
+fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return 0.0..1.0;
+    }
+    let pad = if hi > lo {
+        0.05 * (hi - lo)
+    } else {
+        0.5 * lo.abs().max(1.0)
+    };
+    (lo - pad)..(hi + pad)
+}
+
+/// A line chart of `series` with a legend.
+pub fn line_chart(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> Result<()> {
+    let finite = |s: &Series| {
+        s.points
+            .iter()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .copied()
+            .collect::<Vec<_>>()
+    };
+    let xs = padded_range(
+        series
+            .iter()
+            .flat_map(|s| finite(s).into_iter().map(|p| p.0)),
+    );
+    let ys = padded_range(
+        series
+            .iter()
+            .flat_map(|s| finite(s).into_iter().map(|p| p.1)),
+    );
+    draw_png(path, (800, 500), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(xs, ys)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style((FONT, 14))
+            .draw()?;
+        for (i, s) in series.iter().enumerate() {
+            let c = colour(i);
+            let points = finite(s);
+            chart
+                .draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))?
+                .label(s.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+            if s.markers {
+                chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::LowerRight)
+            .draw()?;
+        Ok(())
+    })
+}
+
+/// A bar per `(label, value)`, in order.
+pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]) -> Result<()> {
+    let top = bars
+        .iter()
+        .map(|b| b.1)
+        .filter(|v| v.is_finite())
+        .fold(0.0_f64, f64::max)
+        * 1.15;
+    let top = if top > 0.0 { top } else { 1.0 };
+    let n = bars.len();
+    draw_png(path, (800, 450), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(0.0..n as f64, 0.0..top)?;
+        let labels: Vec<String> = bars.iter().map(|b| b.0.clone()).collect();
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = (x - 0.5).round();
+                if (x - 0.5 - i).abs() < 1e-6 && i >= 0.0 {
+                    labels.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(y_label)
+            .label_style((FONT, 14))
+            .draw()?;
+        chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
+            Rectangle::new(
+                [(i as f64 + 0.15, 0.0), (i as f64 + 0.85, b.1.max(0.0))],
+                colour(i).filled(),
+            )
+        }))?;
+        chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
+            Text::new(
+                format!("{:.3e}", b.1),
+                (i as f64 + 0.2, b.1.max(0.0) + 0.02 * top),
+                (FONT, 14),
+            )
+        }))?;
+        Ok(())
+    })
+}
+
+/// Labelled points `(label, x, y)`.
+pub fn scatter_chart(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    points: &[(String, f64, f64)],
+) -> Result<()> {
+    let xs = padded_range(points.iter().map(|p| p.1).chain([0.0]));
+    let ys = padded_range(points.iter().map(|p| p.2));
+    let xs = xs.start..(xs.end + 0.25 * (xs.end - xs.start));
+    draw_png(path, (800, 500), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(xs, ys)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style((FONT, 14))
+            .draw()?;
+        for (i, (label, x, y)) in points.iter().enumerate() {
+            chart.draw_series([Circle::new((*x, *y), 6, colour(i).filled())])?;
+            chart.draw_series([Text::new(
+                label.clone(),
+                (*x, *y),
+                (FONT, 15).into_font().color(&BLACK),
+            )
+            .into_dyn()])?;
+        }
+        Ok(())
+    })
+}
+
+/// One panel of a volume figure: a label and `res × res` values (row-major).
+pub struct Panel<'a> {
+    /// Caption under the panel.
+    pub label: String,
+    /// Values, row-major, `res²`.
+    pub values: &'a [f32],
+}
+
+/// Panels side by side, each `res × res` scaled up, coloured with viridis over
+/// `[0, vmax]`, under `title`.
+pub fn panels_figure(
+    path: &Path,
+    title: &str,
+    res: usize,
+    panels: &[Panel<'_>],
+    vmax: f32,
+) -> Result<()> {
+    let scale = (256 / res.max(1)).max(1) as u32;
+    let side = res as u32 * scale;
+    let (gap, top, bottom) = (16_u32, 40_u32, 34_u32);
+    let width = gap + panels.len() as u32 * (side + gap);
+    let height = top + side + bottom;
+    draw_png(path, (width, height), |root| {
+        root.draw(&Text::new(title.to_owned(), (gap as i32, 10), (FONT, 20)))?;
+        for (p, panel) in panels.iter().enumerate() {
+            let x0 = gap + p as u32 * (side + gap);
+            for row in 0..res {
+                for col in 0..res {
+                    let v = panel.values[row * res + col];
+                    let f = if vmax > 0.0 {
+                        f64::from((v / vmax).clamp(0.0, 1.0))
+                    } else {
+                        0.0
+                    };
+                    let c = ViridisRGB::get_color(f);
+                    let (x, y) = (
+                        (x0 + col as u32 * scale) as i32,
+                        (top + row as u32 * scale) as i32,
+                    );
+                    root.draw(&Rectangle::new(
+                        [(x, y), (x + scale as i32, y + scale as i32)],
+                        c.filled(),
+                    ))?;
+                }
+            }
+            root.draw(&Text::new(
+                panel.label.clone(),
+                (x0 as i32, (top + side + 8) as i32),
+                (FONT, 16),
+            ))?;
+        }
+        Ok(())
+    })
+}
+
+/// The xy, xz and yz slices of `volume` at time `tau` through its peak, labelled with
+/// their plane's coordinate, coloured over `[0, vmax]`.
+pub fn volume_slices_figure(
+    path: &Path,
+    name: &str,
+    tau: f64,
+    volume: &crate::volume::Volume,
+    vmax: f32,
+) -> Result<()> {
+    let g = &volume.grid;
+    let peak = volume.peak_cell();
+    let at = |a: usize| g.centre(a, peak[a]);
+    let [xy, xz, yz] = volume.slices_through(peak);
+    let (hi, lo) = volume.range();
+    let panels = [
+        Panel {
+            label: format!("xy at z = {:.2}", at(2)),
+            values: &xy,
+        },
+        Panel {
+            label: format!("xz at y = {:.2}", at(1)),
+            values: &xz,
+        },
+        Panel {
+            label: format!("yz at x = {:.2}", at(0)),
+            values: &yz,
+        },
+    ];
+    let title = format!("{name}, t = {tau}: max {hi:.3}, min {lo:.3} (colour 0 to {vmax:.3})");
+    panels_figure(path, &title, g.res, &panels, vmax)
+}
