@@ -26,13 +26,9 @@ macro_rules! report {
     }};
 }
 
-/// The shipped seed blob (SPEC §7) and a camera that frames its path, for the default job.
-const BLOB_SCENE: &str = include_str!("../data/blob.json");
-const BLOB_CAMERA: &str = include_str!("../data/blob_camera.json");
-
 /// splat4d: render and fit dynamic scenes of 4D Gaussian kernels on the CPU.
 ///
-/// Without a subcommand, renders the shipped seed blob at t = 0, 0.5 and 1 into `out/`.
+/// Without a subcommand, runs the seed paper's experiment and writes `out/report.md`.
 #[derive(Debug, Parser)]
 #[command(name = "splat4d", version, about, long_about = None)]
 pub struct Cli {
@@ -54,6 +50,28 @@ enum Command {
     Toy(ToyArgs),
     /// Evaluate the Eq. 1 sum on a 3D grid; write mid-slices and print max/min per time.
     Volume(VolumeArgs),
+    /// Run the seed paper's experiment (toy data → dataset → fits → baselines → ablation →
+    /// volumes) and write `report.md` with its charts.
+    Report(ReportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ReportArgs {
+    /// Output folder for report.md and its charts.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// A small, fast configuration (for smoke tests): fewer views, steps and kernels.
+    #[arg(long)]
+    quick: bool,
+    /// Kernels of the 4D model (overrides the default or --quick).
+    #[arg(long)]
+    kernels: Option<usize>,
+    /// Adam steps of the 4D model and of each ablation fit.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Image size `WxH` of the dataset.
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -349,13 +367,20 @@ fn with_threads<T: Send>(threads: Option<u16>, work: impl FnOnce() -> T + Send) 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => default_job(),
+        None => report_command(&ReportArgs {
+            out: PathBuf::from("out"),
+            quick: false,
+            kernels: None,
+            steps: None,
+            size: None,
+        }),
         Some(Command::Render(args)) => render_command(&args),
         Some(Command::Grad(args)) => grad_command(&args),
         Some(Command::Dataset(args)) => dataset_command(&args),
         Some(Command::Fit(args)) => fit_command(&args),
         Some(Command::Toy(args)) => toy_command(&args),
         Some(Command::Volume(args)) => volume_command(&args),
+        Some(Command::Report(args)) => report_command(&args),
     }
 }
 
@@ -648,18 +673,90 @@ fn volume_command(args: &VolumeArgs) -> Result<()> {
     Ok(())
 }
 
-/// The default job: the shipped blob at t = 0, 0.5, 1 into `out/`.
-fn default_job() -> Result<()> {
-    let scene = Scene::from_json_str(BLOB_SCENE, "data/blob.json")?;
-    let camera = Camera::from_json_str(BLOB_CAMERA, "data/blob_camera.json")?;
-    let options = RenderOptions::default();
-    let mut context = RenderContext::new();
-    let out = Path::new("out");
-    for tau in [0.0, 0.5, 1.0] {
-        context.render(&scene, &camera, tau, &options)?;
-        let path = out.join(format!("blob_t{tau:.2}.png"));
-        save_image(context.image(), &path, BitDepth::Eight)?;
-        report!("wrote {} (the seed blob at t = {tau})", path.display());
+/// Progress of the experiment's phases, one bar each.
+struct PhaseBars(Option<ProgressBar>);
+
+impl splat4d::report::experiment::Progress for PhaseBars {
+    fn start(&mut self, phase: &str, total: usize) {
+        if let Some(bar) = self.0.take() {
+            bar.finish();
+        }
+        self.0 = Some(progress_bar(total, &format!("{phase:>10}")));
     }
+
+    fn tick(&mut self) {
+        if let Some(bar) = &self.0 {
+            bar.inc(1);
+        }
+    }
+}
+
+fn report_command(args: &ReportArgs) -> Result<()> {
+    use splat4d::report::experiment::{ExperimentConfig, run_experiment};
+    let mut config = ExperimentConfig::default();
+    let mut command = format!("splat4d report --out {}", args.out.display());
+    if args.quick {
+        config.dataset.views = 4;
+        config.dataset.times = 4;
+        config.dataset.width = 32;
+        config.dataset.height = 32;
+        config.model_kernels = 20;
+        config.model_steps = 60;
+        config.frame_kernels = 5;
+        config.frame_steps = 20;
+        config.ablation_sigma_t = vec![0.05, 0.2];
+        config.sweep_times = 9;
+        config.volume_res = 16;
+        command.push_str(" --quick");
+    }
+    if let Some(n) = args.kernels {
+        config.model_kernels = n;
+        command.push_str(&format!(" --kernels {n}"));
+    }
+    if let Some(n) = args.steps {
+        config.model_steps = n;
+        command.push_str(&format!(" --steps {n}"));
+    }
+    if let Some((w, h)) = args.size {
+        (config.dataset.width, config.dataset.height) = (w, h);
+        command.push_str(&format!(" --size {w}x{h}"));
+    }
+    let mut bars = PhaseBars(None);
+    let results = run_experiment(&config, &mut bars)?;
+    if let Some(bar) = bars.0.take() {
+        bar.finish();
+    }
+    let path = splat4d::report::markdown::write_report(&results, &args.out, &command)?;
+    report!(
+        "{:<16} {:>8} {:>8} {:>12} {:>12} {:>12} {:>11}",
+        "method",
+        "params",
+        "fit s",
+        "train",
+        "held-out t",
+        "held-out v+t",
+        "roughness"
+    );
+    for m in &results.methods {
+        let [a, b, t] = m.psnr_splits;
+        report!(
+            "{:<16} {:>8} {:>8.1} {a:>9.2} dB {b:>9.2} dB {t:>9.2} dB {:>11.2e}",
+            m.name,
+            m.parameters,
+            m.fit_seconds,
+            m.roughness
+        );
+    }
+    report!(
+        "{:<16} {:>8} {:>8} {:>12} {:>12} {:>12} {:>11.2e}",
+        "ground truth",
+        "",
+        "",
+        "",
+        "",
+        "",
+        results.ground_truth_roughness
+    );
+    report!("report: {} ({:.0} s)", path.display(), results.seconds);
     Ok(())
 }

@@ -97,22 +97,34 @@ fn threads_flag_does_not_change_the_output() {
 }
 
 #[test]
-fn default_job_renders_the_blob_into_out() {
+fn report_quick_writes_the_report_and_its_charts() {
     let dir = tempfile::tempdir().unwrap();
-    let output = splat4d(&[], dir.path());
+    let output = splat4d(&["report", "--out", "rep", "--quick"], dir.path());
     assert!(output.status.success(), "{}", stderr(&output));
-    assert_eq!(
-        files_in(&dir.path().join("out")),
-        ["blob_t0.00.png", "blob_t0.50.png", "blob_t1.00.png"]
-    );
-    let image = load_image(&dir.path().join("out/blob_t0.50.png"), [0.0; 3]).unwrap();
-    let expected = blob_image();
-    let quantized: Vec<f32> = expected
-        .pixels
-        .iter()
-        .map(|&c| f32::from(quantize(c, 255)) / 255.0)
-        .collect();
-    assert_eq!(image.pixels, quantized);
+    let report = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
+    for part in [
+        "## Headline",
+        "4D (paper)",
+        "frame 3D",
+        "interpolation",
+        "ground truth",
+        "σt ablation",
+        "| 0.5 | 1.8 |",
+        "splat4d report --out rep --quick",
+    ] {
+        assert!(report.contains(part), "report.md should contain `{part}`");
+    }
+    // Every image the report links exists and decodes.
+    let mut linked = 0;
+    for line in report.lines().filter(|l| l.starts_with("![")) {
+        let name = &line[line.find("](").unwrap() + 2..line.len() - 1];
+        let image = load_image(&dir.path().join("rep").join(name), [1.0; 3]).unwrap();
+        assert!(image.width >= 200 && image.height >= 100, "{name}");
+        linked += 1;
+    }
+    assert_eq!(linked, 7 + 6, "7 charts and 6 volume figures");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("report: rep/report.md"), "{stdout}");
 }
 
 /// Runs a render that must fail; returns its stderr after checking status 2 and that the

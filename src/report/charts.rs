@@ -126,6 +126,7 @@ pub fn line_chart(
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .light_line_style(RGBColor(238, 238, 238))
             .label_style((FONT, 14))
             .draw()?;
         for (i, s) in series.iter().enumerate() {
@@ -152,36 +153,28 @@ pub fn line_chart(
     })
 }
 
-/// A bar per `(label, value)`, in order.
+/// A bar per `(label, value)`, in order, each with its name and value above it.
 pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]) -> Result<()> {
     let top = bars
         .iter()
         .map(|b| b.1)
         .filter(|v| v.is_finite())
         .fold(0.0_f64, f64::max)
-        * 1.15;
+        * 1.25;
     let top = if top > 0.0 { top } else { 1.0 };
     let n = bars.len();
     draw_png(path, (800, 450), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption(title, (FONT, 22))
             .margin(12)
-            .x_label_area_size(40)
+            .x_label_area_size(10)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..n as f64, 0.0..top)?;
-        let labels: Vec<String> = bars.iter().map(|b| b.0.clone()).collect();
         chart
             .configure_mesh()
             .disable_x_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| {
-                let i = (x - 0.5).round();
-                if (x - 0.5 - i).abs() < 1e-6 && i >= 0.0 {
-                    labels.get(i as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
+            .disable_x_axis()
+            .light_line_style(RGBColor(238, 238, 238))
             .y_desc(y_label)
             .label_style((FONT, 14))
             .draw()?;
@@ -191,10 +184,18 @@ pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]
                 colour(i).filled(),
             )
         }))?;
+        // Text hangs below its anchor: the name two lines above the bar, the value one.
+        chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
+            Text::new(
+                b.0.clone(),
+                (i as f64 + 0.17, b.1.max(0.0) + 0.16 * top),
+                (FONT, 15),
+            )
+        }))?;
         chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
             Text::new(
                 format!("{:.3e}", b.1),
-                (i as f64 + 0.2, b.1.max(0.0) + 0.02 * top),
+                (i as f64 + 0.17, b.1.max(0.0) + 0.08 * top),
                 (FONT, 14),
             )
         }))?;
@@ -224,6 +225,7 @@ pub fn scatter_chart(
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .light_line_style(RGBColor(238, 238, 238))
             .label_style((FONT, 14))
             .draw()?;
         for (i, (label, x, y)) in points.iter().enumerate() {

@@ -1,0 +1,503 @@
+//! The seed paper's experiment (§4–5, SPEC §7), end to end:
+//!
+//! 1. ground truth: the paper's point data as 30 000 small kernels ([`crate::toy`]);
+//! 2. a multi-view dataset of it ([`crate::fit::dataset`]): train (seen cameras × training
+//!    times), val (seen cameras, times between), test (new cameras, times between);
+//! 3. the 4D model: N kernels from a seeded random start, means and amplitudes fitted with
+//!    Adam, σ fixed (the paper's setting);
+//! 4. the baselines of paper §4.2 ([`super::methods`]): a static fit per training time, used
+//!    nearest-in-time or linearly blended;
+//! 5. metrics: PSNR per split, PSNR per time over a dense sweep from the test cameras,
+//!    temporal roughness over that sweep (beside the ground truth's own), render time, fit
+//!    time, parameter count;
+//! 6. the σt ablation of paper §5.4;
+//! 7. Eq. 1 volumes at t = 0, 0.5, 1 (paper Fig. 1, §5.2).
+
+use std::time::Instant;
+
+use crate::error::Result;
+use crate::fit::adam::LearningRates;
+use crate::fit::dataset::{DatasetSpec, render_dataset};
+use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
+use crate::fit::loss::{mse, psnr};
+use crate::fit::train::{FitOptions, StepRecord, fit};
+use crate::io::dataset::{Dataset, View};
+use crate::raster::Image;
+use crate::render::{RenderContext, RenderOptions};
+use crate::report::methods::{FrameModels, Method, temporal_roughness};
+use crate::scene::Scene;
+use crate::toy::{POINTS_CUTOFF, points_scene};
+use crate::volume::{Grid, Volume, evaluate_volume, scene_bounds};
+
+/// Everything the experiment does, with the embedded defaults of `cargo run --release`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExperimentConfig {
+    /// Seed of the points, the cameras, the initial kernels and the batches.
+    pub seed: u64,
+    /// The dataset.
+    pub dataset: DatasetSpec,
+    /// Kernels of the 4D model.
+    pub model_kernels: usize,
+    /// Their fixed scales `[sx, sy, sz, st]`.
+    pub model_scale: [f64; 4],
+    /// Adam steps of the 4D fit.
+    pub model_steps: usize,
+    /// Kernels per frame of the frame-based baseline.
+    pub frame_kernels: usize,
+    /// Their fixed spatial σ.
+    pub frame_sigma: f64,
+    /// Adam steps per frame.
+    pub frame_steps: usize,
+    /// σt values of the ablation (4D model, `model_steps` each).
+    pub ablation_sigma_t: Vec<f64>,
+    /// Times in the dense evaluation sweep over the time range.
+    pub sweep_times: usize,
+    /// Volume grid cells per axis.
+    pub volume_res: usize,
+    /// Times of the volumes.
+    pub volume_times: Vec<f64>,
+}
+
+impl Default for ExperimentConfig {
+    fn default() -> Self {
+        ExperimentConfig {
+            seed: crate::toy::DEFAULT_SEED,
+            dataset: DatasetSpec {
+                views: 8,
+                times: 10,
+                width: 96,
+                height: 96,
+                time_range: [0.0, 1.0],
+                fov_y_degrees: 40.0,
+                seed: crate::toy::DEFAULT_SEED,
+            },
+            model_kernels: 300,
+            model_scale: [0.1, 0.1, 0.1, 0.1],
+            model_steps: 3000,
+            frame_kernels: 30,
+            frame_sigma: 0.1,
+            frame_steps: 400,
+            ablation_sigma_t: vec![0.03, 0.06, 0.1, 0.2, 0.4],
+            sweep_times: 41,
+            volume_res: 64,
+            volume_times: vec![0.0, 0.5, 1.0],
+        }
+    }
+}
+
+/// Progress of a long run: phases of known length.
+pub trait Progress {
+    /// A phase of `total` ticks begins.
+    fn start(&mut self, phase: &str, total: usize);
+    /// One tick of the current phase is done.
+    fn tick(&mut self);
+}
+
+/// Progress reported nowhere.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn start(&mut self, _: &str, _: usize) {}
+    fn tick(&mut self) {}
+}
+
+/// One method's results.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MethodResult {
+    /// Its name in tables and charts.
+    pub name: String,
+    /// Stored numbers ([`Method::parameter_count`]).
+    pub parameters: usize,
+    /// Seconds spent fitting.
+    pub fit_seconds: f64,
+    /// PSNR on train / val / test views, dB.
+    pub psnr_splits: [f64; 3],
+    /// Temporal roughness over the sweep from the test cameras.
+    pub roughness: f64,
+    /// Milliseconds per rendered frame over the sweep.
+    pub render_ms: f64,
+    /// `(τ, PSNR over the test cameras at τ)` along the sweep.
+    pub psnr_per_time: Vec<(f64, f64)>,
+}
+
+/// One row of the σt ablation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AblationRow {
+    /// Temporal σ of every kernel.
+    pub sigma_t: f64,
+    /// PSNR on train / val / test views, dB.
+    pub psnr_splits: [f64; 3],
+    /// Temporal roughness over the sweep.
+    pub roughness: f64,
+}
+
+/// One volume.
+#[derive(Clone, Debug)]
+pub struct VolumeResult {
+    /// Which scene.
+    pub name: String,
+    /// Time.
+    pub tau: f64,
+    /// The values.
+    pub volume: Volume,
+    /// Seconds to evaluate it.
+    pub seconds: f64,
+}
+
+/// Everything measured.
+#[derive(Clone, Debug)]
+pub struct ExperimentResults {
+    /// The configuration that ran.
+    pub config: ExperimentConfig,
+    /// Frames per split (train, val, test).
+    pub split_sizes: [usize; 3],
+    /// Ground truth's own temporal roughness over the sweep.
+    pub ground_truth_roughness: f64,
+    /// 4D, frame 3D, interpolation.
+    pub methods: Vec<MethodResult>,
+    /// The 4D fit, step by step.
+    pub fit_log: Vec<StepRecord>,
+    /// The σt ablation.
+    pub ablation: Vec<AblationRow>,
+    /// Volumes of the ground truth and of the 4D model.
+    pub volumes: Vec<VolumeResult>,
+    /// The fitted 4D scene.
+    pub model: Scene,
+    /// Seconds for the whole run.
+    pub seconds: f64,
+}
+
+fn split_psnr(
+    method: &Method<'_>,
+    views: &[View],
+    options: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<f64> {
+    let mut image = Image::default();
+    let mut total = 0.0;
+    for view in views {
+        method.render(&view.camera, view.time, options, context, &mut image)?;
+        total += mse(&image, &view.image);
+    }
+    Ok(psnr(total / views.len().max(1) as f64))
+}
+
+/// The dense sweep: ground-truth renders from each test camera at each sweep time.
+struct Sweep {
+    times: Vec<f64>,
+    /// `[camera][time]`.
+    truth: Vec<Vec<Image>>,
+}
+
+/// What the sweep measures of one method.
+struct SweepMetrics {
+    /// `(τ, PSNR over the test cameras)`.
+    psnr_per_time: Vec<(f64, f64)>,
+    /// Mean temporal roughness over the test cameras.
+    roughness: f64,
+    /// Milliseconds per frame.
+    render_ms: f64,
+}
+
+fn sweep_metrics(
+    method: &Method<'_>,
+    cameras: &[crate::Camera],
+    sweep: &Sweep,
+    options: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<SweepMetrics> {
+    let mut per_time = vec![0.0; sweep.times.len()];
+    let mut roughness = 0.0;
+    let mut seconds = 0.0;
+    for (c, camera) in cameras.iter().enumerate() {
+        let mut frames = Vec::with_capacity(sweep.times.len());
+        for (k, &tau) in sweep.times.iter().enumerate() {
+            let mut image = Image::default();
+            let start = Instant::now();
+            method.render(camera, tau, options, context, &mut image)?;
+            seconds += start.elapsed().as_secs_f64();
+            per_time[k] += mse(&image, &sweep.truth[c][k]);
+            frames.push(image);
+        }
+        roughness += temporal_roughness(&frames);
+    }
+    let n_cam = cameras.len() as f64;
+    let frames = n_cam * sweep.times.len() as f64;
+    let per_time = sweep
+        .times
+        .iter()
+        .zip(per_time)
+        .map(|(&t, m)| (t, psnr(m / n_cam)))
+        .collect();
+    Ok(SweepMetrics {
+        psnr_per_time: per_time,
+        roughness: roughness / n_cam,
+        render_ms: 1e3 * seconds / frames,
+    })
+}
+
+fn fit_options(steps: usize, seed: u64, rates: LearningRates) -> FitOptions {
+    FitOptions {
+        steps,
+        learning_rates: rates,
+        eval_every: (steps / 30).max(1),
+        seed,
+        ..FitOptions::default()
+    }
+}
+
+const MODEL_RATES: LearningRates = LearningRates {
+    mean: 2e-3,
+    time: 2e-3,
+    amplitude: 1e-2,
+    velocity: 0.0,
+};
+const FRAME_RATES: LearningRates = LearningRates {
+    mean: 2e-3,
+    time: 0.0,
+    amplitude: 1e-2,
+    velocity: 0.0,
+};
+const INITIAL_AMPLITUDE: f64 = 0.1;
+
+fn fit_4d(
+    config: &ExperimentConfig,
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    scale: [f64; 4],
+    progress: &mut dyn Progress,
+) -> Result<(Scene, Vec<StepRecord>, f64)> {
+    let mut scene = random_scene(
+        config.model_kernels,
+        bounds,
+        Some(scale),
+        INITIAL_AMPLITUDE,
+        config.seed,
+    )?;
+    let start = Instant::now();
+    let options = fit_options(config.model_steps, config.seed, MODEL_RATES);
+    let log = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
+        progress.tick()
+    })?;
+    Ok((scene, log, start.elapsed().as_secs_f64()))
+}
+
+/// Runs the whole experiment.
+pub fn run_experiment(
+    config: &ExperimentConfig,
+    progress: &mut dyn Progress,
+) -> Result<ExperimentResults> {
+    let start = Instant::now();
+    let truth = points_scene(config.seed);
+    let truth_options = RenderOptions {
+        cutoff: POINTS_CUTOFF,
+        ..RenderOptions::default()
+    };
+    let options = RenderOptions::default();
+    let spec = DatasetSpec {
+        seed: config.seed,
+        ..config.dataset
+    };
+
+    progress.start("dataset", crate::fit::dataset::frame_count(&spec));
+    let dataset = render_dataset(&truth, &spec, &truth_options, || progress.tick())?;
+    let cameras: Vec<crate::Camera> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = box_from_cameras(&cameras, spec.time_range)?;
+    let test_cameras: Vec<crate::Camera> = {
+        let mut seen: Vec<crate::Camera> = Vec::new();
+        for view in &dataset.test {
+            if !seen.contains(&view.camera) {
+                seen.push(view.camera);
+            }
+        }
+        seen
+    };
+
+    // The dense sweep of ground truth and blob renders.
+    let [t0, t1] = spec.time_range;
+    let n_sweep = config.sweep_times.max(2);
+    let times: Vec<f64> = (0..n_sweep)
+        .map(|k| t0 + (t1 - t0) * k as f64 / (n_sweep - 1) as f64)
+        .collect();
+    progress.start("sweep", test_cameras.len() * times.len());
+    let mut context = RenderContext::new();
+    let mut render_all = |scene: &Scene,
+                          opts: &RenderOptions,
+                          progress: &mut dyn Progress|
+     -> Result<Vec<Vec<Image>>> {
+        let mut out = Vec::new();
+        for camera in &test_cameras {
+            let mut row = Vec::new();
+            for &tau in &times {
+                context.render(scene, camera, tau, opts)?;
+                row.push(context.image().clone());
+                progress.tick();
+            }
+            out.push(row);
+        }
+        Ok(out)
+    };
+    let truth_sweep = render_all(&truth, &truth_options, progress)?;
+    let sweep = Sweep {
+        times,
+        truth: truth_sweep,
+    };
+    let ground_truth_roughness = sweep
+        .truth
+        .iter()
+        .map(|frames| temporal_roughness(frames))
+        .sum::<f64>()
+        / test_cameras.len() as f64;
+
+    // The 4D model.
+    progress.start("fit 4D", config.model_steps);
+    let (model, fit_log, model_seconds) =
+        fit_4d(config, &dataset, &bounds, config.model_scale, progress)?;
+
+    // Frame-based baselines: one static fit per training time, on that time's views.
+    let train_times = {
+        let mut t: Vec<f64> = dataset.train.iter().map(|v| v.time).collect();
+        t.sort_by(f64::total_cmp);
+        t.dedup();
+        t
+    };
+    progress.start("fit frames", train_times.len() * config.frame_steps);
+    let frame_start = Instant::now();
+    let mut scenes = Vec::new();
+    for (k, &time) in train_times.iter().enumerate() {
+        let views: Vec<View> = dataset
+            .train
+            .iter()
+            .filter(|v| v.time == time)
+            .cloned()
+            .collect();
+        let frame_box = SpaceTimeBox {
+            time: [time, time],
+            ..bounds
+        };
+        let sigma = config.frame_sigma;
+        // σt far above the time range: constant in time.
+        let mut scene = random_scene(
+            config.frame_kernels,
+            &frame_box,
+            Some([sigma, sigma, sigma, 1e3]),
+            INITIAL_AMPLITUDE,
+            config.seed + 1 + k as u64,
+        )?;
+        fit(
+            &mut scene,
+            &views,
+            &[],
+            &fit_options(config.frame_steps, config.seed, FRAME_RATES),
+            |_| progress.tick(),
+        )?;
+        scenes.push(scene);
+    }
+    let frame_seconds = frame_start.elapsed().as_secs_f64();
+    let frames = FrameModels {
+        times: train_times,
+        scenes,
+    };
+
+    // Metrics.
+    let methods_to_run = [
+        ("4D (paper)", Method::Model4d(&model), model_seconds),
+        ("frame 3D", Method::FrameNearest(&frames), frame_seconds),
+        (
+            "interpolation",
+            Method::FrameInterpolation(&frames),
+            frame_seconds,
+        ),
+    ];
+    progress.start("evaluate", methods_to_run.len());
+    let mut methods = Vec::new();
+    for (name, method, fit_seconds) in methods_to_run {
+        let mut splits = [0.0; 3];
+        for (s, views) in [&dataset.train, &dataset.val, &dataset.test]
+            .iter()
+            .enumerate()
+        {
+            splits[s] = split_psnr(&method, views, &options, &mut context)?;
+        }
+        let SweepMetrics {
+            psnr_per_time,
+            roughness,
+            render_ms,
+        } = sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?;
+        methods.push(MethodResult {
+            name: name.to_owned(),
+            parameters: method.parameter_count(),
+            fit_seconds,
+            psnr_splits: splits,
+            roughness,
+            render_ms,
+            psnr_per_time,
+        });
+        progress.tick();
+    }
+
+    // σt ablation.
+    progress.start(
+        "ablation",
+        config.ablation_sigma_t.len() * config.model_steps,
+    );
+    let mut ablation = Vec::new();
+    for &sigma_t in &config.ablation_sigma_t {
+        let [sx, sy, sz, _] = config.model_scale;
+        let (scene, _, _) = fit_4d(config, &dataset, &bounds, [sx, sy, sz, sigma_t], progress)?;
+        let method = Method::Model4d(&scene);
+        let mut splits = [0.0; 3];
+        for (s, views) in [&dataset.train, &dataset.val, &dataset.test]
+            .iter()
+            .enumerate()
+        {
+            splits[s] = split_psnr(&method, views, &options, &mut context)?;
+        }
+        let roughness =
+            sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.roughness;
+        ablation.push(AblationRow {
+            sigma_t,
+            psnr_splits: splits,
+            roughness,
+        });
+    }
+
+    // Volumes on one grid: the ground truth's and the model's.
+    progress.start("volumes", 2 * config.volume_times.len());
+    let (min, max) =
+        scene_bounds(&truth, &config.volume_times, POINTS_CUTOFF).unwrap_or(([-0.5; 3], [1.5; 3]));
+    let grid = Grid {
+        min,
+        max,
+        res: config.volume_res.max(2),
+    };
+    let mut volumes = Vec::new();
+    for (name, scene, cutoff) in [
+        ("ground truth (points)", &truth, 1e-6),
+        ("4D model", &model, 1e-6),
+    ] {
+        for &tau in &config.volume_times {
+            let begin = Instant::now();
+            let volume = evaluate_volume(scene, tau, &grid, cutoff);
+            volumes.push(VolumeResult {
+                name: name.to_owned(),
+                tau,
+                volume,
+                seconds: begin.elapsed().as_secs_f64(),
+            });
+            progress.tick();
+        }
+    }
+
+    Ok(ExperimentResults {
+        config: config.clone(),
+        split_sizes: [dataset.train.len(), dataset.val.len(), dataset.test.len()],
+        ground_truth_roughness,
+        methods,
+        fit_log,
+        ablation,
+        volumes,
+        model,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
