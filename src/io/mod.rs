@@ -41,7 +41,46 @@ pub fn write_atomically(
     let temp = writer
         .into_inner()
         .map_err(|e| Error::io(path, "cannot write", e.into_error()))?;
+    // Temporary files are private (0600); a finished output is an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        temp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| Error::io(path, "cannot set the permissions of", e))?;
+    }
     temp.persist(path)
         .map_err(|e| Error::io(path, "cannot move the finished file into place", e.error))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_whole_files_readable_by_others_and_leaves_nothing_on_failure() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub/out.txt");
+        write_bytes_atomically(&path, b"hello").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"hello");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            assert_eq!(
+                std::fs::metadata(&path).unwrap().permissions().mode() & 0o777,
+                0o644
+            );
+        }
+        let failed = write_atomically(&dir.path().join("sub/failed.txt"), |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("the writer failed"))
+        });
+        assert!(failed.unwrap_err().to_string().contains("failed.txt"));
+        let names: Vec<_> = std::fs::read_dir(dir.path().join("sub"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["out.txt"]);
+    }
 }
