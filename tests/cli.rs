@@ -104,6 +104,7 @@ fn report_quick_writes_the_report_and_its_charts() {
     let report = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
     for part in [
         "## Headline",
+        "MSE per split",
         "4D (paper)",
         "frame 3D",
         "interpolation",
