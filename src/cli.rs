@@ -119,15 +119,8 @@ struct VolumeArgs {
 
 #[derive(Debug, clap::Args)]
 struct GradArgs {
-    /// Scene JSON file.
-    #[arg(long)]
-    scene: PathBuf,
-    /// Camera JSON file.
-    #[arg(long)]
-    camera: PathBuf,
-    /// Scene time τ.
-    #[arg(long, allow_negative_numbers = true)]
-    time: f64,
+    #[command(flatten)]
+    view: ViewFlags,
     /// Target image (`.exr` or `.png`), the camera's size.
     #[arg(long)]
     target: PathBuf,
@@ -247,6 +240,21 @@ struct FitArgs {
 
 #[derive(Debug, clap::Args)]
 struct RenderArgs {
+    #[command(flatten)]
+    view: ViewFlags,
+    /// Output image: `.png` (8 or 16 bits) or `.exr` (float32 linear RGB).
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    render: RenderFlags,
+    /// Bits per channel of a PNG output: 8 or 16.
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    bit_depth: u8,
+}
+
+/// What to look at: a scene through a camera at a time.
+#[derive(Debug, clap::Args)]
+struct ViewFlags {
     /// Scene JSON file.
     #[arg(long)]
     scene: PathBuf,
@@ -256,14 +264,12 @@ struct RenderArgs {
     /// Scene time τ.
     #[arg(long, allow_negative_numbers = true)]
     time: f64,
-    /// Output image: `.png` (8 or 16 bits) or `.exr` (float32 linear RGB).
-    #[arg(long)]
-    out: PathBuf,
-    #[command(flatten)]
-    render: RenderFlags,
-    /// Bits per channel of a PNG output: 8 or 16.
-    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
-    bit_depth: u8,
+}
+
+impl ViewFlags {
+    fn load(&self) -> Result<(Scene, Camera)> {
+        Ok((Scene::load(&self.scene)?, Camera::load(&self.camera)?))
+    }
 }
 
 /// Flags shared by every command that renders.
@@ -388,8 +394,7 @@ fn render_command(args: &RenderArgs) -> Result<()> {
     let options = args.render.options()?;
     // Check the output's extension before any work, so a typo costs nothing.
     ImageKind::from_path(&args.out)?;
-    let scene = Scene::load(&args.scene)?;
-    let camera = Camera::load(&args.camera)?;
+    let (scene, camera) = args.view.load()?;
     let depth = if args.bit_depth == 16 {
         BitDepth::Sixteen
     } else {
@@ -397,7 +402,7 @@ fn render_command(args: &RenderArgs) -> Result<()> {
     };
     let mut context = RenderContext::new();
     let stats = with_threads(args.render.threads, || {
-        context.render(&scene, &camera, args.time, &options)
+        context.render(&scene, &camera, args.view.time, &options)
     })??;
     save_image(context.image(), &args.out, depth)?;
     report!(
@@ -405,7 +410,7 @@ fn render_command(args: &RenderArgs) -> Result<()> {
         args.out.display(),
         camera.width,
         camera.height,
-        args.time,
+        args.view.time,
         stats.projected,
         scene.len(),
         stats.pairs
@@ -415,8 +420,7 @@ fn render_command(args: &RenderArgs) -> Result<()> {
 
 fn grad_command(args: &GradArgs) -> Result<()> {
     let options = args.render.options()?;
-    let scene = Scene::load(&args.scene)?;
-    let camera = Camera::load(&args.camera)?;
+    let (scene, camera) = args.view.load()?;
     let background = scene.background.map(|b| b as f32);
     let target = load_image(&args.target, background)?;
     if (target.width, target.height) != (camera.width, camera.height) {
@@ -425,7 +429,7 @@ fn grad_command(args: &GradArgs) -> Result<()> {
             args.target.display(),
             target.width,
             target.height,
-            args.camera.display(),
+            args.view.camera.display(),
             camera.width,
             camera.height
         );
@@ -437,7 +441,7 @@ fn grad_command(args: &GradArgs) -> Result<()> {
             &mut context,
             &scene,
             &camera,
-            args.time,
+            args.view.time,
             &options,
             &target,
             &mut grads,

@@ -11,13 +11,11 @@
 
 mod common;
 
-use std::path::PathBuf;
-
 use common::{
     PARAM_NAMES, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
-    test_camera,
+    shared_case, shared_case_dir, test_camera,
 };
-use splat4d::fit::loss::mse_with_gradient;
+use splat4d::fit::loss::view_loss_and_gradients;
 use splat4d::reference::reference_loss_and_gradients;
 use splat4d::render::DEFAULT_CUTOFF;
 use splat4d::{Camera, Gradients, Image, Kernel, RenderContext, RenderOptions, Scene};
@@ -38,17 +36,22 @@ fn fast_gradients(
     options: &RenderOptions,
     target: &[f32],
 ) -> (f64, Gradients) {
-    let mut context = RenderContext::new();
-    context.render(scene, camera, tau, options).unwrap();
     let target = Image {
         width: camera.width,
         height: camera.height,
         pixels: target.to_vec(),
     };
-    let mut v_image = Vec::new();
-    let loss = mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
     let mut grads = Gradients::zeros(scene.len());
-    context.backward(scene, camera, tau, options, &v_image, &mut grads);
+    let loss = view_loss_and_gradients(
+        &mut RenderContext::new(),
+        scene,
+        camera,
+        tau,
+        options,
+        &target,
+        &mut grads,
+    )
+    .unwrap();
     (loss, grads)
 }
 
@@ -316,16 +319,8 @@ struct Expected {
 #[test]
 fn match_the_independent_gradient_vectors() {
     for name in ["toy_blob", "random_200"] {
-        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/testdata")
-            .join(name);
-        let scene = Scene::load(&dir.join("scene.json")).unwrap();
-        let camera = Camera::load(&dir.join("camera.json")).unwrap();
-        let tau: f64 = std::fs::read_to_string(dir.join("tau.txt"))
-            .unwrap()
-            .trim()
-            .parse()
-            .unwrap();
+        let dir = shared_case_dir(name);
+        let (scene, camera, tau) = shared_case(name);
         let target =
             splat4d::io::image_file::load_image(&dir.join("grad_target.exr"), [0.0; 3]).unwrap();
         let expected: Expected =

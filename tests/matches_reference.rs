@@ -4,19 +4,13 @@
 
 mod common;
 
-use std::path::PathBuf;
-
-use common::{assert_within_bound, hard_random_scene, test_camera, worst_ratio};
+use common::{
+    assert_within_bound, hard_random_scene, shared_case, shared_case_dir, test_camera, worst_ratio,
+};
 use splat4d::io::image_file::load_image;
 use splat4d::reference::render_reference;
 use splat4d::render::DEFAULT_CUTOFF;
-use splat4d::{Camera, RenderContext, RenderOptions, Scene};
-
-fn shared_testdata(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/testdata")
-        .join(name)
-}
+use splat4d::{RenderContext, RenderOptions};
 
 #[test]
 fn random_scenes_match_reference_at_default_cutoff_and_without_truncation() {
@@ -109,14 +103,8 @@ fn a_sheared_non_orthonormal_camera_matches_reference() {
 #[test]
 fn matches_the_independent_reference_vectors() {
     for name in ["toy_blob", "random_200"] {
-        let dir = shared_testdata(name);
-        let scene = Scene::load(&dir.join("scene.json")).unwrap();
-        let camera = Camera::load(&dir.join("camera.json")).unwrap();
-        let tau: f64 = std::fs::read_to_string(dir.join("tau.txt"))
-            .unwrap()
-            .trim()
-            .parse()
-            .unwrap();
+        let dir = shared_case_dir(name);
+        let (scene, camera, tau) = shared_case(name);
         for (file, cutoff) in [
             ("expected.exr", DEFAULT_CUTOFF),
             ("expected_exact.exr", 0.0),

@@ -5,6 +5,7 @@
 use std::path::Path;
 use std::sync::Once;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::ViridisRGB;
 
@@ -73,6 +74,33 @@ pub struct Series {
     pub markers: bool,
 }
 
+/// The chart type of line and scatter charts.
+type XyChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Titled axes with labels and a light grid over `xs × ys`.
+fn axes<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+    (x_label, xs): (&str, std::ops::Range<f64>),
+    (y_label, ys): (&str, std::ops::Range<f64>),
+) -> std::result::Result<XyChart<'a, 'b>, Box<dyn std::error::Error>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FONT, 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(xs, ys)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .light_line_style(RGBColor(238, 238, 238))
+        .label_style((FONT, 14))
+        .draw()?;
+    Ok(chart)
+}
+
 fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
@@ -116,19 +144,7 @@ pub fn line_chart(
             .flat_map(|s| finite(s).into_iter().map(|p| p.1)),
     );
     draw_png(path, (800, 500), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 22))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(xs, ys)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(RGBColor(238, 238, 238))
-            .label_style((FONT, 14))
-            .draw()?;
+        let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
         for (i, s) in series.iter().enumerate() {
             let c = colour(i);
             let points = finite(s);
@@ -215,19 +231,7 @@ pub fn scatter_chart(
     let ys = padded_range(points.iter().map(|p| p.2));
     let xs = xs.start..(xs.end + 0.25 * (xs.end - xs.start));
     draw_png(path, (800, 500), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 22))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(xs, ys)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(RGBColor(238, 238, 238))
-            .label_style((FONT, 14))
-            .draw()?;
+        let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
         for (i, (label, x, y)) in points.iter().enumerate() {
             chart.draw_series([Circle::new((*x, *y), 6, colour(i).filled())])?;
             chart.draw_series([Text::new(

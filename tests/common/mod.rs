@@ -269,3 +269,23 @@ pub fn jittered_target(
     let image = splat4d::reference::render_reference(&moved, camera, tau, options);
     image.pixels.iter().map(|&v| v as f32).collect()
 }
+
+/// Folder of the shared reference case `name` (`../shared/testdata/NAME`).
+pub fn shared_case_dir(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/testdata")
+        .join(name)
+}
+
+/// The scene, camera and time of the shared reference case `name`.
+pub fn shared_case(name: &str) -> (Scene, Camera, f64) {
+    let dir = shared_case_dir(name);
+    let scene = Scene::load(&dir.join("scene.json")).unwrap();
+    let camera = Camera::load(&dir.join("camera.json")).unwrap();
+    let tau = std::fs::read_to_string(dir.join("tau.txt"))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    (scene, camera, tau)
+}
