@@ -23,6 +23,7 @@
 
 pub mod backward;
 pub mod camera;
+pub mod camera_path;
 pub mod error;
 pub mod fit;
 pub mod io;

@@ -126,7 +126,14 @@ impl Scene {
         self.means.push(kernel.mean);
         self.scales.push(kernel.scale);
         self.amplitudes.push(kernel.amplitude);
-        self.rotations.push(kernel.rotation.map(|q| q / norm));
+        // A quaternion within a few ulps of unit norm is already normalised at f64 precision;
+        // dividing again would only perturb its last bits (and break exact round trips).
+        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON;
+        self.rotations.push(if unit {
+            kernel.rotation
+        } else {
+            kernel.rotation.map(|q| q / norm)
+        });
         self.velocities.push(kernel.velocity);
         Ok(())
     }

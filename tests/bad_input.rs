@@ -217,3 +217,22 @@ fn bad_render_options_and_look_at_are_refused() {
     assert!(Camera::look_at([0.0; 3], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0], 40.0, 8, 8).is_err());
     assert!(Camera::look_at([0.0; 3], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 180.0, 8, 8).is_err());
 }
+
+mod common;
+
+#[test]
+fn scene_files_round_trip_bit_exactly() {
+    let camera = common::test_camera(32, 32);
+    let scene = common::hard_random_scene(&camera, 8, 300);
+    let again = Scene::from_json_str(&scene.to_json_string(), "again").unwrap();
+    for i in 0..scene.len() {
+        assert_eq!(
+            again.kernel(i),
+            scene.kernel(i),
+            "kernel {i}: save → load must give the same bits"
+        );
+    }
+    assert_eq!(again, scene);
+    let camera_again = Camera::from_json_str(&camera.to_json_string(), "again").unwrap();
+    assert_eq!(camera_again, camera);
+}
