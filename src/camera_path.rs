@@ -85,7 +85,7 @@ fn check(circle: &Circle) -> Result<()> {
             format!("{} must be finite and > 0", circle.radius),
         ));
     }
-    if !(circle.elevation_degrees.abs() < 90.0) {
+    if circle.elevation_degrees.is_nan() || circle.elevation_degrees.abs() >= 90.0 {
         return Err(Error::invalid(
             origin,
             "path",
