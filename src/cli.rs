@@ -50,9 +50,72 @@ enum Command {
     Toy(ToyArgs),
     /// Evaluate the Eq. 1 sum on a 3D grid; write mid-slices and print max/min per time.
     Volume(VolumeArgs),
+    /// Render videos along camera paths: orbits at fixed times, a spiral, or a path file.
+    Video(VideoArgs),
     /// Run the seed paper's experiment (toy data → dataset → fits → baselines → ablation →
     /// volumes) and write `report.md` with its charts.
     Report(ReportArgs),
+}
+
+/// An orbit or spiral: explicit `cx,cy,cz,radius,elevation,frames`, or `auto` (from the
+/// scene's bounds: 20° elevation, 60 frames).
+#[derive(Clone, Debug)]
+struct CircleSpec(Option<[f64; 6]>);
+
+fn parse_circle(text: &str) -> Result<CircleSpec, String> {
+    if text == "auto" {
+        return Ok(CircleSpec(None));
+    }
+    let values = parse_list::<6>(text)?;
+    if values[5] < 1.0 || values[5].fract() != 0.0 {
+        return Err(format!("frames = {} must be a whole number ≥ 1", values[5]));
+    }
+    Ok(CircleSpec(Some(values)))
+}
+
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("path_kind").required(true).multiple(true).args(["orbit", "spiral", "path"])))]
+struct VideoArgs {
+    /// Scene JSON file.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Orbit at each of --times: `cx,cy,cz,radius,elevation_degrees,frames`, or alone for
+    /// one framing the scene (a value starting with `-` needs `--orbit=-1,...`).
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
+    orbit: Option<CircleSpec>,
+    /// Times of the orbits, comma-separated.
+    #[arg(long, default_value = "0.5", value_parser = parse_times, allow_hyphen_values = true)]
+    times: TimeList,
+    /// One turn while time runs over --time-range and the elevation rises from -e to +e:
+    /// `cx,cy,cz,radius,elevation_degrees,frames`, or alone for one framing the scene.
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
+    spiral: Option<CircleSpec>,
+    /// Time range of the spiral, `t0,t1`.
+    #[arg(long, value_parser = parse_list::<2>, default_value = "0,1", allow_hyphen_values = true)]
+    time_range: [f64; 2],
+    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
+    #[arg(long)]
+    path: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Frame size of orbits and spirals, `WxH`.
+    #[arg(long, value_parser = parse_size, default_value = "256x256")]
+    size: (u32, u32),
+    /// Vertical field of view of orbits and spirals, degrees.
+    #[arg(long, default_value_t = 40.0)]
+    fov: f64,
+    /// Frames per second of the GIF and MP4.
+    #[arg(long, default_value_t = 25, value_parser = clap::value_parser!(u32).range(1..=100))]
+    fps: u32,
+    /// Do not write GIFs.
+    #[arg(long)]
+    no_gif: bool,
+    /// Do not try ffmpeg for MP4s.
+    #[arg(long)]
+    no_mp4: bool,
+    #[command(flatten)]
+    render: RenderFlags,
 }
 
 #[derive(Debug, clap::Args)]
@@ -387,6 +450,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Some(Command::Toy(args)) => toy_command(&args),
         Some(Command::Volume(args)) => volume_command(&args),
         Some(Command::Report(args)) => report_command(&args),
+        Some(Command::Video(args)) => video_command(&args),
     }
 }
 
@@ -673,6 +737,106 @@ fn volume_command(args: &VolumeArgs) -> Result<()> {
         splat4d::report::charts::volume_slices_figure(&path, &name, *tau, volume, vmax)?;
         let (hi, lo) = volume.range();
         report!("{tau:>8} {hi:>10.4} {lo:>10.4} {:>10.1}", 1e3 * seconds);
+    }
+    Ok(())
+}
+
+fn video_command(args: &VideoArgs) -> Result<()> {
+    use splat4d::camera_path::{Circle, Lens, load_path, orbit, spiral};
+    use splat4d::io::video::{VideoOptions, write_video};
+    let render = args.render.options()?;
+    let scene = Scene::load(&args.scene)?;
+    let lens = Lens {
+        width: args.size.0,
+        height: args.size.1,
+        fov_y_degrees: args.fov,
+    };
+    if !(args.fov > 0.0 && args.fov < 180.0) {
+        anyhow::bail!("--fov {} must be in (0, 180) degrees", args.fov);
+    }
+    // A circle that frames every kernel alive at `times`.
+    let circle = |spec: &CircleSpec, times: &[f64]| -> Circle {
+        match spec.0 {
+            Some([cx, cy, cz, radius, elevation, frames]) => Circle {
+                centre: [cx, cy, cz],
+                radius,
+                elevation_degrees: elevation,
+                frames: frames as usize,
+            },
+            None => {
+                // The box of the kernels alive at `times` (slice centres ± 3σ).
+                let (lo, hi) = splat4d::volume::scene_bounds(&scene, times, render.cutoff)
+                    .unwrap_or(([-1.0; 3], [1.0; 3]));
+                let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+                let r = 0.5 * (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
+                let half = 0.5
+                    * args
+                        .fov
+                        .to_radians()
+                        .min(2.0 * (f64::from(lens.width) / f64::from(lens.height)).atan());
+                Circle {
+                    centre,
+                    radius: 1.05 * r / half.sin(),
+                    elevation_degrees: 20.0,
+                    frames: 60,
+                }
+            }
+        }
+    };
+    let mut videos: Vec<(String, Vec<splat4d::camera_path::PathFrame>)> = Vec::new();
+    if let Some(spec) = &args.orbit {
+        for &tau in &args.times.0 {
+            videos.push((
+                format!("orbit_t{tau:.2}"),
+                orbit(&circle(spec, &[tau]), &lens, tau)?,
+            ));
+        }
+    }
+    if let Some(spec) = &args.spiral {
+        let [t0, t1] = args.time_range;
+        let sweep: Vec<f64> = (0..=10)
+            .map(|k| t0 + (t1 - t0) * f64::from(k) / 10.0)
+            .collect();
+        videos.push((
+            "spiral".into(),
+            spiral(&circle(spec, &sweep), &lens, args.time_range)?,
+        ));
+    }
+    if let Some(path) = &args.path {
+        let name = path
+            .file_stem()
+            .map_or("path".into(), |s| s.to_string_lossy().into_owned());
+        videos.push((name, load_path(path)?));
+    }
+    let total = videos.iter().map(|(_, f)| f.len()).sum();
+    let bar = progress_bar(total, "frames");
+    let options = VideoOptions {
+        fps: args.fps,
+        gif: !args.no_gif,
+        mp4: !args.no_mp4,
+    };
+    let mut written = Vec::new();
+    for (name, frames) in &videos {
+        let files = with_threads(args.render.threads, || {
+            write_video(&scene, frames, &render, &args.out, name, &options, || {
+                bar.inc(1)
+            })
+        })??;
+        written.push(files);
+    }
+    bar.finish_and_clear();
+    for files in &written {
+        let mut line = format!("{}: {} frames", files.frames_dir.display(), files.frames);
+        if let Some(gif) = &files.gif {
+            line.push_str(&format!(", {}", gif.display()));
+        }
+        if let Some(mp4) = &files.mp4 {
+            line.push_str(&format!(", {}", mp4.display()));
+        }
+        report!("{line}");
+    }
+    if let Some(note) = written.iter().find_map(|f| f.mp4_note.clone()) {
+        report!("note: {note}");
     }
     Ok(())
 }

@@ -328,6 +328,11 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         volume_slices_figure(&out.join(&name), &v.name, v.tau, &v.volume, vmax)?;
         let _ = writeln!(w, "![{} at t = {}]({name})\n", v.name, v.tau);
     }
+    results.model.save(&out.join("fitted_4d.json"))?;
+    let _ = writeln!(
+        w,
+        "The fitted 4D scene is saved as `fitted_4d.json` (render it, or make videos of it with `splat4d video`)."
+    );
     let path = out.join("report.md");
     write_bytes_atomically(&path, md.as_bytes())?;
     Ok(path)

@@ -1,0 +1,193 @@
+//! Videos of a camera path: numbered 8-bit PNG frames (`DIR/NAME/frame_0000.png`, ...), an
+//! animated GIF (`DIR/NAME.gif`, looping) and, when `ffmpeg` is on `PATH`, an MP4
+//! (`DIR/NAME.mp4`, H.264, yuv420p).
+//!
+//! Frames are rendered, written and appended to the GIF one at a time, in order, so memory
+//! does not grow with the length of the video. Every file is written atomically; the GIF and
+//! MP4 appear only once complete.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use image::codecs::gif::{GifEncoder, Repeat};
+use image::{Delay, Frame, RgbaImage};
+
+use crate::camera_path::PathFrame;
+use crate::error::{Error, Result};
+use crate::io::image_file::{BitDepth, quantize, save_image};
+use crate::io::write_atomically;
+use crate::render::{RenderContext, RenderOptions};
+use crate::scene::Scene;
+
+/// What was written for one video.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VideoFiles {
+    /// The folder of numbered frames.
+    pub frames_dir: PathBuf,
+    /// Number of frames.
+    pub frames: usize,
+    /// The GIF, if written.
+    pub gif: Option<PathBuf>,
+    /// The MP4, if `ffmpeg` was found and succeeded.
+    pub mp4: Option<PathBuf>,
+    /// Why there is no MP4, when there is none.
+    pub mp4_note: Option<String>,
+}
+
+/// Options of [`write_video`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VideoOptions {
+    /// Frames per second of the GIF and MP4.
+    pub fps: u32,
+    /// Write the GIF.
+    pub gif: bool,
+    /// Try `ffmpeg` for an MP4.
+    pub mp4: bool,
+}
+
+impl Default for VideoOptions {
+    fn default() -> Self {
+        VideoOptions {
+            fps: 25,
+            gif: true,
+            mp4: true,
+        }
+    }
+}
+
+fn to_rgba8(image: &crate::Image) -> RgbaImage {
+    let data = image
+        .pixels
+        .chunks_exact(3)
+        .flat_map(|p| {
+            [
+                quantize(p[0], 255) as u8,
+                quantize(p[1], 255) as u8,
+                quantize(p[2], 255) as u8,
+                255,
+            ]
+        })
+        .collect();
+    RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
+}
+
+/// Renders `frames` of `scene` into `dir/name/`, `dir/name.gif` and `dir/name.mp4`; calls
+/// `on_frame` after each frame.
+pub fn write_video(
+    scene: &Scene,
+    frames: &[PathFrame],
+    render: &RenderOptions,
+    dir: &Path,
+    name: &str,
+    options: &VideoOptions,
+    mut on_frame: impl FnMut(),
+) -> Result<VideoFiles> {
+    if options.fps == 0 {
+        return Err(Error::Usage("--fps must be at least 1".into()));
+    }
+    let frames_dir = dir.join(name);
+    let mut context = RenderContext::new();
+    let mut render_frame = |k: usize, frame: &PathFrame| -> Result<RgbaImage> {
+        context.render(scene, &frame.camera, frame.time, render)?;
+        save_image(
+            context.image(),
+            &frames_dir.join(format!("frame_{k:04}.png")),
+            BitDepth::Eight,
+        )?;
+        on_frame();
+        Ok(to_rgba8(context.image()))
+    };
+    let gif = if options.gif {
+        let path = dir.join(format!("{name}.gif"));
+        let delay = Delay::from_numer_denom_ms(1000, options.fps);
+        let mut failure = None;
+        let written = write_atomically(&path, |w| {
+            let mut encoder = GifEncoder::new_with_speed(w, 10);
+            encoder
+                .set_repeat(Repeat::Infinite)
+                .map_err(std::io::Error::other)?;
+            for (k, frame) in frames.iter().enumerate() {
+                let rgba = match render_frame(k, frame) {
+                    Ok(rgba) => rgba,
+                    Err(e) => {
+                        failure = Some(e);
+                        return Err(std::io::Error::other("a frame failed"));
+                    }
+                };
+                encoder
+                    .encode_frame(Frame::from_parts(rgba, 0, 0, delay))
+                    .map_err(std::io::Error::other)?;
+            }
+            Ok(())
+        });
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        written?;
+        Some(path)
+    } else {
+        for (k, frame) in frames.iter().enumerate() {
+            render_frame(k, frame)?;
+        }
+        None
+    };
+    let (mp4, mp4_note) = if options.mp4 {
+        encode_mp4(&frames_dir, dir, name, options.fps)
+    } else {
+        (None, None)
+    };
+    Ok(VideoFiles {
+        frames_dir,
+        frames: frames.len(),
+        gif,
+        mp4,
+        mp4_note,
+    })
+}
+
+/// Runs `ffmpeg` on the numbered frames, if it is on `PATH`.
+fn encode_mp4(
+    frames_dir: &Path,
+    dir: &Path,
+    name: &str,
+    fps: u32,
+) -> (Option<PathBuf>, Option<String>) {
+    if Command::new("ffmpeg").arg("-version").output().is_err() {
+        return (None, Some("ffmpeg is not on PATH: no MP4 written (install ffmpeg for one; frames and GIF are complete)".into()));
+    }
+    let path = dir.join(format!("{name}.mp4"));
+    let partial = dir.join(format!(".{name}.partial.mp4"));
+    let status = Command::new("ffmpeg")
+        .args([
+            "-y",
+            "-loglevel",
+            "error",
+            "-framerate",
+            &fps.to_string(),
+            "-i",
+        ])
+        .arg(frames_dir.join("frame_%04d.png"))
+        .args([
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+        ])
+        .arg(&partial)
+        .status();
+    match status {
+        Ok(s) if s.success() => match std::fs::rename(&partial, &path) {
+            Ok(()) => (Some(path), None),
+            Err(e) => (None, Some(format!("cannot move the MP4 into place: {e}"))),
+        },
+        other => {
+            let _ = std::fs::remove_file(&partial);
+            (
+                None,
+                Some(format!("ffmpeg failed ({other:?}): no MP4 written")),
+            )
+        }
+    }
+}
