@@ -179,8 +179,11 @@ impl Scene {
         Scene::from_kernels(&file.kernels, file.background, origin)
     }
 
-    /// Reads a scene JSON file.
+    /// Reads a scene file: 4D scene PLY (`.ply`, see [`crate::io::ply`]) or JSON (anything else).
     pub fn load(path: &Path) -> Result<Self> {
+        if is_ply(path) {
+            return crate::io::ply::read_scene_ply(path);
+        }
         let text =
             std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read scene", e))?;
         Scene::from_json_str(&text, &path.display().to_string())
@@ -196,10 +199,18 @@ impl Scene {
         serde_json::to_string_pretty(&file).expect("a scene of finite numbers serialises")
     }
 
-    /// Writes the scene as JSON, atomically (a temporary file renamed into place).
+    /// Writes the scene, atomically: 4D scene PLY for `.ply`, JSON otherwise.
     pub fn save(&self, path: &Path) -> Result<()> {
+        if is_ply(path) {
+            return crate::io::ply::write_scene_ply(self, path);
+        }
         crate::io::write_bytes_atomically(path, self.to_json_string().as_bytes())
     }
+}
+
+fn is_ply(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
 }
 
 /// Error naming `field` of `item` unless every value is finite.

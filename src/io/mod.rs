@@ -3,6 +3,7 @@
 pub mod dataset;
 pub mod image_file;
 pub mod json;
+pub mod ply;
 pub mod video;
 
 use std::io::{BufWriter, Write};
