@@ -331,6 +331,10 @@ struct RenderArgs {
     /// Bits per channel of a PNG output: 8 or 16.
     #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
     bit_depth: u8,
+    /// Draw a debug overlay over the render (PNG only): per-tile load as a red heat map, the
+    /// tile grid, and each kernel's ellipse at its cut-off.
+    #[arg(long)]
+    overlay: bool,
 }
 
 /// What to look at: a scene through a camera at a time.
@@ -476,7 +480,13 @@ pub fn run(cli: Cli) -> Result<()> {
 fn render_command(args: &RenderArgs) -> Result<()> {
     let options = args.render.options()?;
     // Check the output's extension before any work, so a typo costs nothing.
-    ImageKind::from_path(&args.out)?;
+    let kind = ImageKind::from_path(&args.out)?;
+    if args.overlay && kind != ImageKind::Png {
+        anyhow::bail!(
+            "{}: --overlay draws an 8-bit PNG; use a .png output",
+            args.out.display()
+        );
+    }
     let (scene, camera) = args.view.load()?;
     let depth = if args.bit_depth == 16 {
         BitDepth::Sixteen
@@ -487,7 +497,11 @@ fn render_command(args: &RenderArgs) -> Result<()> {
     let stats = with_threads(args.render.threads, || {
         context.render(&scene, &camera, args.view.time, &options)
     })??;
-    save_image(context.image(), &args.out, depth)?;
+    if args.overlay {
+        splat4d::overlay::write_overlay(&context, &args.out)?;
+    } else {
+        save_image(context.image(), &args.out, depth)?;
+    }
     report!(
         "{}: {}×{} at t = {}, {} of {} kernels on screen, {} pairs",
         args.out.display(),

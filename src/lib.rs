@@ -27,6 +27,7 @@ pub mod camera_path;
 pub mod error;
 pub mod fit;
 pub mod io;
+pub mod overlay;
 pub mod project;
 pub mod raster;
 pub mod reference;

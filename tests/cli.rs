@@ -496,3 +496,31 @@ fn fit_refuses_bad_views_and_flags_with_no_output() {
         assert_eq!(files_in(d), ["missing_image", "set"]);
     }
 }
+
+#[test]
+fn overlay_draws_over_the_render_and_needs_a_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, camera) = (data("blob.json"), data("blob_camera.json"));
+    let (scene, camera) = (scene.to_str().unwrap(), camera.to_str().unwrap());
+    let mut args = render_args(scene, camera, "o.png");
+    args.push("--overlay");
+    let output = splat4d(&args, dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let overlay = load_image(&dir.path().join("o.png"), [0.0; 3]).unwrap();
+    let plain = blob_image();
+    assert_eq!((overlay.width, overlay.height), (plain.width, plain.height));
+    // The ellipse outline is drawn in green at the cut-off radius, away from the bright centre:
+    // some pixels are much greener than the render there.
+    let greener = overlay
+        .pixels
+        .chunks_exact(3)
+        .zip(plain.pixels.chunks_exact(3))
+        .filter(|(o, p)| o[1] > p[1] + 0.3 && o[1] > o[0] + 0.2)
+        .count();
+    assert!(greener > 50, "{greener} outline pixels");
+    let mut args = render_args(scene, camera, "o.exr");
+    args.push("--overlay");
+    let output = splat4d(&args, dir.path());
+    assert_eq!(output.status.code(), Some(2));
+    assert!(stderr(&output).contains("--overlay"));
+}
