@@ -524,3 +524,72 @@ fn overlay_draws_over_the_render_and_needs_a_png() {
     assert_eq!(output.status.code(), Some(2));
     assert!(stderr(&output).contains("--overlay"));
 }
+
+#[test]
+fn import_gltf_and_render_through_its_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/gltf/Cameras.gltf");
+    let gltf = gltf.to_str().unwrap();
+    let output = splat4d(
+        &[
+            "import-gltf",
+            gltf,
+            "--kernels",
+            "500",
+            "--times",
+            "4",
+            "--out",
+            "quad.ply",
+        ],
+        dir.path(),
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        String::from_utf8_lossy(&output.stdout)
+            .contains("500 kernels (500 surface points × 1 times")
+    );
+    let camera_from = format!("{gltf}#0");
+    let args = [
+        "render",
+        "--scene",
+        "quad.ply",
+        "--camera-from",
+        &camera_from,
+        "--size",
+        "64x48",
+        "--time",
+        "0",
+        "--out",
+        "q.png",
+    ];
+    let output = splat4d(&args, dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let image = load_image(&dir.path().join("q.png"), [0.0; 3]).unwrap();
+    assert_eq!((image.width, image.height), (64, 48));
+    assert!(image.pixels.iter().cloned().fold(0.0, f32::max) > 0.5);
+    // Neither --camera nor --camera-from: a usage error.
+    let output = splat4d(
+        &[
+            "render", "--scene", "quad.ply", "--time", "0", "--out", "x.png",
+        ],
+        dir.path(),
+    );
+    assert_eq!(output.status.code(), Some(2));
+    let output = splat4d(
+        &[
+            "render",
+            "--scene",
+            "quad.ply",
+            "--camera-from",
+            &format!("{gltf}#1"),
+            "--time",
+            "0",
+            "--out",
+            "x.png",
+        ],
+        dir.path(),
+    );
+    assert_eq!(output.status.code(), Some(2));
+    assert!(stderr(&output).contains("orthographic"));
+    assert!(!dir.path().join("x.png").exists());
+}

@@ -1,6 +1,7 @@
 //! Files: atomic writes and images. Nothing here knows about the command line.
 
 pub mod dataset;
+pub mod gltf_import;
 pub mod image_file;
 pub mod json;
 pub mod ply;

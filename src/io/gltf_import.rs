@@ -1,0 +1,568 @@
+//! glTF 2.0 (`.gltf` with embedded or external buffers, `.glb`): cameras, and scenes sampled
+//! into 4D kernels.
+//!
+//! **Cameras.** A perspective camera (`yfov`, `aspectRatio`, `znear`, `zfar`) on a node looks
+//! down the node's −Z with +Y up (OpenGL axes); its world transform (translation and
+//! rotation; scale is ignored, as glTF asks of camera nodes) is converted to SPEC §3 by
+//! [`Camera::from_opengl_camera_to_world`]. Square pixels: `fy = ½ H / tan(½ yfov)`, `fx = fy`,
+//! principal point at the centre. `MODEL#k` picks the k-th camera node in node order.
+//!
+//! **Scenes** ([`import_scene`]). `N` points are drawn (seeded) over the triangles of every
+//! mesh of the default scene, area-weighted at the first sample time, with their colour from
+//! `COLOR_0` (interpolated) or the material's base colour factor (textures are not read).
+//! Node animations (translation, rotation, scale; LINEAR, STEP and CUBICSPLINE samplers)
+//! through the node hierarchy are sampled at `K` times evenly over the animations' time range
+//! (all animations play together), and each point becomes one kernel per sample time `t_k`:
+//! a surfel with σ = (s, s, 0.3 s), `s = 0.7 √(area/N)`, its thin axis along the triangle's
+//! normal at `t_k`, velocity the central difference of the point's path, σt = Δt, and
+//! amplitude `colour · g / √(2π)` where `g = 1/(2π 0.7²)` makes a lattice of surfels sum to the
+//! colour face-on and `1/√(2π)` undoes the overlap of neighbouring times. Without animation
+//! (or `K = 1`) each point is one static kernel (σt = 1000, amplitude `colour · g`). Skins and
+//! morph targets are refused with a clear message.
+
+use std::path::Path;
+
+use base64::Engine;
+use glam::{DMat4, DQuat, DVec3};
+use rand::RngExt;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::scene::{Kernel, Scene};
+use crate::synthetic::seeded_rng;
+
+/// σ of a surfel, as a fraction of the mean spacing √(area/N).
+const SURFEL_SPREAD: f64 = 0.7;
+/// Thickness of a surfel along its normal, relative to its width.
+const SURFEL_THICKNESS: f64 = 0.3;
+
+fn parse_document(path: &Path) -> Result<gltf::Gltf> {
+    let origin = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read glTF", e))?;
+    gltf::Gltf::from_slice(&bytes)
+        .map_err(|e| Error::malformed(&origin, format!("not a valid glTF 2.0 file: {e}")))
+}
+
+fn load_buffers(document: &gltf::Gltf, path: &Path) -> Result<Vec<Vec<u8>>> {
+    let origin = path.display().to_string();
+    let dir = path.parent().unwrap_or(Path::new("."));
+    document
+        .buffers()
+        .map(|buffer| {
+            let item = format!("buffer {}", buffer.index());
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => document.blob.clone().ok_or_else(|| {
+                    Error::invalid(
+                        &origin,
+                        &item,
+                        "uri",
+                        "refers to the GLB binary chunk, which is missing",
+                    )
+                })?,
+                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                    let (_, encoded) = uri.split_once(',').ok_or_else(|| {
+                        Error::invalid(&origin, &item, "uri", "a data URI without a comma")
+                    })?;
+                    base64::engine::general_purpose::STANDARD
+                        .decode(encoded)
+                        .map_err(|e| {
+                            Error::invalid(&origin, &item, "uri", format!("bad base64: {e}"))
+                        })?
+                }
+                gltf::buffer::Source::Uri(uri) => {
+                    let file = dir.join(uri);
+                    std::fs::read(&file).map_err(|e| {
+                        Error::io(&file, &format!("{origin}: {item}: cannot read"), e)
+                    })?
+                }
+            };
+            if data.len() < buffer.length() {
+                return Err(Error::invalid(
+                    &origin,
+                    &item,
+                    "byteLength",
+                    format!("{} bytes declared, {} present", buffer.length(), data.len()),
+                ));
+            }
+            Ok(data)
+        })
+        .collect()
+}
+
+/// A `MODEL[#index]` argument: the path and the camera index (0 by default).
+pub fn split_camera_spec(spec: &str) -> Result<(&Path, usize)> {
+    match spec.rsplit_once('#') {
+        Some((path, index)) => {
+            let index = index
+                .parse()
+                .map_err(|_| Error::Usage(format!("{spec}: `#{index}` is not a camera index")))?;
+            Ok((Path::new(path), index))
+        }
+        None => Ok((Path::new(spec), 0)),
+    }
+}
+
+/// The `index`-th camera node (in node order) of the glTF at `path`, as a SPEC §3 camera of
+/// `size` (default: 512 pixels high, the camera's aspect ratio wide).
+pub fn load_camera(path: &Path, index: usize, size: Option<(u32, u32)>) -> Result<Camera> {
+    let origin = path.display().to_string();
+    let document = parse_document(path)?;
+    let world = world_matrices_at(&document, &[], 0.0);
+    let nodes: Vec<gltf::Node<'_>> = document.nodes().filter(|n| n.camera().is_some()).collect();
+    let node = nodes.get(index).ok_or_else(|| {
+        Error::Usage(format!(
+            "{origin}: camera #{index} asked for, the file has {} camera nodes",
+            nodes.len()
+        ))
+    })?;
+    let item = format!("camera node {}", node.index());
+    let camera = node.camera().expect("filtered on cameras");
+    let gltf::camera::Projection::Perspective(p) = camera.projection() else {
+        return Err(Error::invalid(
+            &origin,
+            &item,
+            "type",
+            "orthographic cameras are not supported (perspective only)",
+        ));
+    };
+    let yfov = f64::from(p.yfov());
+    if !(yfov > 0.0 && yfov < std::f64::consts::PI) {
+        return Err(Error::invalid(
+            &origin,
+            &item,
+            "yfov",
+            format!("{yfov} is not in (0, π)"),
+        ));
+    }
+    let aspect = p.aspect_ratio().map_or(1.0, f64::from);
+    let (w, h) = size.unwrap_or(((512.0 * aspect).round().max(1.0) as u32, 512));
+    let fy = 0.5 * f64::from(h) / (0.5 * yfov).tan();
+    let (_, rotation, translation) = world[node.index()].to_scale_rotation_translation();
+    let rigid = DMat4::from_rotation_translation(rotation, translation);
+    let mut result = Camera::from_opengl_camera_to_world(
+        w,
+        h,
+        [fy, fy, 0.5 * f64::from(w), 0.5 * f64::from(h)],
+        rigid.transpose().to_cols_array_2d(),
+    )
+    .map_err(|e| Error::malformed(&origin, format!("{item}: {e}")))?;
+    result.near = f64::from(p.znear());
+    if let Some(far) = p.zfar() {
+        result.far = f64::from(far);
+    }
+    result.validate(&format!("{origin}: {item}"))?;
+    Ok(result)
+}
+
+/// One animated property of one node.
+struct Track {
+    node: usize,
+    property: gltf::animation::Property,
+    interpolation: gltf::animation::Interpolation,
+    times: Vec<f64>,
+    /// Per key: 3 or 4 values (×3 for CUBICSPLINE: in-tangent, value, out-tangent).
+    values: Vec<Vec<f64>>,
+}
+
+impl Track {
+    fn sample(&self, t: f64) -> Vec<f64> {
+        use gltf::animation::Interpolation::*;
+        let cubic = self.interpolation == CubicSpline;
+        let value = |k: usize| {
+            if cubic {
+                &self.values[3 * k + 1]
+            } else {
+                &self.values[k]
+            }
+        };
+        let n = self.times.len();
+        if t <= self.times[0] || n == 1 {
+            return value(0).clone();
+        }
+        if t >= self.times[n - 1] {
+            return value(n - 1).clone();
+        }
+        let k = self.times.partition_point(|&x| x <= t) - 1;
+        let dt = self.times[k + 1] - self.times[k];
+        let s = (t - self.times[k]) / dt;
+        let rotation = self.property == gltf::animation::Property::Rotation;
+        let out = match self.interpolation {
+            Step => value(k).clone(),
+            Linear if rotation => {
+                let q = |v: &Vec<f64>| DQuat::from_xyzw(v[0], v[1], v[2], v[3]);
+                let r = q(value(k)).slerp(q(value(k + 1)), s);
+                vec![r.x, r.y, r.z, r.w]
+            }
+            Linear => value(k)
+                .iter()
+                .zip(value(k + 1))
+                .map(|(a, b)| a + s * (b - a))
+                .collect(),
+            CubicSpline => {
+                let (p0, m0) = (&self.values[3 * k + 1], &self.values[3 * k + 2]);
+                let (p1, m1) = (&self.values[3 * (k + 1) + 1], &self.values[3 * (k + 1)]);
+                let (s2, s3) = (s * s, s * s * s);
+                let (h00, h10, h01, h11) = (
+                    2.0 * s3 - 3.0 * s2 + 1.0,
+                    s3 - 2.0 * s2 + s,
+                    -2.0 * s3 + 3.0 * s2,
+                    s3 - s2,
+                );
+                (0..p0.len())
+                    .map(|c| h00 * p0[c] + h10 * dt * m0[c] + h01 * p1[c] + h11 * dt * m1[c])
+                    .collect()
+            }
+        };
+        if rotation {
+            let norm = out.iter().map(|v| v * v).sum::<f64>().sqrt();
+            out.iter().map(|v| v / norm).collect()
+        } else {
+            out
+        }
+    }
+}
+
+fn read_tracks(document: &gltf::Document, buffers: &[Vec<u8>], origin: &str) -> Result<Vec<Track>> {
+    let mut tracks = Vec::new();
+    for animation in document.animations() {
+        for channel in animation.channels() {
+            let item = format!(
+                "animation {} channel {}",
+                animation.index(),
+                channel.index()
+            );
+            let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
+            let times: Vec<f64> = reader
+                .read_inputs()
+                .ok_or_else(|| Error::invalid(origin, &item, "sampler.input", "cannot be read"))?
+                .map(f64::from)
+                .collect();
+            let outputs = reader
+                .read_outputs()
+                .ok_or_else(|| Error::invalid(origin, &item, "sampler.output", "cannot be read"))?;
+            use gltf::animation::util::ReadOutputs;
+            let values: Vec<Vec<f64>> = match outputs {
+                ReadOutputs::Translations(it) => it.map(|v| v.map(f64::from).to_vec()).collect(),
+                ReadOutputs::Scales(it) => it.map(|v| v.map(f64::from).to_vec()).collect(),
+                ReadOutputs::Rotations(it) => {
+                    it.into_f32().map(|v| v.map(f64::from).to_vec()).collect()
+                }
+                ReadOutputs::MorphTargetWeights(_) => {
+                    return Err(Error::invalid(
+                        origin,
+                        &item,
+                        "target.path",
+                        "morph target weights are not supported",
+                    ));
+                }
+            };
+            let interpolation = channel.sampler().interpolation();
+            let per_key = if interpolation == gltf::animation::Interpolation::CubicSpline {
+                3
+            } else {
+                1
+            };
+            if times.is_empty()
+                || values.len() != per_key * times.len()
+                || times.iter().any(|t| !t.is_finite())
+                || times.windows(2).any(|w| w[1] < w[0])
+            {
+                return Err(Error::invalid(
+                    origin,
+                    &item,
+                    "sampler",
+                    "keyframe times and values do not match (count, order or finiteness)",
+                ));
+            }
+            tracks.push(Track {
+                node: channel.target().node().index(),
+                property: channel.target().property(),
+                interpolation,
+                times,
+                values,
+            });
+        }
+    }
+    Ok(tracks)
+}
+
+/// World matrices of every node at time `t`, animation applied.
+fn world_matrices_at(document: &gltf::Document, tracks: &[Track], t: f64) -> Vec<DMat4> {
+    let mut world = vec![DMat4::IDENTITY; document.nodes().count()];
+    let local = |node: &gltf::Node<'_>| -> DMat4 {
+        let (mut translation, mut rotation, mut scale) = node.transform().decomposed();
+        let mut animated = false;
+        for track in tracks.iter().filter(|k| k.node == node.index()) {
+            let v: Vec<f32> = track.sample(t).iter().map(|&x| x as f32).collect();
+            animated = true;
+            match track.property {
+                gltf::animation::Property::Translation => translation = [v[0], v[1], v[2]],
+                gltf::animation::Property::Rotation => rotation = [v[0], v[1], v[2], v[3]],
+                gltf::animation::Property::Scale => scale = [v[0], v[1], v[2]],
+                gltf::animation::Property::MorphTargetWeights => {}
+            }
+        }
+        if !animated {
+            return DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        }
+        let [x, y, z, w] = rotation.map(f64::from);
+        DMat4::from_scale_rotation_translation(
+            DVec3::from(scale.map(f64::from)),
+            DQuat::from_xyzw(x, y, z, w).normalize(),
+            DVec3::from(translation.map(f64::from)),
+        )
+    };
+    fn visit(
+        node: gltf::Node<'_>,
+        parent: DMat4,
+        world: &mut [DMat4],
+        local: &dyn Fn(&gltf::Node<'_>) -> DMat4,
+    ) {
+        let m = parent * local(&node);
+        world[node.index()] = m;
+        for child in node.children() {
+            visit(child, m, world, local);
+        }
+    }
+    if let Some(scene) = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    {
+        for node in scene.nodes() {
+            visit(node, DMat4::IDENTITY, &mut world, &local);
+        }
+    }
+    world
+}
+
+/// A triangle of a mesh, in its node's local space.
+struct Triangle {
+    node: usize,
+    corners: [DVec3; 3],
+    colours: [[f64; 3]; 3],
+}
+
+fn read_triangles(
+    document: &gltf::Document,
+    buffers: &[Vec<u8>],
+    origin: &str,
+) -> Result<Vec<Triangle>> {
+    let mut triangles = Vec::new();
+    let scene = document
+        .default_scene()
+        .or_else(|| document.scenes().next());
+    let mut stack: Vec<gltf::Node<'_>> = scene.map(|s| s.nodes().collect()).unwrap_or_default();
+    while let Some(node) = stack.pop() {
+        stack.extend(node.children());
+        let Some(mesh) = node.mesh() else { continue };
+        let item = format!("node {} mesh {}", node.index(), mesh.index());
+        if node.skin().is_some() {
+            return Err(Error::invalid(
+                origin,
+                &item,
+                "skin",
+                "skinned meshes are not supported",
+            ));
+        }
+        for primitive in mesh.primitives() {
+            if primitive.morph_targets().next().is_some() {
+                return Err(Error::invalid(
+                    origin,
+                    &item,
+                    "targets",
+                    "morph targets are not supported",
+                ));
+            }
+            if primitive.mode() != gltf::mesh::Mode::Triangles {
+                continue; // points and lines have no area
+            }
+            let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
+            let positions: Vec<DVec3> = reader
+                .read_positions()
+                .ok_or_else(|| Error::invalid(origin, &item, "POSITION", "missing or unreadable"))?
+                .map(|p| DVec3::from(p.map(f64::from)))
+                .collect();
+            let base = primitive
+                .material()
+                .pbr_metallic_roughness()
+                .base_color_factor();
+            let colours: Vec<[f64; 3]> = match reader.read_colors(0) {
+                Some(c) => c.into_rgb_f32().map(|c| c.map(f64::from)).collect(),
+                None => vec![
+                    [f64::from(base[0]), f64::from(base[1]), f64::from(base[2])];
+                    positions.len()
+                ],
+            };
+            let indices: Vec<usize> = match reader.read_indices() {
+                Some(i) => i.into_u32().map(|i| i as usize).collect(),
+                None => (0..positions.len()).collect(),
+            };
+            for tri in indices.chunks_exact(3) {
+                if tri
+                    .iter()
+                    .any(|&i| i >= positions.len() || i >= colours.len())
+                {
+                    return Err(Error::invalid(
+                        origin,
+                        &item,
+                        "indices",
+                        "an index is out of range",
+                    ));
+                }
+                triangles.push(Triangle {
+                    node: node.index(),
+                    corners: [positions[tri[0]], positions[tri[1]], positions[tri[2]]],
+                    colours: [colours[tri[0]], colours[tri[1]], colours[tri[2]]],
+                });
+            }
+        }
+    }
+    Ok(triangles)
+}
+
+/// What [`import_scene`] made.
+#[derive(Clone, Debug)]
+pub struct Imported {
+    /// The 4D scene.
+    pub scene: Scene,
+    /// The animations' time range (`[0, 0]` when static).
+    pub time_range: [f64; 2],
+    /// Surface points sampled.
+    pub points: usize,
+    /// Time samples per point.
+    pub times: usize,
+}
+
+/// Samples the glTF at `path` into 4D kernels (see the module docs): `points` surface
+/// points, `times` samples over the animation.
+pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
+    let origin = path.display().to_string();
+    if points == 0 || times == 0 {
+        return Err(Error::Usage(
+            "--kernels and --times must be at least 1".into(),
+        ));
+    }
+    let gltf = parse_document(path)?;
+    let buffers = load_buffers(&gltf, path)?;
+    let document = &gltf.document;
+    let tracks = read_tracks(document, &buffers, &origin)?;
+    let triangles = read_triangles(document, &buffers, &origin)?;
+    let t0 = tracks
+        .iter()
+        .map(|k| k.times[0])
+        .fold(f64::INFINITY, f64::min);
+    let t1 = tracks
+        .iter()
+        .map(|k| *k.times.last().expect("non-empty"))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let animated = !tracks.is_empty() && t1 > t0 && times > 1;
+    let time_range = if animated { [t0, t1] } else { [0.0, 0.0] };
+    let samples = if animated { times } else { 1 };
+    let sample_times: Vec<f64> = (0..samples)
+        .map(|k| {
+            if samples == 1 {
+                time_range[0]
+            } else {
+                t0 + (t1 - t0) * k as f64 / (samples - 1) as f64
+            }
+        })
+        .collect();
+    let worlds: Vec<Vec<DMat4>> = sample_times
+        .iter()
+        .map(|&t| world_matrices_at(document, &tracks, t))
+        .collect();
+    // Area-weighted triangle choice at the first sample time.
+    let areas: Vec<f64> = triangles
+        .iter()
+        .map(|tri| {
+            let m = worlds[0][tri.node];
+            let [a, b, c] = tri.corners.map(|p| m.transform_point3(p));
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .collect();
+    let total: f64 = areas.iter().sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return Err(Error::invalid(
+            &origin,
+            "scene",
+            "meshes",
+            "no triangle with a finite, positive area in the default scene",
+        ));
+    }
+    let cumulative: Vec<f64> = areas
+        .iter()
+        .scan(0.0, |acc, a| {
+            *acc += a;
+            Some(*acc)
+        })
+        .collect();
+    let sigma = SURFEL_SPREAD * (total / points as f64).sqrt();
+    let gain = 1.0 / (std::f64::consts::TAU * SURFEL_SPREAD * SURFEL_SPREAD);
+    let dt = if samples > 1 {
+        sample_times[1] - sample_times[0]
+    } else {
+        0.0
+    };
+    let mut rng = seeded_rng(seed);
+    let mut kernels = Vec::with_capacity(points * samples);
+    for _ in 0..points {
+        let r = rng.random_range(0.0..total);
+        let index = cumulative
+            .partition_point(|&c| c <= r)
+            .min(triangles.len() - 1);
+        let tri = &triangles[index];
+        let (mut u, mut v): (f64, f64) = (rng.random(), rng.random());
+        if u + v > 1.0 {
+            (u, v) = (1.0 - u, 1.0 - v);
+        }
+        let local = tri.corners[0]
+            + u * (tri.corners[1] - tri.corners[0])
+            + v * (tri.corners[2] - tri.corners[0]);
+        let colour: [f64; 3] = std::array::from_fn(|c| {
+            tri.colours[0][c]
+                + u * (tri.colours[1][c] - tri.colours[0][c])
+                + v * (tri.colours[2][c] - tri.colours[0][c])
+        });
+        let path: Vec<DVec3> = worlds
+            .iter()
+            .map(|w| w[tri.node].transform_point3(local))
+            .collect();
+        for (k, &t) in sample_times.iter().enumerate() {
+            let m = worlds[k][tri.node];
+            let [a, b, c] = tri.corners.map(|p| m.transform_point3(p));
+            let normal = (b - a).cross(c - a).normalize_or_zero();
+            let q = if normal == DVec3::ZERO {
+                DQuat::IDENTITY
+            } else {
+                DQuat::from_rotation_arc(DVec3::Z, normal)
+            };
+            let rotation = [q.w, q.x, q.y, q.z];
+            let p = path[k];
+            let (velocity, sigma_t, amplitude) = if samples > 1 {
+                let (lo, hi) = (k.saturating_sub(1), (k + 1).min(samples - 1));
+                let v = (path[hi] - path[lo]) / (sample_times[hi] - sample_times[lo]);
+                (
+                    v.into(),
+                    dt,
+                    colour.map(|c| c * gain / std::f64::consts::TAU.sqrt()),
+                )
+            } else {
+                ([0.0; 3], 1e3, colour.map(|c| c * gain))
+            };
+            kernels.push(Kernel {
+                mean: [p.x, p.y, p.z, t],
+                scale: [sigma, sigma, SURFEL_THICKNESS * sigma, sigma_t],
+                amplitude,
+                rotation,
+                velocity,
+            });
+        }
+    }
+    let scene = Scene::from_kernels(&kernels, [0.0; 3], &origin)?;
+    Ok(Imported {
+        scene,
+        time_range,
+        points,
+        times: samples,
+    })
+}
