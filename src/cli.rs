@@ -154,6 +154,10 @@ struct ExportPlyArgs {
     /// Kernels whose value at τ stays below this cut-off are left out (SPEC §5).
     #[arg(long, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
+    /// Add 45 zero `f_rest_*` properties (degree-3 spherical harmonics) for loaders that
+    /// require them, such as the reference 3DGS training code.
+    #[arg(long)]
+    sh_rest: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -851,7 +855,8 @@ fn export_ply_command(args: &ExportPlyArgs) -> Result<()> {
         );
     }
     let scene = Scene::load(&args.scene)?;
-    let n = splat4d::io::ply::write_slice_ply(&scene, args.time, args.cutoff, &args.out)?;
+    let n =
+        splat4d::io::ply::write_slice_ply(&scene, args.time, args.cutoff, args.sh_rest, &args.out)?;
     report!(
         "{}: {n} splats of {} kernels at t = {}",
         args.out.display(),

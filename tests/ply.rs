@@ -108,7 +108,7 @@ fn the_3dgs_slice_has_the_standard_layout_and_values() {
     let cutoff = RenderOptions::default().cutoff;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("slice.ply");
-    let n = write_slice_ply(&scene, tau, cutoff, &path).unwrap();
+    let n = write_slice_ply(&scene, tau, cutoff, false, &path).unwrap();
     let mut sliced = SlicedKernels::default();
     slice(&scene, tau, cutoff, &mut sliced);
     assert_eq!(n, sliced.len());
@@ -248,4 +248,24 @@ fn mutated_plys_never_panic() {
         }
     }
     assert!(refused > 100, "mutations should be caught: {refused}");
+}
+
+#[test]
+fn sh_rest_properties_for_degree_3_loaders() {
+    let scene = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, rest) = (dir.path().join("a.ply"), dir.path().join("b.ply"));
+    write_slice_ply(&scene, 0.4, 1.0 / 255.0, false, &plain).unwrap();
+    write_slice_ply(&scene, 0.4, 1.0 / 255.0, true, &rest).unwrap();
+    let ((_, a), (names, b)) = (independent_read(&plain), independent_read(&rest));
+    assert_eq!(names.len(), 17 + 45);
+    assert_eq!(names[9], "f_rest_0");
+    assert_eq!(names[53], "f_rest_44");
+    assert_eq!(names[54], "opacity");
+    for (x, y) in a.iter().zip(&b) {
+        for name in SLICE_PROPERTIES {
+            assert_eq!(value(x, name), value(y, name), "{name}");
+        }
+        assert_eq!(value(y, "f_rest_17"), 0.0);
+    }
 }

@@ -61,18 +61,34 @@ pub fn splat_colour(amplitude: [f64; 3]) -> (f64, [f64; 3]) {
     (logit, amplitude.map(|a| (a / alpha - 0.5) / SH_C0))
 }
 
-/// Writes the 3DGS slice of `scene` at `tau` (kernels alive under `cutoff`). Returns the
-/// number of splats.
-pub fn write_slice_ply(scene: &Scene, tau: f64, cutoff: f64, path: &Path) -> Result<usize> {
+/// Writes the 3DGS slice of `scene` at `tau` (kernels alive under `cutoff`). With
+/// `sh_rest`, 45 zero `f_rest_0..44` properties (spherical harmonics of degree 3, as the
+/// reference 3DGS loader expects) follow `f_dc_2`. Returns the number of splats.
+pub fn write_slice_ply(
+    scene: &Scene,
+    tau: f64,
+    cutoff: f64,
+    sh_rest: bool,
+    path: &Path,
+) -> Result<usize> {
     let mut sliced = SlicedKernels::default();
     slice(scene, tau, cutoff, &mut sliced);
     let n = sliced.len();
+    let rest: Vec<String> = if sh_rest {
+        (0..45).map(|k| format!("f_rest_{k}")).collect()
+    } else {
+        Vec::new()
+    };
+    let mut names: Vec<&str> = SLICE_PROPERTIES[..9].to_vec();
+    names.extend(rest.iter().map(String::as_str));
+    names.extend(&SLICE_PROPERTIES[9..]);
+    let zeros = vec![0_u8; 4 * rest.len()];
     write_atomically(path, |w| {
         w.write_all(
             header(
                 n,
                 "float",
-                &SLICE_PROPERTIES,
+                &names,
                 &[format!("slice of a 4D scene at t = {tau}")],
             )
             .as_bytes(),
@@ -102,7 +118,10 @@ pub fn write_slice_ply(scene: &Scene, tau: f64, cutoff: f64, path: &Path) -> Res
                 q[2],
                 q[3],
             ];
-            for v in values {
+            for (k, v) in values.into_iter().enumerate() {
+                if k == 9 {
+                    w.write_all(&zeros)?;
+                }
                 w.write_all(&(v as f32).to_le_bytes())?;
             }
         }
