@@ -264,7 +264,9 @@ fn vertex_colours_carry_over() {
         .flatten()
         .cloned()
         .fold(0.0, f64::max);
-    assert!(gain > 0.2);
+    // Surfels at σ = spacing sum to 2π times their amplitude: the gain is 1/(2π), reached
+    // on the faces whose colour channel is 1.
+    assert!((gain - 1.0 / std::f64::consts::TAU).abs() < 1e-6, "gain {gain}");
     for i in 0..scene.len() {
         for a in 0..3 {
             let colour = scene.amplitudes[i][a] / gain;
