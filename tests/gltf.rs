@@ -266,7 +266,10 @@ fn vertex_colours_carry_over() {
         .fold(0.0, f64::max);
     // Surfels at σ = spacing sum to 2π times their amplitude: the gain is 1/(2π), reached
     // on the faces whose colour channel is 1.
-    assert!((gain - 1.0 / std::f64::consts::TAU).abs() < 1e-6, "gain {gain}");
+    assert!(
+        (gain - 1.0 / std::f64::consts::TAU).abs() < 1e-6,
+        "gain {gain}"
+    );
     for i in 0..scene.len() {
         for a in 0..3 {
             let colour = scene.amplitudes[i][a] / gain;
@@ -325,4 +328,39 @@ fn skins_and_morph_targets_are_refused() {
         message.contains("broken.gltf") && message.contains("glTF"),
         "{message}"
     );
+}
+
+#[test]
+fn a_glb_imports_like_its_gltf() {
+    use base64::Engine;
+    let text = std::fs::read_to_string(sample("Box.gltf")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let uri = json["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let mut bin = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',').unwrap().1)
+        .unwrap();
+    json["buffers"][0].as_object_mut().unwrap().remove("uri");
+    let mut json_bytes = json.to_string().into_bytes();
+    while json_bytes.len() % 4 != 0 {
+        json_bytes.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(total as u32).to_le_bytes());
+    glb.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&json_bytes);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&bin);
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("box.glb"), glb).unwrap();
+    let from_glb = import_scene(&dir.path().join("box.glb"), 300, 1, 4).unwrap();
+    let from_gltf = import_scene(&sample("Box.gltf"), 300, 1, 4).unwrap();
+    assert_eq!(from_glb.scene, from_gltf.scene);
 }

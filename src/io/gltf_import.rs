@@ -576,3 +576,96 @@ pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Resu
         times: samples,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gltf::animation::{Interpolation, Property};
+
+    fn track(
+        property: Property,
+        interpolation: Interpolation,
+        times: &[f64],
+        values: &[&[f64]],
+    ) -> Track {
+        Track {
+            node: 0,
+            property,
+            interpolation,
+            times: times.to_vec(),
+            values: values.iter().map(|v| v.to_vec()).collect(),
+        }
+    }
+
+    #[test]
+    fn step_linear_and_clamping() {
+        let keys: [&[f64]; 2] = [&[0.0, 0.0, 0.0], &[2.0, 4.0, -2.0]];
+        let step = track(
+            Property::Translation,
+            Interpolation::Step,
+            &[1.0, 3.0],
+            &keys,
+        );
+        assert_eq!(step.sample(2.9), vec![0.0, 0.0, 0.0]);
+        assert_eq!(step.sample(3.0), vec![2.0, 4.0, -2.0]);
+        let linear = track(
+            Property::Translation,
+            Interpolation::Linear,
+            &[1.0, 3.0],
+            &keys,
+        );
+        assert_eq!(linear.sample(2.0), vec![1.0, 2.0, -1.0]);
+        assert_eq!(
+            linear.sample(0.0),
+            vec![0.0, 0.0, 0.0],
+            "clamped before the first key"
+        );
+        assert_eq!(
+            linear.sample(9.0),
+            vec![2.0, 4.0, -2.0],
+            "clamped after the last key"
+        );
+    }
+
+    #[test]
+    fn rotations_slerp_and_stay_unit() {
+        // Identity to a half turn about z (x, y, z, w).
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let keys: [&[f64]; 2] = [&[0.0, 0.0, 0.0, 1.0], &[0.0, 0.0, 1.0, 0.0]];
+        let r = track(
+            Property::Rotation,
+            Interpolation::Linear,
+            &[0.0, 1.0],
+            &keys,
+        )
+        .sample(0.5);
+        assert!(
+            (r[2] - s).abs() < 1e-12 && (r[3] - s).abs() < 1e-12,
+            "a quarter turn halfway: {r:?}"
+        );
+    }
+
+    #[test]
+    fn cubic_spline_is_hermite_with_tangents_scaled_by_the_interval() {
+        // Keys at t = 0 and 2: value 0 → 1, out-tangent 1 at the first, in-tangent 0 at the
+        // second. Hermite on s = t/2 with m0 = 2·1, m1 = 2·0.
+        let keys: [&[f64]; 6] = [&[9.0], &[0.0], &[1.0], &[0.0], &[1.0], &[9.0]];
+        let cubic = track(
+            Property::Scale,
+            Interpolation::CubicSpline,
+            &[0.0, 2.0],
+            &keys,
+        );
+        for t in [0.0, 0.5, 1.0, 1.5, 2.0] {
+            let s: f64 = t / 2.0;
+            let expected = (s.powi(3) - 2.0 * s * s + s) * 2.0 + (-2.0 * s.powi(3) + 3.0 * s * s);
+            assert!((cubic.sample(t)[0] - expected).abs() < 1e-12, "t = {t}");
+        }
+        assert_eq!(
+            cubic.sample(-1.0),
+            vec![0.0],
+            "the value, not a tangent, before the first key"
+        );
+        assert_eq!(cubic.sample(5.0), vec![1.0]);
+    }
+}
