@@ -1,0 +1,28 @@
+//! Renders the 100k-kernel bench scene repeatedly, for profilers (perf, callgrind):
+//! `cargo run --release --example profile_forward -- [kernels] [frames]`.
+
+use splat4d::synthetic::{bench_camera, bench_scene};
+use splat4d::{RenderContext, RenderOptions};
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let kernels: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(100_000);
+    let frames: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(10);
+    let scene = bench_scene(kernels, 42);
+    let camera = bench_camera(512, 512);
+    let mut context = RenderContext::new();
+    let start = std::time::Instant::now();
+    let mut pairs = 0;
+    for _ in 0..frames {
+        pairs += context
+            .render(&scene, &camera, 0.5, &RenderOptions::default())
+            .unwrap()
+            .pairs;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    println!(
+        "{kernels} kernels, {frames} frames: {:.1} ms/frame, {:.0} M pairs/s",
+        1e3 * seconds / frames as f64,
+        pairs as f64 / seconds / 1e6
+    );
+}
