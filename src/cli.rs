@@ -56,6 +56,8 @@ enum Command {
     ExportPly(ExportPlyArgs),
     /// Render videos along camera paths: orbits at fixed times, a spiral, or a path file.
     Video(VideoArgs),
+    /// Measure forward-render speed, with the error against the f64 reference.
+    Bench(BenchArgs),
     /// Run the seed paper's experiment (toy data → dataset → fits → baselines → ablation →
     /// volumes) and write `report.md` with its charts.
     Report(ReportArgs),
@@ -158,6 +160,37 @@ struct ExportPlyArgs {
     /// require them, such as the reference 3DGS training code.
     #[arg(long)]
     sh_rest: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct BenchArgs {
+    /// Scene file (default: the seeded bench scenes of 10k and 100k kernels).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Camera file for --scene (default: a look-at camera framing the scene).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Frame size `WxH` (ignored with --camera).
+    #[arg(long, value_parser = parse_size, default_value = "512x512")]
+    size: (u32, u32),
+    /// Worker threads (default: 1, and one per core).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
+    /// Timed frames per configuration (the median is reported).
+    #[arg(long, default_value_t = 10)]
+    frames: usize,
+    /// Pixels sampled for the error against the f64 reference.
+    #[arg(long, default_value_t = 400)]
+    samples: usize,
+    /// Scene time τ.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
+    time: f64,
+    /// Variance added to each screen covariance, px².
+    #[arg(long, default_value_t = DEFAULT_DILATION)]
+    dilation: f64,
+    /// Cut-off ε.
+    #[arg(long, default_value_t = DEFAULT_CUTOFF)]
+    cutoff: f64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -520,6 +553,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Some(Command::Volume(args)) => volume_command(&args),
         Some(Command::Report(args)) => report_command(&args),
         Some(Command::Video(args)) => video_command(&args),
+        Some(Command::Bench(args)) => bench_command(&args),
         Some(Command::ExportPly(args)) => export_ply_command(&args),
         Some(Command::ImportGltf(args)) => import_gltf_command(&args),
     }
@@ -862,6 +896,87 @@ fn export_ply_command(args: &ExportPlyArgs) -> Result<()> {
         args.out.display(),
         scene.len(),
         args.time
+    );
+    Ok(())
+}
+
+fn bench_command(args: &BenchArgs) -> Result<()> {
+    use splat4d::report::bench::{bench_render, format_table};
+    let options = RenderOptions {
+        dilation: args.dilation,
+        cutoff: args.cutoff,
+    };
+    options.validate()?;
+    let (w, h) = args.size;
+    let scenes: Vec<(String, Scene, Camera)> = match &args.scene {
+        Some(path) => {
+            let scene = Scene::load(path)?;
+            let camera = match &args.camera {
+                Some(c) => Camera::load(c)?,
+                None => {
+                    let (lo, hi) = splat4d::volume::scene_bounds(&scene, &[args.time], args.cutoff)
+                        .with_context(|| {
+                            format!(
+                                "{}: no kernel is alive at t = {}",
+                                path.display(),
+                                args.time
+                            )
+                        })?;
+                    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+                    let r = 0.5 * (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
+                    let distance = 1.05 * r / 20f64.to_radians().sin();
+                    let eye = [
+                        centre[0] + 0.6 * distance,
+                        centre[1] + 0.35 * distance,
+                        centre[2] + 0.72 * distance,
+                    ];
+                    Camera::look_at(eye, centre, [0.0, 1.0, 0.0], 40.0, w, h)?
+                }
+            };
+            let name = path
+                .file_name()
+                .map_or("scene".into(), |n| n.to_string_lossy().into_owned());
+            vec![(name, scene, camera)]
+        }
+        None => [10_000, 100_000]
+            .iter()
+            .map(|&n| {
+                (
+                    format!("bench {}k", n / 1000),
+                    splat4d::synthetic::bench_scene(n, 42),
+                    splat4d::synthetic::bench_camera(w, h),
+                )
+            })
+            .collect(),
+    };
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let threads: Vec<usize> = match args.threads {
+        Some(n) => vec![usize::from(n)],
+        None if cores > 1 => vec![1, cores],
+        None => vec![1],
+    };
+    let bar = progress_bar(scenes.len() * threads.len(), "bench");
+    let mut rows = Vec::new();
+    for (name, scene, camera) in &scenes {
+        for &t in &threads {
+            rows.push(bench_render(
+                name,
+                scene,
+                camera,
+                args.time,
+                &options,
+                t,
+                args.frames,
+                args.samples,
+            )?);
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    report!("{}", format_table(&rows).trim_end());
+    report!(
+        "error: |fast - f64 reference| at {} seeded pixels per row; /bound = largest ratio to 1e-6 + 2e-6·Σ|a|",
+        args.samples
     );
     Ok(())
 }

@@ -397,3 +397,35 @@ pub fn reference_loss_and_gradients(
     }
     (loss, grads)
 }
+
+/// The reference at chosen pixels only: for each `(i, j)`, the f64 colour and `Σ|a|` per
+/// channel (every kernel against those pixels). For error estimates on frames too large for
+/// [`render_reference`].
+#[must_use]
+pub fn reference_at_pixels(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    pixels: &[(u32, u32)],
+) -> Vec<([f64; 3], [f64; 3])> {
+    let kernels = reference_kernels(scene, camera, tau, options);
+    pixels
+        .iter()
+        .map(|&(i, j)| {
+            let mut colour = scene.background;
+            let mut abs_sum = scene.background.map(f64::abs);
+            for kernel in &kernels {
+                let q = quadratic_form(kernel, i, j);
+                if q <= kernel.qmax {
+                    let g = (-0.5 * q).exp();
+                    for c in 0..3 {
+                        colour[c] += kernel.amplitude[c] * g;
+                        abs_sum[c] += (kernel.amplitude[c] * g).abs();
+                    }
+                }
+            }
+            (colour, abs_sum)
+        })
+        .collect()
+}

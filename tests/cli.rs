@@ -593,3 +593,39 @@ fn import_gltf_and_render_through_its_camera() {
     assert!(stderr(&output).contains("orthographic"));
     assert!(!dir.path().join("x.png").exists());
 }
+
+#[test]
+fn bench_prints_speed_and_error_within_the_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let data_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata/random_200");
+    let (scene, camera) = (data_dir.join("scene.json"), data_dir.join("camera.json"));
+    let args = [
+        "bench",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.37",
+        "--frames",
+        "2",
+        "--samples",
+        "300",
+        "--threads",
+        "2",
+    ];
+    let output = splat4d(&args, dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let row = stdout
+        .lines()
+        .find(|l| l.starts_with("scene.json"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let columns: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(columns[1], "200");
+    assert_eq!(columns[2], "128x96");
+    let ratio: f64 = columns.last().unwrap().parse().unwrap();
+    assert!(ratio <= 1.0, "error at {ratio} of the bound");
+    let pairs: u64 = columns[5].parse().unwrap();
+    assert!(pairs > 10_000, "{row}");
+}
