@@ -901,7 +901,7 @@ fn export_ply_command(args: &ExportPlyArgs) -> Result<()> {
 }
 
 fn bench_command(args: &BenchArgs) -> Result<()> {
-    use splat4d::report::bench::{bench_render, format_table};
+    use splat4d::report::bench::{BenchSettings, bench_render, format_table};
     let options = RenderOptions {
         dilation: args.dilation,
         cutoff: args.cutoff,
@@ -959,16 +959,14 @@ fn bench_command(args: &BenchArgs) -> Result<()> {
     let mut rows = Vec::new();
     for (name, scene, camera) in &scenes {
         for &t in &threads {
-            rows.push(bench_render(
-                name,
-                scene,
-                camera,
-                args.time,
-                &options,
-                t,
-                args.frames,
-                args.samples,
-            )?);
+            let settings = BenchSettings {
+                tau: args.time,
+                options,
+                threads: t,
+                frames: args.frames,
+                samples: args.samples,
+            };
+            rows.push(bench_render(name, scene, camera, &settings)?);
             bar.inc(1);
         }
     }

@@ -42,18 +42,36 @@ pub struct BenchRow {
     pub bound_ratio: f64,
 }
 
-/// Times `frames` renders of `scene` through `camera` at `tau` on `threads` threads and
-/// measures the error at `samples` seeded pixels.
+/// How to measure one configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BenchSettings {
+    /// Scene time τ.
+    pub tau: f64,
+    /// Rendering options.
+    pub options: RenderOptions,
+    /// Worker threads.
+    pub threads: usize,
+    /// Timed frames (the median is reported).
+    pub frames: usize,
+    /// Pixels sampled for the error.
+    pub samples: usize,
+}
+
+/// Times renders of `scene` through `camera` and measures the error at seeded pixels.
 pub fn bench_render(
     name: &str,
     scene: &Scene,
     camera: &Camera,
-    tau: f64,
-    options: &RenderOptions,
-    threads: usize,
-    frames: usize,
-    samples: usize,
+    settings: &BenchSettings,
 ) -> Result<BenchRow> {
+    let BenchSettings {
+        tau,
+        options,
+        threads,
+        frames,
+        samples,
+    } = *settings;
+    let options = &options;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()
