@@ -48,7 +48,7 @@ enum Command {
     Fit(Box<FitArgs>),
     /// Write the seed paper's toy scene: its point data, or the continuous blob.
     Toy(ToyArgs),
-    /// Evaluate the Eq. 1 sum on a 3D grid; write mid-slices and print max/min per time.
+    /// Evaluate the Eq. 1 sum on a 3D grid; write slices through its peak and print max/min per time.
     Volume(VolumeArgs),
     /// Sample a glTF 2.0 model (.gltf or .glb) and its node animation into 4D kernels.
     ImportGltf(ImportGltfArgs),
