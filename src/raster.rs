@@ -6,7 +6,9 @@
 //!
 //! in ascending kernel order, no sorting and no compositing. Each tile accumulates into its
 //! own 16×16 block of a tile-major buffer, so tiles run in parallel without sharing and
-//! every pixel adds the same terms in the same order whatever the number of threads.
+//! every pixel adds the same terms in the same order whatever the number of threads. Each
+//! term `a exp(-½ q)` is computed in f32 and added to an f64 sum per pixel and channel, so
+//! the error does not grow with the number of kernels on a pixel.
 //!
 //! Per (kernel, row) the row's offsets are formed in f64 and the per-pixel loop runs in f32
 //! (SPEC §5, precision). With `Δv` the row's offset from the centre, the quadratic form is
@@ -172,6 +174,13 @@ fn rasterize_tile(
     let rect = bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
     let mut pairs = 0_u64;
+    // Per-pixel sums in f64 (q and exp stay f32): their error does not grow with the number
+    // of terms (10 000 kernels on one pixel gave 7e-6 relative error with f32 sums, 3.5× the
+    // documented bound).
+    let mut sums = [0.0_f64; TILE_FLOATS];
+    for (sum, &b) in sums.iter_mut().zip(block.iter()) {
+        *sum = f64::from(b);
+    }
     for &p in bins.tile_entries(t) {
         for_each_row_span(proj, bins, p as usize, rect, |kernel, row| {
             let base = ((row.j - ty0) * TILE_SIZE + (row.i0 - tx0)) as usize;
@@ -180,13 +189,16 @@ fn rasterize_tile(
                 if q <= kernel.qmax {
                     let g = (-0.5 * q).exp();
                     let k = 3 * (base + n as usize);
-                    block[k] += kernel.amplitude[0] * g;
-                    block[k + 1] += kernel.amplitude[1] * g;
-                    block[k + 2] += kernel.amplitude[2] * g;
+                    for c in 0..3 {
+                        sums[k + c] += f64::from(kernel.amplitude[c] * g);
+                    }
                     pairs += 1;
                 }
             }
         });
+    }
+    for (b, &sum) in block.iter_mut().zip(sums.iter()) {
+        *b = sum as f32;
     }
     pairs
 }
