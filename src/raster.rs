@@ -12,8 +12,9 @@
 //!
 //! Per (kernel, row) the row's offsets are formed in f64 and the per-pixel loop runs in f32
 //! (SPEC §5, precision). With `Δv` the row's offset from the centre, the quadratic form is
-//! `q = Qxx t² + Δv²/Σ2yy` where `t = Δu + k Δv` (see [`crate::project`]); `t` at the first
-//! pixel of the span is rounded once from f64, then advances by exact unit steps. The row's
+//! `q = Qxx t² + Δv²/Σ2yy` where `t = Δu + k Δv` (see [`crate::project`]); `t` at the pixel
+//! of the span nearest the ellipse's centre line is rounded once from f64, and the other
+//! pixels add exact integer steps. The row's
 //! span comes from the padded cut-off ([`crate::tiles::padded_qmax`]); the f32 test
 //! `q ≤ qmax` decides each pair.
 
@@ -85,12 +86,24 @@ pub(crate) struct RowSpan {
     pub i0: u32,
     /// One past the last pixel column.
     pub i1: u32,
-    /// `t = Δu + k Δv` at pixel `i0`, rounded once from f64.
-    pub t0: f32,
+    /// `t = Δu + k Δv` at pixel `anchor`, rounded once from f64. The anchor is the pixel of
+    /// the span nearest the ellipse's centre line, where `|t|` and so its rounding are
+    /// smallest: a thin ellipse multiplies that rounding by its large `Qxx`.
+    pub t_anchor: f32,
+    /// The pixel column `t_anchor` belongs to.
+    pub anchor: u32,
     /// `Δv = j + 0.5 - m2y`.
     pub dv: f32,
     /// `Δv²/Σ2yy`, the row's part of `q`.
     pub row_q: f32,
+}
+
+impl RowSpan {
+    /// `t` at the `n`-th pixel of the span: the anchor's `t` plus an exact integer step.
+    #[inline(always)]
+    pub fn t(&self, n: u32) -> f32 {
+        self.t_anchor + (i64::from(self.i0 + n) - i64::from(self.anchor)) as f32
+    }
 }
 
 /// The per-pixel constants of projected kernel `p`.
@@ -108,7 +121,7 @@ impl PixelKernel {
     /// `q` at the `n`-th pixel of `row`.
     #[inline(always)]
     pub fn q(&self, row: &RowSpan, n: u32) -> f32 {
-        let t = row.t0 + n as f32;
+        let t = row.t(n);
         self.qxx * t * t + row.row_q
     }
 }
@@ -148,11 +161,14 @@ pub(crate) fn for_each_row_span(
         let Some((i0, i1)) = pixel_span(centre, (reach / qxx).sqrt(), x_lo, x_hi) else {
             continue;
         };
+        // Pixel i has its centre at i + ½: floor(centre) is the pixel nearest the centre line.
+        let anchor = centre.floor().clamp(f64::from(i0), f64::from(i1 - 1));
         let row = RowSpan {
             j,
             i0,
             i1,
-            t0: (f64::from(i0) + 0.5 - centre) as f32,
+            t_anchor: (anchor + 0.5 - centre) as f32,
+            anchor: anchor as u32,
             dv: dv as f32,
             row_q: row_q as f32,
         };

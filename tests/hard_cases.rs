@@ -478,3 +478,50 @@ fn one_pixel_and_8192_squared_images() {
     assert!(worst <= 1.0, "8192² image at {worst} of the bound");
     println!("8192² image: {worst:.3} of the bound (300 sampled pixels)");
 }
+
+/// Found by the property tests: without truncation a row's span is the kernel's whole box,
+/// and `t` anchored at its first pixel (up to 16 px from a thin ellipse's centre line) lost
+/// 1e-4 of the term to one f32 rounding (1.7× the bound). `t` is now anchored at the pixel
+/// nearest the centre line.
+#[test]
+fn thin_ellipse_without_truncation_in_a_very_wide_camera() {
+    let camera = Camera::new(
+        18,
+        3,
+        [1.769207350257841, 1.769207350257841, 9.0, 1.5],
+        [
+            [
+                -0.10633370246933686,
+                0.0,
+                0.9943305002458501,
+                -0.5319613842965969,
+            ],
+            [
+                0.2630589409422048,
+                -0.9643695406918488,
+                0.02813152281975774,
+                -0.5947985859734102,
+            ],
+            [
+                0.9589020478179867,
+                0.2645588573187315,
+                0.1025449838104181,
+                5.321352630591985,
+            ],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    )
+    .unwrap();
+    let s = common::hard_random_scene(&camera, 4196523199664466103, 8);
+    let options = RenderOptions {
+        dilation: 0.0,
+        cutoff: 0.0,
+    };
+    check_render(
+        "thin ellipse, no truncation, 157° camera",
+        &s,
+        &camera,
+        1.1865182092867972,
+        &options,
+    );
+}

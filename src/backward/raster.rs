@@ -81,7 +81,7 @@ pub fn rasterize_backward(
                             + v_c[1] * kernel.amplitude[1]
                             + v_c[2] * kernel.amplitude[2])
                             * g;
-                        let t = row.t0 + n as f32;
+                        let t = row.t(n);
                         w0 += w;
                         w1 += w * t;
                         w2 += w * t * t;
