@@ -492,6 +492,13 @@ fn one_pixel_and_8192_squared_images() {
         0.5,
         &RenderOptions::default(),
     );
+    check_gradients(
+        "1×1 image",
+        &s,
+        &camera(1, 1),
+        0.5,
+        &RenderOptions::default(),
+    );
     let big = camera(8192, 8192);
     let mut context = RenderContext::new();
     let stats = context
@@ -563,6 +570,13 @@ fn thin_ellipse_without_truncation_in_a_very_wide_camera() {
         cutoff: 0.0,
     };
     check_render(
+        "thin ellipse, no truncation, 157° camera",
+        &s,
+        &camera,
+        1.1865182092867972,
+        &options,
+    );
+    check_gradients(
         "thin ellipse, no truncation, 157° camera",
         &s,
         &camera,
