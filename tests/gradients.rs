@@ -15,10 +15,9 @@ use common::{
     PARAM_NAMES, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
     shared_case, shared_case_dir, test_camera,
 };
-use splat4d::fit::loss::view_loss_and_gradients;
 use splat4d::reference::reference_loss_and_gradients;
 use splat4d::render::DEFAULT_CUTOFF;
-use splat4d::{Camera, Gradients, Image, Kernel, RenderContext, RenderOptions, Scene};
+use splat4d::{Camera, Gradients, Image, Kernel, RenderOptions, Scene};
 
 /// Finite-difference tolerance: `|analytic - fd| ≤ ATOL_FD·scale + RTOL_FD·|fd|`, `scale` the
 /// largest |fd| of the parameter over all kernels.
@@ -41,18 +40,7 @@ fn fast_gradients(
         height: camera.height,
         pixels: target.to_vec(),
     };
-    let mut grads = Gradients::zeros(scene.len());
-    let loss = view_loss_and_gradients(
-        &mut RenderContext::new(),
-        scene,
-        camera,
-        tau,
-        options,
-        &target,
-        &mut grads,
-    )
-    .unwrap();
-    (loss, grads)
+    common::fast_gradients(scene, camera, tau, options, &target)
 }
 
 /// Per parameter (0..10), the largest |value| over kernels.

@@ -289,3 +289,25 @@ pub fn shared_case(name: &str) -> (Scene, Camera, f64) {
         .unwrap();
     (scene, camera, tau)
 }
+
+/// The fast MSE and gradients of `scene` against `target` (the library's own path).
+pub fn fast_gradients(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &splat4d::RenderOptions,
+    target: &Image,
+) -> (f64, splat4d::Gradients) {
+    let mut grads = splat4d::Gradients::zeros(scene.len());
+    let loss = splat4d::fit::loss::view_loss_and_gradients(
+        &mut splat4d::RenderContext::new(),
+        scene,
+        camera,
+        tau,
+        options,
+        target,
+        &mut grads,
+    )
+    .unwrap();
+    (loss, grads)
+}
