@@ -23,6 +23,9 @@ use crate::scene::check_finite;
 pub const DEFAULT_NEAR: f64 = 0.01;
 /// Default far plane (SPEC §3).
 pub const DEFAULT_FAR: f64 = 1e6;
+/// Largest frame, in pixels (16384², about 3 GB of render buffers): larger sizes are refused
+/// at validation rather than failing to allocate.
+pub const MAX_PIXELS: u64 = 1 << 28;
 
 /// A validated pinhole camera. Build it with [`Camera::new`], [`Camera::look_at`],
 /// [`Camera::from_opengl_camera_to_world`] or [`Camera::load`].
@@ -200,6 +203,18 @@ impl Camera {
                     "must be at least 1 pixel",
                 ));
             }
+        }
+        let pixels = u64::from(self.width) * u64::from(self.height);
+        if pixels > MAX_PIXELS {
+            return Err(Error::invalid(
+                origin,
+                item,
+                "width",
+                format!(
+                    "{}×{} is {pixels} pixels, more than the {MAX_PIXELS} (16384²) a frame may have",
+                    self.width, self.height
+                ),
+            ));
         }
         for (field, value) in [("fx", self.fx), ("fy", self.fy)] {
             check_finite(origin, item, field, &[value])?;

@@ -144,6 +144,14 @@ fn bad_cameras_name_the_file_and_the_field() {
         &camera_with("width", "-3"),
         &["c.json", "camera", "width", "invalid value"],
     );
+    let huge = format!("{GOOD_CAMERA}}}").replace(
+        r#""width":4,"height":3"#,
+        r#""width":100000,"height":100000"#,
+    );
+    let message = Camera::from_json_str(&huge, "c.json")
+        .unwrap_err()
+        .to_string();
+    assert_mentions(&message, &["c.json", "`width`", "16384²"]);
     assert_mentions(&camera_with("fx", "0"), &["c.json", "`fx`", "must be > 0"]);
     assert_mentions(&camera_with("fy", "-1"), &["c.json", "`fy`", "must be > 0"]);
     let huge_cx = format!("{}}}", GOOD_CAMERA.replace(r#""cx":2"#, r#""cx":1e999"#));
