@@ -12,6 +12,15 @@
 //!
 //! [`reference`] is the slow f64 twin that every fast stage is tested against.
 //!
+//! Around the renderer:
+//!
+//! - [`backward`]: the exact gradient of the render (SPEC §6), stage by stage in reverse;
+//! - [`fit`]: the loss, Adam, initial scenes, synthetic datasets and the training loop;
+//! - [`io`]: scene/camera JSON, PNG/EXR, PLY (3DGS slices and 4D scenes), glTF, D-NeRF
+//!   datasets and videos, every output written atomically;
+//! - [`toy`], [`volume`], [`report`]: the seed paper's experiment, its Eq. 1 volumes and
+//!   report; [`camera_path`] and [`overlay`] for videos and debugging.
+//!
 //! ```
 //! use splat4d::{Camera, Kernel, RenderOptions, Scene, render};
 //! let blob = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0, 1.0, 1.0]);
