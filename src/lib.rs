@@ -4,13 +4,13 @@
 //! The forward renderer is four stages, each a function from plain struct-of-arrays data
 //! to plain data, run by a [`RenderContext`] that owns the buffers:
 //!
-//! 1. [`slice`]: each 4D kernel at time τ → a 3D Gaussian and its amplitude (SPEC §2), with
+//! 1. [`slice`](mod@slice): each 4D kernel at time τ → a 3D Gaussian and its amplitude (SPEC §2), with
 //!    temporal culling;
 //! 2. [`project`]: EWA projection through a pinhole [`Camera`] → a screen ellipse (SPEC §4);
 //! 3. [`tiles`]: ellipses → kernel lists per 16×16 tile, in kernel order;
 //! 4. [`raster`]: the additive sum per pixel, no sorting (SPEC §5).
 //!
-//! [`reference`] is the slow f64 twin that every fast stage is tested against.
+//! [`reference`](mod@reference) is the slow f64 twin that every fast stage is tested against.
 //!
 //! Around the renderer:
 //!

@@ -5,7 +5,7 @@
 //!    (tile-parallel, over exactly the forward's pairs, deterministic reduction);
 //! 2. [`project`]: → `∂L/∂m(τ)`, the world-space slice centre, through `Q = Σ2⁻¹`, the EWA
 //!    Jacobian (including its clamp) and the 2D mean;
-//! 3. [`slice`]: → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v` of each scene kernel.
+//! 3. [`slice`](mod@slice): → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v` of each scene kernel.
 //!
 //! Names follow the `v_x = ∂L/∂x` convention. Gradients are f64 and accumulate (`+=`), so a
 //! batch of views sums into one [`Gradients`].
