@@ -4,8 +4,9 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use splat4d::project::project;
+use splat4d::slice::TemporalIndex;
 use splat4d::slice::slice;
-use splat4d::synthetic::{bench_camera, bench_scene};
+use splat4d::synthetic::{bench_camera, bench_scene, bench_scene_in_time};
 use splat4d::tiles::bin;
 use splat4d::{RenderContext, RenderOptions};
 
@@ -70,5 +71,38 @@ fn stages(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, forward, stages);
+/// Frame cost against the kernels alive (issue: a temporal index): the 10k scene, all
+/// alive, against a 1M-kernel scene with about 1% alive at τ, with and without the index.
+fn temporal_index(c: &mut Criterion) {
+    let camera = bench_camera(512, 512);
+    let options = RenderOptions::default();
+    let dense = bench_scene(10_000, 42);
+    let sparse = bench_scene_in_time(1_000_000, 42, 130.0);
+    let tau = 65.0;
+    let index = TemporalIndex::new(&sparse, options.cutoff);
+    let mut context = RenderContext::new();
+    let alive = context
+        .render(&sparse, &camera, tau, &options)
+        .unwrap()
+        .sliced;
+    eprintln!("1M kernels over 130 time units: {alive} alive at τ = {tau}");
+    let mut group = c.benchmark_group("temporal_index_512x512");
+    group.sample_size(10);
+    group.bench_function("10k_all_alive", |b| {
+        b.iter(|| context.render(&dense, &camera, TAU, &options).unwrap())
+    });
+    group.bench_function("1M_1pct_alive_indexed", |b| {
+        b.iter(|| {
+            context
+                .render_indexed(&sparse, &index, &camera, tau, &options)
+                .unwrap()
+        })
+    });
+    group.bench_function("1M_1pct_alive_plain", |b| {
+        b.iter(|| context.render(&sparse, &camera, tau, &options).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, forward, stages, temporal_index);
 criterion_main!(benches);

@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::project::{ProjectedKernels, project};
 use crate::raster::{Image, rasterize};
 use crate::scene::Scene;
-use crate::slice::{SlicedKernels, slice};
+use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
 
 /// Default dilation `s` of SPEC §4, px².
@@ -82,6 +82,8 @@ pub struct RenderStats {
 pub struct RenderContext {
     /// Stage 1 output.
     pub sliced: SlicedKernels,
+    /// Kernels a temporal index proposes for the frame.
+    candidates: Vec<u32>,
     /// Stage 2 output.
     pub projected: ProjectedKernels,
     /// Stage 3 output.
@@ -108,16 +110,50 @@ impl RenderContext {
         tau: f64,
         options: &RenderOptions,
     ) -> Result<RenderStats> {
-        options.validate()?;
-        if !tau.is_finite() {
-            return Err(Error::invalid(
-                "<options>",
-                "render",
-                "time",
-                format!("{tau} is not finite"),
-            ));
-        }
+        check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
+        Ok(self.finish_frame(scene, camera, options))
+    }
+
+    /// [`Self::render`] visiting only the kernels `index` says may be alive at `tau`: the
+    /// same image, at a cost that follows the kernels alive rather than the scene's size.
+    /// `index` must have been built for `scene` and `options.cutoff`.
+    pub fn render_indexed(
+        &mut self,
+        scene: &Scene,
+        index: &TemporalIndex,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+    ) -> Result<RenderStats> {
+        check_frame(tau, options)?;
+        if index.kernels() != scene.len() || index.cutoff() != options.cutoff {
+            return Err(Error::Usage(format!(
+                "the temporal index was built for {} kernels at cut-off {}, not {} at {}",
+                index.kernels(),
+                index.cutoff(),
+                scene.len(),
+                options.cutoff
+            )));
+        }
+        index.candidates(tau, &mut self.candidates);
+        slice_candidates(
+            scene,
+            &self.candidates,
+            tau,
+            options.cutoff,
+            &mut self.sliced,
+        );
+        Ok(self.finish_frame(scene, camera, options))
+    }
+
+    /// Stages 2–4 after the slice.
+    fn finish_frame(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        options: &RenderOptions,
+    ) -> RenderStats {
         project(&self.sliced, camera, options.dilation, &mut self.projected);
         bin(&self.projected, camera.width, camera.height, &mut self.bins);
         let background = scene.background.map(|b| b as f32);
@@ -128,12 +164,12 @@ impl RenderContext {
             &mut self.tile_buffer,
             &mut self.image,
         );
-        Ok(RenderStats {
+        RenderStats {
             sliced: self.sliced.len(),
             projected: self.projected.len(),
             tile_entries: self.bins.proj_from_entry.len(),
             pairs,
-        })
+        }
     }
 
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
@@ -173,6 +209,20 @@ impl RenderContext {
     pub fn image(&self) -> &Image {
         &self.image
     }
+}
+
+/// The checks of SPEC §4–5 on a frame's options and time.
+fn check_frame(tau: f64, options: &RenderOptions) -> Result<()> {
+    options.validate()?;
+    if !tau.is_finite() {
+        return Err(Error::invalid(
+            "<options>",
+            "render",
+            "time",
+            format!("{tau} is not finite"),
+        ));
+    }
+    Ok(())
 }
 
 /// Renders one frame with a fresh context: convenient, but allocates; use a

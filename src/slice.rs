@@ -120,21 +120,152 @@ pub fn cutoff_radius_squared(amplitude: [f64; 3], d: f64, cutoff: f64) -> Option
 pub fn slice(scene: &Scene, tau: f64, cutoff: f64, out: &mut SlicedKernels) {
     out.reset();
     for i in 0..scene.len() {
-        let [x, y, z, t] = scene.means[i];
-        let scale = scene.scales[i];
-        let dt = tau - t;
-        let d = dt / scale[3];
-        let Some(qmax) = cutoff_radius_squared(scene.amplitudes[i], d, cutoff) else {
-            continue;
+        slice_one(scene, i, tau, cutoff, out);
+    }
+}
+
+/// Slices only `candidates` (ascending scene indices, a superset of the kernels alive at
+/// `tau`, as [`TemporalIndex::candidates`] gives): the same output as [`slice`].
+pub fn slice_candidates(
+    scene: &Scene,
+    candidates: &[u32],
+    tau: f64,
+    cutoff: f64,
+    out: &mut SlicedKernels,
+) {
+    out.reset();
+    for &i in candidates {
+        slice_one(scene, i as usize, tau, cutoff, out);
+    }
+}
+
+#[inline]
+fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64, out: &mut SlicedKernels) {
+    let [x, y, z, t] = scene.means[i];
+    let scale = scene.scales[i];
+    let dt = tau - t;
+    let d = dt / scale[3];
+    let Some(qmax) = cutoff_radius_squared(scene.amplitudes[i], d, cutoff) else {
+        return;
+    };
+    let w = (-0.5 * d * d).exp();
+    let v = scene.velocities[i];
+    out.kernel_from_slice.push(i as u32);
+    out.means
+        .push([x + v[0] * dt, y + v[1] * dt, z + v[2] * dt]);
+    out.covariances
+        .push(covariance_3d(scene.rotations[i], scale));
+    out.amplitudes.push(scene.amplitudes[i].map(|a| a * w));
+    out.qmax.push(qmax);
+}
+
+/// Which kernels can be alive at a time, so that a frame visits those and not the whole
+/// scene: cost follows the kernels alive at τ.
+///
+/// Kernel `i` is alive at τ iff `2 (ln max_c|A_c| - ½ d² - ln ε) > 0` (SPEC §5), i.e. iff
+/// `|τ - t| < st √(2 ln(max|A|/ε))`: an open interval around `t`, widened here by a relative
+/// 1e-9 so that rounding never drops a kernel (the slice applies the exact test again).
+/// Intervals are registered in equal bins over the range of their centres; a kernel whose
+/// interval covers more than a quarter of that range (or is infinite, as with ε = 0) goes to
+/// a list consulted at every time instead. A query merges that list with one bin's list, in
+/// ascending kernel order, so the slice, and the image, are the same as without the index.
+/// The index belongs to one scene and one ε; rebuild it when either changes.
+#[derive(Clone, Debug, Default)]
+pub struct TemporalIndex {
+    cutoff: f64,
+    kernels: usize,
+    start: f64,
+    width: f64,
+    always: Vec<u32>,
+    bins: Vec<Vec<u32>>,
+}
+
+impl TemporalIndex {
+    /// Builds the index of `scene` for cut-off `cutoff`.
+    #[must_use]
+    pub fn new(scene: &Scene, cutoff: f64) -> Self {
+        let mut intervals = Vec::with_capacity(scene.len());
+        let mut always = Vec::new();
+        for i in 0..scene.len() {
+            let peak = scene.amplitudes[i]
+                .iter()
+                .fold(0.0_f64, |m, a| m.max(a.abs()));
+            if peak == 0.0 || (cutoff > 0.0 && peak <= cutoff) {
+                continue; // never alive
+            }
+            let reach = if cutoff == 0.0 {
+                f64::INFINITY
+            } else {
+                scene.scales[i][3] * (2.0 * (peak / cutoff).ln()).sqrt() * (1.0 + 1e-9)
+            };
+            let t = scene.means[i][3];
+            if reach.is_finite() {
+                intervals.push((i as u32, t - reach, t + reach));
+            } else {
+                always.push(i as u32);
+            }
+        }
+        let (lo, hi) = intervals.iter().fold(
+            (f64::INFINITY, f64::NEG_INFINITY),
+            |(lo, hi), &(_, a, b)| (lo.min(0.5 * (a + b)), hi.max(0.5 * (a + b))),
+        );
+        let span = if hi > lo { hi - lo } else { 1.0 };
+        let count = (intervals.len() / 64).clamp(1, 4096);
+        let width = span / count as f64;
+        let mut bins = vec![Vec::new(); count];
+        let bin_of = |time: f64| (((time - lo) / width).floor().max(0.0) as usize).min(count - 1);
+        for &(i, a, b) in &intervals {
+            if b - a > 0.25 * span {
+                always.push(i);
+                continue;
+            }
+            for bin in &mut bins[bin_of(a)..=bin_of(b)] {
+                bin.push(i);
+            }
+        }
+        always.sort_unstable();
+        TemporalIndex {
+            cutoff,
+            kernels: scene.len(),
+            start: if lo.is_finite() { lo } else { 0.0 },
+            width,
+            always,
+            bins,
+        }
+    }
+
+    /// The cut-off the index was built for.
+    #[must_use]
+    pub fn cutoff(&self) -> f64 {
+        self.cutoff
+    }
+
+    /// Kernels of the scene the index was built for.
+    #[must_use]
+    pub fn kernels(&self) -> usize {
+        self.kernels
+    }
+
+    /// The kernels that may be alive at `tau`, ascending, into `out` (reset first).
+    pub fn candidates(&self, tau: f64, out: &mut Vec<u32>) {
+        out.clear();
+        let position = (tau - self.start) / self.width;
+        // A time outside every bin can still be inside an interval that reaches past the
+        // range of centres: use the nearest bin, whose intervals cover the edge.
+        let bin: &[u32] = if self.bins.is_empty() || position.is_nan() {
+            &[]
+        } else {
+            &self.bins[(position.floor().max(0.0) as usize).min(self.bins.len() - 1)]
         };
-        let w = (-0.5 * d * d).exp();
-        let v = scene.velocities[i];
-        out.kernel_from_slice.push(i as u32);
-        out.means
-            .push([x + v[0] * dt, y + v[1] * dt, z + v[2] * dt]);
-        out.covariances
-            .push(covariance_3d(scene.rotations[i], scale));
-        out.amplitudes.push(scene.amplitudes[i].map(|a| a * w));
-        out.qmax.push(qmax);
+        let (mut a, mut b) = (self.always.iter().peekable(), bin.iter().peekable());
+        loop {
+            let next = match (a.peek(), b.peek()) {
+                (Some(&&x), Some(&&y)) if x <= y => a.next(),
+                (Some(_), Some(_)) | (None, Some(_)) => b.next(),
+                (Some(_), None) => a.next(),
+                (None, None) => break,
+            };
+            out.extend(next.copied());
+        }
     }
 }

@@ -74,6 +74,20 @@ pub fn bench_scene(n: usize, seed: u64) -> Scene {
     Scene::from_kernels(&kernels, [0.0; 3], "<bench scene>").expect("generated kernels are valid")
 }
 
+/// [`bench_scene`]'s kernels spread over `duration` time units instead of one, with σt in
+/// [0.2, 0.4]: at any time about 1.3/`duration` of them are alive under ε = 1/255 (1% for a
+/// duration of 130), for benching the cost of a frame against the kernels alive.
+#[must_use]
+pub fn bench_scene_in_time(n: usize, seed: u64, duration: f64) -> Scene {
+    let mut scene = bench_scene(n, seed);
+    let mut rng = seeded_rng(seed ^ 0x5eed);
+    for (mean, scale) in scene.means.iter_mut().zip(&mut scene.scales) {
+        mean[3] *= duration;
+        scale[3] = rng.random_range(0.2..0.4);
+    }
+    scene
+}
+
 /// A camera 3.5 units from the origin framing [`bench_scene`]'s cube, 50° vertical field of view.
 #[must_use]
 pub fn bench_camera(width: u32, height: u32) -> Camera {

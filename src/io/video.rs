@@ -18,6 +18,7 @@ use crate::io::image_file::{BitDepth, quantize, save_image};
 use crate::io::write_atomically;
 use crate::render::{RenderContext, RenderOptions};
 use crate::scene::Scene;
+use crate::slice::TemporalIndex;
 
 /// What was written for one video.
 #[derive(Clone, Debug, PartialEq)]
@@ -87,8 +88,10 @@ pub fn write_video(
     }
     let frames_dir = dir.join(name);
     let mut context = RenderContext::new();
+    // One scene, many frames: each frame visits only the kernels alive at its time.
+    let index = TemporalIndex::new(scene, render.cutoff);
     let mut render_frame = |k: usize, frame: &PathFrame| -> Result<RgbaImage> {
-        context.render(scene, &frame.camera, frame.time, render)?;
+        context.render_indexed(scene, &index, &frame.camera, frame.time, render)?;
         save_image(
             context.image(),
             &frames_dir.join(format!("frame_{k:04}.png")),
