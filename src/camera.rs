@@ -185,6 +185,21 @@ impl Camera {
         w2c.inverse().w_axis.truncate().into()
     }
 
+    /// A world point in camera space, `Rc p + tc` (OpenCV axes).
+    #[must_use]
+    pub fn to_camera_space(&self, p: [f64; 3]) -> [f64; 3] {
+        let m = &self.world_to_camera;
+        std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
+    }
+
+    /// A world point's pixel coordinates and depth `[u, v, z]` (SPEC §3: `u = fx x/z + cx`,
+    /// `v = fy y/z + cy`; the point is in front of the camera when `z > 0`).
+    #[must_use]
+    pub fn project_point(&self, p: [f64; 3]) -> [f64; 3] {
+        let [x, y, z] = self.to_camera_space(p);
+        [self.fx * x / z + self.cx, self.fy * y / z + self.cy, z]
+    }
+
     /// Number of pixels.
     #[must_use]
     pub fn pixel_count(&self) -> usize {
@@ -301,17 +316,6 @@ impl Camera {
 mod tests {
     use super::*;
 
-    fn project(camera: &Camera, p: [f64; 3]) -> [f64; 3] {
-        let m = &camera.world_to_camera;
-        let c: [f64; 3] =
-            std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3]);
-        [
-            camera.fx * c[0] / c[2] + camera.cx,
-            camera.fy * c[1] / c[2] + camera.cy,
-            c[2],
-        ]
-    }
-
     #[test]
     fn look_at_puts_the_target_at_the_centre_with_up_up() {
         let camera = Camera::look_at(
@@ -323,10 +327,10 @@ mod tests {
             48,
         )
         .unwrap();
-        let [u, v, z] = project(&camera, [0.0, 0.5, 0.0]);
+        let [u, v, z] = camera.project_point([0.0, 0.5, 0.0]);
         assert!((u - 32.0).abs() < 1e-12 && (v - 24.0).abs() < 1e-12 && z > 0.0);
         // A point above the target appears higher in the image (smaller v: y is down).
-        assert!(project(&camera, [0.0, 0.6, 0.0])[1] < 24.0);
+        assert!(camera.project_point([0.0, 0.6, 0.0])[1] < 24.0);
         // The vertical field of view: a point at the top edge of the frustum maps to v = 0.
         assert!((camera.fy - 24.0 / 30f64.to_radians().tan()).abs() < 1e-12);
         let centre = camera.centre();
@@ -385,7 +389,7 @@ mod tests {
         )
         .unwrap();
         for t in [0.0, 0.25, 0.5, 0.75, 1.0] {
-            let [u, v, z] = project(&camera, [t, t, t]);
+            let [u, v, z] = camera.project_point([t, t, t]);
             let margin = 3.0 * 0.1 * camera.fx / z;
             assert!(
                 u - margin > 0.0 && u + margin < f64::from(camera.width),

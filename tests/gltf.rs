@@ -150,14 +150,8 @@ fn the_animated_box_follows_its_keyframes() {
     )
     .unwrap();
     let top = [origin[0], origin[1] + 2.52, origin[2]];
-    let m = camera.world_to_camera;
-    let p: Vec<f64> = (0..3)
-        .map(|r| (0..3).map(|c| m[r][c] * top[c]).sum::<f64>() + m[r][3])
-        .collect();
-    let (u, v) = (
-        (camera.fx * p[0] / p[2] + camera.cx) as u32,
-        (camera.fy * p[1] / p[2] + camera.cy) as u32,
-    );
+    let [u, v, _] = camera.project_point(top);
+    let (u, v) = (u as u32, v as u32);
     let bright = |tau: f64| {
         render(scene, &camera, tau, &RenderOptions::default())
             .unwrap()
@@ -197,17 +191,11 @@ fn a_models_own_camera_frames_it() {
     let tilt = 2.0 * 0.383_f64.atan2(0.92375);
     let corners = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]
         .map(|[x, y]: [f64; 2]| [x, y * tilt.cos(), -y * tilt.sin()]);
-    let m = camera.world_to_camera;
     let projected: Vec<(f64, f64)> = corners
         .iter()
-        .map(|p| {
-            let q: Vec<f64> = (0..3)
-                .map(|r| (0..3).map(|k| m[r][k] * p[k]).sum::<f64>() + m[r][3])
-                .collect();
-            (
-                camera.fx * q[0] / q[2] + camera.cx,
-                camera.fy * q[1] / q[2] + camera.cy,
-            )
+        .map(|&p| {
+            let [u, v, _] = camera.project_point(p);
+            (u, v)
         })
         .collect();
     let (lo_u, hi_u) = projected
