@@ -914,16 +914,15 @@ fn bench_command(args: &BenchArgs) -> Result<()> {
             let camera = match &args.camera {
                 Some(c) => Camera::load(c)?,
                 None => {
-                    let (lo, hi) = splat4d::volume::scene_bounds(&scene, &[args.time], args.cutoff)
-                        .with_context(|| {
-                            format!(
-                                "{}: no kernel is alive at t = {}",
-                                path.display(),
-                                args.time
-                            )
-                        })?;
-                    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-                    let r = 0.5 * (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
+                    let (centre, r) =
+                        splat4d::volume::scene_sphere(&scene, &[args.time], args.cutoff)
+                            .with_context(|| {
+                                format!(
+                                    "{}: no kernel is alive at t = {}",
+                                    path.display(),
+                                    args.time
+                                )
+                            })?;
                     let distance = 1.05 * r / 20f64.to_radians().sin();
                     let eye = [
                         centre[0] + 0.6 * distance,
@@ -1002,11 +1001,9 @@ fn video_command(args: &VideoArgs) -> Result<()> {
                 frames: frames as usize,
             },
             None => {
-                // The box of the kernels alive at `times` (slice centres ± 3σ).
-                let (lo, hi) = splat4d::volume::scene_bounds(&scene, times, render.cutoff)
-                    .unwrap_or(([-1.0; 3], [1.0; 3]));
-                let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-                let r = 0.5 * (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
+                // The sphere around the kernels alive at `times` (slice centres ± 3σ).
+                let (centre, r) = splat4d::volume::scene_sphere(&scene, times, render.cutoff)
+                    .unwrap_or(([0.0; 3], 3f64.sqrt()));
                 let half = 0.5
                     * args
                         .fov

@@ -115,6 +115,16 @@ pub fn scene_bounds(scene: &Scene, times: &[f64], cutoff: f64) -> Option<([f64; 
     lo[0].is_finite().then_some((lo, hi))
 }
 
+/// The sphere around [`scene_bounds`]' box: its centre and half its diagonal, for framing
+/// the kernels alive at `times` with a camera.
+#[must_use]
+pub fn scene_sphere(scene: &Scene, times: &[f64], cutoff: f64) -> Option<([f64; 3], f64)> {
+    let (lo, hi) = scene_bounds(scene, times, cutoff)?;
+    let centre = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let radius = 0.5 * (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
+    Some((centre, radius))
+}
+
 struct VolumeKernel {
     mean: DVec3,
     precision: DMat3,
