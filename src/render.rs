@@ -191,6 +191,7 @@ impl RenderContext {
             &self.bins,
             v_image,
             &mut buffers.entry_partials,
+            &mut buffers.kernel_sums,
             &mut buffers.screen,
         );
         project_backward(

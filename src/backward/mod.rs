@@ -62,6 +62,8 @@ impl Gradients {
 pub struct BackwardBuffers {
     /// Per (tile, kernel) entry: partial sums of one tile.
     pub(crate) entry_partials: Vec<[f32; 8]>,
+    /// Per projected kernel: the entries' partial sums reduced in f64.
+    pub(crate) kernel_sums: Vec<[f64; 8]>,
     /// Stage 1 output.
     pub screen: raster::ScreenGradients,
     /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.

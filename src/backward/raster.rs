@@ -36,12 +36,14 @@ pub struct ScreenGradients {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major, `width` pixels per row) into `out`, one
-/// entry per projected kernel (reset first). `partials` is scratch.
+/// entry per projected kernel (reset first). `partials` (one per tile entry) and `sums`
+/// (one per projected kernel) are scratch, kept between calls.
 pub fn rasterize_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
     v_image: &[f32],
     partials: &mut Vec<[f32; 8]>,
+    sums: &mut Vec<[f64; 8]>,
     out: &mut ScreenGradients,
 ) {
     let width = bins.width as usize;
@@ -100,8 +102,8 @@ pub fn rasterize_backward(
         }
     });
     // Deterministic reduction in entry order.
-    let n = proj.len();
-    let mut sums = vec![[0.0_f64; 8]; n];
+    sums.clear();
+    sums.resize(proj.len(), [0.0; 8]);
     for (partial, &p) in partials.iter().zip(&bins.proj_from_entry) {
         for (s, v) in sums[p as usize].iter_mut().zip(partial) {
             *s += f64::from(*v);
