@@ -1,10 +1,23 @@
 //! Stage 3: bin projected ellipses into 16×16 pixel tiles (counting sort, no depth order).
 //!
-//! A kernel goes to every tile that meets the pixel rectangle of its ellipse `q ≤ qmax`
-//! (SPEC §5: `|Δu| ≤ √(qmax Σ2xx)`, `|Δv| ≤ √(qmax Σ2yy)`), clipped to the image. The
-//! rectangle is taken for a slightly larger cut-off, [`padded_qmax`], so that no pixel whose
-//! f32 test in the raster stage could pass is left out; which pairs are summed is decided by
-//! that per-pixel test alone, never by the tiles. Within each tile the kernels are listed in
+//! A kernel goes to every tile whose pixel centres the ellipse `q ≤ qmax` may reach, not to
+//! every tile of its bounding box. The box (SPEC §5: `|Δu| ≤ √(qmax Σ2xx)`,
+//! `|Δv| ≤ √(qmax Σ2yy)`, clipped to the image) gives the tile rows; within each tile row
+//! the ellipse's horizontal extent over that row band gives the tile columns. With
+//! `q = Qxx (Δu + k Δv)² + Δv²/Σ2yy`, row `Δv`'s chord is
+//!
+//! ```text
+//! centre(Δv) ± √((qmax - Δv²/Σ2yy) / Qxx),   centre(Δv) = m2x + (Σ2xy/Σ2yy) Δv
+//! ```
+//!
+//! whose right end is concave in `Δv` with its maximum `m2x + √(qmax Σ2xx)` at
+//! `Δv* = √qmax Σ2xy/√Σ2xx` (the left end mirrors it at `-Δv*`). So over a band of rows the
+//! extent is the ellipse's own when `±Δv*` falls inside the band and the chord of the band's
+//! end row nearest to it otherwise: the very row the raster evaluates, so the test is exact
+//! up to rounding (a margin of 1e-9 relative covers that). A tilted ellipse thus skips the
+//! corner tiles of its box. Everything is taken for a slightly larger cut-off,
+//! [`padded_qmax`], so that no pixel whose f32 test in the raster stage could pass is left
+//! out; which pairs are summed is decided by that per-pixel test alone, never by the tiles. Within each tile the kernels are listed in
 //! ascending scene order (the fill pass runs in that order), which makes every pixel's sum
 //! order, and so the image, independent of threads.
 
@@ -105,21 +118,15 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
         };
         out.pixel_bounds.push(bounds);
     }
-    let tile_ranges = |b: &[u32; 4]| {
-        let tx = b[0] / TILE_SIZE..b[1].div_ceil(TILE_SIZE);
-        let ty = b[2] / TILE_SIZE..b[3].div_ceil(TILE_SIZE);
-        (tx, ty)
-    };
     // Count, prefix-sum, fill: kernels enter each tile's list in ascending order.
     out.tile_offsets.clear();
     out.tile_offsets.resize(out.tile_count() + 1, 0);
-    for b in &out.pixel_bounds {
-        let (txs, tys) = tile_ranges(b);
-        for ty in tys {
-            for tx in txs.clone() {
+    for p in 0..proj.len() {
+        for_each_tile_row(proj, p, out.pixel_bounds[p], |ty, txs| {
+            for tx in txs {
                 out.tile_offsets[ty as usize * tiles_x + tx as usize + 1] += 1;
             }
-        }
+        });
     }
     for t in 0..out.tile_count() {
         out.tile_offsets[t + 1] += out.tile_offsets[t];
@@ -130,15 +137,66 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
     out.fill_cursor.clear();
     out.fill_cursor
         .extend_from_slice(&out.tile_offsets[..out.tile_count()]);
-    for (p, b) in out.pixel_bounds.iter().enumerate() {
-        let (txs, tys) = tile_ranges(b);
-        for ty in tys {
-            for tx in txs.clone() {
+    for p in 0..proj.len() {
+        for_each_tile_row(proj, p, out.pixel_bounds[p], |ty, txs| {
+            for tx in txs {
                 let slot = &mut out.fill_cursor[ty as usize * tiles_x + tx as usize];
                 out.proj_from_entry[*slot as usize] = p as u32;
                 *slot += 1;
             }
-        }
+        });
+    }
+}
+
+/// Calls `visit(ty, tx0..tx1)` for each tile row of projected kernel `p` (pixel rectangle
+/// `bounds`) with the tile columns its ellipse reaches there (see the module docs).
+fn for_each_tile_row(
+    proj: &ProjectedKernels,
+    p: usize,
+    [x0, x1, y0, y1]: [u32; 4],
+    mut visit: impl FnMut(u32, std::ops::Range<u32>),
+) {
+    if x0 >= x1 || y0 >= y1 {
+        return;
+    }
+    let box_columns = x0 / TILE_SIZE..x1.div_ceil(TILE_SIZE);
+    let [mx, my] = proj.means[p];
+    let [sxx, sxy, syy] = proj.covariances[p];
+    let qxx = proj.conics[p][0];
+    let q = padded_qmax(proj.qmax[p]);
+    let reach_x = (q * sxx).sqrt();
+    let dv_star = q.sqrt() * sxy / sxx.sqrt();
+    let shear = sxy / syy;
+    // The chord's ends on row offset `dv`.
+    let chord = |dv: f64| {
+        let half = ((q - dv * dv / syy).max(0.0) / qxx).sqrt();
+        let centre = mx + shear * dv;
+        (centre - half, centre + half)
+    };
+    for ty in y0 / TILE_SIZE..y1.div_ceil(TILE_SIZE) {
+        // Pixel rows of this tile row that the kernel's box covers, as offsets from m2y.
+        let first = (ty * TILE_SIZE).max(y0);
+        let last = ((ty + 1) * TILE_SIZE).min(y1) - 1;
+        let (dv_lo, dv_hi) = (f64::from(first) + 0.5 - my, f64::from(last) + 0.5 - my);
+        let right = if (dv_lo..=dv_hi).contains(&dv_star) {
+            mx + reach_x
+        } else {
+            chord(dv_star.clamp(dv_lo, dv_hi)).1
+        };
+        let left = if (dv_lo..=dv_hi).contains(&-dv_star) {
+            mx - reach_x
+        } else {
+            chord((-dv_star).clamp(dv_lo, dv_hi)).0
+        };
+        let margin = 1e-9 * (left.abs() + right.abs()) + 1e-9;
+        let columns = match pixel_span(0.5 * (left + right), 0.5 * (right - left) + margin, x0, x1)
+        {
+            Some((i0, i1)) => i0 / TILE_SIZE..i1.div_ceil(TILE_SIZE),
+            // Not finite (an infinite cut-off, say): keep the box's columns.
+            None if !(left.is_finite() && right.is_finite()) => box_columns.clone(),
+            None => continue,
+        };
+        visit(ty, columns);
     }
 }
 
