@@ -1,6 +1,8 @@
-//! One training step on the seeded bench scenes at 512×512: forward, backward (after a
-//! forward), and the whole step (forward + loss + backward + Adam). Prints backward time over
-//! forward time per scene. Machine and flags: `benches/README.md`.
+//! One training step on the seeded bench scenes (10k, 100k and 1M kernels at 512×512 and
+//! 1920×1080, 1 and 2 threads): forward, backward (after a forward), and the whole step
+//! (forward + loss + backward + Adam), as `train_WxH/{forward,backward,step}/N/Tt`. Prints
+//! backward time over forward time per scene. Machine and flags: `benches/README.md`.
+//! Filter to run a part: `cargo bench --bench train -- train_512x512`.
 
 use std::time::Instant;
 
@@ -10,11 +12,19 @@ use splat4d::fit::loss::mse_with_gradient;
 use splat4d::synthetic::{bench_camera, bench_scene};
 use splat4d::{Gradients, RenderContext, RenderOptions};
 
-const SIZES: [usize; 3] = [1_000, 10_000, 100_000];
+const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
+const FRAMES: [(u32, u32); 2] = [(512, 512), (1920, 1080)];
+const THREADS: [usize; 2] = [1, 2];
 const TAU: f64 = 0.5;
 
 fn training_step(c: &mut Criterion) {
-    let camera = bench_camera(512, 512);
+    for (w, h) in FRAMES {
+        training_step_at(c, w, h);
+    }
+}
+
+fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
+    let camera = bench_camera(w, h);
     let options = RenderOptions::default();
     let rates = LearningRates {
         mean: 1e-3,
@@ -22,7 +32,7 @@ fn training_step(c: &mut Criterion) {
         amplitude: 1e-3,
         velocity: 1e-3,
     };
-    let mut group = c.benchmark_group("train_512x512");
+    let mut group = c.benchmark_group(format!("train_{w}x{h}"));
     group.sample_size(10);
     for n in SIZES {
         let scene = bench_scene(n, 42);
@@ -49,30 +59,43 @@ fn training_step(c: &mut Criterion) {
         }
         let backward = start.elapsed().as_secs_f64() / repeats as f64;
         eprintln!(
-            "{n} kernels: {} pairs; forward {:.2} ms, backward {:.2} ms, backward/forward = {:.2}",
+            "{n} kernels at {w}x{h}: {} pairs; forward {:.2} ms, backward {:.2} ms, backward/forward = {:.2}",
             stats.pairs,
             1e3 * forward,
             1e3 * backward,
             backward / forward
         );
 
-        group.bench_function(BenchmarkId::new("forward", n), |b| {
-            b.iter(|| context.render(&scene, &camera, TAU, &options).unwrap())
-        });
-        group.bench_function(BenchmarkId::new("backward", n), |b| {
-            b.iter(|| context.backward(&scene, &camera, TAU, &options, &v_image, &mut grads))
-        });
-        let mut fitted = scene.clone();
-        let mut adam = Adam::new(n, AdamConfig::default());
-        group.bench_function(BenchmarkId::new("step", n), |b| {
-            b.iter(|| {
-                context.render(&fitted, &camera, TAU, &options).unwrap();
-                mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
-                grads.reset(n);
-                context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
-                adam.step(&mut fitted, &grads, &rates);
-            })
-        });
+        for threads in THREADS {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let id = |what: &str| BenchmarkId::new(format!("{what}/{n}"), format!("{threads}t"));
+            group.bench_function(id("forward"), |b| {
+                pool.install(|| b.iter(|| context.render(&scene, &camera, TAU, &options).unwrap()))
+            });
+            group.bench_function(id("backward"), |b| {
+                pool.install(|| {
+                    b.iter(|| {
+                        context.backward(&scene, &camera, TAU, &options, &v_image, &mut grads)
+                    })
+                })
+            });
+            let mut fitted = scene.clone();
+            let mut adam = Adam::new(n, AdamConfig::default());
+            group.bench_function(id("step"), |b| {
+                pool.install(|| {
+                    b.iter(|| {
+                        context.render(&fitted, &camera, TAU, &options).unwrap();
+                        mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
+                        grads.reset(n);
+                        context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
+                        adam.step(&mut fitted, &grads, &rates);
+                    })
+                })
+            });
+        }
     }
     group.finish();
 }

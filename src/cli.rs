@@ -14,6 +14,7 @@ use splat4d::fit::train::{FitOptions, evaluate, fit};
 use splat4d::io::dataset::{SPLITS, load_dataset, write_split};
 use splat4d::io::image_file::{BitDepth, ImageKind, load_image, save_image};
 use splat4d::io::write_bytes_atomically;
+use splat4d::raster::ExpMode;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION};
 use splat4d::{Camera, Gradients, RenderContext, RenderOptions, Scene};
 
@@ -164,10 +165,11 @@ struct ExportPlyArgs {
 
 #[derive(Debug, clap::Args)]
 struct BenchArgs {
-    /// Scene file (default: the seeded bench scenes of 10k and 100k kernels).
+    /// Scene: a built-in seeded bench scene by kernel count (`10k`, `100k`, `1m`, `2500`)
+    /// or a scene file; repeat for several (default: `10k` and `100k`).
     #[arg(long)]
-    scene: Option<PathBuf>,
-    /// Camera file for --scene (default: a look-at camera framing the scene).
+    scene: Vec<String>,
+    /// Camera file for scene files (default: a look-at camera framing the scene).
     #[arg(long)]
     camera: Option<PathBuf>,
     /// Frame size `WxH` (ignored with --camera).
@@ -191,6 +193,24 @@ struct BenchArgs {
     /// Cut-off ε.
     #[arg(long, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
+    /// How exp(-q/2) is evaluated: `std` or `poly`.
+    #[arg(long, default_value = "std")]
+    exp: ExpMode,
+    /// Time the seed-style dense baseline (every kernel at every pixel) for every scene. By
+    /// default it runs when kernels × pixels ≤ 3·10⁹ (a few seconds a frame).
+    #[arg(long, conflicts_with = "no_dense")]
+    dense: bool,
+    /// Never time the dense baseline.
+    #[arg(long)]
+    no_dense: bool,
+    /// Measure speed against error over the cut-off, dilation and exp evaluation on the
+    /// first scene (with --threads, or one thread per core); writes sweep.md and sweep.png
+    /// to --out.
+    #[arg(long)]
+    sweep: bool,
+    /// Output folder of --sweep.
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -446,6 +466,10 @@ struct RenderFlags {
     /// Cut-off ε on a kernel's value; 0 disables truncation (SPEC §5).
     #[arg(long, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
     cutoff: f64,
+    /// How exp(-q/2) is evaluated per pixel: `std` (libm) or `poly` (inlined polynomial,
+    /// relative error ≤ 4e-7).
+    #[arg(long, default_value = "std")]
+    exp: ExpMode,
     /// Worker threads (default: one per core). The output does not depend on it.
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
     threads: Option<u16>,
@@ -456,6 +480,7 @@ impl RenderFlags {
         let options = RenderOptions {
             dilation: self.dilation,
             cutoff: self.cutoff,
+            exp: self.exp,
         };
         options.validate()?;
         Ok(options)
@@ -900,61 +925,118 @@ fn export_ply_command(args: &ExportPlyArgs) -> Result<()> {
     Ok(())
 }
 
+/// A bench scene named by its kernel count (`10k`, `1m`, `2500`), if `text` is one.
+fn builtin_scene_size(text: &str) -> Option<usize> {
+    let lower = text.to_ascii_lowercase();
+    let (digits, unit) = match lower.strip_suffix('k') {
+        Some(d) => (d, 1_000),
+        None => match lower.strip_suffix('m') {
+            Some(d) => (d, 1_000_000),
+            None => (lower.as_str(), 1),
+        },
+    };
+    digits
+        .parse::<usize>()
+        .ok()
+        .and_then(|n| n.checked_mul(unit))
+        .filter(|&n| n > 0)
+}
+
+/// The scenes `bench` measures: built-in ones by size, or files with their cameras.
+fn bench_scenes(args: &BenchArgs) -> Result<Vec<(String, Scene, Camera)>> {
+    let (w, h) = args.size;
+    let names = if args.scene.is_empty() {
+        vec!["10k".to_owned(), "100k".to_owned()]
+    } else {
+        args.scene.clone()
+    };
+    let mut scenes = Vec::new();
+    for name in &names {
+        let path = Path::new(name);
+        if let (false, Some(n)) = (path.exists(), builtin_scene_size(name)) {
+            scenes.push((
+                format!("bench-{}", name.to_ascii_lowercase()),
+                splat4d::synthetic::bench_scene(n, 42),
+                splat4d::synthetic::bench_camera(w, h),
+            ));
+            continue;
+        }
+        let scene = Scene::load(path)?;
+        let camera = match &args.camera {
+            Some(c) => Camera::load(c)?,
+            None => {
+                let (centre, r) = splat4d::volume::scene_sphere(&scene, &[args.time], args.cutoff)
+                    .with_context(|| {
+                        format!(
+                            "{}: no kernel is alive at t = {}",
+                            path.display(),
+                            args.time
+                        )
+                    })?;
+                let distance = 1.05 * r / 20f64.to_radians().sin();
+                let eye = [
+                    centre[0] + 0.6 * distance,
+                    centre[1] + 0.35 * distance,
+                    centre[2] + 0.72 * distance,
+                ];
+                Camera::look_at(eye, centre, [0.0, 1.0, 0.0], 40.0, w, h)?
+            }
+        };
+        let file_name = path
+            .file_name()
+            .map_or("scene".into(), |n| n.to_string_lossy().into_owned());
+        scenes.push((file_name, scene, camera));
+    }
+    Ok(scenes)
+}
+
 fn bench_command(args: &BenchArgs) -> Result<()> {
-    use splat4d::report::bench::{BenchSettings, bench_render, format_table};
+    use splat4d::report::bench::{
+        BenchSettings, Method, SweepGrid, bench_render, fill_speedups, format_table, sweep,
+    };
     let options = RenderOptions {
         dilation: args.dilation,
         cutoff: args.cutoff,
+        exp: args.exp,
     };
     options.validate()?;
-    let (w, h) = args.size;
-    let scenes: Vec<(String, Scene, Camera)> = match &args.scene {
-        Some(path) => {
-            let scene = Scene::load(path)?;
-            let camera = match &args.camera {
-                Some(c) => Camera::load(c)?,
-                None => {
-                    let (centre, r) =
-                        splat4d::volume::scene_sphere(&scene, &[args.time], args.cutoff)
-                            .with_context(|| {
-                                format!(
-                                    "{}: no kernel is alive at t = {}",
-                                    path.display(),
-                                    args.time
-                                )
-                            })?;
-                    let distance = 1.05 * r / 20f64.to_radians().sin();
-                    let eye = [
-                        centre[0] + 0.6 * distance,
-                        centre[1] + 0.35 * distance,
-                        centre[2] + 0.72 * distance,
-                    ];
-                    Camera::look_at(eye, centre, [0.0, 1.0, 0.0], 40.0, w, h)?
-                }
-            };
-            let name = path
-                .file_name()
-                .map_or("scene".into(), |n| n.to_string_lossy().into_owned());
-            vec![(name, scene, camera)]
-        }
-        None => [10_000, 100_000]
-            .iter()
-            .map(|&n| {
-                (
-                    format!("bench {}k", n / 1000),
-                    splat4d::synthetic::bench_scene(n, 42),
-                    splat4d::synthetic::bench_camera(w, h),
-                )
-            })
-            .collect(),
-    };
+    let scenes = bench_scenes(args)?;
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     let threads: Vec<usize> = match args.threads {
         Some(n) => vec![usize::from(n)],
         None if cores > 1 => vec![1, cores],
         None => vec![1],
     };
-    let bar = progress_bar(scenes.len() * threads.len(), "bench");
+    if args.sweep {
+        let (name, scene, camera) = &scenes[0];
+        let grid = SweepGrid::default();
+        let count = grid.cutoffs.len()
+            * grid.dilations.len()
+            * grid.exps.len()
+            * splat4d::report::bench::SWEEP_ROUNDS;
+        let settings = BenchSettings {
+            tau: args.time,
+            options,
+            threads: *threads.last().unwrap_or(&1),
+            frames: args.frames,
+            samples: args.samples,
+        };
+        let bar = progress_bar(count, "sweep");
+        let points = sweep(scene, camera, &settings, &grid, || bar.inc(1))?;
+        bar.finish_and_clear();
+        write_sweep(args, name, camera, settings.threads, &grid, &points)?;
+        return Ok(());
+    }
+    let dense_for = |scene: &Scene, camera: &Camera| {
+        !args.no_dense
+            && (args.dense
+                || scene.len() as f64 * f64::from(camera.width) * f64::from(camera.height) <= 3e9)
+    };
+    let jobs: usize = scenes
+        .iter()
+        .map(|(_, s, c)| threads.len() * if dense_for(s, c) { 2 } else { 1 })
+        .sum();
+    let bar = progress_bar(jobs, "bench");
     let mut rows = Vec::new();
     for (name, scene, camera) in &scenes {
         for &t in &threads {
@@ -965,15 +1047,106 @@ fn bench_command(args: &BenchArgs) -> Result<()> {
                 frames: args.frames,
                 samples: args.samples,
             };
-            rows.push(bench_render(name, scene, camera, &settings)?);
+            rows.push(bench_render(name, scene, camera, &settings, Method::Tiles)?);
             bar.inc(1);
+            if dense_for(scene, camera) {
+                rows.push(bench_render(name, scene, camera, &settings, Method::Dense)?);
+                bar.inc(1);
+            }
         }
     }
     bar.finish_and_clear();
+    fill_speedups(&mut rows);
     report!("{}", format_table(&rows).trim_end());
     report!(
-        "error: |fast - f64 reference| at {} seeded pixels per row; /bound = largest ratio to 1e-6 + 2e-6·Σ|a|",
+        "error: |render - f64 reference| at {} seeded pixels per row; /bound = largest ratio to 1e-6 + 2e-6·Σ|a|; speed-up = dense ms / tiles ms",
         args.samples
+    );
+    Ok(())
+}
+
+/// Writes the sweep's table (sweep.md) and chart (sweep.png) to `args.out`.
+fn write_sweep(
+    args: &BenchArgs,
+    name: &str,
+    camera: &Camera,
+    threads: usize,
+    grid: &splat4d::report::bench::SweepGrid,
+    points: &[splat4d::report::bench::SweepPoint],
+) -> Result<()> {
+    use splat4d::report::bench::sweep_table;
+    use splat4d::report::charts::{TradeOffPoint, pareto_chart};
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let table = sweep_table(points);
+    let heading = format!(
+        "# Speed against error: {name}, {}x{}, {threads} threads, τ = {}\n\n\
+         Error: |render - exact| at {} seeded pixels, exact = f64 reference without truncation \
+         (ε = 0) at the default dilation {DEFAULT_DILATION}. /bound: the implementation's error \
+         against the f64 reference with the point's own options, as a ratio to \
+         1e-6 + 2e-6·Σ|a|. ★: on the Pareto front of (ms/frame, max error).\n\n",
+        camera.width, camera.height, args.time, args.samples
+    );
+    write_bytes_atomically(
+        &args.out.join("sweep.md"),
+        format!("{heading}{table}").as_bytes(),
+    )?;
+    let series: Vec<String> = grid
+        .dilations
+        .iter()
+        .flat_map(|d| {
+            grid.exps
+                .iter()
+                .map(move |e| format!("dilation {d}, exp {e}"))
+        })
+        .collect();
+    let chart_points: Vec<TradeOffPoint> = points
+        .iter()
+        .map(|p| {
+            let d = grid
+                .dilations
+                .iter()
+                .position(|&d| d == p.options.dilation)
+                .unwrap_or(0);
+            let e = grid
+                .exps
+                .iter()
+                .position(|&e| e == p.options.exp)
+                .unwrap_or(0);
+            TradeOffPoint {
+                label: format!(
+                    "ε {}, s {}, {}",
+                    if p.options.cutoff == DEFAULT_CUTOFF {
+                        "1/255".to_owned()
+                    } else {
+                        format!("{:.0e}", p.options.cutoff)
+                    },
+                    p.options.dilation,
+                    p.options.exp
+                ),
+                cost: p.ms_per_frame,
+                error: p.model_error,
+                series: d * grid.exps.len() + e,
+                front: p.pareto,
+            }
+        })
+        .collect();
+    let chart = args.out.join("sweep.png");
+    pareto_chart(
+        &chart,
+        &format!(
+            "Speed against error: {name}, {}x{}, {threads} threads",
+            camera.width, camera.height
+        ),
+        ("ms per frame", "log10 max |render - exact|"),
+        &series,
+        &chart_points,
+    )?;
+    report!("{}", table.trim_end());
+    report!(
+        "wrote {} and {}",
+        args.out.join("sweep.md").display(),
+        chart.display()
     );
     Ok(())
 }

@@ -33,6 +33,7 @@
 pub mod backward;
 pub mod camera;
 pub mod camera_path;
+pub mod dense;
 pub mod error;
 pub mod fit;
 pub mod io;

@@ -13,7 +13,7 @@ use crate::backward::{BackwardBuffers, Gradients};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::project::{ProjectedKernels, project};
-use crate::raster::{Image, rasterize};
+use crate::raster::{ExpMode, Image, rasterize};
 use crate::scene::Scene;
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
@@ -30,6 +30,8 @@ pub struct RenderOptions {
     pub dilation: f64,
     /// Cut-off ε on the Gaussian's value, finite and ≥ 0; 0 disables truncation.
     pub cutoff: f64,
+    /// How the per-pixel loops evaluate `exp(-½ q)` (forward and backward alike).
+    pub exp: ExpMode,
 }
 
 impl Default for RenderOptions {
@@ -37,6 +39,7 @@ impl Default for RenderOptions {
         RenderOptions {
             dilation: DEFAULT_DILATION,
             cutoff: DEFAULT_CUTOFF,
+            exp: ExpMode::Std,
         }
     }
 }
@@ -161,6 +164,7 @@ impl RenderContext {
             &self.projected,
             &self.bins,
             background,
+            options.exp,
             &mut self.tile_buffer,
             &mut self.image,
         );
@@ -190,6 +194,7 @@ impl RenderContext {
             &self.projected,
             &self.bins,
             v_image,
+            options.exp,
             &mut buffers.entry_partials,
             &mut buffers.kernel_sums,
             &mut buffers.screen,

@@ -205,18 +205,22 @@ fn bad_render_options_and_look_at_are_refused() {
         RenderOptions {
             dilation: -0.1,
             cutoff: 0.0,
+            ..Default::default()
         },
         RenderOptions {
             dilation: f64::NAN,
             cutoff: 0.0,
+            ..Default::default()
         },
         RenderOptions {
             dilation: 0.3,
             cutoff: -1.0,
+            ..Default::default()
         },
         RenderOptions {
             dilation: 0.3,
             cutoff: f64::INFINITY,
+            ..Default::default()
         },
     ] {
         assert!(options.validate().is_err(), "{options:?} must be refused");

@@ -617,15 +617,120 @@ fn bench_prints_speed_and_error_within_the_bound() {
     let output = splat4d(&args, dir.path());
     assert!(output.status.success(), "{}", stderr(&output));
     let stdout = String::from_utf8_lossy(&output.stdout);
-    let row = stdout
-        .lines()
-        .find(|l| l.starts_with("scene.json"))
+    let rows = bench_rows(&stdout);
+    let tiles = rows
+        .iter()
+        .find(|r| r["scene"] == "scene.json" && r["method"] == "tiles")
         .unwrap_or_else(|| panic!("{stdout}"));
-    let columns: Vec<&str> = row.split_whitespace().collect();
-    assert_eq!(columns[1], "200");
-    assert_eq!(columns[2], "128x96");
-    let ratio: f64 = columns.last().unwrap().parse().unwrap();
+    assert_eq!(tiles["kernels"], "200");
+    assert_eq!(tiles["size"], "128x96");
+    let ratio: f64 = tiles["/bound"].parse().unwrap();
     assert!(ratio <= 1.0, "error at {ratio} of the bound");
-    let pairs: u64 = columns[5].parse().unwrap();
-    assert!(pairs > 10_000, "{row}");
+    let pairs: u64 = tiles["pairs/frame"].parse().unwrap();
+    assert!(pairs > 10_000, "{stdout}");
+    // The dense baseline ran (a small scene) and evaluated every kernel at every pixel it
+    // projected; the tiles row quotes the speed-up over it.
+    let dense = rows
+        .iter()
+        .find(|r| r["method"] == "dense")
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let dense_pairs: u64 = dense["pairs/frame"].parse().unwrap();
+    assert_eq!(dense_pairs % (128 * 96), 0);
+    assert!(dense_pairs > pairs);
+    let dense_max: f64 = dense["max-err"].parse().unwrap();
+    assert!(dense_max < 1e-4, "{stdout}");
+    let speedup: f64 = tiles["speed-up"].trim_end_matches('x').parse().unwrap();
+    assert!(speedup > 0.0, "{stdout}");
+}
+
+/// The rows of `bench`'s table, each as column name → text.
+fn bench_rows(stdout: &str) -> Vec<std::collections::HashMap<String, String>> {
+    let mut lines = stdout.lines();
+    let header: Vec<&str> = lines
+        .find(|l| l.starts_with("scene"))
+        .unwrap_or_else(|| panic!("{stdout}"))
+        .split_whitespace()
+        .collect();
+    lines
+        .take_while(|l| !l.starts_with("error:"))
+        .map(|l| {
+            header
+                .iter()
+                .zip(l.split_whitespace())
+                .map(|(h, v)| ((*h).to_owned(), v.to_owned()))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn bench_runs_builtin_scenes_by_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "bench",
+        "--scene",
+        "300",
+        "--scene",
+        "1k",
+        "--size",
+        "96x64",
+        "--frames",
+        "1",
+        "--threads",
+        "1",
+        "--no-dense",
+    ];
+    let output = splat4d(&args, dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let rows = bench_rows(&stdout);
+    let kernels: Vec<&str> = rows.iter().map(|r| r["kernels"].as_str()).collect();
+    assert_eq!(kernels, ["300", "1000"], "{stdout}");
+    assert!(
+        rows.iter()
+            .all(|r| r["size"] == "96x64" && r["method"] == "tiles")
+    );
+    let output = splat4d(&["bench", "--scene", "no-such-scene.json"], dir.path());
+    assert_eq!(output.status.code(), Some(2));
+    assert!(stderr(&output).contains("no-such-scene.json"));
+}
+
+#[test]
+fn bench_sweep_writes_a_table_and_a_chart_with_a_pareto_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "bench",
+        "--scene",
+        "400",
+        "--size",
+        "64x48",
+        "--frames",
+        "1",
+        "--samples",
+        "100",
+        "--threads",
+        "1",
+        "--sweep",
+        "--out",
+        "sweep",
+    ];
+    let output = splat4d(&args, dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let table = std::fs::read_to_string(dir.path().join("sweep/sweep.md")).unwrap();
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| ")).collect();
+    // A header and 6 cut-offs × 3 dilations × 2 exp modes.
+    assert_eq!(rows.len(), 1 + 36, "{table}");
+    assert!(rows.iter().any(|r| r.ends_with("★ |")), "{table}");
+    // Error against the exact model falls as the cut-off falls, at the default dilation.
+    let error_at = |cutoff: &str| -> f64 {
+        let row = rows
+            .iter()
+            .find(|r| r.starts_with(&format!("| {cutoff} | 0.3 | std |")))
+            .unwrap_or_else(|| panic!("{cutoff}: {table}"));
+        row.split('|').nth(6).unwrap().trim().parse().unwrap()
+    };
+    assert!(error_at("1.000e-5") < error_at("1.000e-3"));
+    assert!(error_at("1.000e-3") < error_at("3.000e-2"));
+    let chart = image::open(dir.path().join("sweep/sweep.png")).unwrap();
+    assert_eq!((chart.width(), chart.height()), (900, 560));
 }

@@ -15,6 +15,7 @@ use common::{
     PARAM_NAMES, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
     shared_case, shared_case_dir, test_camera,
 };
+use splat4d::raster::ExpMode;
 use splat4d::reference::reference_loss_and_gradients;
 use splat4d::render::DEFAULT_CUTOFF;
 use splat4d::{Camera, Gradients, Image, Kernel, RenderOptions, Scene};
@@ -135,6 +136,7 @@ fn reference_gradients_match_finite_differences_on_random_scenes() {
             let options = RenderOptions {
                 dilation: 0.3,
                 cutoff,
+                ..Default::default()
             };
             check_against_finite_differences(
                 &format!("seed {seed} cut-off {cutoff}"),
@@ -148,17 +150,22 @@ fn reference_gradients_match_finite_differences_on_random_scenes() {
 }
 
 #[test]
-fn fast_gradients_match_the_f64_backward_on_random_scenes() {
+fn fast_gradients_match_the_f64_backward_on_random_scenes_with_either_exp() {
     let camera = test_camera(96, 72);
     for seed in 0..3 {
         let scene = hard_random_scene(&camera, 200 + seed, 200);
-        for cutoff in [DEFAULT_CUTOFF, 0.0] {
+        for (cutoff, exp) in [
+            (DEFAULT_CUTOFF, ExpMode::Std),
+            (0.0, ExpMode::Std),
+            (DEFAULT_CUTOFF, ExpMode::Poly),
+        ] {
             let options = RenderOptions {
                 dilation: 0.3,
                 cutoff,
+                exp,
             };
             check_fast_against_reference(
-                &format!("seed {seed} cut-off {cutoff}"),
+                &format!("seed {seed} cut-off {cutoff} exp {exp}"),
                 &scene,
                 &camera,
                 0.6,
@@ -261,7 +268,11 @@ fn hard_cases_match_finite_differences_and_the_f64_backward() {
             if name == "sub-pixel" && dilation == 0.0 {
                 continue; // without dilation a sub-pixel kernel falls between pixel centres
             }
-            let options = RenderOptions { dilation, cutoff };
+            let options = RenderOptions {
+                dilation,
+                cutoff,
+                ..Default::default()
+            };
             let what = format!("{name} (cut-off {cutoff}, dilation {dilation})");
             check_against_finite_differences(&what, &scene, &camera, 0.5, &options);
             check_fast_against_reference(&what, &scene, &camera, 0.5, &options);

@@ -557,6 +557,7 @@ fn thin_ellipse_without_truncation_in_a_very_wide_camera() {
     let options = RenderOptions {
         dilation: 0.0,
         cutoff: 0.0,
+        ..Default::default()
     };
     check_render(
         "thin ellipse, no truncation, 157° camera",

@@ -8,25 +8,32 @@ use common::{
     assert_within_bound, hard_random_scene, shared_case, shared_case_dir, test_camera, worst_ratio,
 };
 use splat4d::io::image_file::load_image;
+use splat4d::raster::ExpMode;
 use splat4d::reference::render_reference;
 use splat4d::render::DEFAULT_CUTOFF;
 use splat4d::{RenderContext, RenderOptions};
 
 #[test]
-fn random_scenes_match_reference_at_default_cutoff_and_without_truncation() {
+fn random_scenes_match_reference_at_default_cutoff_and_without_truncation_with_either_exp() {
     let camera = test_camera(96, 72);
     let mut context = RenderContext::new();
     for seed in 0..4 {
         let scene = hard_random_scene(&camera, seed, 250);
-        for cutoff in [DEFAULT_CUTOFF, 0.0] {
+        for (cutoff, exp) in [
+            (DEFAULT_CUTOFF, ExpMode::Std),
+            (0.0, ExpMode::Std),
+            (DEFAULT_CUTOFF, ExpMode::Poly),
+            (0.0, ExpMode::Poly),
+        ] {
             for tau in [0.0, 0.5, 0.93] {
                 let options = RenderOptions {
                     dilation: 0.3,
                     cutoff,
+                    exp,
                 };
                 let stats = context.render(&scene, &camera, tau, &options).unwrap();
                 let reference = render_reference(&scene, &camera, tau, &options);
-                let what = format!("seed {seed}, cut-off {cutoff}, τ {tau}");
+                let what = format!("seed {seed}, cut-off {cutoff}, exp {exp}, τ {tau}");
                 assert_within_bound(context.image(), &reference, cutoff, &what);
                 let (ratio, _) = worst_ratio(context.image(), &reference, cutoff);
                 println!(
@@ -62,10 +69,12 @@ fn without_dilation_and_with_a_large_cutoff() {
         RenderOptions {
             dilation: 0.0,
             cutoff: DEFAULT_CUTOFF,
+            ..Default::default()
         },
         RenderOptions {
             dilation: 2.0,
             cutoff: 0.1,
+            ..Default::default()
         },
     ] {
         context.render(&scene, &camera, 0.4, &options).unwrap();
@@ -112,6 +121,7 @@ fn matches_the_independent_reference_vectors() {
             let options = RenderOptions {
                 dilation: 0.3,
                 cutoff,
+                ..Default::default()
             };
             let expected = load_image(&dir.join(file), [0.0; 3]).unwrap();
             let mut context = RenderContext::new();

@@ -40,7 +40,7 @@ proptest! {
         dilation in prop_oneof![Just(0.0), 0.0f64..3.0],
     ) {
         let scene = common::hard_random_scene(&camera, seed, general);
-        let options = RenderOptions { dilation, cutoff };
+        let options = RenderOptions { dilation, cutoff, ..Default::default() };
         let mut context = RenderContext::new();
         let stats = context.render(&scene, &camera, tau, &options).unwrap();
         prop_assert!(context.image().pixels.iter().all(|v| v.is_finite()));

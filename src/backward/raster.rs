@@ -21,7 +21,7 @@
 use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
-use crate::raster::for_each_row_span;
+use crate::raster::{ExpMode, for_each_row_span, gaussian};
 use crate::tiles::TileBins;
 
 /// Per projected kernel: the gradients at the screen-space stage.
@@ -42,6 +42,7 @@ pub fn rasterize_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
     v_image: &[f32],
+    exp: ExpMode,
     partials: &mut Vec<[f32; 8]>,
     sums: &mut Vec<[f64; 8]>,
     out: &mut ScreenGradients,
@@ -62,7 +63,23 @@ pub fn rasterize_backward(
         runs.push((t, run));
         rest = tail;
     }
-    runs.into_par_iter().for_each(|(t, run)| {
+    runs.into_par_iter().for_each(|(t, run)| match exp {
+        ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
+        ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
+    });
+    reduce(proj, bins, partials, sums, out);
+}
+
+/// Accumulates tile `t`'s entries into `run` (one partial per entry).
+fn backward_tile<const FAST: bool>(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    v_image: &[f32],
+    t: usize,
+    run: &mut [[f32; 8]],
+) {
+    let width = bins.width as usize;
+    {
         let rect = bins.tile_rect(t);
         for (slot, &p) in run.iter_mut().zip(bins.tile_entries(t)) {
             let mut acc = [0.0_f32; 8];
@@ -73,7 +90,7 @@ pub fn rasterize_backward(
                 for n in 0..row.i1 - row.i0 {
                     let q = kernel.q(&row, n);
                     if q <= kernel.qmax {
-                        let g = (-0.5 * q).exp();
+                        let g = gaussian::<FAST>(q);
                         let k = base + 3 * n as usize;
                         let v_c = [v_image[k], v_image[k + 1], v_image[k + 2]];
                         v_a[0] += v_c[0] * g;
@@ -100,8 +117,18 @@ pub fn rasterize_backward(
             });
             *slot = acc;
         }
-    });
-    // Deterministic reduction in entry order.
+    }
+}
+
+/// Reduces the per-entry partials into per-kernel gradients, in entry order (tile-major)
+/// in f64, so the result does not depend on the thread count.
+fn reduce(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    partials: &[[f32; 8]],
+    sums: &mut Vec<[f64; 8]>,
+    out: &mut ScreenGradients,
+) {
     sums.clear();
     sums.resize(proj.len(), [0.0; 8]);
     for (partial, &p) in partials.iter().zip(&bins.proj_from_entry) {

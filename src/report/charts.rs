@@ -331,3 +331,96 @@ pub fn volume_slices_figure(
     let title = format!("{name}, t = {tau}: max {hi:.3}, min {lo:.3} (colour 0 to {vmax:.3})");
     panels_figure(path, &title, g.res, &panels, vmax)
 }
+
+/// One point of a speed-against-error chart.
+#[derive(Clone, Debug)]
+pub struct TradeOffPoint {
+    /// Text shown next to front points.
+    pub label: String,
+    /// Cost (x).
+    pub cost: f64,
+    /// Error (y, drawn on a log₁₀ axis; must be > 0 to be drawn).
+    pub error: f64,
+    /// Series index (colour and legend entry).
+    pub series: usize,
+    /// On the Pareto front: drawn larger, labelled and joined by a line.
+    pub front: bool,
+}
+
+/// Cost against log₁₀ error, one colour per entry of `series`, the Pareto front joined by a
+/// line and labelled.
+pub fn pareto_chart(
+    path: &Path,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    series: &[String],
+    points: &[TradeOffPoint],
+) -> Result<()> {
+    let drawable: Vec<&TradeOffPoint> = points
+        .iter()
+        .filter(|p| p.cost.is_finite() && p.error > 0.0 && p.error.is_finite())
+        .collect();
+    let xs = padded_range(drawable.iter().map(|p| p.cost).chain([0.0]));
+    let xs = xs.start..(xs.end + 0.3 * (xs.end - xs.start));
+    let ys = padded_range(drawable.iter().map(|p| p.error.log10()));
+    let (xs_span, ys_span) = (xs.end - xs.start, ys.end - ys.start);
+    let mut front: Vec<(f64, f64)> = drawable
+        .iter()
+        .filter(|p| p.front)
+        .map(|p| (p.cost, p.error.log10()))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    draw_png(path, (900, 560), |root| {
+        let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
+        chart
+            .draw_series(LineSeries::new(front.clone(), BLACK.stroke_width(1)))?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(1)));
+        for (s, name) in series.iter().enumerate() {
+            let c = colour(s);
+            chart
+                .draw_series(
+                    drawable
+                        .iter()
+                        .filter(|p| p.series == s)
+                        .map(|p| Circle::new((p.cost, p.error.log10()), 4, c.filled())),
+                )?
+                .label(name.clone())
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
+        }
+        chart.draw_series(
+            drawable
+                .iter()
+                .filter(|p| p.front)
+                .map(|p| Circle::new((p.cost, p.error.log10()), 7, BLACK.stroke_width(1))),
+        )?;
+        // Label front points from the most accurate up, skipping one that would overlap the
+        // last label drawn.
+        let (x_span, y_span) = (xs_span, ys_span);
+        let mut labelled: Vec<(f64, f64)> = Vec::new();
+        let mut front_points: Vec<&&TradeOffPoint> = drawable.iter().filter(|p| p.front).collect();
+        front_points.sort_by(|a, b| a.error.total_cmp(&b.error));
+        for p in front_points {
+            let at = (p.cost, p.error.log10());
+            let clear = labelled.iter().all(|&(x, y)| {
+                (x - at.0).abs() > 0.12 * x_span || (y - at.1).abs() > 0.05 * y_span
+            });
+            if clear {
+                chart.draw_series([Text::new(
+                    format!("  {}", p.label),
+                    at,
+                    (FONT, 13).into_font().color(&BLACK),
+                )])?;
+                labelled.push(at);
+            }
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()?;
+        Ok(())
+    })
+}
