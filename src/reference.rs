@@ -394,6 +394,21 @@ pub fn reference_loss_and_gradients(
         grads.v_means[i] = [v_m.x, v_m.y, v_m.z, v_t];
         grads.v_amplitudes[i] = v_a.map(|v| kernel.weight * v);
         grads.v_velocities[i] = (dt * v_m).into();
+        // Scales: Σc = Rc Σ3 Rcᵀ with Σ3 = R S² Rᵀ; σt through the temporal weight.
+        let v_sigma_c = jac.transpose() * v_sigma2_3 * jac;
+        let v_sigma3 = rc.transpose() * v_sigma_c * rc;
+        let [qw, qx, qy, qz] = scene.rotations[i];
+        let rotation = DMat3::from_quat(DQuat::from_xyzw(qx, qy, qz, qw).normalize());
+        let v_axes = rotation.transpose() * v_sigma3 * rotation;
+        let s = scene.scales[i];
+        grads.v_scales[i] = [
+            2.0 * s[0] * v_axes.x_axis.x,
+            2.0 * s[1] * v_axes.y_axis.y,
+            2.0 * s[2] * v_axes.z_axis.z,
+            (0..3)
+                .map(|c| amplitude[c] * kernel.weight * (kernel.d * kernel.d / st) * v_a[c])
+                .sum(),
+        ];
     }
     (loss, grads)
 }

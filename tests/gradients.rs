@@ -12,7 +12,7 @@
 mod common;
 
 use common::{
-    PARAM_NAMES, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
+    PARAM_NAMES, PARAMS, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
     shared_case, shared_case_dir, test_camera,
 };
 use splat4d::raster::ExpMode;
@@ -44,8 +44,8 @@ fn fast_gradients(
     common::fast_gradients(scene, camera, tau, options, &target)
 }
 
-/// Per parameter (0..10), the largest |value| over kernels.
-fn scales(rows: &[[f64; 10]]) -> [f64; 10] {
+/// Per parameter, the largest |value| over kernels.
+fn scales<const N: usize>(rows: &[[f64; N]]) -> [f64; N] {
     std::array::from_fn(|p| rows.iter().map(|r| r[p].abs()).fold(0.0, f64::max))
 }
 
@@ -59,12 +59,12 @@ fn check_against_finite_differences(
     let target = jittered_target(scene, camera, tau, options, 99);
     let (_, analytic) = reference_loss_and_gradients(scene, camera, tau, options, &target);
     let fd = finite_difference_gradients(scene, camera, tau, options, &target);
-    let fd_values: Vec<[f64; 10]> = fd.iter().map(|r| r.map(|v| v.unwrap_or(0.0))).collect();
+    let fd_values: Vec<[f64; PARAMS]> = fd.iter().map(|r| r.map(|v| v.unwrap_or(0.0))).collect();
     let scale = scales(&fd_values);
     let (mut checked, mut skipped, mut worst) = (0, 0, 0.0_f64);
     for (i, row) in fd.iter().enumerate() {
         let a = grad_of(&analytic, i);
-        for p in 0..10 {
+        for p in 0..PARAMS {
             let Some(f) = row[p] else {
                 skipped += 1;
                 continue;
@@ -106,12 +106,12 @@ fn check_fast_against_reference(
         (fast_loss - ref_loss).abs() <= 1e-5 * ref_loss + 1e-12,
         "{what}: loss {fast_loss} vs {ref_loss}"
     );
-    let rows: Vec<[f64; 10]> = (0..scene.len()).map(|i| grad_of(&reference, i)).collect();
+    let rows: Vec<[f64; PARAMS]> = (0..scene.len()).map(|i| grad_of(&reference, i)).collect();
     let scale = scales(&rows);
     let mut worst = 0.0_f64;
     for (i, r) in rows.iter().enumerate() {
         let f = grad_of(&fast, i);
-        for p in 0..10 {
+        for p in 0..PARAMS {
             let bound = ATOL_FAST * scale[p] + RTOL_FAST * r[p].abs() + 1e-15;
             let delta = (f[p] - r[p]).abs();
             worst = worst.max(delta / bound);

@@ -100,8 +100,8 @@ fn check_gradients_with(
         assert!(
             (a - f).abs() <= bound,
             "{what}: kernel {} {}: f64 backward {a} vs finite difference {f}",
-            k / 10,
-            common::PARAM_NAMES[k % 10]
+            k / common::PARAMS,
+            common::PARAM_NAMES[k % common::PARAMS]
         );
     }
     println!(

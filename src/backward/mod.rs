@@ -23,6 +23,8 @@ pub struct Gradients {
     pub v_amplitudes: Vec<[f64; 3]>,
     /// `∂L/∂(vx, vy, vz)`.
     pub v_velocities: Vec<[f64; 3]>,
+    /// `∂L/∂(sx, sy, sz, st)`, the standard deviations (not in the `splat4d grad` file).
+    pub v_scales: Vec<[f64; 4]>,
 }
 
 impl Gradients {
@@ -42,6 +44,8 @@ impl Gradients {
         self.v_amplitudes.resize(n, [0.0; 3]);
         self.v_velocities.clear();
         self.v_velocities.resize(n, [0.0; 3]);
+        self.v_scales.clear();
+        self.v_scales.resize(n, [0.0; 4]);
     }
 
     /// Number of kernels.

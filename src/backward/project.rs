@@ -1,6 +1,7 @@
 //! Backward of stage 2, the EWA projection (SPEC §4, §6): from `∂L/∂Σ2` and `∂L/∂m2` to
-//! `∂L/∂m(τ)`, the world-space slice centre. Σ3 (scale, rotation) is held fixed. (The
-//! conic's gradient `∂L/∂Σ2 = -Q (∂L/∂Q) Q` is already formed by the raster backward.)
+//! `∂L/∂m(τ)`, the world-space slice centre, and `∂L/∂Σ3`, the world-space covariance (for
+//! fits that move the scales). (The conic's gradient `∂L/∂Σ2 = -Q (∂L/∂Q) Q` is already
+//! formed by the raster backward.)
 //!
 //! ```text
 //! ∂L/∂J  = 2 (∂L/∂Σ2) J Σc              (2×3, Σ2 = J Σc Jᵀ + s I)
@@ -10,6 +11,7 @@
 //! ∂L/∂z  = -∂L/∂J00 fx/z² - ∂L/∂J11 fy/z² + ∂L/∂J02 (2 fx tx/z³ - fx ∂tx/∂z / z²)
 //!          + ∂L/∂J12 (2 fy ty/z³ - fy ∂ty/∂z / z²) - ∂L/∂m2x fx x/z² - ∂L/∂m2y fy y/z²
 //! ∂L/∂m  = Rcᵀ ∂L/∂(x, y, z)
+//! ∂L/∂Σ3 = Rcᵀ Jᵀ (∂L/∂Σ2) J Rc        (Σc = Rc Σ3 Rcᵀ)
 //! ```
 //!
 //! with `∂tx/∂x = 1, ∂tx/∂z = 0` unclamped and `∂tx/∂x = 0, ∂tx/∂z = lim = tx/z` clamped
@@ -27,6 +29,30 @@ pub struct SliceGradients {
     pub v_means: Vec<[f64; 3]>,
     /// `∂L/∂a(τ)` per channel.
     pub v_amplitudes: Vec<[f64; 3]>,
+    /// `∂L/∂Σ3` (3×3, symmetric), world space.
+    pub v_covariances: Vec<[[f64; 3]; 3]>,
+}
+
+/// `∂L/∂Σ3 = Rcᵀ Jᵀ V J Rc` for `V = ∂L/∂Σ2` (`[xx, xy, yy]`), `rc` row-major.
+#[must_use]
+pub fn world_covariance_gradient(
+    rc: &[[f64; 3]; 3],
+    jacobian: &[[f64; 3]; 2],
+    v_covariance2: [f64; 3],
+) -> [[f64; 3]; 3] {
+    let [vxx, vxy, vyy] = v_covariance2;
+    let v = [[vxx, vxy], [vxy, vyy]];
+    // J Rc (2×3), then (J Rc)ᵀ V (J Rc).
+    let jr: [[f64; 3]; 2] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| (0..3).map(|k| jacobian[i][k] * rc[k][j]).sum())
+    });
+    std::array::from_fn(|a| {
+        std::array::from_fn(|b| {
+            (0..2)
+                .map(|i| (0..2).map(|j| jr[i][a] * v[i][j] * jr[j][b]).sum::<f64>())
+                .sum()
+        })
+    })
 }
 
 /// `∂L/∂(x, y, z)` in camera space of one kernel from its screen gradients.
@@ -86,6 +112,8 @@ pub fn project_backward(
     out.v_means.resize(sliced.len(), [0.0; 3]);
     out.v_amplitudes.clear();
     out.v_amplitudes.resize(sliced.len(), [0.0; 3]);
+    out.v_covariances.clear();
+    out.v_covariances.resize(sliced.len(), [[0.0; 3]; 3]);
     let rc = camera.rotation();
     for p in 0..proj.len() {
         let s = proj.slice_from_proj[p] as usize;
@@ -100,5 +128,7 @@ pub fn project_backward(
         // p_cam = Rc m + tc  →  ∂L/∂m = Rcᵀ ∂L/∂p_cam
         out.v_means[s] = std::array::from_fn(|c| (0..3).map(|r| rc[r][c] * v_p[r]).sum());
         out.v_amplitudes[s] = screen.v_amplitudes[p];
+        out.v_covariances[s] =
+            world_covariance_gradient(&rc, &projection.jacobian, screen.v_covariances[p]);
     }
 }

@@ -6,6 +6,8 @@
 //! ∂L/∂A_c       = w ∂L/∂a_c
 //! ∂L/∂t         = Σ_c A_c w (d/st) ∂L/∂a_c - vᵀ ∂L/∂m
 //! ∂L/∂v         = (τ - t) ∂L/∂m
+//! ∂L/∂s_k       = 2 s_k (Rᵀ ∂L/∂Σ3 R)_kk       (Σ3 = R diag(s²) Rᵀ, k = x, y, z)
+//! ∂L/∂st        = Σ_c A_c w (d²/st) ∂L/∂a_c
 //! ```
 //!
 //! Results are added to the scene-order [`Gradients`]; culled kernels receive nothing.
@@ -13,7 +15,7 @@
 use crate::backward::Gradients;
 use crate::backward::project::SliceGradients;
 use crate::scene::Scene;
-use crate::slice::SlicedKernels;
+use crate::slice::{SlicedKernels, rotation_matrix};
 
 /// Adds the kernel gradients of one view to `grads`.
 pub fn slice_backward(
@@ -46,5 +48,24 @@ pub fn slice_backward(
             grads.v_velocities[i][c] += dt * v_m[c];
         }
         mean[3] += v_t;
+        // Scales: the spatial ones through Σ3, σt through the temporal weight.
+        let r = rotation_matrix(scene.rotations[i]);
+        let v_sigma = from_slice.v_covariances[s];
+        let scale = scene.scales[i];
+        let v_scale = &mut grads.v_scales[i];
+        for k in 0..3 {
+            // (Rᵀ V R)_kk = Σ_ab R_ak V_ab R_bk
+            let diagonal: f64 = (0..3)
+                .map(|a| {
+                    (0..3)
+                        .map(|b| r[a][k] * v_sigma[a][b] * r[b][k])
+                        .sum::<f64>()
+                })
+                .sum();
+            v_scale[k] += 2.0 * scale[k] * diagonal;
+        }
+        v_scale[3] += (0..3)
+            .map(|c| amplitude[c] * w * (d * d / st) * v_a[c])
+            .sum::<f64>();
     }
 }

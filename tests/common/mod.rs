@@ -154,31 +154,48 @@ pub fn assert_within_bound(fast: &Image, reference: &ReferenceImage, cutoff: f64
     );
 }
 
-/// Parameter names of one kernel, in the order of [`params`].
-pub const PARAM_NAMES: [&str; 10] = ["x", "y", "z", "t", "r", "g", "b", "vx", "vy", "vz"];
+/// Differentiable parameters per kernel.
+pub const PARAMS: usize = 14;
 
-/// The 10 differentiable parameters of kernel `i`: mean (4), amplitude (3), velocity (3).
-pub fn params(scene: &Scene, i: usize) -> [f64; 10] {
-    let (m, a, v) = (scene.means[i], scene.amplitudes[i], scene.velocities[i]);
-    [m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2]]
+/// Parameter names of one kernel, in the order of [`params`].
+pub const PARAM_NAMES: [&str; PARAMS] = [
+    "x", "y", "z", "t", "r", "g", "b", "vx", "vy", "vz", "sx", "sy", "sz", "st",
+];
+
+/// The differentiable parameters of kernel `i`: mean (4), amplitude (3), velocity (3),
+/// scale (4).
+pub fn params(scene: &Scene, i: usize) -> [f64; PARAMS] {
+    let (m, a, v, s) = (
+        scene.means[i],
+        scene.amplitudes[i],
+        scene.velocities[i],
+        scene.scales[i],
+    );
+    [
+        m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2], s[0], s[1], s[2], s[3],
+    ]
 }
 
 fn set_param(scene: &mut Scene, i: usize, p: usize, value: f64) {
     match p {
         0..4 => scene.means[i][p] = value,
         4..7 => scene.amplitudes[i][p - 4] = value,
-        _ => scene.velocities[i][p - 7] = value,
+        7..10 => scene.velocities[i][p - 7] = value,
+        _ => scene.scales[i][p - 10] = value,
     }
 }
 
 /// The gradient in the same layout as [`params`].
-pub fn grad_of(grads: &splat4d::Gradients, i: usize) -> [f64; 10] {
-    let (m, a, v) = (
+pub fn grad_of(grads: &splat4d::Gradients, i: usize) -> [f64; PARAMS] {
+    let (m, a, v, s) = (
         grads.v_means[i],
         grads.v_amplitudes[i],
         grads.v_velocities[i],
+        grads.v_scales[i],
     );
-    [m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2]]
+    [
+        m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2], s[0], s[1], s[2], s[3],
+    ]
 }
 
 /// Central finite differences (f64) of the reference MSE against `target`, per kernel and
@@ -190,7 +207,7 @@ pub fn finite_difference_gradients(
     tau: f64,
     options: &splat4d::RenderOptions,
     target: &[f32],
-) -> Vec<[Option<f64>; 10]> {
+) -> Vec<[Option<f64>; PARAMS]> {
     use splat4d::reference::{kernel_contribution, mse, reference_kernel};
     let n_px = 3 * camera.pixel_count();
     let mut base: Vec<f64> = (0..n_px).map(|k| scene.background[k % 3]).collect();
@@ -205,9 +222,9 @@ pub fn finite_difference_gradients(
     }
     let mut out = Vec::new();
     for (i, part) in parts.iter().enumerate() {
-        let mut row = [None; 10];
+        let mut row = [None; PARAMS];
         let theta = params(scene, i);
-        for p in 0..10 {
+        for p in 0..PARAMS {
             // Steps follow the scale on which the loss varies: σt for the time mean, the
             // smallest spatial σ for the spatial mean, and that over |τ - t| for the velocity.
             let [sx, sy, sz, st] = scene.scales[i];
@@ -216,7 +233,10 @@ pub fn finite_difference_gradients(
                 0..3 => spatial,
                 3 => 1e-5 * st.min(1.0),
                 4..7 => 1e-6 * theta[p].abs().max(1.0),
-                _ => spatial / (tau - theta[3]).abs().clamp(1e-2, 1.0),
+                7..10 => spatial / (tau - theta[3]).abs().clamp(1e-2, 1.0),
+                // Scales: relative steps, large enough that the loss's rounding stays far
+                // below a needle's small scale gradient (truncation is (h/s)² ~ 4e-8).
+                _ => 2e-4 * theta[p],
             };
             let mut losses = [0.0; 2];
             let mut ok = true;
