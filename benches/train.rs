@@ -31,6 +31,7 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
         time: 1e-3,
         amplitude: 1e-3,
         velocity: 1e-3,
+        scale: 0.0,
     };
     let mut group = c.benchmark_group(format!("train_{w}x{h}"));
     group.sample_size(10);

@@ -7,10 +7,11 @@ use clap::{Parser, Subcommand};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use splat4d::fit::adam::LearningRates;
+use splat4d::fit::adaptive::AdaptiveOptions;
 use splat4d::fit::dataset::{DatasetSpec, frame_count, render_dataset};
-use splat4d::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
+use splat4d::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use splat4d::fit::loss::{psnr, view_loss_and_gradients};
-use splat4d::fit::train::{FitOptions, evaluate, fit};
+use splat4d::fit::train::{DEFAULT_RATES, FitMode, FitOptions, evaluate, fit};
 use splat4d::io::dataset::{SPLITS, load_dataset, write_split};
 use splat4d::io::image_file::{BitDepth, ImageKind, load_image, save_image};
 use splat4d::io::write_bytes_atomically;
@@ -327,9 +328,53 @@ struct FitArgs {
     /// Dataset folder (D-NeRF layout: transforms_train.json, and val/test for held-out views).
     #[arg(long)]
     views: PathBuf,
-    /// Initial scene: a scene JSON file, or `random:N` for N kernels in the box.
-    #[arg(long)]
+    /// Initial scene: `auto` (a few kernels in the box, then densify and prune so the count
+    /// follows the data), `random:N` for N kernels in the box (a fixed count unless
+    /// --adaptive), or a scene file.
+    #[arg(long, default_value = "auto")]
     init: String,
+    /// Kernels `auto` starts from: 1 is one kernel at the centre of the box (space and
+    /// time); more are spread at random in the box.
+    #[arg(long, default_value_t = 1)]
+    start_kernels: usize,
+    /// Densify and prune during the fit (always on with `--init auto`).
+    #[arg(long)]
+    adaptive: bool,
+    /// Budget of the adaptive fit: never more kernels than this.
+    #[arg(long, default_value_t = 100_000)]
+    max_kernels: usize,
+    /// Steps between densify/prune rounds.
+    #[arg(long, default_value_t = 50)]
+    densify_every: usize,
+    /// Fraction of the steps before the first densify/prune round.
+    #[arg(long, default_value_t = AdaptiveOptions::default().from)]
+    densify_from: f64,
+    /// Fraction of the steps after which the kernel count is frozen.
+    #[arg(long, default_value_t = AdaptiveOptions::default().until)]
+    densify_until: f64,
+    /// Mean positional gradient (loss per standard deviation of motion) at which a kernel
+    /// is densified.
+    #[arg(long, default_value_t = AdaptiveOptions::default().gradient_threshold)]
+    densify_threshold: f64,
+    /// Kernels are densified only when the mean training loss fell by less than this
+    /// fraction over the last --densify-every steps (the fit has stalled).
+    #[arg(long, default_value_t = AdaptiveOptions::default().min_improvement)]
+    min_improvement: f64,
+    /// Kernels within this many standard deviations of each other (position, time,
+    /// velocity, log-scale) are merged into one; 0 disables merging.
+    #[arg(long, default_value_t = AdaptiveOptions::default().merge_tolerance)]
+    merge_tolerance: f64,
+    /// Largest fraction of the kernels densified in one round.
+    #[arg(long, default_value_t = 0.5)]
+    max_growth: f64,
+    /// Peak |amplitude| below which a kernel is pruned (default: 2/255).
+    #[arg(long, default_value_t = AdaptiveOptions::default().prune_below)]
+    prune_below: f64,
+    /// Densified kernels whose mean spatial scale is above this are split (scales / 1.6),
+    /// the others cloned (default: for `auto`, an eighth of the initial scale; otherwise
+    /// never split).
+    #[arg(long)]
+    min_scale: Option<f64>,
     /// Adam steps.
     #[arg(long)]
     steps: usize,
@@ -352,23 +397,36 @@ struct FitArgs {
     #[arg(long)]
     log: Option<PathBuf>,
     /// Learning rate of the spatial means.
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = DEFAULT_RATES.mean)]
     lr_mean: f64,
     /// Learning rate of the time means.
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = DEFAULT_RATES.time)]
     lr_time: f64,
     /// Learning rate of the amplitudes.
-    #[arg(long, default_value_t = 1e-2)]
+    #[arg(long, default_value_t = DEFAULT_RATES.amplitude)]
     lr_amplitude: f64,
-    /// Learning rate of the velocities (used with --fit-velocity).
-    #[arg(long, default_value_t = 2e-3)]
+    /// Learning rate of the velocities (with `--mode velocity` or --fit-velocity).
+    #[arg(long, default_value_t = DEFAULT_RATES.velocity)]
     lr_velocity: f64,
     /// Learning rates at the last step as a fraction of the first (exponential decay).
     #[arg(long, default_value_t = 0.05)]
     lr_final: f64,
-    /// Fit the velocities too (frozen by default, as in the seed paper).
+    /// What the fit moves: `paper` (means and amplitudes; kernels static in space, scales
+    /// fixed, as in the seed paper), `static` (also the scales), `velocity` (also the
+    /// velocities and the scales). Default: `velocity` with `--init auto` (the most compact
+    /// models in the report), `paper` otherwise.
+    #[arg(long)]
+    mode: Option<FitMode>,
+    /// Fit the velocities too, whatever the mode.
     #[arg(long)]
     fit_velocity: bool,
+    /// Fit the scales (sx, sy, sz, st) too, in log space, whatever the mode.
+    #[arg(long)]
+    fit_scale: bool,
+    /// Learning rate of the scales, a relative change per step (modes `static` and
+    /// `velocity`, or --fit-scale).
+    #[arg(long, default_value_t = DEFAULT_RATES.scale)]
+    lr_scale: f64,
     /// Keep the spatial means fixed.
     #[arg(long)]
     freeze_mean: bool,
@@ -707,12 +765,20 @@ fn fit_command(args: &FitArgs) -> Result<()> {
         });
         [lo, hi]
     });
-    let mut scene = match args.init.strip_prefix("random:") {
-        Some(count) => {
-            let n: usize =
-                count.parse().ok().filter(|&n| n > 0).with_context(|| {
+    let auto = args.init == "auto";
+    let random_count =
+        if auto {
+            Some(args.start_kernels.max(1))
+        } else {
+            match args.init.strip_prefix("random:") {
+                Some(count) => Some(count.parse().ok().filter(|&n| n > 0).with_context(|| {
                     format!("--init {}: N must be a whole number ≥ 1", args.init)
-                })?;
+                })?),
+                None => None,
+            }
+        };
+    let mut scene = match random_count {
+        Some(n) => {
             let bounds = match args.r#box {
                 Some([x0, y0, z0, x1, y1, z1]) => {
                     if !(x0 < x1 && y0 < y1 && z0 < z1) {
@@ -734,16 +800,48 @@ fn fit_command(args: &FitArgs) -> Result<()> {
             {
                 anyhow::bail!("--init-scale: every scale must be > 0");
             }
-            random_scene(n, &bounds, args.init_scale, args.init_amplitude, args.seed)?
+            if auto && n == 1 && args.init_scale.is_none() {
+                centre_scene(&bounds, args.init_amplitude)?
+            } else {
+                random_scene(n, &bounds, args.init_scale, args.init_amplitude, args.seed)?
+            }
         }
         None => Scene::load(Path::new(&args.init))?,
     };
+    let adaptive = (auto || args.adaptive).then(|| {
+        let initial_scale = scene
+            .scales
+            .iter()
+            .map(|s| (s[0] * s[1] * s[2]).cbrt())
+            .fold(0.0_f64, f64::max);
+        AdaptiveOptions {
+            every: args.densify_every,
+            from: args.densify_from,
+            until: args.densify_until,
+            gradient_threshold: args.densify_threshold,
+            prune_below: args.prune_below,
+            max_growth: args.max_growth,
+            min_improvement: args.min_improvement,
+            merge_tolerance: args.merge_tolerance,
+            max_kernels: args.max_kernels.max(1),
+            min_scale: args.min_scale.unwrap_or(if auto {
+                initial_scale / 8.0
+            } else {
+                f64::INFINITY
+            }),
+        }
+    });
     if let Some(background) = args.background {
         scene.background = background;
     } else if dataset.had_alpha {
         scene.background = [1.0; 3];
     }
     let rate = |frozen: bool, lr: f64| if frozen { 0.0 } else { lr };
+    let mode = args.mode.unwrap_or(if auto {
+        FitMode::Velocity
+    } else {
+        FitMode::Paper
+    });
     let options = FitOptions {
         steps: args.steps,
         batch_size: args.batch,
@@ -751,12 +849,17 @@ fn fit_command(args: &FitArgs) -> Result<()> {
             mean: rate(args.freeze_mean, args.lr_mean),
             time: rate(args.freeze_time, args.lr_time),
             amplitude: rate(args.freeze_amplitude, args.lr_amplitude),
-            velocity: rate(!args.fit_velocity, args.lr_velocity),
+            velocity: rate(
+                !(args.fit_velocity || mode == FitMode::Velocity),
+                args.lr_velocity,
+            ),
+            scale: rate(!(args.fit_scale || mode != FitMode::Paper), args.lr_scale),
         },
         final_rate_factor: args.lr_final,
         eval_every: args.eval_every,
         seed: args.seed,
         render,
+        adaptive,
         ..FitOptions::default()
     };
     let heldout = if dataset.val.is_empty() {
@@ -773,7 +876,8 @@ fn fit_command(args: &FitArgs) -> Result<()> {
             }
             let heldout = last_heldout.map_or(String::new(), |p| format!(", held-out {p:.2} dB"));
             bar.set_message(format!(
-                "loss {:.3e}, PSNR {:.2} dB{heldout}",
+                "{} kernels, loss {:.3e}, PSNR {:.2} dB{heldout}",
+                record.kernels,
                 record.train_loss,
                 psnr(record.train_loss)
             ));

@@ -34,6 +34,7 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
             time: 0.0,
             amplitude: 1e-2,
             velocity: 0.0,
+            scale: 0.0,
         },
         final_rate_factor: 0.01,
         ..FitOptions::default()
@@ -81,6 +82,7 @@ fn a_diverging_fit_stops_with_an_error() {
             time: 0.0,
             amplitude: 1e300,
             velocity: 0.0,
+            scale: 0.0,
         },
         ..FitOptions::default()
     };

@@ -7,9 +7,11 @@
 //! θ ← θ - lr · (m / (1 - β1^k)) / (√(v / (1 - β2^k)) + ε)
 //! ```
 //!
-//! Groups: spatial mean (x, y, z), time (t), amplitude (r, g, b), velocity (vx, vy, vz). A
-//! group with learning rate 0 is frozen and its moments are not updated. Scale and rotation
-//! are never changed (the seed paper fixes σ "for stability").
+//! Groups: spatial mean (x, y, z), time (t), amplitude (r, g, b), velocity (vx, vy, vz) and
+//! scale (sx, sy, sz, st). A group with learning rate 0 is frozen and its moments are not
+//! updated. Scales are optimised as `ln s` (gradient `s ∂L/∂s`, update `s ← s e^(-Δ)`), so
+//! they stay positive and a rate is a relative change; they are frozen by default, as the
+//! seed paper fixes σ "for stability" (SPEC §6). Rotation is never changed.
 
 use crate::backward::Gradients;
 use crate::scene::Scene;
@@ -25,6 +27,8 @@ pub struct LearningRates {
     pub amplitude: f64,
     /// Velocity `(vx, vy, vz)`.
     pub velocity: f64,
+    /// Scales `(sx, sy, sz, st)`, in `ln s` (a relative change per step).
+    pub scale: f64,
 }
 
 impl LearningRates {
@@ -36,6 +40,7 @@ impl LearningRates {
             time: self.time * factor,
             amplitude: self.amplitude * factor,
             velocity: self.velocity * factor,
+            scale: self.scale * factor,
         }
     }
 }
@@ -62,7 +67,7 @@ impl Default for AdamConfig {
 }
 
 /// Parameters per kernel, in Adam's layout: x y z t r g b vx vy vz.
-const PARAMS: usize = 10;
+const PARAMS: usize = 14;
 
 /// Adam's state for one scene.
 #[derive(Clone, Debug)]
@@ -85,6 +90,45 @@ impl Adam {
         }
     }
 
+    /// The state after the scene's kernels changed: kernel `i` of the new scene takes the
+    /// moments of old kernel `sources[i]`, or zeros when it is `None` (a new kernel). The
+    /// step count, and so the bias correction, carries on.
+    pub fn remap(&mut self, sources: &[Option<usize>]) {
+        let mut first = vec![0.0; PARAMS * sources.len()];
+        let mut second = vec![0.0; PARAMS * sources.len()];
+        for (i, source) in sources.iter().enumerate() {
+            if let Some(old) = *source {
+                first[PARAMS * i..PARAMS * (i + 1)]
+                    .copy_from_slice(&self.first[PARAMS * old..PARAMS * (old + 1)]);
+                second[PARAMS * i..PARAMS * (i + 1)]
+                    .copy_from_slice(&self.second[PARAMS * old..PARAMS * (old + 1)]);
+            }
+        }
+        self.first = first;
+        self.second = second;
+    }
+
+    /// Updates the moments of parameter `slot` with `grad`; returns the step to subtract.
+    fn update(
+        &mut self,
+        slot: usize,
+        grad: f64,
+        rate: f64,
+        correction1: f64,
+        correction2: f64,
+    ) -> f64 {
+        let AdamConfig {
+            beta1,
+            beta2,
+            epsilon,
+        } = self.config;
+        let m = beta1 * self.first[slot] + (1.0 - beta1) * grad;
+        let v = beta2 * self.second[slot] + (1.0 - beta2) * grad * grad;
+        self.first[slot] = m;
+        self.second[slot] = v;
+        rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
+    }
+
     /// One update of `scene` with `grads` (sized for the scene).
     pub fn step(&mut self, scene: &mut Scene, grads: &Gradients, rates: &LearningRates) {
         assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
@@ -94,18 +138,14 @@ impl Adam {
             "Adam state sized for the scene"
         );
         self.steps += 1;
-        let AdamConfig {
-            beta1,
-            beta2,
-            epsilon,
-        } = self.config;
+        let AdamConfig { beta1, beta2, .. } = self.config;
         let correction1 = 1.0 - beta1.powi(self.steps);
         let correction2 = 1.0 - beta2.powi(self.steps);
         for i in 0..scene.len() {
             let [x, y, z, t] = &mut scene.means[i];
             let [r, g, b] = &mut scene.amplitudes[i];
             let [vx, vy, vz] = &mut scene.velocities[i];
-            let params: [(&mut f64, f64, f64); PARAMS] = [
+            let params: [(&mut f64, f64, f64); 10] = [
                 (x, grads.v_means[i][0], rates.mean),
                 (y, grads.v_means[i][1], rates.mean),
                 (z, grads.v_means[i][2], rates.mean),
@@ -121,12 +161,22 @@ impl Adam {
                 if rate == 0.0 {
                     continue;
                 }
-                let slot = PARAMS * i + k;
-                let m = beta1 * self.first[slot] + (1.0 - beta1) * grad;
-                let v = beta2 * self.second[slot] + (1.0 - beta2) * grad * grad;
-                self.first[slot] = m;
-                self.second[slot] = v;
-                *value -= rate * (m / correction1) / ((v / correction2).sqrt() + epsilon);
+                *value -= self.update(PARAMS * i + k, grad, rate, correction1, correction2);
+            }
+            if rates.scale != 0.0 {
+                for k in 0..4 {
+                    let s = &mut scene.scales[i][k];
+                    // In ln s: the gradient is s ∂L/∂s.
+                    let grad = *s * grads.v_scales[i][k];
+                    let step = self.update(
+                        PARAMS * i + 10 + k,
+                        grad,
+                        rates.scale,
+                        correction1,
+                        correction2,
+                    );
+                    *s *= (-step).exp();
+                }
             }
         }
     }
@@ -150,6 +200,7 @@ mod tests {
             time: 0.0,
             amplitude: 0.01,
             velocity: 0.0,
+            scale: 0.0,
         };
         Adam::new(1, AdamConfig::default()).step(&mut scene, &grads, &rates);
         // With bias correction the first step is lr · g/(|g| + ε/…): ±lr.
@@ -173,6 +224,7 @@ mod tests {
             time: 0.0,
             amplitude: 0.0,
             velocity: 0.0,
+            scale: 0.0,
         };
         for k in 0..2000 {
             let mut grads = Gradients::zeros(1);
@@ -189,5 +241,32 @@ mod tests {
                 scene.means[0]
             );
         }
+    }
+
+    #[test]
+    fn scales_move_in_log_space_and_stay_positive() {
+        let kernel = Kernel::new([0.0; 4], [0.1, 0.2, 0.3, 1.0], [1.0; 3]);
+        let mut scene = Scene::from_kernels(&[kernel], [0.0; 3], "<test>").unwrap();
+        let mut grads = Gradients::zeros(1);
+        grads.v_scales[0] = [5.0, -1.0, 0.0, 1e6];
+        let rates = LearningRates {
+            mean: 0.0,
+            time: 0.0,
+            amplitude: 0.0,
+            velocity: 0.0,
+            scale: 0.5,
+        };
+        let mut adam = Adam::new(1, AdamConfig::default());
+        adam.step(&mut scene, &grads, &rates);
+        let s = scene.scales[0];
+        // First step: ln s moves by ∓0.5 whatever the gradient's size (up to Adam's ε/|g|).
+        assert!((s[0] - 0.1 * (-0.5_f64).exp()).abs() < 1e-6, "{s:?}");
+        assert!((s[1] - 0.2 * 0.5_f64.exp()).abs() < 1e-6, "{s:?}");
+        assert_eq!(s[2], 0.3);
+        for _ in 0..200 {
+            adam.step(&mut scene, &grads, &rates);
+        }
+        assert!(scene.scales[0].iter().all(|&v| v > 0.0 && v.is_finite()));
+        assert_eq!(scene.means[0], [0.0; 4], "other groups frozen");
     }
 }

@@ -102,3 +102,28 @@ pub fn random_scene(
         .collect();
     Scene::from_kernels(&kernels, [0.0; 3], "<random initial scene>")
 }
+
+/// One kernel at the centre of `bounds` (space and time) with `σ` a quarter of the box's
+/// mean side, `σt` half its time range (at least 1e-3) and grey `amplitude`: the start of
+/// an adaptive fit, which densifies from there (coarse to fine).
+pub fn centre_scene(bounds: &SpaceTimeBox, amplitude: f64) -> Result<Scene> {
+    let side = (0..3).map(|c| bounds.max[c] - bounds.min[c]).sum::<f64>() / 3.0;
+    let span = bounds.time[1] - bounds.time[0];
+    let centre = |c: usize| 0.5 * (bounds.min[c] + bounds.max[c]);
+    let kernel = Kernel::new(
+        [
+            centre(0),
+            centre(1),
+            centre(2),
+            0.5 * (bounds.time[0] + bounds.time[1]),
+        ],
+        [
+            0.25 * side,
+            0.25 * side,
+            0.25 * side,
+            (0.5 * span).max(1e-3),
+        ],
+        [amplitude; 3],
+    );
+    Scene::from_kernels(&[kernel], [0.0; 3], "<initial scene>")
+}

@@ -1,6 +1,7 @@
 //! Fitting kernels to images (SPEC §6): the loss, Adam, initial scenes and the training loop.
 
 pub mod adam;
+pub mod adaptive;
 pub mod dataset;
 pub mod init;
 pub mod loss;

@@ -13,11 +13,82 @@ use rand::seq::SliceRandom;
 use crate::backward::Gradients;
 use crate::error::{Error, Result};
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
+use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
 use crate::fit::loss::{mse, mse_with_gradient, psnr};
 use crate::io::dataset::View;
 use crate::render::{RenderContext, RenderOptions};
 use crate::scene::Scene;
 use crate::synthetic::seeded_rng;
+
+/// Which parameter groups a fit moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FitMode {
+    /// The seed paper's: means `(x, y, z, t)` and amplitudes; kernels static in space, scales
+    /// fixed (SPEC §6).
+    Paper,
+    /// Also the scales `(sx, sy, sz, st)` (in log space); kernels still static in space.
+    Static,
+    /// Also the velocities and the scales: kernels that move (SPEC §1).
+    Velocity,
+}
+
+impl FitMode {
+    /// Every mode.
+    pub const ALL: [FitMode; 3] = [FitMode::Paper, FitMode::Static, FitMode::Velocity];
+
+    /// `rates` with the groups this mode does not fit set to 0.
+    #[must_use]
+    pub fn learning_rates(self, rates: LearningRates) -> LearningRates {
+        LearningRates {
+            velocity: if self == FitMode::Velocity {
+                rates.velocity
+            } else {
+                0.0
+            },
+            scale: if self == FitMode::Paper {
+                0.0
+            } else {
+                rates.scale
+            },
+            ..rates
+        }
+    }
+
+    /// Numbers stored per kernel: mean 4, scale 4, amplitude 3, and velocity 3 when moving.
+    #[must_use]
+    pub fn parameters_per_kernel(self) -> usize {
+        if self == FitMode::Velocity { 14 } else { 11 }
+    }
+}
+
+impl std::fmt::Display for FitMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FitMode::Paper => "paper",
+            FitMode::Static => "static",
+            FitMode::Velocity => "velocity",
+        })
+    }
+}
+
+impl std::str::FromStr for FitMode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        FitMode::ALL
+            .into_iter()
+            .find(|m| m.to_string() == s)
+            .ok_or_else(|| format!("unknown fit mode {s:?} (expected paper, static or velocity)"))
+    }
+}
+
+/// Default learning rates of every group (a mode then zeroes the groups it does not fit).
+pub const DEFAULT_RATES: LearningRates = LearningRates {
+    mean: 2e-3,
+    time: 2e-3,
+    amplitude: 1e-2,
+    velocity: 2e-3,
+    scale: 1e-2,
+};
 
 /// How to fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,6 +109,8 @@ pub struct FitOptions {
     pub seed: u64,
     /// Rendering options used in fitting and evaluation.
     pub render: RenderOptions,
+    /// Densify and prune on a schedule ([`crate::fit::adaptive`]); `None` keeps the count.
+    pub adaptive: Option<AdaptiveOptions>,
 }
 
 impl Default for FitOptions {
@@ -50,12 +123,14 @@ impl Default for FitOptions {
                 time: 2e-3,
                 amplitude: 1e-2,
                 velocity: 0.0,
+                scale: 0.0,
             },
             final_rate_factor: 0.05,
             adam: AdamConfig::default(),
             eval_every: 50,
             seed: 0,
             render: RenderOptions::default(),
+            adaptive: None,
         }
     }
 }
@@ -71,6 +146,8 @@ pub struct StepRecord {
     pub train_loss: f64,
     /// PSNR of the mean held-out MSE, on evaluated steps with held-out views.
     pub heldout_psnr: Option<f64>,
+    /// Kernels after the step (and after a densify/prune round that followed it).
+    pub kernels: usize,
 }
 
 /// Checks that every view's image has its camera's size.
@@ -108,7 +185,8 @@ pub fn evaluate(
 }
 
 /// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
-/// step. Returns every step's record.
+/// step. Returns every step's record. With `options.adaptive` the scene's kernels change
+/// between steps (densify and prune); otherwise only their parameters do.
 pub fn fit(
     scene: &mut Scene,
     train: &[View],
@@ -126,6 +204,7 @@ pub fn fit(
     let mut context = RenderContext::new();
     let mut adam = Adam::new(scene.len(), options.adam);
     let mut grads = Gradients::zeros(scene.len());
+    let mut stats = DensityStats::new(scene.len());
     let mut v_image = Vec::new();
     let mut rng = seeded_rng(options.seed);
     let mut order: Vec<usize> = (0..train.len()).collect();
@@ -169,6 +248,16 @@ pub fn fit(
             .learning_rates
             .scaled(options.final_rate_factor.powf(progress));
         adam.step(scene, &grads, &rates);
+        if let Some(adaptive) = &options.adaptive {
+            stats.accumulate(scene, &grads);
+            if adaptive.round_after(step, options.steps) {
+                stats.record_loss(evaluate(scene, train, &options.render, &mut context)?);
+                let (next, sources, _) = densify_and_prune(scene, &stats, adaptive)?;
+                *scene = next;
+                adam.remap(&sources);
+                stats = stats.next_window(scene.len());
+            }
+        }
         let evaluate_now =
             step == options.steps || (options.eval_every > 0 && step % options.eval_every == 0);
         let heldout_psnr = if evaluate_now && !heldout.is_empty() {
@@ -186,6 +275,7 @@ pub fn fit(
             seconds: start.elapsed().as_secs_f64(),
             train_loss: batch_loss,
             heldout_psnr,
+            kernels: scene.len(),
         };
         on_step(&record);
         records.push(record);

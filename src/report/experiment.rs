@@ -251,12 +251,14 @@ const MODEL_RATES: LearningRates = LearningRates {
     time: 2e-3,
     amplitude: 1e-2,
     velocity: 0.0,
+    scale: 0.0,
 };
 const FRAME_RATES: LearningRates = LearningRates {
     mean: 2e-3,
     time: 0.0,
     amplitude: 1e-2,
     velocity: 0.0,
+    scale: 0.0,
 };
 const INITIAL_AMPLITUDE: f64 = 0.1;
 

@@ -1,0 +1,504 @@
+//! Densify and prune during fitting: the kernel count follows the data.
+//!
+//! Between rounds every kernel accumulates its positional gradient measured in its own
+//! size, `g̃ = (s̄ ∂L/∂x, s̄ ∂L/∂y, s̄ ∂L/∂z, st ∂L/∂t)` with `s̄` the geometric mean of
+//! its spatial scales: how much the loss would change if the kernel moved by one standard
+//! deviation. Every `every` steps, from `from` until `until` of the steps have run (the
+//! start leaves the initial kernels time to move where they belong before any is judged):
+//!
+//! 1. **prune** kernels whose peak amplitude `max_c |A_c|` is below `prune_below`: they are
+//!    negligible at every time (`a(τ) = A w(τ)` with `w ≤ 1`). One kernel always stays.
+//! 2. **densify**, only when the fit has stalled: the training loss (over every training
+//!    view, measured at each round, so batch noise does not count) fell by less than
+//!    `min_improvement` (relative) since the round before, and did not rise (a loss that
+//!    rose is still settling after the last round).
+//!    While the loss is still falling the kernels are still moving to where they belong (one
+//!    velocity kernel converging on a moving blob has a large gradient for hundreds of
+//!    steps), and adding kernels then only splits one object between several. Densified are
+//!    the kernels whose mean `|g̃|` over the steps they were seen is at least
+//!    `gradient_threshold`, largest first (ties by index), at most `max_growth · n` of them
+//!    and never beyond `max_kernels`. Each becomes two that share its amplitude (half each,
+//!    so the additive image barely changes), the new one half a standard deviation down the
+//!    accumulated gradient, so the two separate under the same loss. A kernel whose mean
+//!    spatial scale `s̄` is above `min_scale` is **split**: both halves take spatial scales
+//!    divided by 1.6 (finer detail where the data asks for it; scales are otherwise fixed,
+//!    SPEC §6). At or below `min_scale` it is **cloned** at its own scale.
+//!
+//! 3. **merge** kernels that have become the same kernel: same rotation, and position (at
+//!    the midpoint of their times), time, velocity over one σt and log-scales all within
+//!    `merge_tolerance` standard deviations of each other. The additive sum of two equal
+//!    Gaussians is one Gaussian with the summed amplitude, so this is what lets clones that
+//!    converged onto one moving object collapse back into one kernel. The merged kernel
+//!    takes the summed amplitude and the |amplitude|-weighted mean of the other parameters.
+//!    Pairs are compared directly (O(n²)), so merging only runs on up to
+//!    [`MERGE_LIMIT`] kernels.
+//!
+//! No randomness: the result depends only on the data and the step schedule. Adam's
+//! moments follow the kernels (a clone starts from zero moments).
+
+use crate::backward::Gradients;
+use crate::error::Result;
+use crate::scene::{Kernel, Scene};
+
+/// When and how to densify and prune.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveOptions {
+    /// Steps between rounds.
+    pub every: usize,
+    /// Fraction of the steps before the first round.
+    pub from: f64,
+    /// Fraction of the steps after which the count is frozen (the rest refines).
+    pub until: f64,
+    /// Mean `|g̃|` (loss per standard deviation) at which a kernel is cloned.
+    pub gradient_threshold: f64,
+    /// Relative fall of the window's mean loss below which the fit counts as stalled.
+    pub min_improvement: f64,
+    /// Peak `|amplitude|` below which a kernel is removed.
+    pub prune_below: f64,
+    /// Largest fraction of the kernels cloned in one round.
+    pub max_growth: f64,
+    /// Budget: never more kernels than this.
+    pub max_kernels: usize,
+    /// Kernels this close (in standard deviations, see the module docs) are merged; 0
+    /// disables merging.
+    pub merge_tolerance: f64,
+    /// Kernels with a mean spatial scale above this are split (scales / 1.6), the others
+    /// cloned; 0 splits every kernel, `∞` only clones.
+    pub min_scale: f64,
+}
+
+impl Default for AdaptiveOptions {
+    fn default() -> Self {
+        AdaptiveOptions {
+            every: 50,
+            from: 0.3,
+            until: 0.7,
+            gradient_threshold: 2e-5,
+            min_improvement: 0.05,
+            prune_below: 2.0 / 255.0,
+            max_growth: 0.5,
+            max_kernels: 100_000,
+            merge_tolerance: 0.1,
+            min_scale: f64::INFINITY,
+        }
+    }
+}
+
+impl AdaptiveOptions {
+    /// Whether a round runs after `step` (1-based) of `steps`.
+    #[must_use]
+    pub fn round_after(&self, step: usize, steps: usize) -> bool {
+        self.every > 0
+            && step % self.every == 0
+            && step < steps
+            && (step as f64) >= self.from * steps as f64
+            && (step as f64) <= self.until * steps as f64
+    }
+}
+
+/// What a round did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RoundReport {
+    /// Kernels removed.
+    pub pruned: usize,
+    /// Kernels merged into another.
+    pub merged: usize,
+    /// Kernels added (one per kernel densified).
+    pub added: usize,
+    /// Of those, kernels split (the others were cloned at their scale).
+    pub split: usize,
+}
+
+/// Spatial scales of a split kernel's halves, as a divisor (3D Gaussian splatting's value).
+pub const SPLIT_FACTOR: f64 = 1.6;
+
+/// Per-kernel gradient statistics between rounds.
+#[derive(Clone, Debug, Default)]
+pub struct DensityStats {
+    /// `Σ g̃` (for the direction of a clone).
+    sum: Vec<[f64; 4]>,
+    /// `Σ |g̃|`.
+    sum_norm: Vec<f64>,
+    /// Steps with a non-zero gradient.
+    seen: Vec<u32>,
+    /// Training loss at this round.
+    loss: Option<f64>,
+    /// Training loss at the round before.
+    previous_loss: Option<f64>,
+}
+
+impl DensityStats {
+    /// Statistics for `n` kernels, all zero.
+    #[must_use]
+    pub fn new(n: usize) -> Self {
+        DensityStats {
+            sum: vec![[0.0; 4]; n],
+            sum_norm: vec![0.0; n],
+            seen: vec![0; n],
+            loss: None,
+            previous_loss: None,
+        }
+    }
+
+    /// Statistics for `n` kernels after a round: per-kernel sums cleared, this round's loss
+    /// becomes the previous one.
+    #[must_use]
+    pub fn next_window(&self, n: usize) -> Self {
+        DensityStats {
+            previous_loss: self.loss,
+            ..DensityStats::new(n)
+        }
+    }
+
+    /// Records the training loss at this round.
+    pub fn record_loss(&mut self, loss: f64) {
+        self.loss = Some(loss);
+    }
+
+    /// Whether the loss fell by less than `min_improvement` since the round before.
+    #[must_use]
+    pub fn stalled(&self, min_improvement: f64) -> bool {
+        match (self.previous_loss, self.loss) {
+            // A loss that rose is still settling after the last round: not stalled.
+            (Some(before), Some(now)) => (0.0..min_improvement * before).contains(&(before - now)),
+            _ => false,
+        }
+    }
+
+    /// Adds one step's gradients.
+    pub fn accumulate(&mut self, scene: &Scene, grads: &Gradients) {
+        for i in 0..scene.len() {
+            let g = grads.v_means[i];
+            if g == [0.0; 4] {
+                continue;
+            }
+            let [sx, sy, sz, st] = scene.scales[i];
+            let s = (sx * sy * sz).cbrt();
+            let scaled = [s * g[0], s * g[1], s * g[2], st * g[3]];
+            for (acc, v) in self.sum[i].iter_mut().zip(scaled) {
+                *acc += v;
+            }
+            self.sum_norm[i] += scaled.iter().map(|v| v * v).sum::<f64>().sqrt();
+            self.seen[i] += 1;
+        }
+    }
+
+    /// Mean `|g̃|` of kernel `i` over the steps it was seen.
+    #[must_use]
+    pub fn mean_norm(&self, i: usize) -> f64 {
+        if self.seen[i] == 0 {
+            0.0
+        } else {
+            self.sum_norm[i] / f64::from(self.seen[i])
+        }
+    }
+}
+
+/// Runs one round on `scene`: prunes, then clones. Returns the new scene, for each of its
+/// kernels the index of the old kernel whose optimiser state it keeps (`None` for a clone),
+/// and what was done.
+pub fn densify_and_prune(
+    scene: &Scene,
+    stats: &DensityStats,
+    options: &AdaptiveOptions,
+) -> Result<(Scene, Vec<Option<usize>>, RoundReport)> {
+    let n = scene.len();
+    let peak = |i: usize| {
+        scene.amplitudes[i]
+            .iter()
+            .fold(0.0_f64, |m, a| m.max(a.abs()))
+    };
+    let mut keep: Vec<usize> = (0..n).filter(|&i| peak(i) >= options.prune_below).collect();
+    if keep.is_empty() && n > 0 {
+        // Keep the brightest kernel rather than an empty model.
+        let brightest = (0..n).max_by(|&a, &b| peak(a).total_cmp(&peak(b)).then(b.cmp(&a)));
+        keep.extend(brightest);
+    }
+    let pruned = n - keep.len();
+    // Merge: `absorbed[k]` lists the kept kernels folded into kept kernel `k`.
+    let mut merged_into: Vec<Option<usize>> = vec![None; keep.len()];
+    let mut merged = 0;
+    if options.merge_tolerance > 0.0 && keep.len() <= MERGE_LIMIT {
+        for a in 0..keep.len() {
+            if merged_into[a].is_some() {
+                continue;
+            }
+            for b in a + 1..keep.len() {
+                if merged_into[b].is_none()
+                    && same_kernel(scene, keep[a], keep[b], options.merge_tolerance)
+                {
+                    merged_into[b] = Some(a);
+                    merged += 1;
+                }
+            }
+        }
+    }
+    let mut kernels_kept: Vec<Kernel> = keep.iter().map(|&i| scene.kernel(i)).collect();
+    for b in 0..keep.len() {
+        if let Some(a) = merged_into[b] {
+            let other = kernels_kept[b];
+            merge_into(&mut kernels_kept[a], &other);
+        }
+    }
+    let survivors: Vec<usize> = (0..keep.len())
+        .filter(|&k| merged_into[k].is_none())
+        .collect();
+    let kernels_kept: Vec<Kernel> = survivors.iter().map(|&k| kernels_kept[k]).collect();
+    let keep: Vec<usize> = survivors.iter().map(|&k| keep[k]).collect();
+    let mut candidates: Vec<usize> = keep
+        .iter()
+        .copied()
+        .filter(|&i| {
+            stats.stalled(options.min_improvement)
+                && stats.mean_norm(i) >= options.gradient_threshold
+        })
+        .collect();
+    candidates.sort_by(|&a, &b| {
+        stats
+            .mean_norm(b)
+            .total_cmp(&stats.mean_norm(a))
+            .then(a.cmp(&b))
+    });
+    let growth = ((options.max_growth * keep.len() as f64).ceil() as usize).max(1);
+    let room = options.max_kernels.saturating_sub(keep.len());
+    candidates.truncate(growth.min(room));
+    candidates.sort_unstable();
+    let mut kernels = kernels_kept;
+    let mut sources: Vec<Option<usize>> = keep.iter().map(|&i| Some(i)).collect();
+    let mut split = 0;
+    for &i in &candidates {
+        let slot = keep.binary_search(&i).expect("candidates are kept kernels");
+        let parent = &mut kernels[slot];
+        for a in &mut parent.amplitude {
+            *a *= 0.5;
+        }
+        let [sx, sy, sz, _] = parent.scale;
+        if (sx * sy * sz).cbrt() > options.min_scale {
+            for s in &mut parent.scale[..3] {
+                *s /= SPLIT_FACTOR;
+            }
+            split += 1;
+        }
+        let mut clone = *parent;
+        let direction = stats.sum[i];
+        let length = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if length > 0.0 && length.is_finite() {
+            // Half a standard deviation per axis, down the gradient.
+            for (c, m) in clone.mean.iter_mut().enumerate() {
+                *m -= 0.5 * clone.scale[c] * direction[c] / length;
+            }
+        } else {
+            clone.mean[0] += 0.5 * clone.scale[0];
+        }
+        kernels.push(clone);
+        sources.push(None);
+    }
+    let next = Scene::from_kernels(&kernels, scene.background, "<densified scene>")?;
+    Ok((
+        next,
+        sources,
+        RoundReport {
+            pruned,
+            merged,
+            added: candidates.len(),
+            split,
+        },
+    ))
+}
+
+/// Merging compares every pair, so it runs on at most this many kernels.
+pub const MERGE_LIMIT: usize = 4096;
+
+/// Whether kernels `i` and `j` of `scene` describe the same Gaussian within `tolerance`
+/// standard deviations (see the module docs).
+fn same_kernel(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
+    let (qi, qj) = (scene.rotations[i], scene.rotations[j]);
+    let dot: f64 = (0..4).map(|k| qi[k] * qj[k]).sum();
+    if dot.abs() < 1.0 - 1e-6 {
+        return false;
+    }
+    let (si, sj) = (scene.scales[i], scene.scales[j]);
+    if (0..4).any(|k| (si[k] / sj[k]).ln().abs() > tolerance) {
+        return false;
+    }
+    let spatial = ((si[0] * si[1] * si[2]).cbrt() * (sj[0] * sj[1] * sj[2]).cbrt()).sqrt();
+    let temporal = (si[3] * sj[3]).sqrt();
+    let (mi, mj) = (scene.means[i], scene.means[j]);
+    if (mi[3] - mj[3]).abs() > tolerance * temporal {
+        return false;
+    }
+    let (vi, vj) = (scene.velocities[i], scene.velocities[j]);
+    let tau = 0.5 * (mi[3] + mj[3]);
+    (0..3).all(|c| {
+        let pi = mi[c] + vi[c] * (tau - mi[3]);
+        let pj = mj[c] + vj[c] * (tau - mj[3]);
+        (pi - pj).abs() <= tolerance * spatial
+            && (vi[c] - vj[c]).abs() * temporal <= tolerance * spatial
+    })
+}
+
+/// Folds `other` into `kernel`: amplitudes add, the rest is the |amplitude|-weighted mean.
+fn merge_into(kernel: &mut Kernel, other: &Kernel) {
+    let weight = |k: &Kernel| k.amplitude.iter().map(|a| a.abs()).sum::<f64>();
+    let (wa, wb) = (weight(kernel), weight(other));
+    let f = if wa + wb > 0.0 { wb / (wa + wb) } else { 0.5 };
+    let blend = |a: f64, b: f64| a + f * (b - a);
+    for c in 0..4 {
+        kernel.mean[c] = blend(kernel.mean[c], other.mean[c]);
+        kernel.scale[c] = blend(kernel.scale[c], other.scale[c]);
+    }
+    for c in 0..3 {
+        kernel.velocity[c] = blend(kernel.velocity[c], other.velocity[c]);
+        kernel.amplitude[c] += other.amplitude[c];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(amplitudes: &[f64]) -> Scene {
+        let kernels: Vec<Kernel> = amplitudes
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| Kernel::new([i as f64, 0.0, 0.0, 0.5], [0.1, 0.1, 0.1, 0.2], [a; 3]))
+            .collect();
+        Scene::from_kernels(&kernels, [0.0; 3], "<test>").unwrap()
+    }
+
+    #[test]
+    fn prunes_faint_kernels_and_clones_the_steepest_within_the_budget() {
+        let scene = scene(&[0.5, 0.001, 0.4, 0.3]);
+        let mut stats = DensityStats::new(4);
+        stats.record_loss(1.0);
+        let mut stats = stats.next_window(4);
+        stats.record_loss(1.0);
+        let mut grads = Gradients::zeros(4);
+        grads.v_means[0] = [1e-3, 0.0, 0.0, 0.0]; // |g̃| = 1e-4
+        grads.v_means[1] = [1.0, 0.0, 0.0, 0.0]; // faint: pruned first
+        grads.v_means[2] = [0.0, -3e-3, 0.0, 0.0]; // |g̃| = 3e-4
+        grads.v_means[3] = [1e-5, 0.0, 0.0, 0.0]; // below the threshold
+        stats.accumulate(&scene, &grads);
+        let options = AdaptiveOptions {
+            gradient_threshold: 5e-5,
+            max_kernels: 4,
+            ..AdaptiveOptions::default()
+        };
+        let (next, sources, report) = densify_and_prune(&scene, &stats, &options).unwrap();
+        assert_eq!(
+            report,
+            RoundReport {
+                pruned: 1,
+                merged: 0,
+                added: 1,
+                split: 0
+            }
+        );
+        // Budget 4: three kept, one clone, the steepest (kernel 2).
+        assert_eq!(sources, [Some(0), Some(2), Some(3), None]);
+        assert_eq!(next.amplitudes[1], [0.2; 3]);
+        assert_eq!(next.amplitudes[3], [0.2; 3]);
+        // The clone moved half a σ down the gradient (+y).
+        let moved = next.means[3];
+        assert!(
+            (moved[1] - 0.05).abs() < 1e-12 && moved[0] == 2.0,
+            "{moved:?}"
+        );
+        // A larger budget clones both steep kernels.
+        let (next, _, report) = densify_and_prune(
+            &scene,
+            &stats,
+            &AdaptiveOptions {
+                max_kernels: 10,
+                ..options
+            },
+        )
+        .unwrap();
+        assert_eq!((report.added, next.len()), (2, 5));
+        // Above min_scale the densified kernels are split: both halves shrink.
+        let (next, _, report) = densify_and_prune(
+            &scene,
+            &stats,
+            &AdaptiveOptions {
+                max_kernels: 10,
+                min_scale: 0.05,
+                ..options
+            },
+        )
+        .unwrap();
+        assert_eq!(report.split, 2);
+        assert_eq!(next.scales[0][..3], [0.1 / SPLIT_FACTOR; 3]);
+        assert_eq!(next.scales[4][..3], [0.1 / SPLIT_FACTOR; 3]);
+        assert_eq!(next.scales[2], [0.1, 0.1, 0.1, 0.2]);
+    }
+
+    #[test]
+    fn densifies_only_once_the_loss_has_stalled() {
+        let scene = scene(&[0.5]);
+        let mut grads = Gradients::zeros(1);
+        grads.v_means[0] = [1e-2, 0.0, 0.0, 0.0];
+        let options = AdaptiveOptions::default();
+        let run = |losses: [f64; 2]| {
+            let mut stats = DensityStats::new(1);
+            stats.record_loss(losses[0]);
+            let mut stats = stats.next_window(1);
+            stats.accumulate(&scene, &grads);
+            stats.record_loss(losses[1]);
+            densify_and_prune(&scene, &stats, &options).unwrap().2.added
+        };
+        // Falling by 20%: still converging, no new kernel; by 1%: stalled, densify.
+        assert_eq!(run([1.0, 0.8]), 0);
+        assert_eq!(run([1.0, 0.99]), 1);
+        // Rising: settling after a round, not stalled.
+        assert_eq!(run([1.0, 1.5]), 0);
+        // No window before: not judged.
+        let mut stats = DensityStats::new(1);
+        stats.accumulate(&scene, &grads);
+        stats.record_loss(1.0);
+        assert_eq!(
+            densify_and_prune(&scene, &stats, &options).unwrap().2.added,
+            0
+        );
+    }
+
+    #[test]
+    fn kernels_that_became_the_same_merge_and_others_do_not() {
+        let base = Kernel::new([0.0, 0.0, 0.0, 0.5], [0.1, 0.1, 0.1, 0.4], [0.3; 3]);
+        let mut twin = base;
+        twin.mean[0] += 0.005; // 0.05 σ
+        twin.amplitude = [0.1; 3];
+        let mut moving = base;
+        moving.velocity = [0.5, 0.0, 0.0]; // 2 σ over one σt
+        let mut apart = base;
+        apart.mean[1] += 0.05; // 0.5 σ
+        let scene = Scene::from_kernels(&[base, twin, moving, apart], [0.0; 3], "<test>").unwrap();
+        let (next, sources, report) =
+            densify_and_prune(&scene, &DensityStats::new(4), &AdaptiveOptions::default()).unwrap();
+        assert_eq!(report.merged, 1);
+        assert_eq!(sources, [Some(0), Some(2), Some(3)]);
+        assert_eq!(next.amplitudes[0], [0.4; 3]);
+        // Weighted 3:1 towards the brighter kernel.
+        assert!(
+            (next.means[0][0] - 0.00125).abs() < 1e-12,
+            "{:?}",
+            next.means[0]
+        );
+    }
+
+    #[test]
+    fn never_prunes_the_last_kernel_and_schedules_rounds() {
+        let scene = scene(&[1e-4, 2e-4]);
+        let stats = DensityStats::new(2);
+        let (next, sources, _) =
+            densify_and_prune(&scene, &stats, &AdaptiveOptions::default()).unwrap();
+        assert_eq!((next.len(), sources), (1, vec![Some(1)]));
+        let options = AdaptiveOptions {
+            every: 10,
+            from: 0.2,
+            until: 0.5,
+            ..AdaptiveOptions::default()
+        };
+        let rounds: Vec<usize> = (1..=100).filter(|&s| options.round_after(s, 100)).collect();
+        assert_eq!(rounds, [20, 30, 40, 50]);
+    }
+}
