@@ -417,6 +417,37 @@ fn dataset_then_fit_as_a_new_user_would() {
     let output = splat4d(&args, d);
     assert!(output.status.success(), "{}", stderr(&output));
     assert_eq!(Scene::load(&d.join("random.json")).unwrap().len(), 7);
+
+    // No kernel count: one kernel at the box centre, velocity mode, densify and prune; the
+    // log records the count per step.
+    let args = [
+        "fit",
+        "--views",
+        "set",
+        "--steps",
+        "600",
+        "--out",
+        "auto.json",
+        "--log",
+        "auto.jsonl",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let auto = Scene::load(&d.join("auto.json")).unwrap();
+    let log = std::fs::read_to_string(d.join("auto.jsonl")).unwrap();
+    let rows: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows[0]["kernels"], 1);
+    assert_eq!(rows[599]["kernels"], auto.len());
+    assert!(auto.len() <= 20, "{} kernels", auto.len());
+    assert!(
+        auto.velocities.iter().any(|v| v != &[0.0; 3]),
+        "velocities fitted"
+    );
+    let report = String::from_utf8_lossy(&output.stdout);
+    assert!(report.contains("auto.json"), "{report}");
 }
 
 #[test]

@@ -1,10 +1,13 @@
 //! Fitting works (SPEC §6–7): from a perturbed start, Adam recovers the seed blob from
-//! images of 8 views at 5 times, and generalises to unseen cameras at unseen times.
+//! images of 8 views at 5 times, and generalises to unseen cameras at unseen times; the
+//! adaptive velocity fit ends with the kernels a scene needs.
 
 use splat4d::fit::adam::LearningRates;
+use splat4d::fit::adaptive::AdaptiveOptions;
 use splat4d::fit::dataset::{DatasetSpec, render_dataset};
+use splat4d::fit::init::{box_from_cameras, centre_scene};
 use splat4d::fit::loss::psnr;
-use splat4d::fit::train::{FitOptions, evaluate, fit};
+use splat4d::fit::train::{DEFAULT_RATES, FitMode, FitOptions, evaluate, fit};
 use splat4d::{RenderContext, RenderOptions, Scene};
 
 fn seed_blob() -> Scene {
@@ -94,4 +97,68 @@ fn a_diverging_fit_stops_with_an_error() {
         error.contains("diverged") && error.contains("learning rates"),
         "{error}"
     );
+}
+
+/// An adaptive fit from one kernel at the centre of the cameras' box (what `splat4d fit`
+/// does without `--init`): returns the fitted scene and its PSNR on held-out views at
+/// held-out times.
+fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
+    let spec = DatasetSpec {
+        views: 10,
+        times: 8,
+        width: 48,
+        height: 48,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let cameras: Vec<_> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = box_from_cameras(&cameras, spec.time_range).unwrap();
+    let mut scene = centre_scene(&bounds, 0.1).unwrap();
+    let options = FitOptions {
+        steps,
+        learning_rates: mode.learning_rates(DEFAULT_RATES),
+        adaptive: Some(AdaptiveOptions::default()),
+        ..FitOptions::default()
+    };
+    let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
+    assert_eq!(records.last().unwrap().kernels, scene.len());
+    let mut context = RenderContext::new();
+    let test_psnr = psnr(evaluate(&scene, &dataset.test, &options.render, &mut context).unwrap());
+    (scene, test_psnr)
+}
+
+#[test]
+fn velocity_fit_of_the_seed_blob_ends_with_few_kernels_above_50_db() {
+    let (scene, test_psnr) = adaptive_fit(&seed_blob(), FitMode::Velocity, 3000);
+    println!(
+        "velocity mode: {} kernels, {test_psnr:.1} dB; velocities {:?}",
+        scene.len(),
+        scene.velocities
+    );
+    assert!(scene.len() <= 3, "{} kernels", scene.len());
+    assert!(test_psnr >= 50.0, "held-out PSNR {test_psnr:.1} dB");
+}
+
+#[test]
+fn the_kernel_count_follows_the_scene() {
+    // Three blobs on three paths: the adaptive fit needs more kernels than for one.
+    let mut kernels = seed_blob().kernels();
+    for (k, velocity) in [[-1.0, 0.5, 0.0], [0.0, -1.0, 1.0]].into_iter().enumerate() {
+        let mut blob = kernels[0];
+        blob.mean = [0.2 + 0.3 * k as f64, 0.7, 0.3, 0.5];
+        blob.velocity = velocity;
+        blob.amplitude = [0.5, 0.8, 1.0];
+        kernels.push(blob);
+    }
+    let three = Scene::from_kernels(&kernels, [0.0; 3], "<three blobs>").unwrap();
+    let (scene, test_psnr) = adaptive_fit(&three, FitMode::Velocity, 3000);
+    println!("three blobs: {} kernels, {test_psnr:.1} dB", scene.len());
+    // Measured: 8 kernels at 33.1 dB (one blob: 2 kernels at 62.7 dB); the fixed-count
+    // model of the report uses 300.
+    assert!(
+        (3..=20).contains(&scene.len()),
+        "{} kernels for three blobs",
+        scene.len()
+    );
+    assert!(test_psnr >= 30.0, "held-out PSNR {test_psnr:.1} dB");
 }
