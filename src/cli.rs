@@ -1387,6 +1387,11 @@ fn report_command(args: &ReportArgs) -> Result<()> {
         config.ablation_sigma_t = vec![0.05, 0.2];
         config.sweep_times = 9;
         config.volume_res = 16;
+        config.adaptive_steps = 60;
+        config.blob_dataset.views = 4;
+        config.blob_dataset.times = 3;
+        config.blob_dataset.width = 24;
+        config.blob_dataset.height = 24;
         command.push_str(" --quick");
     }
     if let Some(n) = args.kernels {

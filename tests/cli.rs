@@ -111,6 +111,9 @@ fn report_quick_writes_the_report_and_its_charts() {
         "ground truth",
         "σt ablation",
         "| 0.5 | 1.8 |",
+        "## Model size",
+        "| seed blob | 4D adaptive, velocity kernels |",
+        "| seed points | 4D adaptive, static kernels |",
         "splat4d report --out rep --quick",
     ] {
         assert!(report.contains(part), "report.md should contain `{part}`");
@@ -123,7 +126,7 @@ fn report_quick_writes_the_report_and_its_charts() {
         assert!(image.width >= 200 && image.height >= 100, "{name}");
         linked += 1;
     }
-    assert_eq!(linked, 7 + 6, "7 charts and 6 volume figures");
+    assert_eq!(linked, 8 + 6, "8 charts and 6 volume figures");
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("report: rep/report.md"), "{stdout}");
 }

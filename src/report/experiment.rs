@@ -17,10 +17,11 @@ use std::time::Instant;
 
 use crate::error::Result;
 use crate::fit::adam::LearningRates;
+use crate::fit::adaptive::AdaptiveOptions;
 use crate::fit::dataset::{DatasetSpec, render_dataset};
-use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
+use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::loss::{mse, psnr};
-use crate::fit::train::{FitOptions, StepRecord, fit};
+use crate::fit::train::{DEFAULT_RATES, FitMode, FitOptions, StepRecord, evaluate, fit};
 use crate::io::dataset::{Dataset, View};
 use crate::raster::Image;
 use crate::render::{RenderContext, RenderOptions};
@@ -56,6 +57,10 @@ pub struct ExperimentConfig {
     pub volume_res: usize,
     /// Times of the volumes.
     pub volume_times: Vec<f64>,
+    /// Adam steps of each adaptive fit (model size section).
+    pub adaptive_steps: usize,
+    /// The seed blob's dataset for the model size section.
+    pub blob_dataset: DatasetSpec,
 }
 
 impl Default for ExperimentConfig {
@@ -81,6 +86,16 @@ impl Default for ExperimentConfig {
             sweep_times: 41,
             volume_res: 64,
             volume_times: vec![0.0, 0.5, 1.0],
+            adaptive_steps: 3000,
+            blob_dataset: DatasetSpec {
+                views: 12,
+                times: 10,
+                width: 64,
+                height: 64,
+                time_range: [0.0, 1.0],
+                fov_y_degrees: 40.0,
+                seed: crate::toy::DEFAULT_SEED,
+            },
         }
     }
 }
@@ -118,6 +133,25 @@ pub struct MethodResult {
     pub render_ms: f64,
     /// `(τ, PSNR over the test cameras at τ)` along the sweep.
     pub psnr_per_time: Vec<(f64, f64)>,
+}
+
+/// One row of the model size comparison: parameters against held-out PSNR.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelSizeRow {
+    /// Which dataset (the seed paper's points, or the continuous seed blob).
+    pub dataset: String,
+    /// Which model.
+    pub method: String,
+    /// Kernels at the end of the fit (per frame summed over frames for the baseline).
+    pub kernels: usize,
+    /// Stored numbers.
+    pub parameters: usize,
+    /// PSNR on held-out views at held-out times (the test split), dB.
+    pub heldout_psnr: f64,
+    /// Milliseconds per rendered test frame.
+    pub render_ms: f64,
+    /// Seconds spent fitting.
+    pub fit_seconds: f64,
 }
 
 /// One row of the σt ablation.
@@ -159,6 +193,8 @@ pub struct ExperimentResults {
     pub fit_log: Vec<StepRecord>,
     /// The σt ablation.
     pub ablation: Vec<AblationRow>,
+    /// Parameters against held-out PSNR: fixed-count, adaptive and velocity 4D, frames.
+    pub model_size: Vec<ModelSizeRow>,
     /// Volumes of the ground truth and of the 4D model.
     pub volumes: Vec<VolumeResult>,
     /// The fitted 4D scene.
@@ -261,6 +297,110 @@ const FRAME_RATES: LearningRates = LearningRates {
     scale: 0.0,
 };
 const INITIAL_AMPLITUDE: f64 = 0.1;
+
+/// An adaptive fit as `splat4d fit` runs it without `--init`: one kernel at the centre of
+/// the cameras' box, densify/prune/merge rounds, `mode`'s parameter groups. Returns the
+/// scene and the seconds it took.
+fn fit_adaptive(
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    mode: FitMode,
+    steps: usize,
+    seed: u64,
+    progress: &mut dyn Progress,
+) -> Result<(Scene, f64)> {
+    let mut scene = centre_scene(bounds, INITIAL_AMPLITUDE)?;
+    let start = Instant::now();
+    let options = FitOptions {
+        adaptive: Some(AdaptiveOptions::default()),
+        ..fit_options(steps, seed, mode.learning_rates(DEFAULT_RATES))
+    };
+    fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
+        progress.tick()
+    })?;
+    Ok((scene, start.elapsed().as_secs_f64()))
+}
+
+/// PSNR of `scene` on `views` and its milliseconds per frame there.
+fn heldout_and_speed(
+    scene: &Scene,
+    views: &[View],
+    options: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<(f64, f64)> {
+    let start = Instant::now();
+    let mse = evaluate(scene, views, options, context)?;
+    let ms = 1e3 * start.elapsed().as_secs_f64() / views.len().max(1) as f64;
+    Ok((psnr(mse), ms))
+}
+
+/// The model size comparison on the seed blob: the paper's fixed-count model against the
+/// adaptive static and velocity fits.
+fn blob_model_size(
+    config: &ExperimentConfig,
+    progress: &mut dyn Progress,
+) -> Result<Vec<ModelSizeRow>> {
+    let blob = crate::toy::blob_scene();
+    let spec = config.blob_dataset;
+    let options = RenderOptions::default();
+    let dataset = render_dataset(&blob, &spec, &options, || {})?;
+    let cameras: Vec<crate::Camera> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = box_from_cameras(&cameras, spec.time_range)?;
+    let mut context = RenderContext::new();
+    let mut rows = Vec::new();
+    let mut fixed = random_scene(
+        config.model_kernels,
+        &bounds,
+        Some(config.model_scale),
+        INITIAL_AMPLITUDE,
+        config.seed,
+    )?;
+    let start = Instant::now();
+    fit(
+        &mut fixed,
+        &dataset.train,
+        &dataset.val,
+        &fit_options(config.adaptive_steps, config.seed, MODEL_RATES),
+        |_| progress.tick(),
+    )?;
+    let fixed_seconds = start.elapsed().as_secs_f64();
+    let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
+    for (name, mode) in [
+        (ADAPTIVE_NAME, FitMode::Static),
+        (VELOCITY_NAME, FitMode::Velocity),
+    ] {
+        let (scene, seconds) = fit_adaptive(
+            &dataset,
+            &bounds,
+            mode,
+            config.adaptive_steps,
+            config.seed,
+            progress,
+        )?;
+        fits.push((name, mode, scene, seconds));
+    }
+    for (name, mode, scene, fit_seconds) in fits {
+        let (heldout_psnr, render_ms) =
+            heldout_and_speed(&scene, &dataset.test, &options, &mut context)?;
+        rows.push(ModelSizeRow {
+            dataset: "seed blob".into(),
+            method: name.into(),
+            kernels: scene.len(),
+            parameters: mode.parameters_per_kernel() * scene.len(),
+            heldout_psnr,
+            render_ms,
+            fit_seconds,
+        });
+    }
+    Ok(rows)
+}
+
+/// Names of the model size section's methods.
+/// Name of the paper's fixed-count model in the model size section.
+pub const FIXED_NAME: &str = "4D fixed count (paper)";
+const ADAPTIVE_NAME: &str = "4D adaptive, static kernels";
+/// Name of the adaptive velocity fit in the model size section.
+pub const VELOCITY_NAME: &str = "4D adaptive, velocity kernels";
 
 fn fit_4d(
     config: &ExperimentConfig,
@@ -464,6 +604,60 @@ pub fn run_experiment(
         });
     }
 
+    // Model size: adaptive static and velocity fits against the fixed count and the frames,
+    // on the points, then the same on the continuous blob.
+    progress.start("model size", 5 * config.adaptive_steps);
+    let mut model_size = Vec::new();
+    for method in &methods {
+        if method.name == "4D (paper)" || method.name == "frame 3D" {
+            let kernels = if method.name == "frame 3D" {
+                frames.scenes.iter().map(Scene::len).sum()
+            } else {
+                model.len()
+            };
+            model_size.push(ModelSizeRow {
+                dataset: "seed points".into(),
+                method: if method.name == "4D (paper)" {
+                    FIXED_NAME.into()
+                } else {
+                    "frame 3D (per-frame baseline)".into()
+                },
+                kernels,
+                parameters: method.parameters,
+                heldout_psnr: method.psnr_splits[2],
+                render_ms: method.render_ms,
+                fit_seconds: method.fit_seconds,
+            });
+        }
+    }
+    for (name, mode) in [
+        (ADAPTIVE_NAME, FitMode::Static),
+        (VELOCITY_NAME, FitMode::Velocity),
+    ] {
+        let (scene, fit_seconds) = fit_adaptive(
+            &dataset,
+            &bounds,
+            mode,
+            config.adaptive_steps,
+            config.seed,
+            progress,
+        )?;
+        let method = Method::Model4d(&scene);
+        let heldout_psnr = split_psnr(&method, &dataset.test, &options, &mut context)?;
+        let render_ms =
+            sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.render_ms;
+        model_size.push(ModelSizeRow {
+            dataset: "seed points".into(),
+            method: name.into(),
+            kernels: scene.len(),
+            parameters: mode.parameters_per_kernel() * scene.len(),
+            heldout_psnr,
+            render_ms,
+            fit_seconds,
+        });
+    }
+    model_size.extend(blob_model_size(config, progress)?);
+
     // Volumes on one grid: the ground truth's and the model's.
     progress.start("volumes", 2 * config.volume_times.len());
     let (min, max) =
@@ -498,6 +692,7 @@ pub fn run_experiment(
         methods,
         fit_log,
         ablation,
+        model_size,
         volumes,
         model,
         seconds: start.elapsed().as_secs_f64(),
