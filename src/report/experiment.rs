@@ -321,6 +321,32 @@ fn fit_adaptive(
     Ok((scene, start.elapsed().as_secs_f64()))
 }
 
+/// The adaptive static and velocity fits of the model size section, with their names,
+/// modes and seconds.
+fn adaptive_fits(
+    config: &ExperimentConfig,
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    progress: &mut dyn Progress,
+) -> Result<Vec<(&'static str, FitMode, Scene, f64)>> {
+    let mut fits = Vec::new();
+    for (name, mode) in [
+        (ADAPTIVE_NAME, FitMode::Static),
+        (VELOCITY_NAME, FitMode::Velocity),
+    ] {
+        let (scene, seconds) = fit_adaptive(
+            dataset,
+            bounds,
+            mode,
+            config.adaptive_steps,
+            config.seed,
+            progress,
+        )?;
+        fits.push((name, mode, scene, seconds));
+    }
+    Ok(fits)
+}
+
 /// PSNR of `scene` on `views` and its milliseconds per frame there.
 fn heldout_and_speed(
     scene: &Scene,
@@ -365,20 +391,7 @@ fn blob_model_size(
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
     let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
-    for (name, mode) in [
-        (ADAPTIVE_NAME, FitMode::Static),
-        (VELOCITY_NAME, FitMode::Velocity),
-    ] {
-        let (scene, seconds) = fit_adaptive(
-            &dataset,
-            &bounds,
-            mode,
-            config.adaptive_steps,
-            config.seed,
-            progress,
-        )?;
-        fits.push((name, mode, scene, seconds));
-    }
+    fits.extend(adaptive_fits(config, &dataset, &bounds, progress)?);
     for (name, mode, scene, fit_seconds) in fits {
         let (heldout_psnr, render_ms) =
             heldout_and_speed(&scene, &dataset.test, &options, &mut context)?;
@@ -630,18 +643,7 @@ pub fn run_experiment(
             });
         }
     }
-    for (name, mode) in [
-        (ADAPTIVE_NAME, FitMode::Static),
-        (VELOCITY_NAME, FitMode::Velocity),
-    ] {
-        let (scene, fit_seconds) = fit_adaptive(
-            &dataset,
-            &bounds,
-            mode,
-            config.adaptive_steps,
-            config.seed,
-            progress,
-        )?;
+    for (name, mode, scene, fit_seconds) in adaptive_fits(config, &dataset, &bounds, progress)? {
         let method = Method::Model4d(&scene);
         let heldout_psnr = split_psnr(&method, &dataset.test, &options, &mut context)?;
         let render_ms =

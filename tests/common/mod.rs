@@ -162,18 +162,22 @@ pub const PARAM_NAMES: [&str; PARAMS] = [
     "x", "y", "z", "t", "r", "g", "b", "vx", "vy", "vz", "sx", "sy", "sz", "st",
 ];
 
+/// Mean (4), amplitude (3), velocity (3) and scale (4) as one row, the layout of [`params`].
+fn flatten(m: [f64; 4], a: [f64; 3], v: [f64; 3], s: [f64; 4]) -> [f64; PARAMS] {
+    [
+        m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2], s[0], s[1], s[2], s[3],
+    ]
+}
+
 /// The differentiable parameters of kernel `i`: mean (4), amplitude (3), velocity (3),
 /// scale (4).
 pub fn params(scene: &Scene, i: usize) -> [f64; PARAMS] {
-    let (m, a, v, s) = (
+    flatten(
         scene.means[i],
         scene.amplitudes[i],
         scene.velocities[i],
         scene.scales[i],
-    );
-    [
-        m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2], s[0], s[1], s[2], s[3],
-    ]
+    )
 }
 
 fn set_param(scene: &mut Scene, i: usize, p: usize, value: f64) {
@@ -187,15 +191,12 @@ fn set_param(scene: &mut Scene, i: usize, p: usize, value: f64) {
 
 /// The gradient in the same layout as [`params`].
 pub fn grad_of(grads: &splat4d::Gradients, i: usize) -> [f64; PARAMS] {
-    let (m, a, v, s) = (
+    flatten(
         grads.v_means[i],
         grads.v_amplitudes[i],
         grads.v_velocities[i],
         grads.v_scales[i],
-    );
-    [
-        m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2], s[0], s[1], s[2], s[3],
-    ]
+    )
 }
 
 /// Central finite differences (f64) of the reference MSE against `target`, per kernel and
