@@ -1,5 +1,5 @@
 //! Renders the 100k-kernel bench scene repeatedly, for profilers (perf, callgrind):
-//! `cargo run --release --example profile_forward -- [kernels] [frames]`.
+//! `cargo run --release --example profile_forward -- [kernels] [frames] [std|poly]`.
 
 use splat4d::synthetic::{bench_camera, bench_scene};
 use splat4d::{RenderContext, RenderOptions};
@@ -8,6 +8,10 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let kernels: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(100_000);
     let frames: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(10);
+    let options = RenderOptions {
+        exp: args.next().and_then(|a| a.parse().ok()).unwrap_or_default(),
+        ..RenderOptions::default()
+    };
     let scene = bench_scene(kernels, 42);
     let camera = bench_camera(512, 512);
     let mut context = RenderContext::new();
@@ -15,7 +19,7 @@ fn main() {
     let mut pairs = 0;
     for _ in 0..frames {
         pairs += context
-            .render(&scene, &camera, 0.5, &RenderOptions::default())
+            .render(&scene, &camera, 0.5, &options)
             .unwrap()
             .pairs;
     }

@@ -194,8 +194,9 @@ struct BenchArgs {
     /// Cut-off ε.
     #[arg(long, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
-    /// How exp(-q/2) is evaluated: `std` or `poly`.
-    #[arg(long, default_value = "std")]
+    /// How exp(-q/2) is evaluated: `poly` (inlined polynomial, batched and vectorised) or
+    /// `std` (libm).
+    #[arg(long, default_value = "poly")]
     exp: ExpMode,
     /// Time the seed-style dense baseline (every kernel at every pixel) for every scene. By
     /// default it runs when kernels × pixels ≤ 3·10⁹ (a few seconds a frame).
@@ -524,9 +525,9 @@ struct RenderFlags {
     /// Cut-off ε on a kernel's value; 0 disables truncation (SPEC §5).
     #[arg(long, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
     cutoff: f64,
-    /// How exp(-q/2) is evaluated per pixel: `std` (libm) or `poly` (inlined polynomial,
-    /// relative error ≤ 4e-7).
-    #[arg(long, default_value = "std")]
+    /// How exp(-q/2) is evaluated per pixel: `poly` (inlined polynomial, relative error
+    /// ≤ 4e-7, batched and vectorised) or `std` (libm).
+    #[arg(long, default_value = "poly")]
     exp: ExpMode,
     /// Worker threads (default: one per core). The output does not depend on it.
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]

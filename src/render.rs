@@ -39,7 +39,7 @@ impl Default for RenderOptions {
         RenderOptions {
             dilation: DEFAULT_DILATION,
             cutoff: DEFAULT_CUTOFF,
-            exp: ExpMode::Std,
+            exp: ExpMode::Poly,
         }
     }
 }
