@@ -63,14 +63,43 @@ pub fn rasterize_backward(
         runs.push((t, run));
         rest = tail;
     }
-    runs.into_par_iter().for_each(|(t, run)| match exp {
-        ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
-        ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+    runs.into_par_iter().for_each(|(t, run)| {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: the CPU has the features the function is compiled for.
+            unsafe { backward_tile_avx2(proj, bins, v_image, t, run, exp) };
+            return;
+        }
+        match exp {
+            ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
+            ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
+        }
     });
     reduce(proj, bins, partials, sums, out);
 }
 
+/// [`backward_tile`] compiled for AVX2 and FMA (inline rounding for the row spans, wider
+/// registers); the same operations, so the same bits (no fused operations are formed).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_tile_avx2(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    v_image: &[f32],
+    t: usize,
+    run: &mut [[f32; 8]],
+    exp: ExpMode,
+) {
+    match exp {
+        ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
+        ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
+    }
+}
+
 /// Accumulates tile `t`'s entries into `run` (one partial per entry).
+#[inline(always)]
 fn backward_tile<const FAST: bool>(
     proj: &ProjectedKernels,
     bins: &TileBins,
