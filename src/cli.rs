@@ -329,8 +329,8 @@ struct FitArgs {
     /// Dataset folder (D-NeRF layout: transforms_train.json, and val/test for held-out views).
     #[arg(long)]
     views: PathBuf,
-    /// Initial scene: `auto` (a few kernels in the box, then densify and prune so the count
-    /// follows the data), `random:N` for N kernels in the box (a fixed count unless
+    /// Initial scene: `auto` (one kernel at the centre of the box, then densify, prune and
+    /// merge so the count follows the data), `random:N` for N kernels in the box (a fixed count unless
     /// --adaptive), or a scene file.
     #[arg(long, default_value = "auto")]
     init: String,
@@ -372,8 +372,8 @@ struct FitArgs {
     #[arg(long, default_value_t = AdaptiveOptions::default().prune_below)]
     prune_below: f64,
     /// Densified kernels whose mean spatial scale is above this are split (scales / 1.6),
-    /// the others cloned (default: for `auto`, an eighth of the initial scale; otherwise
-    /// never split).
+    /// the others cloned (default: when the scales are not fitted, an eighth of the largest
+    /// initial scale; otherwise never split: the fit sizes the kernels).
     #[arg(long)]
     min_scale: Option<f64>,
     /// Adam steps.
@@ -809,12 +809,24 @@ fn fit_command(args: &FitArgs) -> Result<()> {
         }
         None => Scene::load(Path::new(&args.init))?,
     };
+    let mode = args.mode.unwrap_or(if auto {
+        FitMode::Velocity
+    } else {
+        FitMode::Paper
+    });
+    let fits_scales = args.fit_scale || mode != FitMode::Paper;
     let adaptive = (auto || args.adaptive).then(|| {
+        // With fixed scales, splitting is the only way to finer kernels.
         let initial_scale = scene
             .scales
             .iter()
             .map(|s| (s[0] * s[1] * s[2]).cbrt())
             .fold(0.0_f64, f64::max);
+        let split_above = if fits_scales {
+            f64::INFINITY
+        } else {
+            initial_scale / 8.0
+        };
         AdaptiveOptions {
             every: args.densify_every,
             from: args.densify_from,
@@ -825,11 +837,7 @@ fn fit_command(args: &FitArgs) -> Result<()> {
             min_improvement: args.min_improvement,
             merge_tolerance: args.merge_tolerance,
             max_kernels: args.max_kernels.max(1),
-            min_scale: args.min_scale.unwrap_or(if auto {
-                initial_scale / 8.0
-            } else {
-                f64::INFINITY
-            }),
+            min_scale: args.min_scale.unwrap_or(split_above),
         }
     });
     if let Some(background) = args.background {
@@ -838,11 +846,6 @@ fn fit_command(args: &FitArgs) -> Result<()> {
         scene.background = [1.0; 3];
     }
     let rate = |frozen: bool, lr: f64| if frozen { 0.0 } else { lr };
-    let mode = args.mode.unwrap_or(if auto {
-        FitMode::Velocity
-    } else {
-        FitMode::Paper
-    });
     let options = FitOptions {
         steps: args.steps,
         batch_size: args.batch,
@@ -854,7 +857,7 @@ fn fit_command(args: &FitArgs) -> Result<()> {
                 !(args.fit_velocity || mode == FitMode::Velocity),
                 args.lr_velocity,
             ),
-            scale: rate(!(args.fit_scale || mode != FitMode::Paper), args.lr_scale),
+            scale: rate(!fits_scales, args.lr_scale),
         },
         final_rate_factor: args.lr_final,
         eval_every: args.eval_every,

@@ -8,7 +8,15 @@
 //!
 //! 1. **prune** kernels whose peak amplitude `max_c |A_c|` is below `prune_below`: they are
 //!    negligible at every time (`a(τ) = A w(τ)` with `w ≤ 1`). One kernel always stays.
-//! 2. **densify**, only when the fit has stalled: the training loss (over every training
+//! 2. **merge** kernels that have become the same kernel: same rotation, and position (at
+//!    the midpoint of their times), time, velocity over one σt and log-scales all within
+//!    `merge_tolerance` standard deviations of each other. The additive sum of two equal
+//!    Gaussians is one Gaussian with the summed amplitude, so this is what lets clones that
+//!    converged onto one moving object collapse back into one kernel. The merged kernel
+//!    takes the summed amplitude and the |amplitude|-weighted mean of the other parameters.
+//!    Pairs are compared directly (O(n²)), so merging only runs on up to
+//!    [`MERGE_LIMIT`] kernels.
+//! 3. **densify**, only when the fit has stalled: the training loss (over every training
 //!    view, measured at each round, so batch noise does not count) fell by less than
 //!    `min_improvement` (relative) since the round before, and did not rise (a loss that
 //!    rose is still settling after the last round).
@@ -21,17 +29,8 @@
 //!    so the additive image barely changes), the new one half a standard deviation down the
 //!    accumulated gradient, so the two separate under the same loss. A kernel whose mean
 //!    spatial scale `s̄` is above `min_scale` is **split**: both halves take spatial scales
-//!    divided by 1.6 (finer detail where the data asks for it; scales are otherwise fixed,
-//!    SPEC §6). At or below `min_scale` it is **cloned** at its own scale.
-//!
-//! 3. **merge** kernels that have become the same kernel: same rotation, and position (at
-//!    the midpoint of their times), time, velocity over one σt and log-scales all within
-//!    `merge_tolerance` standard deviations of each other. The additive sum of two equal
-//!    Gaussians is one Gaussian with the summed amplitude, so this is what lets clones that
-//!    converged onto one moving object collapse back into one kernel. The merged kernel
-//!    takes the summed amplitude and the |amplitude|-weighted mean of the other parameters.
-//!    Pairs are compared directly (O(n²)), so merging only runs on up to
-//!    [`MERGE_LIMIT`] kernels.
+//!    divided by 1.6 (finer detail where the data asks for it, for fits that keep scales
+//!    fixed, SPEC §6). At or below `min_scale` it is **cloned** at its own scale.
 //!
 //! No randomness: the result depends only on the data and the step schedule. Adam's
 //! moments follow the kernels (a clone starts from zero moments).
@@ -49,13 +48,14 @@ pub struct AdaptiveOptions {
     pub from: f64,
     /// Fraction of the steps after which the count is frozen (the rest refines).
     pub until: f64,
-    /// Mean `|g̃|` (loss per standard deviation) at which a kernel is cloned.
+    /// Mean `|g̃|` (loss per standard deviation) at which a kernel is densified.
     pub gradient_threshold: f64,
-    /// Relative fall of the window's mean loss below which the fit counts as stalled.
+    /// Relative fall of the training loss between rounds below which the fit counts as
+    /// stalled.
     pub min_improvement: f64,
     /// Peak `|amplitude|` below which a kernel is removed.
     pub prune_below: f64,
-    /// Largest fraction of the kernels cloned in one round.
+    /// Largest fraction of the kernels densified in one round.
     pub max_growth: f64,
     /// Budget: never more kernels than this.
     pub max_kernels: usize,
@@ -194,9 +194,9 @@ impl DensityStats {
     }
 }
 
-/// Runs one round on `scene`: prunes, then clones. Returns the new scene, for each of its
-/// kernels the index of the old kernel whose optimiser state it keeps (`None` for a clone),
-/// and what was done.
+/// Runs one round on `scene`: prunes, merges, then densifies. Returns the new scene, for
+/// each of its kernels the index of the old kernel whose optimiser state it keeps (`None`
+/// for a new one), and what was done.
 pub fn densify_and_prune(
     scene: &Scene,
     stats: &DensityStats,
