@@ -631,7 +631,7 @@ fn import_gltf_and_render_through_its_camera() {
 #[test]
 fn bench_prints_speed_and_error_within_the_bound() {
     let dir = tempfile::tempdir().unwrap();
-    let data_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata/random_200");
+    let data_dir = shared_testdata("random_200");
     let (scene, camera) = (data_dir.join("scene.json"), data_dir.join("camera.json"));
     let args = [
         "bench",

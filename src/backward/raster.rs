@@ -72,10 +72,7 @@ pub fn rasterize_backward(
             unsafe { backward_tile_avx2(proj, bins, v_image, t, run, exp) };
             return;
         }
-        match exp {
-            ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
-            ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
-        }
+        backward_tile_with(proj, bins, v_image, t, run, exp);
     });
     reduce(proj, bins, partials, sums, out);
 }
@@ -85,6 +82,19 @@ pub fn rasterize_backward(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn backward_tile_avx2(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    v_image: &[f32],
+    t: usize,
+    run: &mut [[f32; 8]],
+    exp: ExpMode,
+) {
+    backward_tile_with(proj, bins, v_image, t, run, exp);
+}
+
+/// [`backward_tile`] for `exp`.
+#[inline(always)]
+fn backward_tile_with(
     proj: &ProjectedKernels,
     bins: &TileBins,
     v_image: &[f32],

@@ -154,6 +154,25 @@ pub struct ModelSizeRow {
     pub fit_seconds: f64,
 }
 
+/// A fit of the model size section: name, mode, fitted scene and seconds.
+type Fitted = (&'static str, FitMode, Scene, f64);
+
+impl ModelSizeRow {
+    /// The row of `fitted` on `dataset`, with its measured held-out PSNR and render time.
+    fn of_fit(dataset: &str, fitted: &Fitted, heldout_psnr: f64, render_ms: f64) -> Self {
+        let (name, mode, scene, fit_seconds) = fitted;
+        ModelSizeRow {
+            dataset: dataset.into(),
+            method: (*name).into(),
+            kernels: scene.len(),
+            parameters: mode.parameters_per_kernel() * scene.len(),
+            heldout_psnr,
+            render_ms,
+            fit_seconds: *fit_seconds,
+        }
+    }
+}
+
 /// One row of the σt ablation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AblationRow {
@@ -328,7 +347,7 @@ fn adaptive_fits(
     dataset: &Dataset,
     bounds: &SpaceTimeBox,
     progress: &mut dyn Progress,
-) -> Result<Vec<(&'static str, FitMode, Scene, f64)>> {
+) -> Result<Vec<Fitted>> {
     let mut fits = Vec::new();
     for (name, mode) in [
         (ADAPTIVE_NAME, FitMode::Static),
@@ -392,18 +411,15 @@ fn blob_model_size(
     let fixed_seconds = start.elapsed().as_secs_f64();
     let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
     fits.extend(adaptive_fits(config, &dataset, &bounds, progress)?);
-    for (name, mode, scene, fit_seconds) in fits {
+    for fitted in &fits {
         let (heldout_psnr, render_ms) =
-            heldout_and_speed(&scene, &dataset.test, &options, &mut context)?;
-        rows.push(ModelSizeRow {
-            dataset: "seed blob".into(),
-            method: name.into(),
-            kernels: scene.len(),
-            parameters: mode.parameters_per_kernel() * scene.len(),
+            heldout_and_speed(&fitted.2, &dataset.test, &options, &mut context)?;
+        rows.push(ModelSizeRow::of_fit(
+            "seed blob",
+            fitted,
             heldout_psnr,
             render_ms,
-            fit_seconds,
-        });
+        ));
     }
     Ok(rows)
 }
@@ -643,20 +659,17 @@ pub fn run_experiment(
             });
         }
     }
-    for (name, mode, scene, fit_seconds) in adaptive_fits(config, &dataset, &bounds, progress)? {
-        let method = Method::Model4d(&scene);
+    for fitted in &adaptive_fits(config, &dataset, &bounds, progress)? {
+        let method = Method::Model4d(&fitted.2);
         let heldout_psnr = split_psnr(&method, &dataset.test, &options, &mut context)?;
         let render_ms =
             sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.render_ms;
-        model_size.push(ModelSizeRow {
-            dataset: "seed points".into(),
-            method: name.into(),
-            kernels: scene.len(),
-            parameters: mode.parameters_per_kernel() * scene.len(),
+        model_size.push(ModelSizeRow::of_fit(
+            "seed points",
+            fitted,
             heldout_psnr,
             render_ms,
-            fit_seconds,
-        });
+        ));
     }
     model_size.extend(blob_model_size(config, progress)?);
 
