@@ -1,4 +1,4 @@
-//! Forward render of seeded bench scenes (`splat4d::synthetic::bench_scene`): 10k, 100k and
+//! Forward render of seeded bench scenes (`splat4d::scenes::synthetic::bench_scene`): 10k, 100k and
 //! 1M kernels at 512×512 and 1920×1080 on 1 and 2 threads (`forward_WxH/render/N/Tt`), the
 //! seed-style dense baseline (`dense_512x512`), one group per stage (`stages_512x512`) and the
 //! temporal index. Throughput is kernel-pixel pairs per second (criterion's "elem/s" is
@@ -6,11 +6,11 @@
 //! `benches/README.md`. Filter to run a part: `cargo bench --bench forward -- forward_512`.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use splat4d::dense::dense_render;
 use splat4d::project::project;
+use splat4d::reference::dense::dense_render;
+use splat4d::scenes::synthetic::{bench_camera, bench_scene, bench_scene_in_time};
 use splat4d::slice::TemporalIndex;
 use splat4d::slice::slice;
-use splat4d::synthetic::{bench_camera, bench_scene, bench_scene_in_time};
 use splat4d::tiles::bin;
 use splat4d::{RenderContext, RenderOptions};
 

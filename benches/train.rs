@@ -9,7 +9,7 @@ use std::time::Instant;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use splat4d::fit::adam::{Adam, AdamConfig, LearningRates};
 use splat4d::fit::loss::mse_with_gradient;
-use splat4d::synthetic::{bench_camera, bench_scene};
+use splat4d::scenes::synthetic::{bench_camera, bench_scene};
 use splat4d::{Gradients, RenderContext, RenderOptions};
 
 const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];

@@ -1,25 +1,37 @@
 //! splat4d: dynamic scenes as 4D Gaussian kernels over (x, y, z, t), rendered and fitted on
 //! the CPU. The math is fixed by `SPEC.md` (shared with independent implementations).
 //!
-//! The forward renderer is four stages, each a function from plain struct-of-arrays data
-//! to plain data, run by a [`RenderContext`] that owns the buffers:
+//! # Layers
 //!
-//! 1. [`slice`](mod@slice): each 4D kernel at time τ → a 3D Gaussian and its amplitude (SPEC §2), with
-//!    temporal culling;
-//! 2. [`project`]: EWA projection through a pinhole [`Camera`] → a screen ellipse (SPEC §4);
-//! 3. [`tiles`]: ellipses → kernel lists per 16×16 tile, in kernel order;
-//! 4. [`raster`]: the additive sum per pixel, no sorting (SPEC §5).
+//! Each layer imports only from the layers above it in this list (a test, `layers`, checks
+//! every `crate::` path in `src/`):
 //!
-//! [`reference`](mod@reference) is the slow f64 twin that every fast stage is tested against.
+//! | layer | modules | what |
+//! |---|---|---|
+//! | model | [`model`] | [`Scene`]/[`Kernel`], [`Camera`], [`Image`], views, errors, seeded randomness: data and math, no files |
+//! | stages | [`slice`](mod@slice) → [`project`] → [`tiles`] → [`raster`] | the forward render, one function per stage from plain data to plain data |
+//! | | [`backward`] | the exact gradient (SPEC §6), the stages mirrored in reverse |
+//! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |
+//! | reference | [`reference`](mod@reference) | the f64 twin of every stage, and the dense baseline |
+//! | fit | [`fit`] | loss, Adam, initial scenes, adaptive density, the training loop, and [`fit::plan`]: every fit default |
+//! | scenes | [`scenes`] | synthetic and toy scenes, camera paths and framing, synthetic datasets |
+//! | io | [`io`] | every file format; atomic writes |
+//! | report | [`report`] | the seed experiment, metrics, charts, markdown, bench tables |
+//! | tasks | [`tasks`] | one call per subcommand: read, compute, write, summarise |
 //!
-//! Around the renderer:
+//! The binary (`src/main.rs`, `src/cli/`) only parses flags into a task's request.
 //!
-//! - [`backward`]: the exact gradient of the render (SPEC §6), stage by stage in reverse;
-//! - [`fit`]: the loss, Adam, initial scenes, synthetic datasets and the training loop;
-//! - [`io`]: scene/camera JSON, PNG/EXR, PLY (3DGS slices and 4D scenes), glTF, D-NeRF
-//!   datasets and videos, every output written atomically;
-//! - [`toy`], [`volume`], [`report`]: the seed paper's experiment, its Eq. 1 volumes and
-//!   report; [`camera_path`] and [`overlay`] for videos and debugging.
+//! # Data flow
+//!
+//! ```text
+//!              io (JSON, PLY, glTF, D-NeRF) ──► Scene, Camera, View
+//!                                                  │
+//!   Scene ─slice(τ)─► SlicedKernels ─project─► ProjectedKernels ─tiles─► TileBins ─raster─► Image ─► io (PNG, EXR, video)
+//!     ▲                    ▲                         ▲                                   │
+//!     │                 backward ◄──────────────── backward ◄──────────── ∂L/∂C ◄── fit::loss(Image, View)
+//!     └──── fit (Adam, densify/prune) ◄── Gradients                                    │
+//!                                                                     report (metrics, charts, markdown)
+//! ```
 //!
 //! ```
 //! use splat4d::{Camera, Kernel, RenderOptions, Scene, render};
@@ -30,29 +42,24 @@
 //! assert!(image.pixel(32, 24)[0] > 0.9);
 //! ```
 
+pub mod model;
+
 pub mod backward;
-pub mod camera;
-pub mod camera_path;
-pub mod dense;
-pub mod error;
-pub mod fit;
-pub mod io;
 pub mod overlay;
 pub mod project;
 pub mod raster;
-pub mod reference;
 pub mod render;
-pub mod report;
-pub mod scene;
 pub mod slice;
-pub mod synthetic;
 pub mod tiles;
-pub mod toy;
 pub mod volume;
 
+pub mod fit;
+pub mod io;
+pub mod reference;
+pub mod report;
+pub mod scenes;
+pub mod tasks;
+
 pub use backward::Gradients;
-pub use camera::Camera;
-pub use error::{Error, Result};
-pub use raster::Image;
+pub use model::{Camera, Error, ErrorKind, Image, Kernel, Result, Scene};
 pub use render::{RenderContext, RenderOptions, RenderStats, render};
-pub use scene::{Kernel, Scene};

@@ -1,17 +1,34 @@
-//! The `splat4d` command line: parse → validated options → library calls. Every error is
-//! printed once, here, and exits with status 2.
+//! The `splat4d` command line: parse → a task → print. Every error is printed once, here,
+//! and its kind decides the exit status (clap's own usage errors exit 2 as well):
+//!
+//! | kind | exit |
+//! |---|---|
+//! | input: a file that cannot be read, is malformed, or holds an invalid value | 2 |
+//! | usage: flags that cannot be carried out as given | 2 |
+//! | output: a file that cannot be written | 3 |
+//! | numeric: a fit that diverged, a result that is not finite | 4 |
 
 mod cli;
 
 use std::process::ExitCode;
+
+use splat4d::ErrorKind;
+
+fn exit_code(kind: ErrorKind) -> u8 {
+    match kind {
+        ErrorKind::Input | ErrorKind::Usage => 2,
+        ErrorKind::Output => 3,
+        ErrorKind::Numeric => 4,
+    }
+}
 
 fn main() -> ExitCode {
     let args = <cli::Cli as clap::Parser>::parse();
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("error: {error:#}");
-            ExitCode::from(2)
+            eprintln!("error: {error}");
+            ExitCode::from(exit_code(error.kind()))
         }
     }
 }

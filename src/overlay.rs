@@ -6,12 +6,10 @@
 //! The outline of `q = c` is the ellipse with semi-axes `√(c λ_k)` along the eigenvectors of
 //! Σ2 (λ_k its eigenvalues), centred on `m2` (pixel centres at `i + ½`).
 
-use std::path::Path;
-
 use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
 
-use crate::error::{Error, Result};
-use crate::io::image_file::{quantize, save_rgb8_png};
+use crate::model::error::{Error, Result};
+use crate::model::image::quantize;
 use crate::render::RenderContext;
 use crate::tiles::TILE_SIZE;
 
@@ -119,12 +117,6 @@ pub fn draw_overlay(context: &RenderContext) -> Result<(u32, u32, Vec<u8>)> {
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
     Ok((w, h, rgb))
-}
-
-/// Draws the overlay and writes it as a PNG.
-pub fn write_overlay(context: &RenderContext, path: &Path) -> Result<()> {
-    let (w, h, rgb) = draw_overlay(context)?;
-    save_rgb8_png(path, w, h, &rgb)
 }
 
 #[cfg(test)]

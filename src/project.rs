@@ -19,7 +19,7 @@
 //! `k = -Σ2xy/Σ2yy`: no cancellation however thin the ellipse, and each row's span of
 //! pixels inside the ellipse follows from one square root. Everything here is f64.
 
-use crate::camera::Camera;
+use crate::model::camera::Camera;
 use crate::slice::SlicedKernels;
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index

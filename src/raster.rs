@@ -23,42 +23,12 @@ use std::str::FromStr;
 
 use rayon::prelude::*;
 
+use crate::model::Image;
 use crate::project::ProjectedKernels;
 use crate::tiles::{TILE_SIZE, TileBins, padded_qmax, pixel_span};
 
 /// Floats per tile in the tile-major buffer (16 × 16 pixels × RGB).
 const TILE_FLOATS: usize = (TILE_SIZE * TILE_SIZE * 3) as usize;
-
-/// A linear RGB image, row-major, 3 interleaved f32 per pixel.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Image {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// `[r, g, b]` of pixel `(i, j)` at `3 (j width + i)`.
-    pub pixels: Vec<f32>,
-}
-
-impl Image {
-    /// A `width × height` image filled with `colour`.
-    #[must_use]
-    pub fn filled(width: u32, height: u32, colour: [f32; 3]) -> Self {
-        let n = width as usize * height as usize;
-        Image {
-            width,
-            height,
-            pixels: colour.iter().copied().cycle().take(3 * n).collect(),
-        }
-    }
-
-    /// `[r, g, b]` of pixel `(i, j)`.
-    #[must_use]
-    pub fn pixel(&self, i: u32, j: u32) -> [f32; 3] {
-        let k = 3 * (j as usize * self.width as usize + i as usize);
-        [self.pixels[k], self.pixels[k + 1], self.pixels[k + 2]]
-    }
-}
 
 /// How the per-pixel loops evaluate `G = exp(-½ q)` in f32.
 ///
@@ -521,9 +491,9 @@ mod tests {
     #[test]
     fn batched_tiles_equal_the_span_loop_bit_for_bit() {
         use crate::render::{RenderContext, RenderOptions};
-        let camera = crate::synthetic::bench_camera(160, 96);
+        let camera = crate::scenes::synthetic::bench_camera(160, 96);
         for (n, cutoff) in [(3000, 1.0 / 255.0), (300, 0.0)] {
-            let scene = crate::synthetic::bench_scene(n, 5);
+            let scene = crate::scenes::synthetic::bench_scene(n, 5);
             let options = RenderOptions {
                 cutoff,
                 exp: ExpMode::Poly,

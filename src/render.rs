@@ -10,13 +10,16 @@ use crate::backward::project::project_backward;
 use crate::backward::raster::rasterize_backward;
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
-use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::model::camera::Camera;
+use crate::model::error::{Error, Result};
+use crate::model::scene::Scene;
 use crate::project::{ProjectedKernels, project};
-use crate::raster::{ExpMode, Image, rasterize};
-use crate::scene::Scene;
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
+use crate::{
+    model::Image,
+    raster::{ExpMode, rasterize},
+};
 
 /// Default dilation `s` of SPEC §4, px².
 pub const DEFAULT_DILATION: f64 = 0.3;

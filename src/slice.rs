@@ -17,7 +17,7 @@
 //! any projection work. With `ε = 0` nothing is truncated: `qmax = +∞`, and only kernels
 //! whose amplitude is exactly zero are dropped. Everything is f64.
 
-use crate::scene::Scene;
+use crate::model::scene::Scene;
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).

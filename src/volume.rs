@@ -14,7 +14,7 @@
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use crate::scene::Scene;
+use crate::model::scene::Scene;
 use crate::slice::{SlicedKernels, slice};
 
 /// A cubic grid of `res³` cells over an axis-aligned box.

@@ -18,7 +18,7 @@
 //! (likewise y). All f64; the per-kernel projection is recomputed from the slice.
 
 use crate::backward::raster::ScreenGradients;
-use crate::camera::Camera;
+use crate::model::camera::Camera;
 use crate::project::{ProjectedKernels, Projection, project_one};
 use crate::slice::SlicedKernels;
 

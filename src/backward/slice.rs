@@ -14,7 +14,7 @@
 
 use crate::backward::Gradients;
 use crate::backward::project::SliceGradients;
-use crate::scene::Scene;
+use crate::model::scene::Scene;
 use crate::slice::{SlicedKernels, rotation_matrix};
 
 /// Adds the kernel gradients of one view to `grads`.

@@ -14,7 +14,7 @@
 //! seed paper fixes σ "for stability" (SPEC §6). Rotation is never changed.
 
 use crate::backward::Gradients;
-use crate::scene::Scene;
+use crate::model::scene::Scene;
 
 /// Learning rate per parameter group; 0 freezes a group.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -185,7 +185,7 @@ impl Adam {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Kernel;
+    use crate::model::scene::Kernel;
 
     #[test]
     fn first_step_moves_each_live_parameter_by_its_rate_against_the_gradient_sign() {

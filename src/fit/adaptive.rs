@@ -36,8 +36,8 @@
 //! moments follow the kernels (a clone starts from zero moments).
 
 use crate::backward::Gradients;
-use crate::error::Result;
-use crate::scene::{Kernel, Scene};
+use crate::model::error::Result;
+use crate::model::scene::{Kernel, Scene};
 
 /// When and how to densify and prune.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,10 +4,10 @@
 use glam::{DMat3, DVec3};
 use rand::RngExt;
 
-use crate::camera::Camera;
-use crate::error::{Error, Result};
-use crate::scene::{Kernel, Scene};
-use crate::synthetic::seeded_rng;
+use crate::model::camera::Camera;
+use crate::model::error::{Error, Result};
+use crate::model::random::seeded_rng;
+use crate::model::scene::{Kernel, Scene};
 
 /// An axis-aligned space-time box.
 #[derive(Clone, Copy, Debug, PartialEq)]

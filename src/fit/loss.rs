@@ -1,7 +1,7 @@
 //! The loss of SPEC §6: per view, the mean over pixels and channels of `(C - C_gt)²` on raw
 //! linear values (no clamp); over views, the mean of those. `PSNR = 10 log10(1 / MSE)`.
 
-use crate::raster::Image;
+use crate::model::Image;
 
 /// MSE of `image` against `target` (same size), accumulated in f64.
 #[must_use]

@@ -2,7 +2,7 @@
 
 pub mod adam;
 pub mod adaptive;
-pub mod dataset;
 pub mod init;
 pub mod loss;
+pub mod plan;
 pub mod train;

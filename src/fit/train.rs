@@ -11,14 +11,14 @@ use std::time::Instant;
 use rand::seq::SliceRandom;
 
 use crate::backward::Gradients;
-use crate::error::{Error, Result};
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
 use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
 use crate::fit::loss::{mse, mse_with_gradient, psnr};
-use crate::io::dataset::View;
+use crate::model::View;
+use crate::model::error::{Error, Result};
+use crate::model::random::seeded_rng;
+use crate::model::scene::Scene;
 use crate::render::{RenderContext, RenderOptions};
-use crate::scene::Scene;
-use crate::synthetic::seeded_rng;
 
 /// Which parameter groups a fit moves.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -118,13 +118,7 @@ impl Default for FitOptions {
         FitOptions {
             steps: 500,
             batch_size: 8,
-            learning_rates: LearningRates {
-                mean: 2e-3,
-                time: 2e-3,
-                amplitude: 1e-2,
-                velocity: 0.0,
-                scale: 0.0,
-            },
+            learning_rates: FitMode::Paper.learning_rates(DEFAULT_RATES),
             final_rate_factor: 0.05,
             adam: AdamConfig::default(),
             eval_every: 50,
@@ -235,7 +229,7 @@ pub fn fit(
             );
         }
         if !batch_loss.is_finite() {
-            return Err(Error::Usage(format!(
+            return Err(Error::Numeric(format!(
                 "fitting diverged at step {step}: the loss is {batch_loss}; lower the learning rates"
             )));
         }

@@ -21,41 +21,15 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::Camera;
-use crate::error::{Error, Result};
 use crate::io::image_file::{BitDepth, load_image_with_alpha, save_image};
 use crate::io::json::parse_json;
 use crate::io::write_bytes_atomically;
-use crate::raster::Image;
+use crate::model::camera::Camera;
+use crate::model::error::{Error, Result};
+use crate::model::{Dataset, View};
 
 /// The three splits, in file order.
 pub const SPLITS: [&str; 3] = ["train", "val", "test"];
-
-/// One image with its camera and time.
-#[derive(Clone, Debug)]
-pub struct View {
-    /// The camera that took it.
-    pub camera: Camera,
-    /// Scene time.
-    pub time: f64,
-    /// Linear RGB.
-    pub image: Image,
-    /// Where it came from (`./train/r_000`), for messages and reports.
-    pub name: String,
-}
-
-/// A dataset's splits.
-#[derive(Clone, Debug, Default)]
-pub struct Dataset {
-    /// Views to fit.
-    pub train: Vec<View>,
-    /// Held-out views for monitoring.
-    pub val: Vec<View>,
-    /// Held-out views for final evaluation.
-    pub test: Vec<View>,
-    /// True when some image had an alpha channel (composited over the background).
-    pub had_alpha: bool,
-}
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -104,7 +78,7 @@ pub fn read_split(dir: &Path, split: &str, background: [f32; 3]) -> Result<(Vec<
         return Ok((Vec::new(), false));
     }
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, "cannot read", e))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::read(&path, "cannot read", e))?;
     let file: TransformsFile = parse_json(&text, &origin, "transforms")?;
     let mut views = Vec::with_capacity(file.frames.len());
     let mut had_alpha = false;
@@ -173,10 +147,10 @@ pub fn read_split(dir: &Path, split: &str, background: [f32; 3]) -> Result<(Vec<
 /// Reads every split of the dataset in `dir`. RGBA images are composited over `background`.
 pub fn load_dataset(dir: &Path, background: [f32; 3]) -> Result<Dataset> {
     if !dir.is_dir() {
-        return Err(Error::Usage(format!(
-            "{}: not a folder with transforms_*.json",
-            dir.display()
-        )));
+        return Err(Error::malformed(
+            &dir.display().to_string(),
+            "not a folder with transforms_*.json",
+        ));
     }
     let mut dataset = Dataset::default();
     for split in SPLITS {
@@ -189,10 +163,12 @@ pub fn load_dataset(dir: &Path, background: [f32; 3]) -> Result<Dataset> {
         }
     }
     if dataset.train.is_empty() {
-        return Err(Error::Usage(format!(
-            "{}: transforms_train.json is missing or has no frames",
-            dir.display()
-        )));
+        return Err(Error::invalid(
+            &dir.join("transforms_train.json").display().to_string(),
+            "dataset",
+            "frames",
+            "transforms_train.json is missing or has no frames",
+        ));
     }
     Ok(dataset)
 }

@@ -26,10 +26,10 @@ use base64::Engine;
 use glam::{DMat4, DQuat, DVec3};
 use rand::RngExt;
 
-use crate::camera::Camera;
-use crate::error::{Error, Result};
-use crate::scene::{Kernel, Scene};
-use crate::synthetic::seeded_rng;
+use crate::model::camera::Camera;
+use crate::model::error::{Error, Result};
+use crate::model::random::seeded_rng;
+use crate::model::scene::{Kernel, Scene};
 
 /// σ of a surfel, as a fraction of the mean spacing √(area/N).
 const SURFEL_SPREAD: f64 = 1.0;
@@ -38,7 +38,7 @@ const SURFEL_THICKNESS: f64 = 0.3;
 
 fn parse_document(path: &Path) -> Result<gltf::Gltf> {
     let origin = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read glTF", e))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read glTF", e))?;
     gltf::Gltf::from_slice(&bytes)
         .map_err(|e| Error::malformed(&origin, format!("not a valid glTF 2.0 file: {e}")))
 }
@@ -72,7 +72,7 @@ fn load_buffers(document: &gltf::Gltf, path: &Path) -> Result<Vec<Vec<u8>>> {
                 gltf::buffer::Source::Uri(uri) => {
                     let file = dir.join(uri);
                     std::fs::read(&file).map_err(|e| {
-                        Error::io(&file, &format!("{origin}: {item}: cannot read"), e)
+                        Error::read(&file, &format!("{origin}: {item}: cannot read"), e)
                     })?
                 }
             };

@@ -12,9 +12,10 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
 
-use crate::error::{Error, Result};
 use crate::io::write_atomically;
-use crate::raster::Image;
+use crate::model::Image;
+use crate::model::error::{Error, Result};
+use crate::model::image::quantize;
 
 /// Bits per channel of an integer image file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -51,13 +52,6 @@ impl ImageKind {
             ))),
         }
     }
-}
-
-/// `round(max · clamp(c, 0, 1))`, rounding half away from zero; NaN stores 0.
-#[must_use]
-pub fn quantize(c: f32, max: u16) -> u16 {
-    let v = f64::from(c).clamp(0.0, 1.0) * f64::from(max);
-    if v.is_nan() { 0 } else { v.round() as u16 }
 }
 
 /// Encodes `image` in `kind` to a seekable writer.
@@ -129,9 +123,9 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
     let origin = path.display().to_string();
     ImageKind::from_path(path)?;
     let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, "cannot read image", e))?
+        .map_err(|e| Error::read(path, "cannot read image", e))?
         .with_guessed_format()
-        .map_err(|e| Error::io(path, "cannot read image", e))?;
+        .map_err(|e| Error::read(path, "cannot read image", e))?;
     let decoded = reader
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;

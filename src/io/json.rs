@@ -4,7 +4,7 @@
 use serde::de::DeserializeOwned;
 use serde_path_to_error::Segment;
 
-use crate::error::{Error, Result};
+use crate::model::error::{Error, Result};
 
 /// Parses `text` as a `T`. `origin` (a file name) and `what` (the document's item name, such
 /// as `camera`) go into error messages.

@@ -1,16 +1,35 @@
-//! Files: atomic writes and images. Nothing here knows about the command line.
+//! Files: every format the tool reads or writes, and atomic writes. It reads and writes
+//! model types ([`crate::model`]); nothing below it imports it, and nothing here knows of
+//! the command line.
+//!
+//! | module | format |
+//! |---|---|
+//! | [`scene_file`] | scene JSON (SPEC §1), and 4D scene PLY through [`ply`] |
+//! | [`camera_file`] | camera JSON (SPEC §3) |
+//! | [`path_file`] | camera path JSON |
+//! | [`gradients_file`] | the `splat4d grad` JSON |
+//! | [`image_file`] | PNG (8/16 bit) and EXR images (SPEC §5: linear, no sRGB curve) |
+//! | [`ply`] | 3DGS slice PLY for splat viewers, 4D scene PLY |
+//! | [`dataset`] | D-NeRF / Blender `transforms_*.json` datasets |
+//! | [`gltf_import`] | glTF 2.0 models, their cameras and node animation |
+//! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
+//! | [`json`] | JSON with errors that name the item and field |
 
+pub mod camera_file;
 pub mod dataset;
 pub mod gltf_import;
+pub mod gradients_file;
 pub mod image_file;
 pub mod json;
+pub mod path_file;
 pub mod ply;
+pub mod scene_file;
 pub mod video;
 
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use crate::error::{Error, Result};
+use crate::model::{Error, Result};
 
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
 pub type AtomicWriter = BufWriter<tempfile::NamedTempFile>;
@@ -22,38 +41,48 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Writes a file all at once or not at all: `write` fills a temporary file in the same
 /// folder, which is then renamed over `path`. On any error nothing is left at `path` (an
-/// existing file there is untouched). Missing parent folders are created.
+/// existing file there is untouched). Missing parent folders are created. A `path` that is
+/// a folder is a usage error; failures to write are output errors
+/// ([`crate::model::ErrorKind`]).
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut AtomicWriter) -> std::io::Result<()>,
 ) -> Result<()> {
+    if path.is_dir() {
+        return Err(Error::usage(format!(
+            "{}: is a folder; name a file to write",
+            path.display()
+        )));
+    }
     let parent = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    std::fs::create_dir_all(parent)
-        .map_err(|e| Error::io(parent, "cannot create the output folder", e))?;
+    std::fs::create_dir_all(parent).map_err(|e| {
+        let message = format!("cannot create its folder {}", parent.display());
+        Error::write(path, &message, e)
+    })?;
     let temp = tempfile::Builder::new()
         .prefix(".splat4d-")
         .tempfile_in(parent)
-        .map_err(|e| Error::io(path, "cannot create a temporary file beside the output", e))?;
+        .map_err(|e| Error::write(path, "cannot create a temporary file beside the output", e))?;
     let mut writer = BufWriter::new(temp);
     write(&mut writer)
         .and_then(|()| writer.flush())
-        .map_err(|e| Error::io(path, "cannot write", e))?;
+        .map_err(|e| Error::write(path, "cannot write", e))?;
     let temp = writer
         .into_inner()
-        .map_err(|e| Error::io(path, "cannot write", e.into_error()))?;
+        .map_err(|e| Error::write(path, "cannot write", e.into_error()))?;
     // Temporary files are private (0600); a finished output is an ordinary file.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         temp.as_file()
             .set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| Error::io(path, "cannot set the permissions of", e))?;
+            .map_err(|e| Error::write(path, "cannot set the permissions of", e))?;
     }
     temp.persist(path)
-        .map_err(|e| Error::io(path, "cannot move the finished file into place", e.error))?;
+        .map_err(|e| Error::write(path, "cannot move the finished file into place", e.error))?;
     Ok(())
 }
 

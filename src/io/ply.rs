@@ -19,9 +19,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::error::{Error, Result};
 use crate::io::write_atomically;
-use crate::scene::{Kernel, Scene};
+use crate::model::error::{Error, Result};
+use crate::model::scene::{Kernel, Scene};
 use crate::slice::{SlicedKernels, slice};
 
 /// The zeroth-order spherical-harmonic constant of 3DGS.
@@ -174,7 +174,7 @@ struct Property {
 /// against the file's length.
 pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     let origin = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read scene", e))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read scene", e))?;
     parse_scene_ply(&bytes, &origin)
 }
 

@@ -1,9 +1,9 @@
-//! Videos of a camera path: numbered 8-bit PNG frames (`DIR/NAME/frame_0000.png`, ...), an
+//! Video files from frames rendered by the caller: numbered 8-bit PNG frames (`DIR/NAME/frame_0000.png`, ...), an
 //! animated GIF (`DIR/NAME.gif`, looping) and, when `ffmpeg` is on `PATH`, an MP4
 //! (`DIR/NAME.mp4`, H.264, yuv420p).
 //!
-//! Frames are rendered, written and appended to the GIF one at a time, in order, so memory
-//! does not grow with the length of the video. Every file is written atomically; the GIF and
+//! Frames are asked for (rendered above this layer), written and appended to the GIF one at
+//! a time, in order, so memory does not grow with the length of the video. Every file is written atomically; the GIF and
 //! MP4 appear only once complete.
 
 use std::path::{Path, PathBuf};
@@ -12,13 +12,10 @@ use std::process::Command;
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 
-use crate::camera_path::PathFrame;
-use crate::error::{Error, Result};
-use crate::io::image_file::{BitDepth, quantize, save_image};
+use crate::io::image_file::{BitDepth, save_image};
 use crate::io::write_atomically;
-use crate::render::{RenderContext, RenderOptions};
-use crate::scene::Scene;
-use crate::slice::TemporalIndex;
+use crate::model::image::quantize;
+use crate::model::{Error, Image, Result};
 
 /// What was written for one video.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,7 +53,7 @@ impl Default for VideoOptions {
     }
 }
 
-fn to_rgba8(image: &crate::Image) -> RgbaImage {
+fn to_rgba8(image: &Image) -> RgbaImage {
     let data = image
         .pixels
         .chunks_exact(3)
@@ -72,33 +69,29 @@ fn to_rgba8(image: &crate::Image) -> RgbaImage {
     RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
 }
 
-/// Renders `frames` of `scene` into `dir/name/`, `dir/name.gif` and `dir/name.mp4`; calls
-/// `on_frame` after each frame.
+/// Writes `frame_count` frames into `dir/name/`, `dir/name.gif` and `dir/name.mp4`.
+/// `next_frame(k, image)` fills `image` with frame `k`; it is called once per frame, in
+/// order.
 pub fn write_video(
-    scene: &Scene,
-    frames: &[PathFrame],
-    render: &RenderOptions,
+    frame_count: usize,
     dir: &Path,
     name: &str,
     options: &VideoOptions,
-    mut on_frame: impl FnMut(),
+    mut next_frame: impl FnMut(usize, &mut Image) -> Result<()>,
 ) -> Result<VideoFiles> {
     if options.fps == 0 {
-        return Err(Error::Usage("--fps must be at least 1".into()));
+        return Err(Error::usage("--fps must be at least 1"));
     }
     let frames_dir = dir.join(name);
-    let mut context = RenderContext::new();
-    // One scene, many frames: each frame visits only the kernels alive at its time.
-    let index = TemporalIndex::new(scene, render.cutoff);
-    let mut render_frame = |k: usize, frame: &PathFrame| -> Result<RgbaImage> {
-        context.render_indexed(scene, &index, &frame.camera, frame.time, render)?;
+    let mut image = Image::default();
+    let mut write_frame = |k: usize| -> Result<RgbaImage> {
+        next_frame(k, &mut image)?;
         save_image(
-            context.image(),
+            &image,
             &frames_dir.join(format!("frame_{k:04}.png")),
             BitDepth::Eight,
         )?;
-        on_frame();
-        Ok(to_rgba8(context.image()))
+        Ok(to_rgba8(&image))
     };
     let gif = if options.gif {
         let path = dir.join(format!("{name}.gif"));
@@ -109,8 +102,8 @@ pub fn write_video(
             encoder
                 .set_repeat(Repeat::Infinite)
                 .map_err(std::io::Error::other)?;
-            for (k, frame) in frames.iter().enumerate() {
-                let rgba = match render_frame(k, frame) {
+            for k in 0..frame_count {
+                let rgba = match write_frame(k) {
                     Ok(rgba) => rgba,
                     Err(e) => {
                         failure = Some(e);
@@ -129,8 +122,8 @@ pub fn write_video(
         written?;
         Some(path)
     } else {
-        for (k, frame) in frames.iter().enumerate() {
-            render_frame(k, frame)?;
+        for k in 0..frame_count {
+            write_frame(k)?;
         }
         None
     };
@@ -141,7 +134,7 @@ pub fn write_video(
     };
     Ok(VideoFiles {
         frames_dir,
-        frames: frames.len(),
+        frames: frame_count,
         gif,
         mp4,
         mp4_note,

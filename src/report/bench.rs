@@ -12,14 +12,14 @@ use std::time::Instant;
 
 use rand::RngExt;
 
-use crate::camera::Camera;
-use crate::dense::dense_render;
-use crate::error::{Error, Result};
-use crate::raster::{ExpMode, Image};
+use crate::model::camera::Camera;
+use crate::model::error::{Error, Result};
+use crate::model::random::seeded_rng;
+use crate::model::scene::Scene;
+use crate::reference::dense::dense_render;
 use crate::reference::reference_at_pixels;
 use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderContext, RenderOptions};
-use crate::scene::Scene;
-use crate::synthetic::seeded_rng;
+use crate::{model::Image, raster::ExpMode};
 
 /// Which renderer a row measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

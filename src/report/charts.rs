@@ -9,8 +9,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::ViridisRGB;
 
-use crate::error::{Error, Result};
 use crate::io::image_file::save_rgb8_png;
+use crate::model::error::{Error, Result};
 
 const FONT: &str = "sans-serif";
 
@@ -27,7 +27,11 @@ fn register_font() {
 }
 
 fn chart_error(path: &Path, e: impl std::fmt::Display) -> Error {
-    Error::Usage(format!("{}: cannot draw the chart: {e}", path.display()))
+    Error::write(
+        path,
+        "cannot draw the chart",
+        std::io::Error::other(e.to_string()),
+    )
 }
 
 /// Colour of series `i`.

@@ -15,19 +15,20 @@
 
 use std::time::Instant;
 
-use crate::error::Result;
 use crate::fit::adam::LearningRates;
-use crate::fit::adaptive::AdaptiveOptions;
-use crate::fit::dataset::{DatasetSpec, render_dataset};
-use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
+use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
 use crate::fit::loss::{mse, psnr};
+use crate::fit::plan::{FitPlan, Init, PreparedFit};
 use crate::fit::train::{DEFAULT_RATES, FitMode, FitOptions, StepRecord, evaluate, fit};
-use crate::io::dataset::{Dataset, View};
-use crate::raster::Image;
+use crate::model::Image;
+use crate::model::Progress;
+use crate::model::error::Result;
+use crate::model::scene::Scene;
+use crate::model::{Dataset, View};
 use crate::render::{RenderContext, RenderOptions};
 use crate::report::methods::{FrameModels, Method, temporal_roughness};
-use crate::scene::Scene;
-use crate::toy::{POINTS_CUTOFF, points_scene};
+use crate::scenes::dataset::{DatasetSpec, render_dataset};
+use crate::scenes::toy::{POINTS_CUTOFF, points_scene};
 use crate::volume::{Grid, Volume, evaluate_volume, scene_bounds};
 
 /// Everything the experiment does, with the embedded defaults of `cargo run --release`.
@@ -66,7 +67,7 @@ pub struct ExperimentConfig {
 impl Default for ExperimentConfig {
     fn default() -> Self {
         ExperimentConfig {
-            seed: crate::toy::DEFAULT_SEED,
+            seed: crate::scenes::toy::DEFAULT_SEED,
             dataset: DatasetSpec {
                 views: 8,
                 times: 10,
@@ -74,7 +75,7 @@ impl Default for ExperimentConfig {
                 height: 96,
                 time_range: [0.0, 1.0],
                 fov_y_degrees: 40.0,
-                seed: crate::toy::DEFAULT_SEED,
+                seed: crate::scenes::toy::DEFAULT_SEED,
             },
             model_kernels: 300,
             model_scale: [0.1, 0.1, 0.1, 0.1],
@@ -94,26 +95,36 @@ impl Default for ExperimentConfig {
                 height: 64,
                 time_range: [0.0, 1.0],
                 fov_y_degrees: 40.0,
-                seed: crate::toy::DEFAULT_SEED,
+                seed: crate::scenes::toy::DEFAULT_SEED,
             },
         }
     }
 }
 
-/// Progress of a long run: phases of known length.
-pub trait Progress {
-    /// A phase of `total` ticks begins.
-    fn start(&mut self, phase: &str, total: usize);
-    /// One tick of the current phase is done.
-    fn tick(&mut self);
-}
-
-/// Progress reported nowhere.
-pub struct Silent;
-
-impl Progress for Silent {
-    fn start(&mut self, _: &str, _: usize) {}
-    fn tick(&mut self) {}
+impl ExperimentConfig {
+    /// A small, fast configuration for smoke tests (`splat4d report --quick`): fewer views,
+    /// steps and kernels.
+    #[must_use]
+    pub fn quick() -> Self {
+        let mut config = ExperimentConfig::default();
+        config.dataset.views = 4;
+        config.dataset.times = 4;
+        config.dataset.width = 32;
+        config.dataset.height = 32;
+        config.model_kernels = 20;
+        config.model_steps = 60;
+        config.frame_kernels = 5;
+        config.frame_steps = 20;
+        config.ablation_sigma_t = vec![0.05, 0.2];
+        config.sweep_times = 9;
+        config.volume_res = 16;
+        config.adaptive_steps = 60;
+        config.blob_dataset.views = 4;
+        config.blob_dataset.times = 3;
+        config.blob_dataset.width = 24;
+        config.blob_dataset.height = 24;
+        config
+    }
 }
 
 /// One method's results.
@@ -301,39 +312,40 @@ fn fit_options(steps: usize, seed: u64, rates: LearningRates) -> FitOptions {
     }
 }
 
-const MODEL_RATES: LearningRates = LearningRates {
-    mean: 2e-3,
-    time: 2e-3,
-    amplitude: 1e-2,
-    velocity: 0.0,
-    scale: 0.0,
-};
-const FRAME_RATES: LearningRates = LearningRates {
-    mean: 2e-3,
-    time: 0.0,
-    amplitude: 1e-2,
-    velocity: 0.0,
-    scale: 0.0,
-};
-const INITIAL_AMPLITUDE: f64 = 0.1;
+/// The paper's setting: means and amplitudes, scales fixed.
+fn model_rates() -> LearningRates {
+    FitMode::Paper.learning_rates(DEFAULT_RATES)
+}
+
+/// A static fit per frame: the paper's setting with the time means fixed too.
+fn frame_rates() -> LearningRates {
+    LearningRates {
+        time: 0.0,
+        ..model_rates()
+    }
+}
 
 /// An adaptive fit as `splat4d fit` runs it without `--init`: one kernel at the centre of
 /// the cameras' box, densify/prune/merge rounds, `mode`'s parameter groups. Returns the
 /// scene and the seconds it took.
 fn fit_adaptive(
     dataset: &Dataset,
-    bounds: &SpaceTimeBox,
     mode: FitMode,
     steps: usize,
     seed: u64,
     progress: &mut dyn Progress,
 ) -> Result<(Scene, f64)> {
-    let mut scene = centre_scene(bounds, INITIAL_AMPLITUDE)?;
-    let start = Instant::now();
-    let options = FitOptions {
-        adaptive: Some(AdaptiveOptions::default()),
-        ..fit_options(steps, seed, mode.learning_rates(DEFAULT_RATES))
+    let plan = FitPlan {
+        steps,
+        seed,
+        mode: Some(mode),
+        eval_every: (steps / 30).max(1),
+        ..FitPlan::default()
     };
+    let PreparedFit {
+        mut scene, options, ..
+    } = plan.prepare(Init::Auto, &dataset.train, dataset.had_alpha)?;
+    let start = Instant::now();
     fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
         progress.tick()
     })?;
@@ -345,7 +357,6 @@ fn fit_adaptive(
 fn adaptive_fits(
     config: &ExperimentConfig,
     dataset: &Dataset,
-    bounds: &SpaceTimeBox,
     progress: &mut dyn Progress,
 ) -> Result<Vec<Fitted>> {
     let mut fits = Vec::new();
@@ -353,14 +364,8 @@ fn adaptive_fits(
         (ADAPTIVE_NAME, FitMode::Static),
         (VELOCITY_NAME, FitMode::Velocity),
     ] {
-        let (scene, seconds) = fit_adaptive(
-            dataset,
-            bounds,
-            mode,
-            config.adaptive_steps,
-            config.seed,
-            progress,
-        )?;
+        let (scene, seconds) =
+            fit_adaptive(dataset, mode, config.adaptive_steps, config.seed, progress)?;
         fits.push((name, mode, scene, seconds));
     }
     Ok(fits)
@@ -385,7 +390,7 @@ fn blob_model_size(
     config: &ExperimentConfig,
     progress: &mut dyn Progress,
 ) -> Result<Vec<ModelSizeRow>> {
-    let blob = crate::toy::blob_scene();
+    let blob = crate::scenes::toy::blob_scene();
     let spec = config.blob_dataset;
     let options = RenderOptions::default();
     let dataset = render_dataset(&blob, &spec, &options, || {})?;
@@ -397,7 +402,7 @@ fn blob_model_size(
         config.model_kernels,
         &bounds,
         Some(config.model_scale),
-        INITIAL_AMPLITUDE,
+        FitPlan::default().init_amplitude,
         config.seed,
     )?;
     let start = Instant::now();
@@ -405,12 +410,12 @@ fn blob_model_size(
         &mut fixed,
         &dataset.train,
         &dataset.val,
-        &fit_options(config.adaptive_steps, config.seed, MODEL_RATES),
+        &fit_options(config.adaptive_steps, config.seed, model_rates()),
         |_| progress.tick(),
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
     let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
-    fits.extend(adaptive_fits(config, &dataset, &bounds, progress)?);
+    fits.extend(adaptive_fits(config, &dataset, progress)?);
     for fitted in &fits {
         let (heldout_psnr, render_ms) =
             heldout_and_speed(&fitted.2, &dataset.test, &options, &mut context)?;
@@ -442,11 +447,11 @@ fn fit_4d(
         config.model_kernels,
         bounds,
         Some(scale),
-        INITIAL_AMPLITUDE,
+        FitPlan::default().init_amplitude,
         config.seed,
     )?;
     let start = Instant::now();
-    let options = fit_options(config.model_steps, config.seed, MODEL_RATES);
+    let options = fit_options(config.model_steps, config.seed, model_rates());
     let log = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
         progress.tick()
     })?;
@@ -470,7 +475,7 @@ pub fn run_experiment(
         ..config.dataset
     };
 
-    progress.start("dataset", crate::fit::dataset::frame_count(&spec));
+    progress.start("dataset", crate::scenes::dataset::frame_count(&spec));
     let dataset = render_dataset(&truth, &spec, &truth_options, || progress.tick())?;
     let cameras: Vec<crate::Camera> = dataset.train.iter().map(|v| v.camera).collect();
     let bounds = box_from_cameras(&cameras, spec.time_range)?;
@@ -552,14 +557,14 @@ pub fn run_experiment(
             config.frame_kernels,
             &frame_box,
             Some([sigma, sigma, sigma, 1e3]),
-            INITIAL_AMPLITUDE,
+            FitPlan::default().init_amplitude,
             config.seed + 1 + k as u64,
         )?;
         fit(
             &mut scene,
             &views,
             &[],
-            &fit_options(config.frame_steps, config.seed, FRAME_RATES),
+            &fit_options(config.frame_steps, config.seed, frame_rates()),
             |_| progress.tick(),
         )?;
         scenes.push(scene);
@@ -659,7 +664,7 @@ pub fn run_experiment(
             });
         }
     }
-    for fitted in &adaptive_fits(config, &dataset, &bounds, progress)? {
+    for fitted in &adaptive_fits(config, &dataset, progress)? {
         let method = Method::Model4d(&fitted.2);
         let heldout_psnr = split_psnr(&method, &dataset.test, &options, &mut context)?;
         let render_ms =

@@ -3,9 +3,9 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use crate::error::Result;
 use crate::fit::loss::psnr;
 use crate::io::write_bytes_atomically;
+use crate::model::error::Result;
 use crate::report::charts::{Series, bar_chart, line_chart, scatter_chart, volume_slices_figure};
 use crate::report::experiment::{ExperimentResults, ModelSizeRow};
 
@@ -330,7 +330,7 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         volume_slices_figure(&out.join(&name), &v.name, v.tau, &v.volume, vmax)?;
         let _ = writeln!(w, "![{} at t = {}]({name})\n", v.name, v.tau);
     }
-    results.model.save(&out.join("fitted_4d.json"))?;
+    crate::io::scene_file::save_scene(&results.model, &out.join("fitted_4d.json"))?;
     let _ = writeln!(
         w,
         "The fitted 4D scene is saved as `fitted_4d.json` (render it, or make videos of it with `splat4d video`)."

@@ -7,11 +7,11 @@
 //!   t_{k+1}` the linear blend `(1 - α) C_k + α C_{k+1}`, `α = (τ - t_k)/(t_{k+1} - t_k)`, of
 //!   their renders (clamped to the ends outside).
 
-use crate::camera::Camera;
-use crate::error::Result;
-use crate::raster::Image;
+use crate::model::Image;
+use crate::model::camera::Camera;
+use crate::model::error::Result;
+use crate::model::scene::Scene;
 use crate::render::{RenderContext, RenderOptions};
-use crate::scene::Scene;
 
 /// One static scene per training time, in ascending time.
 #[derive(Clone, Debug)]

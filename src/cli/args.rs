@@ -1,0 +1,124 @@
+//! Flags shared by several subcommands, and the parsers of list-valued flags.
+
+use std::path::PathBuf;
+
+use splat4d::raster::ExpMode;
+use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
+use splat4d::tasks::render::{CameraSource, ViewRequest};
+
+/// What to look at: a scene through a camera at a time.
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("camera_source").required(true).args(["camera", "camera_from"])))]
+pub struct ViewFlags {
+    /// Scene file: JSON or 4D PLY.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Camera JSON file.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// A glTF model's camera instead: `MODEL.gltf[#index]` (the index-th camera node).
+    #[arg(long)]
+    camera_from: Option<String>,
+    /// Image size `WxH` for --camera-from (default: 512 high, the camera's aspect ratio).
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Scene time τ.
+    #[arg(long, allow_negative_numbers = true)]
+    time: f64,
+}
+
+impl ViewFlags {
+    /// The view these flags and `render` describe.
+    pub fn request(&self, render: &RenderFlags) -> ViewRequest {
+        let camera = match (&self.camera, &self.camera_from) {
+            (Some(path), _) => CameraSource::File(path.clone()),
+            (None, spec) => CameraSource::Gltf {
+                spec: spec.clone().unwrap_or_default(),
+                size: self.size,
+            },
+        };
+        ViewRequest {
+            scene: self.scene.clone(),
+            camera,
+            time: self.time,
+            options: render.options(),
+            threads: render.threads(),
+        }
+    }
+}
+
+/// Flags shared by every command that renders.
+#[derive(Debug, clap::Args)]
+pub struct RenderFlags {
+    /// Variance added to each screen-space covariance, px² (SPEC §4).
+    #[arg(long, default_value_t = DEFAULT_DILATION, allow_negative_numbers = true)]
+    dilation: f64,
+    /// Cut-off ε on a kernel's value; 0 disables truncation (SPEC §5).
+    #[arg(long, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
+    cutoff: f64,
+    /// How exp(-q/2) is evaluated per pixel: `poly` (inlined polynomial, relative error
+    /// ≤ 4e-7, batched and vectorised) or `std` (libm).
+    #[arg(long, default_value = "poly")]
+    exp: ExpMode,
+    /// Worker threads (default: one per core). The output does not depend on it.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
+}
+
+impl RenderFlags {
+    /// The rendering options (validated by the task).
+    pub fn options(&self) -> RenderOptions {
+        RenderOptions {
+            dilation: self.dilation,
+            cutoff: self.cutoff,
+            exp: self.exp,
+        }
+    }
+
+    /// The worker threads asked for.
+    pub fn threads(&self) -> Option<usize> {
+        self.threads.map(usize::from)
+    }
+}
+
+/// `N` comma-separated finite numbers.
+pub fn parse_list<const N: usize>(text: &str) -> Result<[f64; N], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("`{v}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    let array: [f64; N] = values
+        .try_into()
+        .map_err(|v: Vec<f64>| format!("expected {N} comma-separated numbers, got {}", v.len()))?;
+    match array.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(format!("{v} is not finite")),
+        None => Ok(array),
+    }
+}
+
+/// A comma-separated list of times.
+#[derive(Clone, Debug)]
+pub struct TimeList(pub Vec<f64>);
+
+/// Parses a [`TimeList`].
+pub fn parse_times(text: &str) -> Result<TimeList, String> {
+    text.split(',')
+        .map(|v| match v.trim().parse::<f64>() {
+            Ok(t) if t.is_finite() => Ok(t),
+            _ => Err(format!("`{v}` is not a finite time")),
+        })
+        .collect::<Result<_, _>>()
+        .map(TimeList)
+}
+
+/// `WxH` with both ≥ 1.
+pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{text}` is not WxH"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|&n| n > 0);
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("`{text}` is not WxH with W, H ≥ 1")),
+    }
+}

@@ -1,0 +1,203 @@
+//! `splat4d fit`: kernels fitted to a multi-view dataset with Adam. Every default comes from
+//! [`splat4d::fit::plan::FitPlan`]; this file only maps flags onto it.
+
+use std::path::PathBuf;
+
+use splat4d::Result;
+use splat4d::fit::adam::LearningRates;
+use splat4d::fit::adaptive::AdaptiveOptions;
+use splat4d::fit::plan::FitPlan;
+use splat4d::fit::train::FitMode;
+use splat4d::tasks::fit::{FitRequest, fit_dataset};
+
+use super::args::{RenderFlags, parse_list};
+use super::progress::Bars;
+
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// Dataset folder (D-NeRF layout: transforms_train.json, and val/test for held-out views).
+    #[arg(long)]
+    views: PathBuf,
+    /// Initial scene: `auto` (one kernel at the centre of the box, then densify, prune and
+    /// merge so the count follows the data), `random:N` for N kernels in the box (a fixed count unless
+    /// --adaptive), or a scene file.
+    #[arg(long, default_value = "auto")]
+    init: String,
+    /// Kernels `auto` starts from: 1 is one kernel at the centre of the box (space and
+    /// time); more are spread at random in the box.
+    #[arg(long, default_value_t = FitPlan::default().start_kernels)]
+    start_kernels: usize,
+    /// Densify and prune during the fit (always on with `--init auto`).
+    #[arg(long)]
+    adaptive: bool,
+    /// Budget of the adaptive fit: never more kernels than this.
+    #[arg(long, default_value_t = FitPlan::default().rounds.max_kernels)]
+    max_kernels: usize,
+    /// Steps between densify/prune rounds.
+    #[arg(long, default_value_t = FitPlan::default().rounds.every)]
+    densify_every: usize,
+    /// Fraction of the steps before the first densify/prune round.
+    #[arg(long, default_value_t = FitPlan::default().rounds.from)]
+    densify_from: f64,
+    /// Fraction of the steps after which the kernel count is frozen.
+    #[arg(long, default_value_t = FitPlan::default().rounds.until)]
+    densify_until: f64,
+    /// Mean positional gradient (loss per standard deviation of motion) at which a kernel
+    /// is densified.
+    #[arg(long, default_value_t = FitPlan::default().rounds.gradient_threshold)]
+    densify_threshold: f64,
+    /// Kernels are densified only when the mean training loss fell by less than this
+    /// fraction over the last --densify-every steps (the fit has stalled).
+    #[arg(long, default_value_t = FitPlan::default().rounds.min_improvement)]
+    min_improvement: f64,
+    /// Kernels within this many standard deviations of each other (position, time,
+    /// velocity, log-scale) are merged into one; 0 disables merging.
+    #[arg(long, default_value_t = FitPlan::default().rounds.merge_tolerance)]
+    merge_tolerance: f64,
+    /// Largest fraction of the kernels densified in one round.
+    #[arg(long, default_value_t = FitPlan::default().rounds.max_growth)]
+    max_growth: f64,
+    /// Peak |amplitude| below which a kernel is pruned (default: 2/255).
+    #[arg(long, default_value_t = FitPlan::default().rounds.prune_below)]
+    prune_below: f64,
+    /// Densified kernels whose mean spatial scale is above this are split (scales / 1.6),
+    /// the others cloned (default: when the scales are not fitted, an eighth of the largest
+    /// initial scale; otherwise never split: the fit sizes the kernels).
+    #[arg(long)]
+    min_scale: Option<f64>,
+    /// Adam steps.
+    #[arg(long, default_value_t = FitPlan::default().steps)]
+    steps: usize,
+    /// Output scene JSON.
+    #[arg(long)]
+    out: PathBuf,
+    /// Box for `random:N`: `x0,y0,z0,x1,y1,z1` (default: from the cameras).
+    #[arg(long, value_parser = parse_list::<6>, allow_hyphen_values = true)]
+    r#box: Option<[f64; 6]>,
+    /// Time range for `random:N`: `t0,t1` (default: the training times' range).
+    #[arg(long, value_parser = parse_list::<2>, allow_hyphen_values = true)]
+    time_range: Option<[f64; 2]>,
+    /// Scales for `random:N`: `sx,sy,sz,st` (default: from the box and N).
+    #[arg(long, value_parser = parse_list::<4>)]
+    init_scale: Option<[f64; 4]>,
+    /// Amplitude of every channel for `random:N`.
+    #[arg(long, default_value_t = FitPlan::default().init_amplitude, allow_negative_numbers = true)]
+    init_amplitude: f64,
+    /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
+    #[arg(long)]
+    log: Option<PathBuf>,
+    /// Learning rate of the spatial means.
+    #[arg(long, default_value_t = FitPlan::default().rates.mean)]
+    lr_mean: f64,
+    /// Learning rate of the time means.
+    #[arg(long, default_value_t = FitPlan::default().rates.time)]
+    lr_time: f64,
+    /// Learning rate of the amplitudes.
+    #[arg(long, default_value_t = FitPlan::default().rates.amplitude)]
+    lr_amplitude: f64,
+    /// Learning rate of the velocities (with `--mode velocity` or --fit-velocity).
+    #[arg(long, default_value_t = FitPlan::default().rates.velocity)]
+    lr_velocity: f64,
+    /// Learning rates at the last step as a fraction of the first (exponential decay).
+    #[arg(long, default_value_t = FitPlan::default().final_rate_factor)]
+    lr_final: f64,
+    /// What the fit moves: `paper` (means and amplitudes; kernels static in space, scales
+    /// fixed, as in the seed paper), `static` (also the scales), `velocity` (also the
+    /// velocities and the scales). Default: `velocity` with `--init auto` (the most compact
+    /// models in the report), `paper` otherwise.
+    #[arg(long)]
+    mode: Option<FitMode>,
+    /// Fit the velocities too, whatever the mode.
+    #[arg(long)]
+    fit_velocity: bool,
+    /// Fit the scales (sx, sy, sz, st) too, in log space, whatever the mode.
+    #[arg(long)]
+    fit_scale: bool,
+    /// Learning rate of the scales, a relative change per step (modes `static` and
+    /// `velocity`, or --fit-scale).
+    #[arg(long, default_value_t = FitPlan::default().rates.scale)]
+    lr_scale: f64,
+    /// Keep the spatial means fixed.
+    #[arg(long)]
+    freeze_mean: bool,
+    /// Keep the time means fixed.
+    #[arg(long)]
+    freeze_time: bool,
+    /// Keep the amplitudes fixed.
+    #[arg(long)]
+    freeze_amplitude: bool,
+    /// Views per step.
+    #[arg(long, default_value_t = FitPlan::default().batch_size)]
+    batch: usize,
+    /// Held-out evaluation period, steps (0: only at the end).
+    #[arg(long, default_value_t = FitPlan::default().eval_every)]
+    eval_every: usize,
+    /// Seed of the batch order and of `random:N`.
+    #[arg(long, default_value_t = FitPlan::default().seed)]
+    seed: u64,
+    /// Background `r,g,b`: RGBA images are composited over it and the fitted scene uses it
+    /// (default: white when the images have alpha, as D-NeRF does; otherwise the initial
+    /// scene's, black for `random:N`).
+    #[arg(long, value_parser = parse_list::<3>)]
+    background: Option<[f64; 3]>,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+pub fn run(args: &FitArgs) -> Result<()> {
+    let defaults = FitPlan::default();
+    let plan = FitPlan {
+        steps: args.steps,
+        start_kernels: args.start_kernels,
+        adaptive: args.adaptive,
+        rounds: AdaptiveOptions {
+            every: args.densify_every,
+            from: args.densify_from,
+            until: args.densify_until,
+            gradient_threshold: args.densify_threshold,
+            prune_below: args.prune_below,
+            max_growth: args.max_growth,
+            min_improvement: args.min_improvement,
+            merge_tolerance: args.merge_tolerance,
+            max_kernels: args.max_kernels,
+            ..defaults.rounds
+        },
+        min_scale: args.min_scale,
+        bounds: args.r#box,
+        time_range: args.time_range,
+        init_scale: args.init_scale,
+        init_amplitude: args.init_amplitude,
+        rates: LearningRates {
+            mean: args.lr_mean,
+            time: args.lr_time,
+            amplitude: args.lr_amplitude,
+            velocity: args.lr_velocity,
+            scale: args.lr_scale,
+        },
+        final_rate_factor: args.lr_final,
+        mode: args.mode,
+        fit_velocity: args.fit_velocity,
+        fit_scale: args.fit_scale,
+        freeze_mean: args.freeze_mean,
+        freeze_time: args.freeze_time,
+        freeze_amplitude: args.freeze_amplitude,
+        batch_size: args.batch,
+        eval_every: args.eval_every,
+        seed: args.seed,
+        background: args.background,
+        render: args.render.options(),
+    };
+    let request = FitRequest {
+        views: args.views.clone(),
+        init: args.init.clone(),
+        plan,
+        out: args.out.clone(),
+        log: args.log.clone(),
+        threads: args.render.threads(),
+    };
+    let mut bars = Bars::new();
+    let summary = fit_dataset(&request, &mut bars)?;
+    bars.finish();
+    super::print(summary);
+    Ok(())
+}

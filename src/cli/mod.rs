@@ -1,0 +1,81 @@
+//! The command line: clap flags → a task's request → one call into
+//! [`splat4d::tasks`] → its summary printed. One file per subcommand; no defaults or
+//! automatic choices live here (the fit's are in `splat4d::fit::plan`).
+
+mod args;
+mod bench;
+mod dataset;
+mod export_ply;
+mod fit;
+mod grad;
+mod import_gltf;
+mod progress;
+mod render;
+mod report;
+mod toy;
+mod video;
+mod volume;
+
+use clap::{Parser, Subcommand};
+
+/// Prints a task's summary to stdout. A closed stdout (`splat4d … | head`) is not an
+/// error: the work is done and written, only the summary has no reader.
+fn print(summary: impl std::fmt::Display) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stdout().lock(), "{summary}");
+}
+
+/// splat4d: render and fit dynamic scenes of 4D Gaussian kernels on the CPU.
+///
+/// Without a subcommand, runs the seed paper's experiment and writes `out/report.md`.
+#[derive(Debug, Parser)]
+#[command(name = "splat4d", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Render a scene through a camera at one time into a PNG or EXR image.
+    Render(render::RenderArgs),
+    /// The MSE of a render against a target image, and its gradient per kernel, as JSON.
+    Grad(grad::GradArgs),
+    /// Render a multi-view dataset (D-NeRF / Blender layout) of a scene.
+    Dataset(dataset::DatasetArgs),
+    /// Fit kernels to a multi-view dataset with Adam.
+    Fit(Box<fit::FitArgs>),
+    /// Write the seed paper's toy scene: its point data, or the continuous blob.
+    Toy(toy::ToyArgs),
+    /// Evaluate the Eq. 1 sum on a 3D grid; write slices through its peak and print max/min per time.
+    Volume(volume::VolumeArgs),
+    /// Sample a glTF 2.0 model (.gltf or .glb) and its node animation into 4D kernels.
+    ImportGltf(import_gltf::ImportGltfArgs),
+    /// Write the 3D Gaussian Splatting PLY of a scene's slice at one time, for splat viewers.
+    ExportPly(export_ply::ExportPlyArgs),
+    /// Render videos along camera paths: orbits at fixed times, a spiral, or a path file.
+    Video(video::VideoArgs),
+    /// Measure forward-render speed, with the error against the f64 reference.
+    Bench(bench::BenchArgs),
+    /// Run the seed paper's experiment (toy data → dataset → fits → baselines → ablation →
+    /// volumes) and write `report.md` with its charts.
+    Report(report::ReportArgs),
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> splat4d::Result<()> {
+    match cli.command {
+        None => report::run(&report::ReportArgs::default()),
+        Some(Command::Render(args)) => render::run(&args),
+        Some(Command::Grad(args)) => grad::run(&args),
+        Some(Command::Dataset(args)) => dataset::run(&args),
+        Some(Command::Fit(args)) => fit::run(&args),
+        Some(Command::Toy(args)) => toy::run(&args),
+        Some(Command::Volume(args)) => volume::run(&args),
+        Some(Command::Report(args)) => report::run(&args),
+        Some(Command::Video(args)) => video::run(&args),
+        Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::ExportPly(args)) => export_ply::run(&args),
+        Some(Command::ImportGltf(args)) => import_gltf::run(&args),
+    }
+}

@@ -1,0 +1,70 @@
+//! `splat4d report` (and `splat4d` alone): the seed paper's experiment and its report.
+
+use std::path::PathBuf;
+
+use splat4d::Result;
+use splat4d::report::experiment::ExperimentConfig;
+use splat4d::tasks::report::write_report;
+
+use super::args::parse_size;
+use super::progress::Bars;
+
+#[derive(Debug, clap::Args)]
+pub struct ReportArgs {
+    /// Output folder for report.md and its charts.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// A small, fast configuration (for smoke tests): fewer views, steps and kernels.
+    #[arg(long)]
+    quick: bool,
+    /// Kernels of the 4D model (overrides the default or --quick).
+    #[arg(long)]
+    kernels: Option<usize>,
+    /// Adam steps of the 4D model and of each ablation fit.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Image size `WxH` of the dataset.
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+}
+
+impl Default for ReportArgs {
+    fn default() -> Self {
+        ReportArgs {
+            out: PathBuf::from("out"),
+            quick: false,
+            kernels: None,
+            steps: None,
+            size: None,
+        }
+    }
+}
+
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let mut config = if args.quick {
+        ExperimentConfig::quick()
+    } else {
+        ExperimentConfig::default()
+    };
+    let mut command = format!("splat4d report --out {}", args.out.display());
+    if args.quick {
+        command.push_str(" --quick");
+    }
+    if let Some(n) = args.kernels {
+        config.model_kernels = n;
+        command.push_str(&format!(" --kernels {n}"));
+    }
+    if let Some(n) = args.steps {
+        config.model_steps = n;
+        command.push_str(&format!(" --steps {n}"));
+    }
+    if let Some((w, h)) = args.size {
+        (config.dataset.width, config.dataset.height) = (w, h);
+        command.push_str(&format!(" --size {w}x{h}"));
+    }
+    let mut bars = Bars::new();
+    let summary = write_report(&config, &args.out, &command, &mut bars)?;
+    bars.finish();
+    super::print(summary);
+    Ok(())
+}

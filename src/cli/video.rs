@@ -1,0 +1,116 @@
+//! `splat4d video`: videos along camera paths — orbits at fixed times, a spiral, or a path
+//! file.
+
+use std::path::PathBuf;
+
+use splat4d::Result;
+use splat4d::io::video::VideoOptions;
+use splat4d::scenes::paths::{Circle, Lens};
+use splat4d::tasks::video::{CircleSpec as Spec, VideoRequest, write_videos};
+
+use super::args::{RenderFlags, TimeList, parse_list, parse_size, parse_times};
+use super::progress::Bars;
+
+/// An orbit or spiral: explicit `cx,cy,cz,radius,elevation,frames`, or `auto` (from the
+/// scene's bounds: 20° elevation, 60 frames).
+#[derive(Clone, Debug)]
+pub struct CircleSpec(Option<[f64; 6]>);
+
+fn parse_circle(text: &str) -> std::result::Result<CircleSpec, String> {
+    if text == "auto" {
+        return Ok(CircleSpec(None));
+    }
+    let values = parse_list::<6>(text)?;
+    if values[5] < 1.0 || values[5].fract() != 0.0 {
+        return Err(format!("frames = {} must be a whole number ≥ 1", values[5]));
+    }
+    Ok(CircleSpec(Some(values)))
+}
+
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("path_kind").required(true).multiple(true).args(["orbit", "spiral", "path"])))]
+pub struct VideoArgs {
+    /// Scene JSON file.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Orbit at each of --times: `cx,cy,cz,radius,elevation_degrees,frames`, or alone for
+    /// one framing the scene (a value starting with `-` needs `--orbit=-1,...`).
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
+    orbit: Option<CircleSpec>,
+    /// Times of the orbits, comma-separated.
+    #[arg(long, default_value = "0.5", value_parser = parse_times, allow_hyphen_values = true)]
+    times: TimeList,
+    /// One turn while time runs over --time-range and the elevation rises from -e to +e:
+    /// `cx,cy,cz,radius,elevation_degrees,frames`, or alone for one framing the scene.
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
+    spiral: Option<CircleSpec>,
+    /// Time range of the spiral, `t0,t1`.
+    #[arg(long, value_parser = parse_list::<2>, default_value = "0,1", allow_hyphen_values = true)]
+    time_range: [f64; 2],
+    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
+    #[arg(long)]
+    path: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Frame size of orbits and spirals, `WxH`.
+    #[arg(long, value_parser = parse_size, default_value = "256x256")]
+    size: (u32, u32),
+    /// Vertical field of view of orbits and spirals, degrees.
+    #[arg(long, default_value_t = 40.0)]
+    fov: f64,
+    /// Frames per second of the GIF and MP4.
+    #[arg(long, default_value_t = 25, value_parser = clap::value_parser!(u32).range(1..=100))]
+    fps: u32,
+    /// Do not write GIFs.
+    #[arg(long)]
+    no_gif: bool,
+    /// Do not try ffmpeg for MP4s.
+    #[arg(long)]
+    no_mp4: bool,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+impl CircleSpec {
+    fn spec(&self) -> Spec {
+        match self.0 {
+            Some([cx, cy, cz, radius, elevation, frames]) => Spec::Given(Circle {
+                centre: [cx, cy, cz],
+                radius,
+                elevation_degrees: elevation,
+                frames: frames as usize,
+            }),
+            None => Spec::Auto,
+        }
+    }
+}
+
+pub fn run(args: &VideoArgs) -> Result<()> {
+    let request = VideoRequest {
+        scene: args.scene.clone(),
+        orbit: args.orbit.as_ref().map(CircleSpec::spec),
+        times: args.times.0.clone(),
+        spiral: args.spiral.as_ref().map(CircleSpec::spec),
+        time_range: args.time_range,
+        path: args.path.clone(),
+        out: args.out.clone(),
+        lens: Lens {
+            width: args.size.0,
+            height: args.size.1,
+            fov_y_degrees: args.fov,
+        },
+        video: VideoOptions {
+            fps: args.fps,
+            gif: !args.no_gif,
+            mp4: !args.no_mp4,
+        },
+        options: args.render.options(),
+        threads: args.render.threads(),
+    };
+    let mut bars = Bars::new();
+    let summary = write_videos(&request, &mut bars)?;
+    bars.finish();
+    super::print(summary);
+    Ok(())
+}

@@ -1,0 +1,26 @@
+//! The model: plain data and math, no files, no threads of its own.
+//!
+//! - [`Scene`] / [`Kernel`]: 4D Gaussian kernels as struct-of-arrays (SPEC §1);
+//! - [`Camera`]: a pinhole camera, OpenCV axes (SPEC §3);
+//! - [`Image`]: linear RGB, row-major (SPEC §5);
+//! - [`View`] / [`Dataset`]: images with their camera and time, in splits, to fit;
+//! - [`Error`] / [`ErrorKind`]: what went wrong, by kind, naming file, item and field;
+//! - [`random`]: the seeded generator every random choice goes through;
+//! - [`progress`]: how long work reports its progress.
+//!
+//! Every other module builds on these; nothing here imports from the rest of the crate.
+
+pub mod camera;
+pub mod error;
+pub mod image;
+pub mod progress;
+pub mod random;
+pub mod scene;
+pub mod view;
+
+pub use camera::Camera;
+pub use error::{Error, ErrorKind, Result, check_finite};
+pub use image::Image;
+pub use progress::{Progress, Silent};
+pub use scene::{Kernel, Scene};
+pub use view::{Dataset, View};

@@ -1,0 +1,18 @@
+//! Progress of long work, reported through a trait so the library knows nothing of
+//! terminals: the command line shows a bar (or log lines when piped), tests stay silent.
+
+/// Progress of a long run: phases of known length.
+pub trait Progress: Send {
+    /// A phase of `total` ticks begins.
+    fn start(&mut self, phase: &str, total: usize);
+    /// One tick of the current phase is done.
+    fn tick(&mut self);
+}
+
+/// Progress reported nowhere.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn start(&mut self, _: &str, _: usize) {}
+    fn tick(&mut self) {}
+}

@@ -1,0 +1,160 @@
+//! Scenes of 4D Gaussian kernels (SPEC §1), stored as struct-of-arrays.
+//!
+//! A kernel has a space-time mean `[x, y, z, t]`, standard deviations `[sx, sy, sz, st]`
+//! (all > 0; `sx, sy, sz` are the conditional spreads of the slice at a fixed time), an
+//! unnormalised peak amplitude `[r, g, b]` (any finite real), a Hamilton quaternion
+//! `[w, x, y, z]` turning the spatial axes (normalised on load; active rotation, the columns
+//! of R are the kernel's axes in world space) and a velocity `[vx, vy, vz]` in world units per
+//! time unit (not rotated). Parameters are stored in f64: the per-kernel stage of the
+//! renderer works in f64 (SPEC §5, precision).
+//!
+//! Files (JSON and 4D PLY) are read and written by [`crate::io::scene_file`]; this module
+//! knows nothing of them. `Kernel` carries serde derives so that the file layer can read it.
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::error::{Error, Result, check_finite};
+
+/// One 4D kernel, as read from or written to a file. The renderer works on [`Scene`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Kernel {
+    /// Centre `[x, y, z, t]`: world space and scene time.
+    pub mean: [f64; 4],
+    /// Standard deviations `[sx, sy, sz, st]`, all > 0.
+    pub scale: [f64; 4],
+    /// Peak intensity per channel `[r, g, b]`.
+    pub amplitude: [f64; 3],
+    /// Hamilton quaternion `[w, x, y, z]`.
+    #[serde(default = "identity_rotation")]
+    pub rotation: [f64; 4],
+    /// World units per time unit.
+    #[serde(default)]
+    pub velocity: [f64; 3],
+}
+
+fn identity_rotation() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+impl Kernel {
+    /// An axis-aligned, static kernel.
+    #[must_use]
+    pub fn new(mean: [f64; 4], scale: [f64; 4], amplitude: [f64; 3]) -> Self {
+        Kernel {
+            mean,
+            scale,
+            amplitude,
+            rotation: identity_rotation(),
+            velocity: [0.0; 3],
+        }
+    }
+}
+
+/// A scene: kernels as struct-of-arrays (index `i` of every array is kernel `i`) and a
+/// background colour added to every pixel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// `[x, y, z, t]` per kernel.
+    pub means: Vec<[f64; 4]>,
+    /// `[sx, sy, sz, st]` per kernel.
+    pub scales: Vec<[f64; 4]>,
+    /// `[r, g, b]` per kernel.
+    pub amplitudes: Vec<[f64; 3]>,
+    /// Unit quaternions `[w, x, y, z]` per kernel.
+    pub rotations: Vec<[f64; 4]>,
+    /// `[vx, vy, vz]` per kernel.
+    pub velocities: Vec<[f64; 3]>,
+    /// `[r, g, b]`, linear.
+    pub background: [f64; 3],
+}
+
+impl Scene {
+    /// A scene from kernels; rotations are normalised and everything is validated.
+    /// `origin` names the data in error messages.
+    pub fn from_kernels(kernels: &[Kernel], background: [f64; 3], origin: &str) -> Result<Self> {
+        let mut scene = Scene {
+            background,
+            ..Scene::default()
+        };
+        check_finite(origin, "scene", "background", &background)?;
+        for (index, kernel) in kernels.iter().enumerate() {
+            scene.push_checked(kernel, index, origin)?;
+        }
+        Ok(scene)
+    }
+
+    fn push_checked(&mut self, kernel: &Kernel, index: usize, origin: &str) -> Result<()> {
+        let item = format!("kernel {index}");
+        check_finite(origin, &item, "mean", &kernel.mean)?;
+        check_finite(origin, &item, "scale", &kernel.scale)?;
+        check_finite(origin, &item, "amplitude", &kernel.amplitude)?;
+        check_finite(origin, &item, "rotation", &kernel.rotation)?;
+        check_finite(origin, &item, "velocity", &kernel.velocity)?;
+        if let Some(c) = kernel.scale.iter().position(|&s| s <= 0.0) {
+            return Err(Error::invalid(
+                origin,
+                item,
+                "scale",
+                format!("scale[{c}] = {} must be > 0", kernel.scale[c]),
+            ));
+        }
+        let norm = kernel.rotation.iter().map(|q| q * q).sum::<f64>().sqrt();
+        if !(norm > 0.0 && norm.is_finite()) {
+            return Err(Error::invalid(
+                origin,
+                item,
+                "rotation",
+                "the quaternion is zero (or its norm overflows) and cannot be normalised",
+            ));
+        }
+        self.means.push(kernel.mean);
+        self.scales.push(kernel.scale);
+        self.amplitudes.push(kernel.amplitude);
+        // A quaternion within a few ulps of unit norm is already normalised at f64 precision;
+        // dividing again would only perturb its last bits (and break exact round trips).
+        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON;
+        self.rotations.push(if unit {
+            kernel.rotation
+        } else {
+            kernel.rotation.map(|q| q / norm)
+        });
+        self.velocities.push(kernel.velocity);
+        Ok(())
+    }
+
+    /// Number of kernels.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// True when the scene has no kernel.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Kernel `i` as a [`Kernel`].
+    #[must_use]
+    pub fn kernel(&self, i: usize) -> Kernel {
+        Kernel {
+            mean: self.means[i],
+            scale: self.scales[i],
+            amplitude: self.amplitudes[i],
+            rotation: self.rotations[i],
+            velocity: self.velocities[i],
+        }
+    }
+
+    /// All kernels, in order.
+    #[must_use]
+    pub fn kernels(&self) -> Vec<Kernel> {
+        (0..self.len()).map(|i| self.kernel(i)).collect()
+    }
+
+    /// Checks every value (finite, scales > 0, unit quaternions): for scenes changed in code.
+    pub fn validate(&self, origin: &str) -> Result<()> {
+        Scene::from_kernels(&self.kernels(), self.background, origin).map(|_| ())
+    }
+}

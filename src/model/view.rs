@@ -1,0 +1,31 @@
+//! Views to fit: images with the camera that took them and their scene time, and the
+//! train / val / test splits of a dataset.
+
+use crate::model::camera::Camera;
+use crate::model::image::Image;
+
+/// One image with its camera and time.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The camera that took it.
+    pub camera: Camera,
+    /// Scene time.
+    pub time: f64,
+    /// Linear RGB.
+    pub image: Image,
+    /// Where it came from (`./train/r_000`), for messages and reports.
+    pub name: String,
+}
+
+/// A dataset's splits.
+#[derive(Clone, Debug, Default)]
+pub struct Dataset {
+    /// Views to fit.
+    pub train: Vec<View>,
+    /// Held-out views for monitoring.
+    pub val: Vec<View>,
+    /// Held-out views for final evaluation.
+    pub test: Vec<View>,
+    /// True when some image had an alpha channel (composited over the background).
+    pub had_alpha: bool,
+}

@@ -1,0 +1,168 @@
+//! f64 twin of the backward pass, [`crate::backward`] (SPEC §6): the loss and its exact
+//! gradient by the chain rule written with whole matrices.
+
+use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
+
+use crate::backward::Gradients;
+use crate::model::{Camera, Scene};
+use crate::reference::pixels::{quadratic_form, render_reference};
+use crate::reference::reference_kernels;
+use crate::render::RenderOptions;
+
+/// `MSE = mean over pixels and channels of (C - C_gt)²` (SPEC §6, one view), in f64.
+#[must_use]
+pub fn mse(image: &[f64], target: &[f32]) -> f64 {
+    assert_eq!(image.len(), target.len(), "image and target sizes differ");
+    image
+        .iter()
+        .zip(target)
+        .map(|(c, &t)| (c - f64::from(t)).powi(2))
+        .sum::<f64>()
+        / image.len() as f64
+}
+
+/// The MSE of the f64 render against `target` (RGB, row-major) and its exact gradient
+/// (SPEC §6), by the chain rule written with whole matrices:
+///
+/// ```text
+/// ∂L/∂Q  = Σ_pairs ∂L/∂q d dᵀ,  ∂L/∂m2 = Σ_pairs ∂L/∂q (-2 Q d),  ∂L/∂q = -½ G Σ_c ∂L/∂C_c a_c
+/// ∂L/∂Σ2 = -Q (∂L/∂Q) Q,        ∂L/∂J = 2 (∂L/∂Σ2) J Σc
+/// ∂L/∂p  = Σ_(r,c) (∂L/∂J)_rc ∂J_rc/∂p + (∂m2/∂p)ᵀ ∂L/∂m2,   ∂L/∂m = Rcᵀ ∂L/∂p
+/// ```
+///
+/// then through the slice as SPEC §6 lists.
+#[must_use]
+pub fn reference_loss_and_gradients(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    target: &[f32],
+) -> (f64, Gradients) {
+    let image = render_reference(scene, camera, tau, options);
+    let loss = mse(&image.pixels, target);
+    let n = scene.len();
+    let mut grads = Gradients::zeros(n);
+    let scale = 2.0 / image.pixels.len() as f64;
+    let v_image: Vec<f64> = image
+        .pixels
+        .iter()
+        .zip(target)
+        .map(|(c, &t)| scale * (c - f64::from(t)))
+        .collect();
+    let rc = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
+    for kernel in reference_kernels(scene, camera, tau, options) {
+        let q_mat = DMat2::from_cols_array_2d(&kernel.conic).transpose();
+        let mut v_q = DMat2::ZERO;
+        let mut v_m2 = DVec2::ZERO;
+        let mut v_a = [0.0; 3];
+        for j in 0..camera.height {
+            for i in 0..camera.width {
+                let q = quadratic_form(&kernel, i, j);
+                if q > kernel.qmax {
+                    continue;
+                }
+                let k = 3 * (j as usize * camera.width as usize + i as usize);
+                let g = (-0.5 * q).exp();
+                let mut v_q_scalar = 0.0;
+                for c in 0..3 {
+                    v_a[c] += v_image[k + c] * g;
+                    v_q_scalar += -0.5 * g * v_image[k + c] * kernel.amplitude[c];
+                }
+                let d =
+                    DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5) - DVec2::from(kernel.mean);
+                v_q += v_q_scalar * DMat2::from_cols(d * d.x, d * d.y);
+                v_m2 += v_q_scalar * (-2.0 * (q_mat * d));
+            }
+        }
+        // Σ2 = J Σc Jᵀ + s I; as 3×3 with a zero third row of J.
+        let [x, y, z] = kernel.camera_mean;
+        let [tx, ty] = kernel.clamped_xy;
+        let (fx, fy) = (camera.fx, camera.fy);
+        let j_of = |entries: [[f64; 3]; 2]| {
+            DMat3::from_cols_array_2d(&[
+                [entries[0][0], entries[1][0], 0.0],
+                [entries[0][1], entries[1][1], 0.0],
+                [entries[0][2], entries[1][2], 0.0],
+            ])
+        };
+        let jac = j_of([
+            [fx / z, 0.0, -fx * tx / (z * z)],
+            [0.0, fy / z, -fy * ty / (z * z)],
+        ]);
+        let v_sigma2 = -(q_mat * v_q * q_mat);
+        let v_sigma2_3 = DMat3::from_cols_array_2d(&[
+            [v_sigma2.x_axis.x, v_sigma2.x_axis.y, 0.0],
+            [v_sigma2.y_axis.x, v_sigma2.y_axis.y, 0.0],
+            [0.0; 3],
+        ]);
+        let v_jac = 2.0 * v_sigma2_3 * jac * kernel.camera_covariance;
+        // ∂J/∂x, ∂J/∂y, ∂J/∂z with tx = x (unclamped) or z·lim (clamped), SPEC §6.
+        let (dtx_dx, dtx_dz) = if kernel.clamped[0] {
+            (0.0, tx / z)
+        } else {
+            (1.0, 0.0)
+        };
+        let (dty_dy, dty_dz) = if kernel.clamped[1] {
+            (0.0, ty / z)
+        } else {
+            (1.0, 0.0)
+        };
+        let dj_dx = j_of([[0.0, 0.0, -fx * dtx_dx / (z * z)], [0.0; 3]]);
+        let dj_dy = j_of([[0.0; 3], [0.0, 0.0, -fy * dty_dy / (z * z)]]);
+        let dj_dz = j_of([
+            [
+                -fx / (z * z),
+                0.0,
+                -fx * dtx_dz / (z * z) + 2.0 * fx * tx / (z * z * z),
+            ],
+            [
+                0.0,
+                -fy / (z * z),
+                -fy * dty_dz / (z * z) + 2.0 * fy * ty / (z * z * z),
+            ],
+        ]);
+        let frobenius = |a: DMat3, b: DMat3| {
+            a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+        };
+        let dm2_dp = [
+            [fx / z, 0.0, -fx * x / (z * z)],
+            [0.0, fy / z, -fy * y / (z * z)],
+        ];
+        let v_p = DVec3::new(
+            frobenius(v_jac, dj_dx) + v_m2.x * dm2_dp[0][0] + v_m2.y * dm2_dp[1][0],
+            frobenius(v_jac, dj_dy) + v_m2.x * dm2_dp[0][1] + v_m2.y * dm2_dp[1][1],
+            frobenius(v_jac, dj_dz) + v_m2.x * dm2_dp[0][2] + v_m2.y * dm2_dp[1][2],
+        );
+        let v_m = rc.transpose() * v_p;
+        // Slice (SPEC §6).
+        let i = kernel.index;
+        let amplitude = scene.amplitudes[i];
+        let velocity = DVec3::from(scene.velocities[i]);
+        let st = scene.scales[i][3];
+        let dt = tau - scene.means[i][3];
+        let v_t = (0..3)
+            .map(|c| amplitude[c] * kernel.weight * (kernel.d / st) * v_a[c])
+            .sum::<f64>()
+            - velocity.dot(v_m);
+        grads.v_means[i] = [v_m.x, v_m.y, v_m.z, v_t];
+        grads.v_amplitudes[i] = v_a.map(|v| kernel.weight * v);
+        grads.v_velocities[i] = (dt * v_m).into();
+        // Scales: Σc = Rc Σ3 Rcᵀ with Σ3 = R S² Rᵀ; σt through the temporal weight.
+        let v_sigma_c = jac.transpose() * v_sigma2_3 * jac;
+        let v_sigma3 = rc.transpose() * v_sigma_c * rc;
+        let [qw, qx, qy, qz] = scene.rotations[i];
+        let rotation = DMat3::from_quat(DQuat::from_xyzw(qx, qy, qz, qw).normalize());
+        let v_axes = rotation.transpose() * v_sigma3 * rotation;
+        let s = scene.scales[i];
+        grads.v_scales[i] = [
+            2.0 * s[0] * v_axes.x_axis.x,
+            2.0 * s[1] * v_axes.y_axis.y,
+            2.0 * s[2] * v_axes.z_axis.z,
+            (0..3)
+                .map(|c| amplitude[c] * kernel.weight * (kernel.d * kernel.d / st) * v_a[c])
+                .sum(),
+        ];
+    }
+    (loss, grads)
+}

@@ -1,0 +1,56 @@
+//! The slow, obviously correct twin of the renderer: f64 throughout, every kernel against
+//! every pixel, no tiles, no bounds, no rewriting of formulas (SPEC §2–6 as written). One
+//! file per fast stage, so tests compare the stages one at a time, not only whole images:
+//!
+//! | fast stage | twin |
+//! |---|---|
+//! | [`crate::slice`] (SPEC §2) | [`slice::reference_slice`] |
+//! | [`crate::project`] (SPEC §4) | [`project::reference_project`] |
+//! | [`crate::tiles`] + [`crate::raster`] (SPEC §5) | [`pixels::render_reference`], [`pixels::reference_at_pixels`] |
+//! | [`crate::backward`] (SPEC §6) | [`gradients::reference_loss_and_gradients`] |
+//!
+//! [`dense`] is the seed-style baseline the benches time against the tiles (every kernel at
+//! every pixel, but the fast f32 arithmetic): a speed reference, not an accuracy one.
+
+pub mod dense;
+pub mod gradients;
+pub mod pixels;
+pub mod project;
+pub mod slice;
+
+pub use gradients::{mse, reference_loss_and_gradients};
+pub use pixels::{
+    BORDERLINE_BAND, PairMask, ReferenceImage, is_borderline, kernel_contribution, quadratic_form,
+    reference_at_pixels, render_reference,
+};
+pub use project::{ReferenceKernel, reference_project};
+pub use slice::{ReferenceSlice, reference_slice};
+
+use crate::model::{Camera, Scene};
+use crate::render::RenderOptions;
+
+/// Slices and projects kernel `index` of `scene` (SPEC §2 and §4), or `None` when culled.
+#[must_use]
+pub fn reference_kernel(
+    scene: &Scene,
+    index: usize,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+) -> Option<ReferenceKernel> {
+    let slice = reference_slice(scene, index, tau, options.cutoff)?;
+    reference_project(&slice, camera, options.dilation)
+}
+
+/// Every kernel that survives culling, in scene order.
+#[must_use]
+pub fn reference_kernels(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+) -> Vec<ReferenceKernel> {
+    (0..scene.len())
+        .filter_map(|i| reference_kernel(scene, i, camera, tau, options))
+        .collect()
+}

@@ -1,0 +1,137 @@
+//! Synthetic multi-view datasets rendered from a scene: what `splat4d dataset` writes.
+//!
+//! - train: `views` seeded cameras on a sphere around the scene, each at `times` times spread
+//!   evenly over the time range (both ends included);
+//! - val: the first (up to 4) training cameras at the midpoints between training times;
+//! - test: `max(2, views/4)` new cameras at those midpoints: unseen views at unseen times.
+
+use crate::model::error::{Error, Result};
+use crate::model::scene::Scene;
+use crate::model::{Dataset, View};
+use crate::render::{RenderContext, RenderOptions};
+use crate::{
+    model::random::seeded_rng,
+    scenes::synthetic::{bounding_sphere, sphere_cameras},
+};
+
+/// What to render.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DatasetSpec {
+    /// Training cameras.
+    pub views: usize,
+    /// Training times.
+    pub times: usize,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Time range `[t0, t1]`.
+    pub time_range: [f64; 2],
+    /// Vertical field of view, degrees.
+    pub fov_y_degrees: f64,
+    /// Seed of the cameras.
+    pub seed: u64,
+}
+
+impl Default for DatasetSpec {
+    fn default() -> Self {
+        DatasetSpec {
+            views: 8,
+            times: 5,
+            width: 128,
+            height: 128,
+            time_range: [0.0, 1.0],
+            fov_y_degrees: 40.0,
+            seed: 0,
+        }
+    }
+}
+
+/// Renders the dataset of `spec` from `scene`, calling `on_frame` after each image.
+pub fn render_dataset(
+    scene: &Scene,
+    spec: &DatasetSpec,
+    options: &RenderOptions,
+    mut on_frame: impl FnMut(),
+) -> Result<Dataset> {
+    if spec.views == 0 || spec.times == 0 || spec.width == 0 || spec.height == 0 {
+        return Err(Error::Usage(
+            "views, times, width and height must all be at least 1".into(),
+        ));
+    }
+    let [t0, t1] = spec.time_range;
+    if !(t0.is_finite() && t1.is_finite() && t0 <= t1) {
+        return Err(Error::Usage(format!(
+            "time range {t0}..{t1} is not a finite, ordered pair"
+        )));
+    }
+    let train_times: Vec<f64> = (0..spec.times)
+        .map(|k| {
+            if spec.times == 1 {
+                t0
+            } else {
+                t0 + (t1 - t0) * k as f64 / (spec.times - 1) as f64
+            }
+        })
+        .collect();
+    let mid_times: Vec<f64> = if spec.times == 1 {
+        vec![t0]
+    } else {
+        train_times
+            .windows(2)
+            .map(|w| 0.5 * (w[0] + w[1]))
+            .collect()
+    };
+    let mut sweep = train_times.clone();
+    sweep.extend(&mid_times);
+    let (centre, radius) = bounding_sphere(scene, &sweep);
+    let mut rng = seeded_rng(spec.seed);
+    let test_count = (spec.views / 4).max(2);
+    let cameras = sphere_cameras(
+        centre,
+        radius,
+        spec.views + test_count,
+        spec.fov_y_degrees,
+        spec.width,
+        spec.height,
+        &mut rng,
+    );
+    let (train_cameras, test_cameras) = cameras.split_at(spec.views);
+    let mut context = RenderContext::new();
+    let mut render =
+        |camera: &crate::model::camera::Camera, time: f64, name: String| -> Result<View> {
+            context.render(scene, camera, time, options)?;
+            on_frame();
+            Ok(View {
+                camera: *camera,
+                time,
+                image: context.image().clone(),
+                name,
+            })
+        };
+    let mut dataset = Dataset::default();
+    for &time in &train_times {
+        for camera in train_cameras {
+            let name = format!("./train/r_{:03}", dataset.train.len());
+            dataset.train.push(render(camera, time, name)?);
+        }
+    }
+    for &time in &mid_times {
+        for camera in train_cameras.iter().take(4) {
+            let name = format!("./val/r_{:03}", dataset.val.len());
+            dataset.val.push(render(camera, time, name)?);
+        }
+        for camera in test_cameras {
+            let name = format!("./test/r_{:03}", dataset.test.len());
+            dataset.test.push(render(camera, time, name)?);
+        }
+    }
+    Ok(dataset)
+}
+
+/// Frames [`render_dataset`] will render for `spec`.
+#[must_use]
+pub fn frame_count(spec: &DatasetSpec) -> usize {
+    let mids = if spec.times == 1 { 1 } else { spec.times - 1 };
+    spec.views * spec.times + mids * (spec.views.min(4) + (spec.views / 4).max(2))
+}

@@ -1,0 +1,8 @@
+//! Scenes and cameras made in code: seeded synthetic scenes and camera sets, the seed
+//! paper's toy scene (SPEC §7), camera paths (orbits, spirals) and the framing that sizes
+//! them to a scene, and synthetic multi-view datasets rendered from a scene.
+
+pub mod dataset;
+pub mod paths;
+pub mod synthetic;
+pub mod toy;

@@ -1,0 +1,286 @@
+//! `bench`: forward-render speed with the error against the f64 reference, per scene and
+//! thread count, or a sweep of speed against error over the cut-off, dilation and exp.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use crate::io::camera_file::load_camera;
+use crate::io::scene_file::load_scene;
+use crate::io::write_bytes_atomically;
+use crate::model::{Camera, Error, Progress, Result, Scene};
+use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
+use crate::report::bench::{
+    BenchSettings, Method, SWEEP_ROUNDS, SweepGrid, SweepPoint, bench_render, fill_speedups,
+    format_table, sweep, sweep_table,
+};
+use crate::report::charts::{TradeOffPoint, pareto_chart};
+use crate::scenes::paths::{Lens, framing_distance};
+use crate::scenes::synthetic::{bench_camera, bench_scene};
+use crate::volume::scene_sphere;
+
+/// `splat4d bench`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchRequest {
+    /// Built-in scenes by kernel count (`10k`, `1m`, `2500`) or scene files (default: `10k`
+    /// and `100k`).
+    pub scenes: Vec<String>,
+    /// Camera file for scene files (default: a look-at camera framing the scene).
+    pub camera: Option<PathBuf>,
+    /// Frame size (ignored with `camera`).
+    pub size: (u32, u32),
+    /// Worker threads (default: 1, and one per core).
+    pub threads: Option<usize>,
+    /// Timed frames per configuration.
+    pub frames: usize,
+    /// Pixels sampled for the error.
+    pub samples: usize,
+    /// Scene time τ.
+    pub time: f64,
+    /// Rendering options.
+    pub options: RenderOptions,
+    /// Time the dense baseline: `Some(true)` always, `Some(false)` never, `None` when
+    /// kernels × pixels ≤ 3·10⁹.
+    pub dense: Option<bool>,
+    /// Sweep speed against error on the first scene, writing `sweep.md` and `sweep.png`
+    /// to `out`.
+    pub sweep: bool,
+    /// Output folder of the sweep.
+    pub out: PathBuf,
+}
+
+/// What [`bench`] measured: a table, or the sweep's table and files.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchSummary {
+    text: String,
+}
+
+impl fmt::Display for BenchSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// A bench scene named by its kernel count (`10k`, `1m`, `2500`), if `text` is one.
+fn builtin_scene_size(text: &str) -> Option<usize> {
+    let lower = text.to_ascii_lowercase();
+    let (digits, unit) = match lower.strip_suffix('k') {
+        Some(d) => (d, 1_000),
+        None => match lower.strip_suffix('m') {
+            Some(d) => (d, 1_000_000),
+            None => (lower.as_str(), 1),
+        },
+    };
+    digits
+        .parse::<usize>()
+        .ok()
+        .and_then(|n| n.checked_mul(unit))
+        .filter(|&n| n > 0)
+}
+
+/// The scenes `bench` measures: built-in ones by size, or files with their cameras.
+fn bench_scenes(request: &BenchRequest) -> Result<Vec<(String, Scene, Camera)>> {
+    let (w, h) = request.size;
+    let names = if request.scenes.is_empty() {
+        vec!["10k".to_owned(), "100k".to_owned()]
+    } else {
+        request.scenes.clone()
+    };
+    let mut scenes = Vec::new();
+    for name in &names {
+        let path = Path::new(name);
+        if let (false, Some(n)) = (path.exists(), builtin_scene_size(name)) {
+            scenes.push((
+                format!("bench-{}", name.to_ascii_lowercase()),
+                bench_scene(n, 42),
+                bench_camera(w, h),
+            ));
+            continue;
+        }
+        let scene = load_scene(path)?;
+        let camera = match &request.camera {
+            Some(c) => load_camera(c)?,
+            None => {
+                let cutoff = request.options.cutoff;
+                let (centre, r) =
+                    scene_sphere(&scene, &[request.time], cutoff).ok_or_else(|| {
+                        Error::usage(format!(
+                            "{}: no kernel is alive at t = {}",
+                            path.display(),
+                            request.time
+                        ))
+                    })?;
+                let lens = Lens {
+                    width: w,
+                    height: h,
+                    fov_y_degrees: 40.0,
+                };
+                let distance = framing_distance(r, &lens);
+                let eye = [
+                    centre[0] + 0.6 * distance,
+                    centre[1] + 0.35 * distance,
+                    centre[2] + 0.72 * distance,
+                ];
+                Camera::look_at(eye, centre, [0.0, 1.0, 0.0], lens.fov_y_degrees, w, h)?
+            }
+        };
+        let file_name = path
+            .file_name()
+            .map_or("scene".into(), |n| n.to_string_lossy().into_owned());
+        scenes.push((file_name, scene, camera));
+    }
+    Ok(scenes)
+}
+
+/// Measures the renderer as `request` asks.
+pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<BenchSummary> {
+    request.options.validate()?;
+    let scenes = bench_scenes(request)?;
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let threads: Vec<usize> = match request.threads {
+        Some(n) => vec![n],
+        None if cores > 1 => vec![1, cores],
+        None => vec![1],
+    };
+    let settings = |threads: usize| BenchSettings {
+        tau: request.time,
+        options: request.options,
+        threads,
+        frames: request.frames,
+        samples: request.samples,
+    };
+    if request.sweep {
+        let (name, scene, camera) = &scenes[0];
+        let grid = SweepGrid::default();
+        let count = grid.cutoffs.len() * grid.dilations.len() * grid.exps.len() * SWEEP_ROUNDS;
+        let settings = settings(*threads.last().unwrap_or(&1));
+        progress.start("sweep", count);
+        let points = sweep(scene, camera, &settings, &grid, || progress.tick())?;
+        let text = write_sweep(request, name, camera, settings.threads, &grid, &points)?;
+        return Ok(BenchSummary { text });
+    }
+    let dense_for = |scene: &Scene, camera: &Camera| {
+        request.dense.unwrap_or_else(|| {
+            scene.len() as f64 * f64::from(camera.width) * f64::from(camera.height) <= 3e9
+        })
+    };
+    let jobs: usize = scenes
+        .iter()
+        .map(|(_, s, c)| threads.len() * if dense_for(s, c) { 2 } else { 1 })
+        .sum();
+    progress.start("bench", jobs);
+    let mut rows = Vec::new();
+    for (name, scene, camera) in &scenes {
+        for &t in &threads {
+            rows.push(bench_render(
+                name,
+                scene,
+                camera,
+                &settings(t),
+                Method::Tiles,
+            )?);
+            progress.tick();
+            if dense_for(scene, camera) {
+                rows.push(bench_render(
+                    name,
+                    scene,
+                    camera,
+                    &settings(t),
+                    Method::Dense,
+                )?);
+                progress.tick();
+            }
+        }
+    }
+    fill_speedups(&mut rows);
+    let text = format!(
+        "{}\nerror: |render - f64 reference| at {} seeded pixels per row; /bound = largest ratio to 1e-6 + 2e-6·Σ|a|; speed-up = dense ms / tiles ms",
+        format_table(&rows).trim_end(),
+        request.samples
+    );
+    Ok(BenchSummary { text })
+}
+
+/// Writes the sweep's table (sweep.md) and chart (sweep.png) to `request.out`; returns the
+/// table and the names of the files.
+fn write_sweep(
+    request: &BenchRequest,
+    name: &str,
+    camera: &Camera,
+    threads: usize,
+    grid: &SweepGrid,
+    points: &[SweepPoint],
+) -> Result<String> {
+    let out = &request.out;
+    std::fs::create_dir_all(out)
+        .map_err(|e| Error::write(out, "cannot create the output folder", e))?;
+    let table = sweep_table(points);
+    let heading = format!(
+        "# Speed against error: {name}, {}x{}, {threads} threads, τ = {}\n\n\
+         Error: |render - exact| at {} seeded pixels, exact = f64 reference without truncation \
+         (ε = 0) at the default dilation {DEFAULT_DILATION}. /bound: the implementation's error \
+         against the f64 reference with the point's own options, as a ratio to \
+         1e-6 + 2e-6·Σ|a|. ★: on the Pareto front of (ms/frame, max error).\n\n",
+        camera.width, camera.height, request.time, request.samples
+    );
+    write_bytes_atomically(
+        &out.join("sweep.md"),
+        format!("{heading}{table}").as_bytes(),
+    )?;
+    let series: Vec<String> = grid
+        .dilations
+        .iter()
+        .flat_map(|d| {
+            grid.exps
+                .iter()
+                .map(move |e| format!("dilation {d}, exp {e}"))
+        })
+        .collect();
+    let chart_points: Vec<TradeOffPoint> = points
+        .iter()
+        .map(|p| {
+            let d = grid
+                .dilations
+                .iter()
+                .position(|&d| d == p.options.dilation)
+                .unwrap_or(0);
+            let e = grid
+                .exps
+                .iter()
+                .position(|&e| e == p.options.exp)
+                .unwrap_or(0);
+            TradeOffPoint {
+                label: format!(
+                    "ε {}, s {}, {}",
+                    if p.options.cutoff == DEFAULT_CUTOFF {
+                        "1/255".to_owned()
+                    } else {
+                        format!("{:.0e}", p.options.cutoff)
+                    },
+                    p.options.dilation,
+                    p.options.exp
+                ),
+                cost: p.ms_per_frame,
+                error: p.model_error,
+                series: d * grid.exps.len() + e,
+                front: p.pareto,
+            }
+        })
+        .collect();
+    let chart = out.join("sweep.png");
+    pareto_chart(
+        &chart,
+        &format!(
+            "Speed against error: {name}, {}x{}, {threads} threads",
+            camera.width, camera.height
+        ),
+        ("ms per frame", "log10 max |render - exact|"),
+        &series,
+        &chart_points,
+    )?;
+    Ok(format!(
+        "{}\nwrote {} and {}",
+        table.trim_end(),
+        out.join("sweep.md").display(),
+        chart.display()
+    ))
+}

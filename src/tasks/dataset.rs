@@ -1,0 +1,72 @@
+//! `dataset`: a multi-view dataset of a scene in the D-NeRF / Blender layout.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use crate::io::dataset::{SPLITS, write_split};
+use crate::io::scene_file::load_scene;
+use crate::model::{Progress, Result};
+use crate::render::RenderOptions;
+use crate::scenes::dataset::{DatasetSpec, frame_count, render_dataset};
+use crate::tasks::with_threads;
+
+/// `splat4d dataset`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatasetRequest {
+    /// Scene file.
+    pub scene: PathBuf,
+    /// Cameras, times, size, time range, field of view and seed.
+    pub spec: DatasetSpec,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Also write float32 EXR images beside the 16-bit PNGs.
+    pub exr: bool,
+    /// Rendering options.
+    pub options: RenderOptions,
+    /// Worker threads (`None`: one per core).
+    pub threads: Option<usize>,
+}
+
+/// What [`write_dataset`] wrote.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatasetSummary {
+    out: PathBuf,
+    frames: [usize; 3],
+    size: (u32, u32),
+}
+
+impl fmt::Display for DatasetSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let [train, val, test] = self.frames;
+        write!(
+            f,
+            "{}: {train} train, {val} val, {test} test frames ({}×{})",
+            self.out.display(),
+            self.size.0,
+            self.size.1
+        )
+    }
+}
+
+/// Renders the dataset of `request` and writes its three splits.
+pub fn write_dataset(
+    request: &DatasetRequest,
+    progress: &mut dyn Progress,
+) -> Result<DatasetSummary> {
+    request.options.validate()?;
+    let scene = load_scene(&request.scene)?;
+    let spec = &request.spec;
+    progress.start("render", frame_count(spec));
+    let dataset = with_threads(request.threads, || {
+        render_dataset(&scene, spec, &request.options, || progress.tick())
+    })??;
+    let splits = [&dataset.train, &dataset.val, &dataset.test];
+    for (split, views) in SPLITS.iter().zip(splits) {
+        write_split(&request.out, split, views, request.exr)?;
+    }
+    Ok(DatasetSummary {
+        out: request.out.clone(),
+        frames: splits.map(Vec::len),
+        size: (spec.width, spec.height),
+    })
+}

@@ -1,0 +1,141 @@
+//! `fit`: kernels fitted to a dataset on disk with the plan of [`crate::fit::plan`].
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use crate::fit::loss::psnr;
+use crate::fit::plan::{FitPlan, Init};
+use crate::fit::train::{StepRecord, evaluate, fit};
+use crate::io::dataset::load_dataset;
+use crate::io::scene_file::{load_scene, save_scene};
+use crate::io::write_bytes_atomically;
+use crate::model::{Result, Silent};
+use crate::render::RenderContext;
+use crate::tasks::with_threads;
+
+/// `splat4d fit`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitRequest {
+    /// Dataset folder (D-NeRF layout).
+    pub views: PathBuf,
+    /// `auto`, `random:N` or a scene file.
+    pub init: String,
+    /// Everything else about the fit.
+    pub plan: FitPlan,
+    /// Output scene.
+    pub out: PathBuf,
+    /// Log file: one JSON object per step.
+    pub log: Option<PathBuf>,
+    /// Worker threads (`None`: one per core).
+    pub threads: Option<usize>,
+}
+
+/// What [`fit_dataset`] did: the fit and the PSNR per split.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitSummary {
+    out: PathBuf,
+    kernels: usize,
+    steps: usize,
+    seconds: f64,
+    /// `(split, views, MSE)` for every non-empty split.
+    pub splits: Vec<(&'static str, usize, f64)>,
+}
+
+impl fmt::Display for FitSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: {} kernels fitted in {} steps, {:.1} s",
+            self.out.display(),
+            self.kernels,
+            self.steps,
+            self.seconds
+        )?;
+        for (split, views, mse) in &self.splits {
+            write!(
+                f,
+                "\n  {split}: {views} views, MSE {mse:.3e}, PSNR {:.2} dB",
+                psnr(*mse)
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Progress of a fit: one tick per step, with the step's record.
+pub trait FitProgress: Send {
+    /// The fit of `steps` steps begins.
+    fn start(&mut self, steps: usize);
+    /// A step is done; `heldout_psnr` is the latest held-out PSNR measured.
+    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>);
+}
+
+impl FitProgress for Silent {
+    fn start(&mut self, _: usize) {}
+    fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
+}
+
+/// Fits kernels to the dataset in `request.views` and writes the scene (and the log).
+pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
+    let plan = &request.plan;
+    plan.validate()?;
+    let composite_on = plan.background.unwrap_or([1.0; 3]).map(|b| b as f32);
+    let dataset = load_dataset(&request.views, composite_on)?;
+    let init = match Init::parse_builtin(&request.init)? {
+        Some(init) => init,
+        None => Init::Scene(load_scene(Path::new(&request.init))?),
+    };
+    let prepared = plan.prepare(init, &dataset.train, dataset.had_alpha)?;
+    let mut scene = prepared.scene;
+    let heldout = if dataset.val.is_empty() {
+        &dataset.test
+    } else {
+        &dataset.val
+    };
+    progress.start(plan.steps);
+    let mut last_heldout = None;
+    let records = with_threads(request.threads, || {
+        fit(
+            &mut scene,
+            &dataset.train,
+            heldout,
+            &prepared.options,
+            |record| {
+                if record.heldout_psnr.is_some() {
+                    last_heldout = record.heldout_psnr;
+                }
+                progress.step(record, last_heldout);
+            },
+        )
+    })??;
+    save_scene(&scene, &request.out)?;
+    if let Some(log) = &request.log {
+        let mut lines = String::new();
+        for record in &records {
+            lines.push_str(&serde_json::to_string(record).expect("a record serialises"));
+            lines.push('\n');
+        }
+        write_bytes_atomically(log, lines.as_bytes())?;
+    }
+    let mut context = RenderContext::new();
+    let mut splits = Vec::new();
+    for (split, views) in [
+        ("train", &dataset.train),
+        ("val", &dataset.val),
+        ("test", &dataset.test),
+    ] {
+        if !views.is_empty() {
+            let mse = with_threads(request.threads, || {
+                evaluate(&scene, views, &plan.render, &mut context)
+            })??;
+            splits.push((split, views.len(), mse));
+        }
+    }
+    Ok(FitSummary {
+        out: request.out.clone(),
+        kernels: scene.len(),
+        steps: plan.steps,
+        seconds: records.last().map_or(0.0, |r| r.seconds),
+        splits,
+    })
+}

@@ -1,0 +1,220 @@
+//! `render` and `grad`: one view of a scene at one time, written as an image, or its loss
+//! against a target image and the gradient per kernel.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use crate::backward::Gradients;
+use crate::fit::loss::{psnr, view_loss_and_gradients};
+use crate::io::camera_file::load_camera;
+use crate::io::gltf_import::{load_camera as load_gltf_camera, split_camera_spec};
+use crate::io::gradients_file::gradients_to_json;
+use crate::io::image_file::{BitDepth, ImageKind, load_image, save_image, save_rgb8_png};
+use crate::io::scene_file::load_scene;
+use crate::io::write_bytes_atomically;
+use crate::model::{Camera, Error, Result, Scene};
+use crate::overlay::draw_overlay;
+use crate::render::{RenderContext, RenderOptions};
+use crate::tasks::with_threads;
+
+/// Where the camera comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraSource {
+    /// A camera JSON file.
+    File(PathBuf),
+    /// A glTF model's camera, `MODEL.gltf[#index]`, at `size` (default: 512 high, the
+    /// camera's aspect ratio).
+    Gltf {
+        /// `MODEL.gltf[#index]`.
+        spec: String,
+        /// Image size `(width, height)`.
+        size: Option<(u32, u32)>,
+    },
+}
+
+impl CameraSource {
+    /// Reads the camera.
+    pub fn load(&self) -> Result<Camera> {
+        match self {
+            CameraSource::File(path) => load_camera(path),
+            CameraSource::Gltf { spec, size } => {
+                let (path, index) = split_camera_spec(spec)?;
+                load_gltf_camera(path, index, *size)
+            }
+        }
+    }
+
+    /// Its name, for messages.
+    #[must_use]
+    pub fn name(&self) -> String {
+        match self {
+            CameraSource::File(path) => path.display().to_string(),
+            CameraSource::Gltf { spec, .. } => spec.clone(),
+        }
+    }
+}
+
+/// A scene seen through a camera at a time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewRequest {
+    /// Scene file (JSON or 4D PLY).
+    pub scene: PathBuf,
+    /// The camera.
+    pub camera: CameraSource,
+    /// Scene time τ.
+    pub time: f64,
+    /// Rendering options.
+    pub options: RenderOptions,
+    /// Worker threads (`None`: one per core).
+    pub threads: Option<usize>,
+}
+
+impl ViewRequest {
+    fn load(&self) -> Result<(Scene, Camera)> {
+        self.options.validate()?;
+        let camera = self.camera.load()?;
+        Ok((load_scene(&self.scene)?, camera))
+    }
+}
+
+/// `splat4d render`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderRequest {
+    /// What to render.
+    pub view: ViewRequest,
+    /// Output image: `.png` or `.exr`.
+    pub out: PathBuf,
+    /// Bits per channel of a PNG.
+    pub depth: BitDepth,
+    /// Draw the debug overlay ([`crate::overlay`]) instead of the plain image (PNG only).
+    pub overlay: bool,
+}
+
+/// What [`render`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSummary {
+    out: PathBuf,
+    size: (u32, u32),
+    time: f64,
+    projected: usize,
+    kernels: usize,
+    pairs: u64,
+}
+
+impl fmt::Display for RenderSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: {}×{} at t = {}, {} of {} kernels on screen, {} pairs",
+            self.out.display(),
+            self.size.0,
+            self.size.1,
+            self.time,
+            self.projected,
+            self.kernels,
+            self.pairs
+        )
+    }
+}
+
+/// Renders a scene through a camera at one time into a PNG or EXR image.
+pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
+    // Check the output's extension before any work, so a typo costs nothing.
+    let kind = ImageKind::from_path(&request.out)?;
+    if request.overlay && kind != ImageKind::Png {
+        return Err(Error::usage(format!(
+            "{}: --overlay draws an 8-bit PNG; use a .png output",
+            request.out.display()
+        )));
+    }
+    let view = &request.view;
+    let (scene, camera) = view.load()?;
+    let mut context = RenderContext::new();
+    let stats = with_threads(view.threads, || {
+        context.render(&scene, &camera, view.time, &view.options)
+    })??;
+    if request.overlay {
+        let (w, h, rgb) = draw_overlay(&context)?;
+        save_rgb8_png(&request.out, w, h, &rgb)?;
+    } else {
+        save_image(context.image(), &request.out, request.depth)?;
+    }
+    Ok(RenderSummary {
+        out: request.out.clone(),
+        size: (camera.width, camera.height),
+        time: view.time,
+        projected: stats.projected,
+        kernels: scene.len(),
+        pairs: stats.pairs,
+    })
+}
+
+/// `splat4d grad`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradRequest {
+    /// What to render.
+    pub view: ViewRequest,
+    /// Target image (`.exr` or `.png`), the camera's size.
+    pub target: PathBuf,
+    /// Output JSON ([`crate::io::gradients_file`]).
+    pub out: PathBuf,
+}
+
+/// What [`grad`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradSummary {
+    out: PathBuf,
+    loss: f64,
+    kernels: usize,
+}
+
+impl fmt::Display for GradSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: loss {:e} (PSNR {:.2} dB), gradients of {} kernels",
+            self.out.display(),
+            self.loss,
+            psnr(self.loss),
+            self.kernels
+        )
+    }
+}
+
+/// The MSE of a render against a target image and its gradient per kernel, as JSON.
+pub fn grad(request: &GradRequest) -> Result<GradSummary> {
+    let view = &request.view;
+    let (scene, camera) = view.load()?;
+    let background = scene.background.map(|b| b as f32);
+    let target = load_image(&request.target, background)?;
+    if (target.width, target.height) != (camera.width, camera.height) {
+        return Err(Error::usage(format!(
+            "{}: the target is {}×{} but {} is {}×{}",
+            request.target.display(),
+            target.width,
+            target.height,
+            view.camera.name(),
+            camera.width,
+            camera.height
+        )));
+    }
+    let mut context = RenderContext::new();
+    let mut grads = Gradients::zeros(scene.len());
+    let loss = with_threads(view.threads, || {
+        view_loss_and_gradients(
+            &mut context,
+            &scene,
+            &camera,
+            view.time,
+            &view.options,
+            &target,
+            &mut grads,
+        )
+    })??;
+    write_bytes_atomically(&request.out, gradients_to_json(&grads, loss).as_bytes())?;
+    Ok(GradSummary {
+        out: request.out.clone(),
+        loss,
+        kernels: scene.len(),
+    })
+}

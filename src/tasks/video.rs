@@ -1,0 +1,155 @@
+//! `video`: videos of a scene along camera paths — orbits at fixed times, a spiral through
+//! time, or a path file — rendered here frame by frame and encoded by [`crate::io::video`].
+
+use std::fmt;
+use std::path::PathBuf;
+
+use crate::io::path_file::load_path;
+use crate::io::scene_file::load_scene;
+use crate::io::video::{VideoFiles, VideoOptions, write_video};
+use crate::model::{Error, Progress, Result, Scene};
+use crate::render::{RenderContext, RenderOptions};
+use crate::scenes::paths::{Circle, Lens, PathFrame, framing_circle, orbit, spiral};
+use crate::slice::TemporalIndex;
+use crate::tasks::with_threads;
+
+/// An orbit or spiral: explicit, or framing the scene ([`framing_circle`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CircleSpec {
+    /// `centre, radius, elevation, frames` as given.
+    Given(Circle),
+    /// Framing every kernel alive at the path's times.
+    Auto,
+}
+
+/// `splat4d video`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VideoRequest {
+    /// Scene file.
+    pub scene: PathBuf,
+    /// An orbit at each of `times`.
+    pub orbit: Option<CircleSpec>,
+    /// Times of the orbits.
+    pub times: Vec<f64>,
+    /// One turn while time runs over `time_range`.
+    pub spiral: Option<CircleSpec>,
+    /// Time range of the spiral.
+    pub time_range: [f64; 2],
+    /// A camera path file.
+    pub path: Option<PathBuf>,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Frame size and field of view of orbits and spirals.
+    pub lens: Lens,
+    /// Frame rate and which files to write.
+    pub video: VideoOptions,
+    /// Rendering options.
+    pub options: RenderOptions,
+    /// Worker threads (`None`: one per core).
+    pub threads: Option<usize>,
+}
+
+/// What [`write_videos`] wrote.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VideoSummary {
+    /// One entry per video.
+    pub videos: Vec<VideoFiles>,
+}
+
+impl fmt::Display for VideoSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut lines = Vec::new();
+        for files in &self.videos {
+            let mut line = format!("{}: {} frames", files.frames_dir.display(), files.frames);
+            if let Some(gif) = &files.gif {
+                line.push_str(&format!(", {}", gif.display()));
+            }
+            if let Some(mp4) = &files.mp4 {
+                line.push_str(&format!(", {}", mp4.display()));
+            }
+            lines.push(line);
+        }
+        if let Some(note) = self.videos.iter().find_map(|f| f.mp4_note.clone()) {
+            lines.push(format!("note: {note}"));
+        }
+        f.write_str(&lines.join("\n"))
+    }
+}
+
+/// The named camera paths of `request`.
+fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathFrame>)>> {
+    let lens = &request.lens;
+    let circle = |spec: &CircleSpec, times: &[f64]| match spec {
+        CircleSpec::Given(circle) => *circle,
+        CircleSpec::Auto => framing_circle(scene, times, request.options.cutoff, lens),
+    };
+    let mut videos = Vec::new();
+    if let Some(spec) = &request.orbit {
+        for &tau in &request.times {
+            videos.push((
+                format!("orbit_t{tau:.2}"),
+                orbit(&circle(spec, &[tau]), lens, tau)?,
+            ));
+        }
+    }
+    if let Some(spec) = &request.spiral {
+        let [t0, t1] = request.time_range;
+        let sweep: Vec<f64> = (0..=10)
+            .map(|k| t0 + (t1 - t0) * f64::from(k) / 10.0)
+            .collect();
+        videos.push((
+            "spiral".into(),
+            spiral(&circle(spec, &sweep), lens, request.time_range)?,
+        ));
+    }
+    if let Some(path) = &request.path {
+        let name = path
+            .file_stem()
+            .map_or("path".into(), |s| s.to_string_lossy().into_owned());
+        videos.push((name, load_path(path)?));
+    }
+    Ok(videos)
+}
+
+/// Renders and writes every video of `request`.
+pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Result<VideoSummary> {
+    request.options.validate()?;
+    let fov = request.lens.fov_y_degrees;
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(Error::usage(format!(
+            "--fov {fov} must be in (0, 180) degrees"
+        )));
+    }
+    let scene = load_scene(&request.scene)?;
+    let videos = paths(request, &scene)?;
+    progress.start("frames", videos.iter().map(|(_, f)| f.len()).sum());
+    let mut context = RenderContext::new();
+    // One scene, many frames: each frame visits only the kernels alive at its time.
+    let index = TemporalIndex::new(&scene, request.options.cutoff);
+    let mut written = Vec::new();
+    for (name, frames) in &videos {
+        let files = with_threads(request.threads, || {
+            write_video(
+                frames.len(),
+                &request.out,
+                name,
+                &request.video,
+                |k, image| {
+                    let frame = &frames[k];
+                    context.render_indexed(
+                        &scene,
+                        &index,
+                        &frame.camera,
+                        frame.time,
+                        &request.options,
+                    )?;
+                    image.clone_from(context.image());
+                    progress.tick();
+                    Ok(())
+                },
+            )
+        })??;
+        written.push(files);
+    }
+    Ok(VideoSummary { videos: written })
+}

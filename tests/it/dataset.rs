@@ -1,0 +1,129 @@
+//! The D-NeRF / Blender dataset layout: what is written reads back as the same cameras,
+//! times and images; other tools' RGBA PNGs are composited over the background.
+
+use splat4d::RenderOptions;
+use splat4d::io::dataset::{SPLITS, load_dataset, write_split};
+use splat4d::scenes::dataset::{DatasetSpec, frame_count, render_dataset};
+
+#[test]
+fn cameras_times_and_images_round_trip() {
+    let scene =
+        splat4d::io::scene_file::scene_from_json(include_str!("../../data/blob.json"), "blob")
+            .unwrap();
+    let spec = DatasetSpec {
+        views: 5,
+        times: 3,
+        width: 40,
+        height: 30,
+        seed: 9,
+        ..DatasetSpec::default()
+    };
+    let written = render_dataset(&scene, &spec, &RenderOptions::default(), || {}).unwrap();
+    assert_eq!(
+        written.train.len() + written.val.len() + written.test.len(),
+        frame_count(&spec)
+    );
+    // Test cameras are not training cameras; test and val times lie between training times.
+    let train_times: Vec<f64> = written.train.iter().map(|v| v.time).collect();
+    for view in written.test.iter().chain(&written.val) {
+        assert!(
+            !train_times.contains(&view.time),
+            "{} at a training time",
+            view.name
+        );
+        if written.test.iter().any(|t| t.name == view.name) {
+            assert!(
+                written.train.iter().all(|t| t.camera != view.camera),
+                "{} reuses a training camera",
+                view.name
+            );
+        }
+    }
+    for exr in [false, true] {
+        let dir = tempfile::tempdir().unwrap();
+        for (split, views) in SPLITS
+            .iter()
+            .zip([&written.train, &written.val, &written.test])
+        {
+            write_split(dir.path(), split, views, exr).unwrap();
+        }
+        let read = load_dataset(dir.path(), [1.0; 3]).unwrap();
+        assert!(!read.had_alpha);
+        for (a_views, b_views) in [
+            (&written.train, &read.train),
+            (&written.val, &read.val),
+            (&written.test, &read.test),
+        ] {
+            assert_eq!(a_views.len(), b_views.len());
+            for (a, b) in a_views.iter().zip(b_views) {
+                assert_eq!(a.time, b.time);
+                assert_eq!(a.name, b.name);
+                let (ca, cb) = (&a.camera, &b.camera);
+                assert_eq!((ca.width, ca.height), (cb.width, cb.height));
+                for (x, y) in [ca.fx, ca.fy, ca.cx, ca.cy]
+                    .iter()
+                    .zip([cb.fx, cb.fy, cb.cx, cb.cy])
+                {
+                    assert!(
+                        (x - y).abs() <= 1e-12 * x.abs().max(1.0),
+                        "intrinsics {x} vs {y}"
+                    );
+                }
+                for (x, y) in ca
+                    .world_to_camera
+                    .iter()
+                    .flatten()
+                    .zip(cb.world_to_camera.iter().flatten())
+                {
+                    assert!(
+                        (x - y).abs() <= 1e-12,
+                        "{}: world_to_camera {x} vs {y}",
+                        a.name
+                    );
+                }
+                // EXR is exact; 16-bit PNG within half a step of the clamped value.
+                let tolerance = if exr { 0.0 } else { 0.5 / 65535.0 + 1e-7 };
+                for (x, y) in a.image.pixels.iter().zip(&b.image.pixels) {
+                    assert!(
+                        (x.clamp(0.0, 1.0) - y).abs() <= tolerance,
+                        "{}: pixel {x} vs {y}",
+                        a.name
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn rgba_pngs_of_other_datasets_are_composited_over_the_background() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("train")).unwrap();
+    // 2×1: an opaque red pixel and a half-transparent green one, 8-bit RGBA.
+    let rgba = image::RgbaImage::from_raw(2, 1, vec![255, 0, 0, 255, 0, 255, 0, 51]).unwrap();
+    rgba.save(dir.path().join("train/r_000.png")).unwrap();
+    std::fs::write(
+        dir.path().join("transforms_train.json"),
+        r#"{"camera_angle_x": 0.6911112070083618, "frames": [{"file_path": "./train/r_000", "rotation": 0.0314, "time": 0.25,
+            "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
+    let white = load_dataset(dir.path(), [1.0; 3]).unwrap();
+    assert!(white.had_alpha);
+    let view = &white.train[0];
+    assert_eq!(view.time, 0.25);
+    let expected = [1.0, 0.0, 0.0, 0.8, 1.0, 0.8];
+    assert!(
+        view.image
+            .pixels
+            .iter()
+            .zip(expected)
+            .all(|(a, b)| (a - b).abs() < 1e-6),
+        "{:?}",
+        view.image.pixels
+    );
+    // OpenGL camera at z = 4 looking down -z: OpenCV world→camera flips y and z.
+    let m = view.camera.world_to_camera;
+    assert_eq!(m[2], [0.0, 0.0, -1.0, 4.0]);
+    assert!((view.camera.fx - 1.0 / (0.5_f64 * 0.6911112070083618).tan()).abs() < 1e-12);
+}

@@ -1,0 +1,165 @@
+//! Fitting works (SPEC §6–7): from a perturbed start, Adam recovers the seed blob from
+//! images of 8 views at 5 times, and generalises to unseen cameras at unseen times; the
+//! adaptive velocity fit ends with the kernels a scene needs.
+
+use splat4d::fit::adam::LearningRates;
+use splat4d::fit::adaptive::AdaptiveOptions;
+use splat4d::fit::init::{box_from_cameras, centre_scene};
+use splat4d::fit::loss::psnr;
+use splat4d::fit::train::{DEFAULT_RATES, FitMode, FitOptions, evaluate, fit};
+use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
+use splat4d::{RenderContext, RenderOptions, Scene};
+
+fn seed_blob() -> Scene {
+    splat4d::io::scene_file::scene_from_json(include_str!("../../data/blob.json"), "data/blob.json")
+        .unwrap()
+}
+
+#[test]
+fn recovers_the_seed_blob_from_a_perturbed_start() {
+    let truth = seed_blob();
+    let spec = DatasetSpec {
+        views: 8,
+        times: 5,
+        width: 64,
+        height: 64,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    assert_eq!((dataset.train.len(), dataset.test.len()), (40, 8));
+
+    let mut scene = truth.clone();
+    scene.means[0] = [0.55, 0.46, 0.53, 0.5];
+    scene.amplitudes[0] = [0.7, 1.3, 0.75];
+    let options = FitOptions {
+        steps: 300,
+        learning_rates: LearningRates {
+            mean: 5e-3,
+            time: 0.0,
+            amplitude: 1e-2,
+            velocity: 0.0,
+            scale: 0.0,
+        },
+        final_rate_factor: 0.01,
+        ..FitOptions::default()
+    };
+    let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
+    let error: f64 = (0..3)
+        .map(|c| (scene.means[0][c] - 0.5).abs())
+        .fold(0.0, f64::max);
+    let mut context = RenderContext::new();
+    let test_psnr = psnr(evaluate(&scene, &dataset.test, &options.render, &mut context).unwrap());
+    println!(
+        "mean {:?}, amplitude {:?}, |Δmean|∞ = {error:e}, held-out views at held-out times: {test_psnr:.1} dB, first loss {:e}, last {:e}",
+        scene.means[0],
+        scene.amplitudes[0],
+        records[0].train_loss,
+        records.last().unwrap().train_loss
+    );
+    assert!(
+        error <= 1e-3,
+        "spatial mean {:?} is {error:e} from (0.5, 0.5, 0.5)",
+        scene.means[0]
+    );
+    assert!(test_psnr >= 50.0, "held-out PSNR {test_psnr:.1} dB");
+    assert_eq!(scene.means[0][3], 0.5, "time frozen");
+    assert_eq!(scene.velocities[0], [1.0; 3], "velocity frozen");
+    assert!(records.last().unwrap().heldout_psnr.is_some());
+}
+
+#[test]
+fn a_diverging_fit_stops_with_an_error() {
+    let truth = seed_blob();
+    let spec = DatasetSpec {
+        views: 2,
+        times: 2,
+        width: 16,
+        height: 16,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let mut scene = truth.clone();
+    let options = FitOptions {
+        steps: 50,
+        learning_rates: LearningRates {
+            mean: 0.0,
+            time: 0.0,
+            amplitude: 1e300,
+            velocity: 0.0,
+            scale: 0.0,
+        },
+        ..FitOptions::default()
+    };
+    scene.amplitudes[0] = [0.5; 3];
+    let error = fit(&mut scene, &dataset.train, &[], &options, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("diverged") && error.contains("learning rates"),
+        "{error}"
+    );
+}
+
+/// An adaptive fit from one kernel at the centre of the cameras' box (what `splat4d fit`
+/// does without `--init`): returns the fitted scene and its PSNR on held-out views at
+/// held-out times.
+fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
+    let spec = DatasetSpec {
+        views: 10,
+        times: 8,
+        width: 48,
+        height: 48,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let cameras: Vec<_> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = box_from_cameras(&cameras, spec.time_range).unwrap();
+    let mut scene = centre_scene(&bounds, 0.1).unwrap();
+    let options = FitOptions {
+        steps,
+        learning_rates: mode.learning_rates(DEFAULT_RATES),
+        adaptive: Some(AdaptiveOptions::default()),
+        ..FitOptions::default()
+    };
+    let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
+    assert_eq!(records.last().unwrap().kernels, scene.len());
+    let mut context = RenderContext::new();
+    let test_psnr = psnr(evaluate(&scene, &dataset.test, &options.render, &mut context).unwrap());
+    (scene, test_psnr)
+}
+
+#[test]
+fn velocity_fit_of_the_seed_blob_ends_with_few_kernels_above_50_db() {
+    let (scene, test_psnr) = adaptive_fit(&seed_blob(), FitMode::Velocity, 3000);
+    println!(
+        "velocity mode: {} kernels, {test_psnr:.1} dB; velocities {:?}",
+        scene.len(),
+        scene.velocities
+    );
+    assert!(scene.len() <= 3, "{} kernels", scene.len());
+    assert!(test_psnr >= 50.0, "held-out PSNR {test_psnr:.1} dB");
+}
+
+#[test]
+fn the_kernel_count_follows_the_scene() {
+    // Three blobs on three paths: the adaptive fit needs more kernels than for one.
+    let mut kernels = seed_blob().kernels();
+    for (k, velocity) in [[-1.0, 0.5, 0.0], [0.0, -1.0, 1.0]].into_iter().enumerate() {
+        let mut blob = kernels[0];
+        blob.mean = [0.2 + 0.3 * k as f64, 0.7, 0.3, 0.5];
+        blob.velocity = velocity;
+        blob.amplitude = [0.5, 0.8, 1.0];
+        kernels.push(blob);
+    }
+    let three = Scene::from_kernels(&kernels, [0.0; 3], "<three blobs>").unwrap();
+    let (scene, test_psnr) = adaptive_fit(&three, FitMode::Velocity, 3000);
+    println!("three blobs: {} kernels, {test_psnr:.1} dB", scene.len());
+    // Measured: 8 kernels at 33.1 dB (one blob: 2 kernels at 62.7 dB); the fixed-count
+    // model of the report uses 300.
+    assert!(
+        (3..=20).contains(&scene.len()),
+        "{} kernels for three blobs",
+        scene.len()
+    );
+    assert!(test_psnr >= 30.0, "held-out PSNR {test_psnr:.1} dB");
+}

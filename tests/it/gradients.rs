@@ -1,0 +1,376 @@
+//! Gradients (SPEC §6) against three oracles:
+//! 1. central finite differences of the f64 reference loss, pair set frozen, for every
+//!    parameter group, on seeded random scenes and on hard cases;
+//! 2. the f64 analytic backward of the reference, for the f32 fast backward;
+//! 3. the independent float64 vectors in `tests/data/reference`.
+//!
+//! Tolerances, per parameter with `scale` its largest |gradient| over the scene's kernels:
+//! analytic vs finite differences `|Δ| ≤ 1e-7·scale + 1e-5·|fd|`; fast (f32 per pixel) vs
+//! f64 analytic `|Δ| ≤ 1e-5·scale + 1e-5·|ref|`. A failure names the case, the kernel, the
+//! parameter and |Δ|.
+
+use crate::common::{
+    PARAM_NAMES, PARAMS, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
+    reference_case, reference_case_dir, test_camera,
+};
+use splat4d::raster::ExpMode;
+use splat4d::reference::reference_loss_and_gradients;
+use splat4d::render::DEFAULT_CUTOFF;
+use splat4d::{Camera, Gradients, Image, Kernel, RenderOptions, Scene};
+
+/// Finite-difference tolerance: `|analytic - fd| ≤ ATOL_FD·scale + RTOL_FD·|fd|`, `scale` the
+/// largest |fd| of the parameter over all kernels.
+const RTOL_FD: f64 = 1e-5;
+const ATOL_FD: f64 = 1e-7;
+
+/// Fast (f32 per pixel) vs f64 analytic: `|Δ| ≤ ATOL_FAST·scale + RTOL_FAST·|ref|`.
+const RTOL_FAST: f64 = 1e-5;
+const ATOL_FAST: f64 = 1e-5;
+
+fn fast_gradients(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    target: &[f32],
+) -> (f64, Gradients) {
+    let target = Image {
+        width: camera.width,
+        height: camera.height,
+        pixels: target.to_vec(),
+    };
+    crate::common::fast_gradients(scene, camera, tau, options, &target)
+}
+
+/// Per parameter, the largest |value| over kernels.
+fn scales<const N: usize>(rows: &[[f64; N]]) -> [f64; N] {
+    std::array::from_fn(|p| rows.iter().map(|r| r[p].abs()).fold(0.0, f64::max))
+}
+
+fn check_against_finite_differences(
+    what: &str,
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+) {
+    let target = jittered_target(scene, camera, tau, options, 99);
+    let (_, analytic) = reference_loss_and_gradients(scene, camera, tau, options, &target);
+    let fd = finite_difference_gradients(scene, camera, tau, options, &target);
+    let fd_values: Vec<[f64; PARAMS]> = fd.iter().map(|r| r.map(|v| v.unwrap_or(0.0))).collect();
+    let scale = scales(&fd_values);
+    let (mut checked, mut skipped, mut worst) = (0, 0, 0.0_f64);
+    for (i, row) in fd.iter().enumerate() {
+        let a = grad_of(&analytic, i);
+        for p in 0..PARAMS {
+            let Some(f) = row[p] else {
+                skipped += 1;
+                continue;
+            };
+            let bound = ATOL_FD * scale[p] + RTOL_FD * f.abs() + 1e-12;
+            let delta = (a[p] - f).abs();
+            worst = worst.max(delta / bound);
+            assert!(
+                delta <= bound,
+                "{what}: kernel {i} parameter {}: analytic {} vs finite difference {f} (|Δ| = {delta:e}, bound {bound:e})",
+                PARAM_NAMES[p],
+                a[p]
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        skipped * 20 <= checked,
+        "{what}: {skipped} parameters changed culling under a step, {checked} checked"
+    );
+    assert!(
+        scale.iter().all(|&s| s > 0.0),
+        "{what}: every parameter group has a non-zero gradient somewhere: {scale:?}"
+    );
+    println!("{what}: {checked} parameters, worst at {worst:.3} of the bound");
+}
+
+fn check_fast_against_reference(
+    what: &str,
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+) {
+    let target = jittered_target(scene, camera, tau, options, 7);
+    let (ref_loss, reference) = reference_loss_and_gradients(scene, camera, tau, options, &target);
+    let (fast_loss, fast) = fast_gradients(scene, camera, tau, options, &target);
+    assert!(
+        (fast_loss - ref_loss).abs() <= 1e-5 * ref_loss + 1e-12,
+        "{what}: loss {fast_loss} vs {ref_loss}"
+    );
+    let rows: Vec<[f64; PARAMS]> = (0..scene.len()).map(|i| grad_of(&reference, i)).collect();
+    let scale = scales(&rows);
+    let mut worst = 0.0_f64;
+    for (i, r) in rows.iter().enumerate() {
+        let f = grad_of(&fast, i);
+        for p in 0..PARAMS {
+            let bound = ATOL_FAST * scale[p] + RTOL_FAST * r[p].abs() + 1e-15;
+            let delta = (f[p] - r[p]).abs();
+            worst = worst.max(delta / bound);
+            assert!(
+                delta <= bound,
+                "{what}: kernel {i} parameter {}: fast {} vs f64 {} (|Δ| = {delta:e}, bound {bound:e})",
+                PARAM_NAMES[p],
+                f[p],
+                r[p]
+            );
+        }
+    }
+    println!("{what}: fast vs f64 worst at {worst:.3} of the bound");
+}
+
+#[test]
+fn reference_gradients_match_finite_differences_on_random_scenes() {
+    let camera = test_camera(48, 36);
+    for seed in 0..2 {
+        let scene = hard_random_scene(&camera, 100 + seed, 40);
+        for cutoff in [DEFAULT_CUTOFF, 0.0] {
+            let options = RenderOptions {
+                dilation: 0.3,
+                cutoff,
+                ..Default::default()
+            };
+            check_against_finite_differences(
+                &format!("seed {seed} cut-off {cutoff}"),
+                &scene,
+                &camera,
+                0.37,
+                &options,
+            );
+        }
+    }
+}
+
+#[test]
+fn fast_gradients_match_the_f64_backward_on_random_scenes_with_either_exp() {
+    let camera = test_camera(96, 72);
+    for seed in 0..3 {
+        let scene = hard_random_scene(&camera, 200 + seed, 200);
+        for (cutoff, exp) in [
+            (DEFAULT_CUTOFF, ExpMode::Std),
+            (0.0, ExpMode::Std),
+            (DEFAULT_CUTOFF, ExpMode::Poly),
+        ] {
+            let options = RenderOptions {
+                dilation: 0.3,
+                cutoff,
+                exp,
+            };
+            check_fast_against_reference(
+                &format!("seed {seed} cut-off {cutoff} exp {exp}"),
+                &scene,
+                &camera,
+                0.6,
+                &options,
+            );
+        }
+    }
+}
+
+/// Small scenes that each stress one part of the chain rule.
+fn hard_cases(camera: &Camera) -> Vec<(&'static str, Scene)> {
+    // Every kernel moves and sits off τ = 0.5 in time, so that all parameter groups matter.
+    let kernel = |mean: [f64; 4], scale: [f64; 4]| Kernel {
+        velocity: [0.2, -0.1, 0.15],
+        ..Kernel::new(
+            [mean[0], mean[1], mean[2], mean[3] - 0.1 * scale[3]],
+            scale,
+            [0.9, -0.4, 0.6],
+        )
+    };
+    let near_edges = {
+        // Centres just inside and just beyond the clamp limits, on every side.
+        let limits = splat4d::project::clamp_limits(camera);
+        let mut ks = Vec::new();
+        for (k, factor) in [0.9, 1.05, 1.3].into_iter().enumerate() {
+            let z = 3.0 + k as f64;
+            for (u, v) in [
+                (limits[1] * factor, 0.1),
+                (-limits[0] * factor, -0.1),
+                (0.05, limits[3] * factor),
+                (0.0, -limits[2] * factor),
+            ] {
+                let world = crate::common::world_from_camera(camera, [u * z, v * z, z]);
+                ks.push(kernel(
+                    [world[0], world[1], world[2], 0.5],
+                    [0.6, 0.3, 0.5, 1.0],
+                ));
+            }
+        }
+        ks
+    };
+    let rotated = |scale: [f64; 4], rotation: [f64; 4]| Kernel {
+        rotation,
+        ..kernel([0.1, -0.1, 0.2, 0.5], scale)
+    };
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    vec![
+        ("near the frustum clamp", near_edges),
+        (
+            "strongly anisotropic",
+            vec![
+                rotated([1.0, 0.001, 0.002, 1.0], [0.9, 0.3, -0.2, 0.24]),
+                rotated([0.002, 0.8, 0.001, 1.0], [s, 0.0, s, 0.0]),
+            ],
+        ),
+        (
+            "sub-pixel",
+            vec![
+                kernel([0.0, 0.0, 0.0, 0.5], [0.002, 0.003, 0.002, 1.0]),
+                kernel([0.05, 0.02, 0.0, 0.5], [0.004, 0.001, 0.001, 1.0]),
+            ],
+        ),
+        (
+            "tiny sigma_t",
+            vec![
+                kernel([0.0, 0.0, 0.0, 0.5 - 1.5e-3], [0.3, 0.3, 0.3, 1e-3]),
+                kernel([0.2, 0.1, 0.0, 0.5 + 2e-6], [0.3, 0.2, 0.3, 1e-6]),
+            ],
+        ),
+        (
+            "velocity and rotation",
+            vec![
+                Kernel {
+                    velocity: [0.8, -0.5, 0.3],
+                    ..rotated([0.3, 0.1, 0.2, 0.4], [0.5, 0.5, 0.5, 0.5])
+                },
+                Kernel {
+                    velocity: [-1.0, 0.2, 2.0],
+                    mean: [0.3, 0.0, -0.2, 0.2],
+                    ..rotated([0.2, 0.25, 0.1, 0.3], [0.8, 0.0, 0.6, 0.0])
+                },
+            ],
+        ),
+    ]
+    .into_iter()
+    .map(|(name, ks)| {
+        (
+            name,
+            Scene::from_kernels(&ks, [0.05, 0.0, 0.1], name).unwrap(),
+        )
+    })
+    .collect()
+}
+
+#[test]
+fn hard_cases_match_finite_differences_and_the_f64_backward() {
+    let camera = test_camera(64, 48);
+    for (name, scene) in hard_cases(&camera) {
+        for (cutoff, dilation) in [(DEFAULT_CUTOFF, 0.3), (0.0, 0.3), (DEFAULT_CUTOFF, 0.0)] {
+            if name == "sub-pixel" && dilation == 0.0 {
+                continue; // without dilation a sub-pixel kernel falls between pixel centres
+            }
+            let options = RenderOptions {
+                dilation,
+                cutoff,
+                ..Default::default()
+            };
+            let what = format!("{name} (cut-off {cutoff}, dilation {dilation})");
+            check_against_finite_differences(&what, &scene, &camera, 0.5, &options);
+            check_fast_against_reference(&what, &scene, &camera, 0.5, &options);
+        }
+    }
+}
+
+#[test]
+fn gradients_are_the_same_bits_for_any_thread_count() {
+    let camera = test_camera(96, 72);
+    let scene = hard_random_scene(&camera, 5, 300);
+    let options = RenderOptions::default();
+    let target = jittered_target(&scene, &camera, 0.4, &options, 3);
+    let results: Vec<Gradients> = [1, 2, 5]
+        .iter()
+        .map(|&n| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap();
+            pool.install(|| fast_gradients(&scene, &camera, 0.4, &options, &target).1)
+        })
+        .collect();
+    assert!(
+        results.iter().all(|g| g == &results[0]),
+        "gradients depend on the thread count"
+    );
+}
+
+#[derive(serde::Deserialize)]
+struct ExpectedKernel {
+    mean: [f64; 4],
+    amplitude: [f64; 3],
+    velocity: [f64; 3],
+}
+
+#[derive(serde::Deserialize)]
+struct Expected {
+    loss: f64,
+    kernels: Vec<ExpectedKernel>,
+}
+
+#[test]
+fn match_the_independent_gradient_vectors() {
+    for name in ["toy_blob", "random_200"] {
+        let dir = reference_case_dir(name);
+        let (scene, camera, tau) = reference_case(name);
+        let target =
+            splat4d::io::image_file::load_image(&dir.join("grad_target.exr"), [0.0; 3]).unwrap();
+        let expected: Expected =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("grad_expected.json")).unwrap())
+                .unwrap();
+        let options = RenderOptions::default();
+        let (ref_loss, reference) =
+            reference_loss_and_gradients(&scene, &camera, tau, &options, &target.pixels);
+        let (fast_loss, fast) = fast_gradients(&scene, &camera, tau, &options, &target.pixels);
+        assert!(
+            (ref_loss - expected.loss).abs() <= 1e-9 * expected.loss,
+            "{name}: f64 loss {ref_loss} vs {}",
+            expected.loss
+        );
+        assert!(
+            (fast_loss - expected.loss).abs() <= 1e-5 * expected.loss,
+            "{name}: fast loss {fast_loss} vs {}",
+            expected.loss
+        );
+        let rows: Vec<[f64; 10]> = expected
+            .kernels
+            .iter()
+            .map(|k| {
+                let (m, a, v) = (k.mean, k.amplitude, k.velocity);
+                [m[0], m[1], m[2], m[3], a[0], a[1], a[2], v[0], v[1], v[2]]
+            })
+            .collect();
+        assert_eq!(rows.len(), scene.len());
+        let scale = scales(&rows);
+        let (mut worst_ref, mut worst_fast) = (0.0_f64, 0.0_f64);
+        for (i, e) in rows.iter().enumerate() {
+            let (r, f) = (grad_of(&reference, i), grad_of(&fast, i));
+            for p in 0..10 {
+                let ref_bound = 1e-7 * scale[p] + 1e-6 * e[p].abs();
+                let fast_bound = ATOL_FAST * scale[p] + RTOL_FAST * e[p].abs();
+                worst_ref = worst_ref.max((r[p] - e[p]).abs() / ref_bound);
+                worst_fast = worst_fast.max((f[p] - e[p]).abs() / fast_bound);
+                assert!(
+                    (r[p] - e[p]).abs() <= ref_bound,
+                    "{name}: kernel {i} {}: f64 {} vs expected {}",
+                    PARAM_NAMES[p],
+                    r[p],
+                    e[p]
+                );
+                assert!(
+                    (f[p] - e[p]).abs() <= fast_bound,
+                    "{name}: kernel {i} {}: fast {} vs expected {}",
+                    PARAM_NAMES[p],
+                    f[p],
+                    e[p]
+                );
+            }
+        }
+        println!("{name}: f64 backward at {worst_ref:.3} of its bound, fast at {worst_fast:.3}");
+    }
+}

@@ -1,0 +1,206 @@
+//! Videos: frames on disk match renders, the GIF holds every frame, MP4 goes through
+//! `ffmpeg` when it is on PATH (a stand-in here) and is skipped with a note when it is not.
+
+use std::path::Path;
+use std::process::Command;
+
+use image::AnimationDecoder;
+use splat4d::io::image_file::load_image;
+use splat4d::io::path_file::save_path;
+use splat4d::model::image::quantize;
+use splat4d::scenes::paths::{Circle, Lens, orbit, spiral};
+use splat4d::{RenderOptions, Scene, render};
+
+fn blob() -> Scene {
+    splat4d::io::scene_file::scene_from_json(include_str!("../../data/blob.json"), "blob").unwrap()
+}
+
+fn gif_frames(path: &Path) -> usize {
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    image::codecs::gif::GifDecoder::new(file)
+        .unwrap()
+        .into_frames()
+        .count()
+}
+
+fn splat4d(args: &[&str], cwd: &Path, path_env: Option<&str>) -> std::process::Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_splat4d"));
+    command.args(args).current_dir(cwd);
+    if let Some(p) = path_env {
+        command.env("PATH", p);
+    }
+    command.output().unwrap()
+}
+
+#[test]
+fn orbit_frames_are_the_renders_and_the_gif_has_them_all() {
+    let scene = blob();
+    let circle = Circle {
+        centre: [0.5; 3],
+        radius: 4.0,
+        elevation_degrees: 15.0,
+        frames: 6,
+    };
+    let lens = Lens {
+        width: 40,
+        height: 30,
+        fov_y_degrees: 45.0,
+    };
+    let frames = orbit(&circle, &lens, 0.5).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let options = splat4d::io::video::VideoOptions {
+        mp4: false,
+        ..Default::default()
+    };
+    let mut ticks = 0;
+    let files =
+        splat4d::io::video::write_video(frames.len(), dir.path(), "o", &options, |k, image| {
+            *image = render(
+                &scene,
+                &frames[k].camera,
+                frames[k].time,
+                &RenderOptions::default(),
+            )?;
+            ticks += 1;
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!((files.frames, ticks), (6, 6));
+    assert_eq!(gif_frames(files.gif.as_ref().unwrap()), 6);
+    for (k, frame) in frames.iter().enumerate() {
+        let written =
+            load_image(&dir.path().join(format!("o/frame_{k:04}.png")), [0.0; 3]).unwrap();
+        let expected =
+            render(&scene, &frame.camera, frame.time, &RenderOptions::default()).unwrap();
+        let quantized: Vec<f32> = expected
+            .pixels
+            .iter()
+            .map(|&c| f32::from(quantize(c, 255)) / 255.0)
+            .collect();
+        assert_eq!(written.pixels, quantized, "frame {k}");
+        assert!(
+            expected.pixels.iter().cloned().fold(0.0, f32::max) > 0.5,
+            "the blob is in frame {k}"
+        );
+    }
+}
+
+#[test]
+fn video_command_writes_orbits_spiral_and_path_videos() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let lens = Lens {
+        width: 24,
+        height: 24,
+        fov_y_degrees: 50.0,
+    };
+    let path_frames = spiral(
+        &Circle {
+            centre: [0.5; 3],
+            radius: 3.0,
+            elevation_degrees: 10.0,
+            frames: 4,
+        },
+        &lens,
+        [0.0, 1.0],
+    )
+    .unwrap();
+    save_path(&path_frames, &d.join("walk.json")).unwrap();
+    let args = [
+        "video",
+        "--scene",
+        "blob.json",
+        "--orbit",
+        "0.5,0.5,0.5,4,20,5",
+        "--times",
+        "0,1",
+        "--spiral",
+        "--path",
+        "walk.json",
+        "--out",
+        "v",
+        "--size",
+        "32x24",
+    ];
+    // No ffmpeg: an empty PATH.
+    let output = splat4d(&args, d, Some(""));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("ffmpeg is not on PATH"), "{stdout}");
+    for (name, frames) in [
+        ("orbit_t0.00", 5),
+        ("orbit_t1.00", 5),
+        ("spiral", 60),
+        ("walk", 4),
+    ] {
+        assert_eq!(
+            std::fs::read_dir(d.join("v").join(name)).unwrap().count(),
+            frames,
+            "{name}"
+        );
+        assert_eq!(
+            gif_frames(&d.join(format!("v/{name}.gif"))),
+            frames,
+            "{name}"
+        );
+        assert!(!d.join(format!("v/{name}.mp4")).exists());
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn mp4_goes_through_ffmpeg_when_it_is_on_path() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    // A stand-in ffmpeg: answers -version, records its arguments, writes its last argument.
+    let bin = d.join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let script = "#!/bin/sh\nif [ \"$1\" = \"-version\" ]; then echo fake; exit 0; fi\necho \"$@\" > \"$(dirname \"$0\")/args.txt\"\nfor last; do :; done\necho mp4 > \"$last\"\n";
+    std::fs::write(bin.join("ffmpeg"), script).unwrap();
+    std::fs::set_permissions(bin.join("ffmpeg"), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let path_env = format!("{}:/usr/bin:/bin", bin.display());
+    let args = [
+        "video",
+        "--scene",
+        "blob.json",
+        "--orbit",
+        "0.5,0.5,0.5,4,20,3",
+        "--out",
+        "v",
+        "--size",
+        "16x16",
+        "--no-gif",
+        "--fps",
+        "12",
+    ];
+    let output = splat4d(&args, d, Some(&path_env));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("v/orbit_t0.50.mp4")).unwrap(),
+        "mp4\n"
+    );
+    let recorded = std::fs::read_to_string(bin.join("args.txt")).unwrap();
+    assert!(
+        recorded.contains("-framerate 12")
+            && recorded.contains("frame_%04d.png")
+            && recorded.contains("libx264"),
+        "{recorded}"
+    );
+    assert!(!d.join("v/orbit_t0.50.gif").exists());
+    let names: Vec<String> = std::fs::read_dir(d.join("v"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.contains("partial")), "{names:?}");
+}
