@@ -32,6 +32,8 @@ mod ply;
 mod properties;
 /// The CLI writes the same bytes as before the layered move (issue 15).
 mod recorded;
+/// Each fast stage against its f64 twin, one stage at a time on the same input.
+mod stages;
 /// The temporal index renders exactly what a plain render does.
 mod temporal_index;
 /// Binning lists exactly the tiles each ellipse reaches.

@@ -1,5 +1,5 @@
 //! Renders the 100k-kernel bench scene repeatedly, for profilers (perf, callgrind):
-//! `cargo run --release --example profile_forward -- [kernels] [frames] [std|poly]`.
+//! `cargo run --profile profiling -p splat4d-benches --example profile_forward -- [kernels] [frames] [std|poly]`.
 
 use splat4d::scenes::synthetic::{bench_camera, bench_scene};
 use splat4d::{RenderContext, RenderOptions};
