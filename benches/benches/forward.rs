@@ -3,7 +3,7 @@
 //! seed-style dense baseline (`dense_512x512`), one group per stage (`stages_512x512`) and the
 //! temporal index. Throughput is kernel-pixel pairs per second (criterion's "elem/s" is
 //! pairs/s here; for the dense baseline, pairs evaluated). Machine and flags:
-//! `benches/README.md`. Filter to run a part: `cargo bench --bench forward -- forward_512`.
+//! `benches/README.md`. Filter to run a part: `cargo bench -p splat4d-benches --bench forward -- forward_512`.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use splat4d::project::project;

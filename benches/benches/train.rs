@@ -2,7 +2,7 @@
 //! 1920×1080, 1 and 2 threads): forward, backward (after a forward), and the whole step
 //! (forward + loss + backward + Adam), as `train_WxH/{forward,backward,step}/N/Tt`. Prints
 //! backward time over forward time per scene. Machine and flags: `benches/README.md`.
-//! Filter to run a part: `cargo bench --bench train -- train_512x512`.
+//! Filter to run a part: `cargo bench -p splat4d-benches --bench train -- train_512x512`.
 
 use std::time::Instant;
 

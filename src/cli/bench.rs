@@ -8,7 +8,6 @@ use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::tasks::bench::{BenchRequest, bench};
 
 use super::args::parse_size;
-use super::progress::Bars;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -85,9 +84,5 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         sweep: args.sweep,
         out: args.out.clone(),
     };
-    let mut bars = Bars::new();
-    let summary = bench(&request, &mut bars)?;
-    bars.finish();
-    super::print(summary);
-    Ok(())
+    super::with_progress(|bars| bench(&request, bars))
 }

@@ -7,7 +7,6 @@ use splat4d::scenes::dataset::DatasetSpec;
 use splat4d::tasks::dataset::{DatasetRequest, write_dataset};
 
 use super::args::{RenderFlags, parse_list, parse_size};
-use super::progress::Bars;
 
 #[derive(Debug, clap::Args)]
 pub struct DatasetArgs {
@@ -59,9 +58,5 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         options: args.render.options(),
         threads: args.render.threads(),
     };
-    let mut bars = Bars::new();
-    let summary = write_dataset(&request, &mut bars)?;
-    bars.finish();
-    super::print(summary);
-    Ok(())
+    super::with_progress(|bars| write_dataset(&request, bars))
 }

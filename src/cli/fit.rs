@@ -11,7 +11,6 @@ use splat4d::fit::train::FitMode;
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
 use super::args::{RenderFlags, parse_list};
-use super::progress::Bars;
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
@@ -195,9 +194,5 @@ pub fn run(args: &FitArgs) -> Result<()> {
         log: args.log.clone(),
         threads: args.render.threads(),
     };
-    let mut bars = Bars::new();
-    let summary = fit_dataset(&request, &mut bars)?;
-    bars.finish();
-    super::print(summary);
-    Ok(())
+    super::with_progress(|bars| fit_dataset(&request, bars))
 }

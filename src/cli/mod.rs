@@ -25,6 +25,17 @@ fn print(summary: impl std::fmt::Display) {
     let _ = writeln!(std::io::stdout().lock(), "{summary}");
 }
 
+/// Runs a long task with progress on stderr ([`progress::Bars`]), then prints its summary.
+fn with_progress<S: std::fmt::Display>(
+    task: impl FnOnce(&mut progress::Bars) -> splat4d::Result<S>,
+) -> splat4d::Result<()> {
+    let mut bars = progress::Bars::new();
+    let summary = task(&mut bars)?;
+    bars.finish();
+    print(summary);
+    Ok(())
+}
+
 /// splat4d: render and fit dynamic scenes of 4D Gaussian kernels on the CPU.
 ///
 /// Without a subcommand, runs the seed paper's experiment and writes `out/report.md`.

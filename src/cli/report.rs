@@ -7,7 +7,6 @@ use splat4d::report::experiment::ExperimentConfig;
 use splat4d::tasks::report::write_report;
 
 use super::args::parse_size;
-use super::progress::Bars;
 
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
@@ -62,9 +61,5 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         (config.dataset.width, config.dataset.height) = (w, h);
         command.push_str(&format!(" --size {w}x{h}"));
     }
-    let mut bars = Bars::new();
-    let summary = write_report(&config, &args.out, &command, &mut bars)?;
-    bars.finish();
-    super::print(summary);
-    Ok(())
+    super::with_progress(|bars| write_report(&config, &args.out, &command, bars))
 }

@@ -9,7 +9,6 @@ use splat4d::scenes::paths::{Circle, Lens};
 use splat4d::tasks::video::{CircleSpec as Spec, VideoRequest, write_videos};
 
 use super::args::{RenderFlags, TimeList, parse_list, parse_size, parse_times};
-use super::progress::Bars;
 
 /// An orbit or spiral: explicit `cx,cy,cz,radius,elevation,frames`, or `auto` (from the
 /// scene's bounds: 20° elevation, 60 frames).
@@ -108,9 +107,5 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         options: args.render.options(),
         threads: args.render.threads(),
     };
-    let mut bars = Bars::new();
-    let summary = write_videos(&request, &mut bars)?;
-    bars.finish();
-    super::print(summary);
-    Ok(())
+    super::with_progress(|bars| write_videos(&request, bars))
 }
