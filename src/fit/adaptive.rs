@@ -67,20 +67,10 @@ pub struct AdaptiveOptions {
     pub min_scale: f64,
 }
 
+/// [`crate::fit::plan::DEFAULT_ROUNDS`].
 impl Default for AdaptiveOptions {
     fn default() -> Self {
-        AdaptiveOptions {
-            every: 50,
-            from: 0.3,
-            until: 0.7,
-            gradient_threshold: 2e-5,
-            min_improvement: 0.05,
-            prune_below: 2.0 / 255.0,
-            max_growth: 0.5,
-            max_kernels: 100_000,
-            merge_tolerance: 0.1,
-            min_scale: f64::INFINITY,
-        }
+        crate::fit::plan::DEFAULT_ROUNDS
     }
 }
 

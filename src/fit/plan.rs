@@ -13,15 +13,51 @@
 //!   compact models in the report) and `paper` otherwise.
 //! - **splitting**: densified kernels are split only when the scales are fixed (the fit
 //!   cannot shrink them), above an eighth of the largest initial scale; otherwise cloned.
+//! - **numbers**: every default (steps, rates, batch, the adaptive rounds) is a constant
+//!   here; `FitOptions::default` and `AdaptiveOptions::default` read them.
 //! - **background**: the one given, else white when the images had alpha (D-NeRF's
 //!   convention), else the initial scene's.
 
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
-use crate::fit::train::{DEFAULT_RATES, FitMode, FitOptions};
+use crate::fit::train::{FitMode, FitOptions};
 use crate::model::{Camera, Error, Result, Scene, View};
 use crate::render::RenderOptions;
+
+/// Adam steps of a fit (`splat4d fit` without `--steps`).
+pub const DEFAULT_STEPS: usize = 2000;
+/// Views per step.
+pub const DEFAULT_BATCH_SIZE: usize = 8;
+/// Learning rates at the last step as a fraction of the first (exponential decay).
+pub const DEFAULT_FINAL_RATE_FACTOR: f64 = 0.05;
+/// Held-out evaluation period, steps.
+pub const DEFAULT_EVAL_EVERY: usize = 50;
+/// Amplitude of every channel of a random or automatic start.
+pub const DEFAULT_INIT_AMPLITUDE: f64 = 0.1;
+
+/// Initial learning rates of every group (a mode then zeroes the groups it does not fit).
+pub const DEFAULT_RATES: LearningRates = LearningRates {
+    mean: 2e-3,
+    time: 2e-3,
+    amplitude: 1e-2,
+    velocity: 2e-3,
+    scale: 1e-2,
+};
+
+/// The adaptive rounds (densify, prune, merge; [`crate::fit::adaptive`]).
+pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
+    every: 50,
+    from: 0.3,
+    until: 0.7,
+    gradient_threshold: 2e-5,
+    min_improvement: 0.05,
+    prune_below: 2.0 / 255.0,
+    max_growth: 0.5,
+    max_kernels: 100_000,
+    merge_tolerance: 0.1,
+    min_scale: f64::INFINITY,
+};
 
 /// Where a fit starts.
 #[derive(Clone, Debug, PartialEq)]
@@ -109,25 +145,25 @@ pub struct FitPlan {
 impl Default for FitPlan {
     fn default() -> Self {
         FitPlan {
-            steps: 2000,
+            steps: DEFAULT_STEPS,
             start_kernels: 1,
             adaptive: false,
-            rounds: AdaptiveOptions::default(),
+            rounds: DEFAULT_ROUNDS,
             min_scale: None,
             bounds: None,
             time_range: None,
             init_scale: None,
-            init_amplitude: 0.1,
+            init_amplitude: DEFAULT_INIT_AMPLITUDE,
             rates: DEFAULT_RATES,
-            final_rate_factor: 0.05,
+            final_rate_factor: DEFAULT_FINAL_RATE_FACTOR,
             mode: None,
             fit_velocity: false,
             fit_scale: false,
             freeze_mean: false,
             freeze_time: false,
             freeze_amplitude: false,
-            batch_size: 8,
-            eval_every: 50,
+            batch_size: DEFAULT_BATCH_SIZE,
+            eval_every: DEFAULT_EVAL_EVERY,
             seed: 0,
             background: None,
             render: RenderOptions::default(),
@@ -268,5 +304,107 @@ impl FitPlan {
                 box_from_cameras(&cameras, time)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Image;
+
+    /// Four 8×8 views of the origin from around it, at times 0 and 1.
+    fn views() -> Vec<View> {
+        [
+            [3.0, 0.5, 0.0],
+            [0.0, 0.5, 3.0],
+            [-3.0, 0.5, 0.0],
+            [0.0, 0.5, -3.0],
+        ]
+        .iter()
+        .enumerate()
+        .map(|(k, &eye)| View {
+            camera: Camera::look_at(eye, [0.0; 3], [0.0, 1.0, 0.0], 40.0, 8, 8).unwrap(),
+            time: (k % 2) as f64,
+            image: Image::filled(8, 8, [0.0; 3]),
+            name: format!("view {k}"),
+        })
+        .collect()
+    }
+
+    #[test]
+    fn auto_starts_from_one_kernel_with_velocity_and_rounds_that_never_split() {
+        let prepared = FitPlan::default()
+            .prepare(Init::Auto, &views(), false)
+            .unwrap();
+        assert_eq!(prepared.mode, FitMode::Velocity);
+        assert_eq!(prepared.scene.len(), 1);
+        assert_eq!(
+            prepared.scene.means[0][3], 0.5,
+            "the middle of the training times"
+        );
+        let rounds = prepared.options.adaptive.expect("auto is adaptive");
+        assert_eq!(rounds.min_scale, f64::INFINITY, "the fit sizes the kernels");
+        assert_eq!(prepared.options.learning_rates, DEFAULT_RATES);
+        assert_eq!(prepared.options.steps, DEFAULT_STEPS);
+    }
+
+    #[test]
+    fn fixed_scales_split_above_an_eighth_of_the_initial_scale() {
+        let plan = FitPlan {
+            adaptive: true,
+            init_scale: Some([0.4, 0.4, 0.4, 0.2]),
+            ..FitPlan::default()
+        };
+        let prepared = plan.prepare(Init::Random(5), &views(), false).unwrap();
+        assert_eq!(prepared.mode, FitMode::Paper);
+        assert_eq!(prepared.scene.len(), 5);
+        let rounds = prepared.options.adaptive.unwrap();
+        assert!(
+            (rounds.min_scale - 0.05).abs() < 1e-15,
+            "{}",
+            rounds.min_scale
+        );
+        let rates = prepared.options.learning_rates;
+        assert_eq!((rates.velocity, rates.scale), (0.0, 0.0), "paper mode");
+    }
+
+    #[test]
+    fn freezing_a_group_zeroes_its_rate_and_the_background_follows_the_rule() {
+        let plan = FitPlan {
+            freeze_time: true,
+            fit_velocity: true,
+            ..FitPlan::default()
+        };
+        let prepared = plan.prepare(Init::Random(2), &views(), true).unwrap();
+        let rates = prepared.options.learning_rates;
+        assert_eq!(rates.time, 0.0);
+        assert_eq!(rates.velocity, DEFAULT_RATES.velocity);
+        assert!(prepared.options.adaptive.is_none(), "a fixed count");
+        assert_eq!(
+            prepared.scene.background, [1.0; 3],
+            "images with alpha: white"
+        );
+        let given = FitPlan {
+            background: Some([0.2, 0.3, 0.4]),
+            ..FitPlan::default()
+        };
+        let scene = given.prepare(Init::Auto, &views(), true).unwrap().scene;
+        assert_eq!(scene.background, [0.2, 0.3, 0.4]);
+    }
+
+    #[test]
+    fn bad_starts_are_refused() {
+        assert!(Init::parse_builtin("random:0").is_err());
+        assert!(Init::parse_builtin("random:x").is_err());
+        assert_eq!(
+            Init::parse_builtin("random:3").unwrap(),
+            Some(Init::Random(3))
+        );
+        assert_eq!(Init::parse_builtin("scene.json").unwrap(), None);
+        let bad_box = FitPlan {
+            bounds: Some([0.0, 0.0, 0.0, -1.0, 1.0, 1.0]),
+            ..FitPlan::default()
+        };
+        assert!(bad_box.prepare(Init::Random(1), &views(), false).is_err());
     }
 }

@@ -14,6 +14,7 @@ use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
 use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
 use crate::fit::loss::{mse, mse_with_gradient, psnr};
+use crate::fit::plan;
 use crate::model::View;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
@@ -81,15 +82,6 @@ impl std::str::FromStr for FitMode {
     }
 }
 
-/// Default learning rates of every group (a mode then zeroes the groups it does not fit).
-pub const DEFAULT_RATES: LearningRates = LearningRates {
-    mean: 2e-3,
-    time: 2e-3,
-    amplitude: 1e-2,
-    velocity: 2e-3,
-    scale: 1e-2,
-};
-
 /// How to fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitOptions {
@@ -113,15 +105,16 @@ pub struct FitOptions {
     pub adaptive: Option<AdaptiveOptions>,
 }
 
+/// The defaults of [`crate::fit::plan`] with the paper's mode and a fixed count.
 impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
-            steps: 500,
-            batch_size: 8,
-            learning_rates: FitMode::Paper.learning_rates(DEFAULT_RATES),
-            final_rate_factor: 0.05,
+            steps: plan::DEFAULT_STEPS,
+            batch_size: plan::DEFAULT_BATCH_SIZE,
+            learning_rates: FitMode::Paper.learning_rates(plan::DEFAULT_RATES),
+            final_rate_factor: plan::DEFAULT_FINAL_RATE_FACTOR,
             adam: AdamConfig::default(),
-            eval_every: 50,
+            eval_every: plan::DEFAULT_EVAL_EVERY,
             seed: 0,
             render: RenderOptions::default(),
             adaptive: None,

@@ -3,10 +3,9 @@
 //! adaptive velocity fit ends with the kernels a scene needs.
 
 use splat4d::fit::adam::LearningRates;
-use splat4d::fit::adaptive::AdaptiveOptions;
-use splat4d::fit::init::{box_from_cameras, centre_scene};
 use splat4d::fit::loss::psnr;
-use splat4d::fit::train::{DEFAULT_RATES, FitMode, FitOptions, evaluate, fit};
+use splat4d::fit::plan::{FitPlan, Init, PreparedFit};
+use splat4d::fit::train::{FitMode, FitOptions, evaluate, fit};
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
 use splat4d::{RenderContext, RenderOptions, Scene};
 
@@ -112,15 +111,14 @@ fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
         ..DatasetSpec::default()
     };
     let dataset = render_dataset(truth, &spec, &RenderOptions::default(), || {}).unwrap();
-    let cameras: Vec<_> = dataset.train.iter().map(|v| v.camera).collect();
-    let bounds = box_from_cameras(&cameras, spec.time_range).unwrap();
-    let mut scene = centre_scene(&bounds, 0.1).unwrap();
-    let options = FitOptions {
+    let plan = FitPlan {
         steps,
-        learning_rates: mode.learning_rates(DEFAULT_RATES),
-        adaptive: Some(AdaptiveOptions::default()),
-        ..FitOptions::default()
+        mode: Some(mode),
+        ..FitPlan::default()
     };
+    let PreparedFit {
+        mut scene, options, ..
+    } = plan.prepare(Init::Auto, &dataset.train, false).unwrap();
     let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
     assert_eq!(records.last().unwrap().kernels, scene.len());
     let mut context = RenderContext::new();
