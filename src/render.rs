@@ -211,6 +211,16 @@ impl RenderContext {
             &mut buffers.sliced,
         );
         slice_backward(scene, tau, &self.sliced, &buffers.sliced, grads);
+        // The background is added to every pixel: its gradient is the sum of ∂L/∂C.
+        let mut v_background = [0.0_f64; 3];
+        for pixel in v_image.chunks_exact(3) {
+            for (sum, &v) in v_background.iter_mut().zip(pixel) {
+                *sum += f64::from(v);
+            }
+        }
+        for (total, sum) in grads.v_background.iter_mut().zip(v_background) {
+            *total += sum;
+        }
     }
 
     /// The last rendered image.

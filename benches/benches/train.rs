@@ -32,6 +32,7 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
         amplitude: 1e-3,
         velocity: 1e-3,
         scale: 0.0,
+        background: 0.0,
     };
     let mut group = c.benchmark_group(format!("train_{w}x{h}"));
     group.sample_size(10);

@@ -25,6 +25,9 @@ pub struct Gradients {
     pub v_velocities: Vec<[f64; 3]>,
     /// `∂L/∂(sx, sy, sz, st)`, the standard deviations (not in the `splat4d grad` file).
     pub v_scales: Vec<[f64; 4]>,
+    /// `∂L/∂b`, the scene's background colour (SPEC §5: `b` is added to every pixel, so
+    /// this is `Σ_pixels ∂L/∂C`; not in the `splat4d grad` file).
+    pub v_background: [f64; 3],
 }
 
 impl Gradients {
@@ -46,6 +49,7 @@ impl Gradients {
         self.v_velocities.resize(n, [0.0; 3]);
         self.v_scales.clear();
         self.v_scales.resize(n, [0.0; 4]);
+        self.v_background = [0.0; 3];
     }
 
     /// Number of kernels.

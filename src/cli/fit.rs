@@ -79,9 +79,10 @@ pub struct FitArgs {
     /// Scales for `random:N`: `sx,sy,sz,st` (default: from the box and N).
     #[arg(long, value_parser = parse_list::<4>)]
     init_scale: Option<[f64; 4]>,
-    /// Amplitude of every channel for `random:N`.
-    #[arg(long, default_value_t = FitPlan::default().init_amplitude, allow_negative_numbers = true)]
-    init_amplitude: f64,
+    /// Amplitude of every channel of a `random:N` or `auto` start (default: the data's mean
+    /// colour above the background, so the sign follows the data).
+    #[arg(long, allow_negative_numbers = true)]
+    init_amplitude: Option<f64>,
     /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
     #[arg(long)]
     log: Option<PathBuf>,
@@ -125,6 +126,17 @@ pub struct FitArgs {
     /// Keep the amplitudes fixed.
     #[arg(long)]
     freeze_amplitude: bool,
+    /// Keep the background fixed at its start (the given --background, or the median of the
+    /// training images' border pixels).
+    #[arg(long)]
+    freeze_background: bool,
+    /// Learning rate of the background colour.
+    #[arg(long, default_value_t = FitPlan::default().rates.background)]
+    lr_background: f64,
+    /// Average N×N blocks of pixels of every image (a box filter, like nerfstudio's
+    /// `images_N`); the intrinsics are divided by N.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    downscale: u32,
     /// Views per step.
     #[arg(long, default_value_t = FitPlan::default().batch_size)]
     batch: usize,
@@ -134,9 +146,9 @@ pub struct FitArgs {
     /// Seed of the batch order and of `random:N`.
     #[arg(long, default_value_t = FitPlan::default().seed)]
     seed: u64,
-    /// Background `r,g,b`: RGBA images are composited over it and the fitted scene uses it
-    /// (default: white when the images have alpha, as D-NeRF does; otherwise the initial
-    /// scene's, black for `random:N`).
+    /// Background `r,g,b`: RGBA images are composited over it and the fit starts from it
+    /// (default: RGBA images over black; the fit starts from the median of the images'
+    /// border pixels). The background is fitted unless --freeze-background.
     #[arg(long, value_parser = parse_list::<3>)]
     background: Option<[f64; 3]>,
     #[command(flatten)]
@@ -172,6 +184,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             amplitude: args.lr_amplitude,
             velocity: args.lr_velocity,
             scale: args.lr_scale,
+            background: args.lr_background,
         },
         final_rate_factor: args.lr_final,
         mode: args.mode,
@@ -180,6 +193,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         freeze_mean: args.freeze_mean,
         freeze_time: args.freeze_time,
         freeze_amplitude: args.freeze_amplitude,
+        freeze_background: args.freeze_background,
         batch_size: args.batch,
         eval_every: args.eval_every,
         seed: args.seed,
@@ -188,6 +202,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     };
     let request = FitRequest {
         views: args.views.clone(),
+        downscale: args.downscale,
         init: args.init.clone(),
         plan,
         out: args.out.clone(),

@@ -80,6 +80,13 @@ impl Progress for Bars {
         }
     }
 
+    fn note(&mut self, text: &str) {
+        match &self.bar {
+            Some(bar) => bar.println(format!("note: {text}")),
+            None => eprintln!("note: {text}"),
+        }
+    }
+
     fn tick(&mut self) {
         if let Some(bar) = &self.bar {
             bar.inc(1);
@@ -96,6 +103,10 @@ impl Progress for Bars {
 impl FitProgress for Bars {
     fn start(&mut self, steps: usize) {
         Progress::start(self, "fit", steps);
+    }
+
+    fn note(&mut self, text: &str) {
+        Progress::note(self, text);
     }
 
     fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>) {

@@ -7,8 +7,8 @@
 //! θ ← θ - lr · (m / (1 - β1^k)) / (√(v / (1 - β2^k)) + ε)
 //! ```
 //!
-//! Groups: spatial mean (x, y, z), time (t), amplitude (r, g, b), velocity (vx, vy, vz) and
-//! scale (sx, sy, sz, st). A group with learning rate 0 is frozen and its moments are not
+//! Groups: spatial mean (x, y, z), time (t), amplitude (r, g, b), velocity (vx, vy, vz),
+//! scale (sx, sy, sz, st), and the scene's background colour (r, g, b), one for the scene. A group with learning rate 0 is frozen and its moments are not
 //! updated. Scales are optimised as `ln s` (gradient `s ∂L/∂s`, update `s ← s e^(-Δ)`), so
 //! they stay positive and a rate is a relative change; they are frozen by default, as the
 //! seed paper fixes σ "for stability" (SPEC §6). Rotation is never changed.
@@ -29,6 +29,8 @@ pub struct LearningRates {
     pub velocity: f64,
     /// Scales `(sx, sy, sz, st)`, in `ln s` (a relative change per step).
     pub scale: f64,
+    /// The scene's background colour `(r, g, b)` (SPEC §5).
+    pub background: f64,
 }
 
 impl LearningRates {
@@ -41,6 +43,7 @@ impl LearningRates {
             amplitude: self.amplitude * factor,
             velocity: self.velocity * factor,
             scale: self.scale * factor,
+            background: self.background * factor,
         }
     }
 }
@@ -74,6 +77,7 @@ const PARAMS: usize = 14;
 pub struct Adam {
     config: AdamConfig,
     steps: i32,
+    /// Kernels' moments, [`PARAMS`] per kernel, then the background's three.
     first: Vec<f64>,
     second: Vec<f64>,
 }
@@ -85,8 +89,8 @@ impl Adam {
         Adam {
             config,
             steps: 0,
-            first: vec![0.0; PARAMS * kernels],
-            second: vec![0.0; PARAMS * kernels],
+            first: vec![0.0; PARAMS * kernels + 3],
+            second: vec![0.0; PARAMS * kernels + 3],
         }
     }
 
@@ -94,8 +98,12 @@ impl Adam {
     /// moments of old kernel `sources[i]`, or zeros when it is `None` (a new kernel). The
     /// step count, and so the bias correction, carries on.
     pub fn remap(&mut self, sources: &[Option<usize>]) {
-        let mut first = vec![0.0; PARAMS * sources.len()];
-        let mut second = vec![0.0; PARAMS * sources.len()];
+        let kernels = PARAMS * sources.len();
+        let mut first = vec![0.0; kernels + 3];
+        let mut second = vec![0.0; kernels + 3];
+        let old = self.first.len() - 3;
+        first[kernels..].copy_from_slice(&self.first[old..]);
+        second[kernels..].copy_from_slice(&self.second[old..]);
         for (i, source) in sources.iter().enumerate() {
             if let Some(old) = *source {
                 first[PARAMS * i..PARAMS * (i + 1)]
@@ -134,7 +142,7 @@ impl Adam {
         assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
         assert_eq!(
             self.first.len(),
-            PARAMS * scene.len(),
+            PARAMS * scene.len() + 3,
             "Adam state sized for the scene"
         );
         self.steps += 1;
@@ -179,6 +187,14 @@ impl Adam {
                 }
             }
         }
+        if rates.background != 0.0 {
+            let base = PARAMS * scene.len();
+            for c in 0..3 {
+                let grad = grads.v_background[c];
+                scene.background[c] -=
+                    self.update(base + c, grad, rates.background, correction1, correction2);
+            }
+        }
     }
 }
 
@@ -201,6 +217,7 @@ mod tests {
             amplitude: 0.01,
             velocity: 0.0,
             scale: 0.0,
+            background: 0.0,
         };
         Adam::new(1, AdamConfig::default()).step(&mut scene, &grads, &rates);
         // With bias correction the first step is lr · g/(|g| + ε/…): ±lr.
@@ -225,6 +242,7 @@ mod tests {
             amplitude: 0.0,
             velocity: 0.0,
             scale: 0.0,
+            background: 0.0,
         };
         for k in 0..2000 {
             let mut grads = Gradients::zeros(1);
@@ -255,6 +273,7 @@ mod tests {
             amplitude: 0.0,
             velocity: 0.0,
             scale: 0.5,
+            background: 0.0,
         };
         let mut adam = Adam::new(1, AdamConfig::default());
         adam.step(&mut scene, &grads, &rates);
@@ -268,5 +287,38 @@ mod tests {
         }
         assert!(scene.scales[0].iter().all(|&v| v > 0.0 && v.is_finite()));
         assert_eq!(scene.means[0], [0.0; 4], "other groups frozen");
+    }
+
+    #[test]
+    fn the_background_is_its_own_group_and_survives_a_remap() {
+        let kernel = Kernel::new([0.0; 4], [1.0; 4], [1.0; 3]);
+        let mut scene = Scene::from_kernels(&[kernel], [0.5; 3], "<test>").unwrap();
+        let mut grads = Gradients::zeros(1);
+        grads.v_background = [1.0, -1.0, 0.0];
+        let rates = LearningRates {
+            mean: 0.0,
+            time: 0.0,
+            amplitude: 0.0,
+            velocity: 0.0,
+            scale: 0.0,
+            background: 0.01,
+        };
+        let mut adam = Adam::new(1, AdamConfig::default());
+        adam.step(&mut scene, &grads, &rates);
+        let b = scene.background;
+        assert!((b[0] - 0.49).abs() < 1e-6 && (b[1] - 0.51).abs() < 1e-6 && b[2] == 0.5);
+        assert_eq!(scene.amplitudes[0], [1.0; 3], "kernels frozen");
+        // Two kernels now (the old one and a new one): the background's moments carry on, so
+        // a second step with the same gradient moves it by the same amount again.
+        adam.remap(&[Some(0), None]);
+        scene = Scene::from_kernels(&[kernel, kernel], scene.background, "<test>").unwrap();
+        let mut grads = Gradients::zeros(2);
+        grads.v_background = [1.0, -1.0, 0.0];
+        adam.step(&mut scene, &grads, &rates);
+        assert!(
+            (scene.background[0] - 0.48).abs() < 1e-6,
+            "{:?}",
+            scene.background
+        );
     }
 }

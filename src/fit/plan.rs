@@ -15,8 +15,12 @@
 //!   cannot shrink them), above an eighth of the largest initial scale; otherwise cloned.
 //! - **numbers**: every default (steps, rates, batch, the adaptive rounds) is a constant
 //!   here; `FitOptions::default` and `AdaptiveOptions::default` read them.
-//! - **background**: the one given, else white when the images had alpha (D-NeRF's
-//!   convention), else the initial scene's.
+//! - **background** `b` (SPEC §5): a fitted parameter group (its own learning rate,
+//!   `freeze_background` keeps it), starting from the one given, else from the data: the
+//!   median of the training images' border pixels ([`border_median`]). A start from a
+//!   scene keeps the scene's own background unless one is given.
+//! - **amplitudes** of a random or automatic start: the data's mean colour above the
+//!   background ([`start_amplitude`]), so the sign follows the data.
 
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
@@ -33,8 +37,12 @@ pub const DEFAULT_BATCH_SIZE: usize = 8;
 pub const DEFAULT_FINAL_RATE_FACTOR: f64 = 0.05;
 /// Held-out evaluation period, steps.
 pub const DEFAULT_EVAL_EVERY: usize = 50;
-/// Amplitude of every channel of a random or automatic start.
+/// Amplitude of every channel of a random or automatic start when the data cannot say
+/// (no pixel differs from the background): the report's fixed-count fits use it too.
 pub const DEFAULT_INIT_AMPLITUDE: f64 = 0.1;
+/// A pixel whose colour differs from the background by more than this in some channel
+/// counts as foreground when the start's amplitude is taken from the data.
+pub const FOREGROUND_THRESHOLD: f32 = 1.0 / 255.0;
 
 /// Initial learning rates of every group (a mode then zeroes the groups it does not fit).
 pub const DEFAULT_RATES: LearningRates = LearningRates {
@@ -43,6 +51,7 @@ pub const DEFAULT_RATES: LearningRates = LearningRates {
     amplitude: 1e-2,
     velocity: 2e-3,
     scale: 1e-2,
+    background: 2e-3,
 };
 
 /// The adaptive rounds (densify, prune, merge; [`crate::fit::adaptive`]).
@@ -112,8 +121,9 @@ pub struct FitPlan {
     pub time_range: Option<[f64; 2]>,
     /// Scales of the random start (default: from the box and the count).
     pub init_scale: Option<[f64; 4]>,
-    /// Amplitude of every channel of a random or automatic start.
-    pub init_amplitude: f64,
+    /// Amplitude of every channel of a random or automatic start (default: from the data,
+    /// see [`start_amplitude`]).
+    pub init_amplitude: Option<f64>,
     /// Initial learning rates of every group (the mode zeroes the ones it does not fit).
     pub rates: LearningRates,
     /// Learning rates at the last step as a fraction of the first.
@@ -130,6 +140,8 @@ pub struct FitPlan {
     pub freeze_time: bool,
     /// Keep the amplitudes fixed.
     pub freeze_amplitude: bool,
+    /// Keep the background fixed at its start.
+    pub freeze_background: bool,
     /// Views per step.
     pub batch_size: usize,
     /// Held-out evaluation period in steps (0: only at the end).
@@ -153,7 +165,7 @@ impl Default for FitPlan {
             bounds: None,
             time_range: None,
             init_scale: None,
-            init_amplitude: DEFAULT_INIT_AMPLITUDE,
+            init_amplitude: None,
             rates: DEFAULT_RATES,
             final_rate_factor: DEFAULT_FINAL_RATE_FACTOR,
             mode: None,
@@ -162,6 +174,7 @@ impl Default for FitPlan {
             freeze_mean: false,
             freeze_time: false,
             freeze_amplitude: false,
+            freeze_background: false,
             batch_size: DEFAULT_BATCH_SIZE,
             eval_every: DEFAULT_EVAL_EVERY,
             seed: 0,
@@ -209,9 +222,8 @@ impl FitPlan {
         Ok(())
     }
 
-    /// The initial scene and the options of a fit from `init` to `train`; `had_alpha` says
-    /// whether the training images had an alpha channel (for the default background).
-    pub fn prepare(&self, init: Init, train: &[View], had_alpha: bool) -> Result<PreparedFit> {
+    /// The initial scene and the options of a fit from `init` to `train`.
+    pub fn prepare(&self, init: Init, train: &[View]) -> Result<PreparedFit> {
         self.validate()?;
         let mode = self.mode_for(&init);
         let random_count = match init {
@@ -220,14 +232,22 @@ impl FitPlan {
             Init::Scene(_) => None,
         };
         let auto = init == Init::Auto;
+        let background = self.background.unwrap_or_else(|| border_median(train));
         let mut scene = match (random_count, init) {
             (Some(n), _) => {
                 let bounds = self.start_box(train)?;
-                if auto && n == 1 && self.init_scale.is_none() {
-                    centre_scene(&bounds, self.init_amplitude)?
+                let amplitude = self
+                    .init_amplitude
+                    .map_or_else(|| start_amplitude(train, background), |a| [a; 3]);
+                let mut start = if auto && n == 1 && self.init_scale.is_none() {
+                    centre_scene(&bounds, 1.0)?
                 } else {
-                    random_scene(n, &bounds, self.init_scale, self.init_amplitude, self.seed)?
+                    random_scene(n, &bounds, self.init_scale, 1.0, self.seed)?
+                };
+                for a in &mut start.amplitudes {
+                    *a = amplitude;
                 }
+                start
             }
             (None, Init::Scene(scene)) => scene,
             (None, _) => unreachable!("only a scene start has no count"),
@@ -251,10 +271,8 @@ impl FitPlan {
                 ..self.rounds
             }
         });
-        if let Some(background) = self.background {
+        if random_count.is_some() || self.background.is_some() {
             scene.background = background;
-        } else if had_alpha {
-            scene.background = [1.0; 3];
         }
         let rate = |frozen: bool, lr: f64| if frozen { 0.0 } else { lr };
         let options = FitOptions {
@@ -269,6 +287,7 @@ impl FitPlan {
                     self.rates.velocity,
                 ),
                 scale: rate(!fits_scales, self.rates.scale),
+                background: rate(self.freeze_background, self.rates.background),
             },
             final_rate_factor: self.final_rate_factor,
             eval_every: self.eval_every,
@@ -307,6 +326,61 @@ impl FitPlan {
     }
 }
 
+/// The per-channel median of the border pixels (the outermost row and column on each
+/// side) of every training image: the colour the scene shows where nothing is, the start
+/// of the fitted background. Black when there are no views.
+#[must_use]
+pub fn border_median(views: &[View]) -> [f64; 3] {
+    let mut channels: [Vec<f32>; 3] = Default::default();
+    for view in views {
+        let image = &view.image;
+        let (w, h) = (image.width, image.height);
+        for j in 0..h {
+            for i in 0..w {
+                if i == 0 || j == 0 || i + 1 == w || j + 1 == h {
+                    let p = image.pixel(i, j);
+                    for c in 0..3 {
+                        channels[c].push(p[c]);
+                    }
+                }
+            }
+        }
+    }
+    channels.map(|mut values| {
+        if values.is_empty() {
+            return 0.0;
+        }
+        values.sort_by(f32::total_cmp);
+        f64::from(values[values.len() / 2])
+    })
+}
+
+/// The amplitude a random or automatic start gives every kernel: the mean colour above
+/// `background` of the foreground pixels (those that differ from it by more than
+/// [`FOREGROUND_THRESHOLD`] in some channel), so that a dark object on a bright background
+/// starts with negative amplitudes and a bright one with positive. When no pixel differs,
+/// [`DEFAULT_INIT_AMPLITUDE`].
+#[must_use]
+pub fn start_amplitude(views: &[View], background: [f64; 3]) -> [f64; 3] {
+    let b = background.map(|v| v as f32);
+    let mut sum = [0.0_f64; 3];
+    let mut count = 0_u64;
+    for view in views {
+        for p in view.image.pixels.chunks_exact(3) {
+            if (0..3).any(|c| (p[c] - b[c]).abs() > FOREGROUND_THRESHOLD) {
+                for c in 0..3 {
+                    sum[c] += f64::from(p[c] - b[c]);
+                }
+                count += 1;
+            }
+        }
+    }
+    if count == 0 {
+        return [DEFAULT_INIT_AMPLITUDE; 3];
+    }
+    sum.map(|s| s / count as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -333,9 +407,7 @@ mod tests {
 
     #[test]
     fn auto_starts_from_one_kernel_with_velocity_and_rounds_that_never_split() {
-        let prepared = FitPlan::default()
-            .prepare(Init::Auto, &views(), false)
-            .unwrap();
+        let prepared = FitPlan::default().prepare(Init::Auto, &views()).unwrap();
         assert_eq!(prepared.mode, FitMode::Velocity);
         assert_eq!(prepared.scene.len(), 1);
         assert_eq!(
@@ -355,7 +427,7 @@ mod tests {
             init_scale: Some([0.4, 0.4, 0.4, 0.2]),
             ..FitPlan::default()
         };
-        let prepared = plan.prepare(Init::Random(5), &views(), false).unwrap();
+        let prepared = plan.prepare(Init::Random(5), &views()).unwrap();
         assert_eq!(prepared.mode, FitMode::Paper);
         assert_eq!(prepared.scene.len(), 5);
         let rounds = prepared.options.adaptive.unwrap();
@@ -369,27 +441,64 @@ mod tests {
     }
 
     #[test]
-    fn freezing_a_group_zeroes_its_rate_and_the_background_follows_the_rule() {
+    fn freezing_a_group_zeroes_its_rate() {
         let plan = FitPlan {
             freeze_time: true,
+            freeze_background: true,
             fit_velocity: true,
             ..FitPlan::default()
         };
-        let prepared = plan.prepare(Init::Random(2), &views(), true).unwrap();
+        let prepared = plan.prepare(Init::Random(2), &views()).unwrap();
         let rates = prepared.options.learning_rates;
-        assert_eq!(rates.time, 0.0);
+        assert_eq!((rates.time, rates.background), (0.0, 0.0));
         assert_eq!(rates.velocity, DEFAULT_RATES.velocity);
         assert!(prepared.options.adaptive.is_none(), "a fixed count");
+        let fitted = FitPlan::default().prepare(Init::Auto, &views()).unwrap();
         assert_eq!(
-            prepared.scene.background, [1.0; 3],
-            "images with alpha: white"
+            fitted.options.learning_rates.background,
+            DEFAULT_RATES.background
         );
+    }
+
+    #[test]
+    fn background_and_start_amplitude_come_from_the_data() {
+        // A dark square on a bright grey background: the border says 0.9, the square is
+        // 0.7 below it.
+        let mut views = views();
+        for view in &mut views {
+            view.image = Image::filled(8, 8, [0.9, 0.8, 0.9]);
+            for j in 3..5 {
+                for i in 3..5 {
+                    let k = 3 * (j * 8 + i);
+                    view.image.pixels[k..k + 3].copy_from_slice(&[0.2, 0.1, 0.2]);
+                }
+            }
+        }
+        let prepared = FitPlan::default().prepare(Init::Auto, &views).unwrap();
+        let [r, g, b] = prepared.scene.background;
+        assert!((r - 0.9).abs() < 1e-6 && (g - 0.8).abs() < 1e-6 && (b - 0.9).abs() < 1e-6);
+        for (a, expected) in prepared.scene.amplitudes[0].iter().zip([-0.7, -0.7, -0.7]) {
+            assert!(
+                (a - expected).abs() < 1e-6,
+                "{:?}",
+                prepared.scene.amplitudes[0]
+            );
+        }
+        // Given values win.
         let given = FitPlan {
             background: Some([0.2, 0.3, 0.4]),
+            init_amplitude: Some(0.5),
             ..FitPlan::default()
         };
-        let scene = given.prepare(Init::Auto, &views(), true).unwrap().scene;
+        let scene = given.prepare(Init::Random(3), &views).unwrap().scene;
         assert_eq!(scene.background, [0.2, 0.3, 0.4]);
+        assert!(scene.amplitudes.iter().all(|a| *a == [0.5; 3]));
+        // Nothing but background: the default amplitude.
+        let blank = FitPlan::default()
+            .prepare(Init::Auto, &super::tests::views())
+            .unwrap();
+        assert_eq!(blank.scene.amplitudes[0], [DEFAULT_INIT_AMPLITUDE; 3]);
+        assert_eq!(blank.scene.background, [0.0; 3]);
     }
 
     #[test]
@@ -405,6 +514,6 @@ mod tests {
             bounds: Some([0.0, 0.0, 0.0, -1.0, 1.0, 1.0]),
             ..FitPlan::default()
         };
-        assert!(bad_box.prepare(Init::Random(1), &views(), false).is_err());
+        assert!(bad_box.prepare(Init::Random(1), &views()).is_err());
     }
 }

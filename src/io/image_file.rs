@@ -118,10 +118,20 @@ pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     load_image_with_alpha(path, background).map(|(image, _)| image)
 }
 
-/// [`load_image`], also telling whether the file had an alpha channel.
+/// [`load_image`], also telling whether some pixel was transparent (alpha below 1).
 pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image, bool)> {
     let origin = path.display().to_string();
-    ImageKind::from_path(path)?;
+    let readable = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .is_some_and(|e| ["exr", "png", "jpg", "jpeg"].contains(&e.as_str()));
+    if !readable {
+        return Err(Error::usage(format!(
+            "{}: unsupported image extension (read: .png, .exr, .jpg, .jpeg)",
+            path.display()
+        )));
+    }
     let reader = image::ImageReader::open(path)
         .map_err(|e| Error::read(path, "cannot read image", e))?
         .with_guessed_format()
@@ -129,10 +139,9 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
     let decoded = reader
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
-    Ok((
-        to_linear_rgb(&decoded, background),
-        decoded.color().has_alpha(),
-    ))
+    let transparent =
+        decoded.color().has_alpha() && decoded.to_rgba32f().pixels().any(|p| p.0[3] < 1.0);
+    Ok((to_linear_rgb(&decoded, background), transparent))
 }
 
 /// Converts a decoded image to linear RGB f32 (integers divided by `2^bits - 1`), alpha

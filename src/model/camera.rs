@@ -14,6 +14,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::error::{Error, Result, check_finite};
 
+/// How far the last row of a camera-to-world matrix read from a file may be from
+/// `(0, 0, 0, 1)` (rounding in the file, not a projective matrix).
+pub const LAST_ROW_TOLERANCE: f64 = 1e-6;
+
 /// Default near plane (SPEC §3).
 pub const DEFAULT_NEAR: f64 = 0.01;
 /// Default far plane (SPEC §3).
@@ -134,15 +138,36 @@ impl Camera {
 
     /// A camera from an OpenGL camera-to-world matrix (Blender, D-NeRF `transform_matrix`:
     /// x right, y up, z backward), row-major, with the given intrinsics.
+    ///
+    /// Files carry rounding: the matrix's last row must be `(0, 0, 0, 1)` within
+    /// [`LAST_ROW_TOLERANCE`], and is then taken as exactly that; the inverse's last row is
+    /// set exactly too (SPEC §3 checks it exactly). The 3×3 part may be any invertible
+    /// matrix (scaled or sheared rotations keep working).
     pub fn from_opengl_camera_to_world(
         width: u32,
         height: u32,
         intrinsics: [f64; 4],
         camera_to_world: [[f64; 4]; 4],
     ) -> Result<Self> {
-        let c2w = DMat4::from_cols_array_2d(&camera_to_world).transpose();
+        let origin = "<camera-to-world matrix>";
+        for (r, row) in camera_to_world.iter().enumerate() {
+            check_finite(origin, "camera", &format!("camera_to_world[{r}]"), row)?;
+        }
+        let last = camera_to_world[3];
+        if (0..4).any(|k| (last[k] - [0.0, 0.0, 0.0, 1.0][k]).abs() > LAST_ROW_TOLERANCE) {
+            return Err(Error::invalid(
+                origin,
+                "camera",
+                "camera_to_world",
+                format!("the last row is {last:?}, not [0, 0, 0, 1]"),
+            ));
+        }
+        let mut exact = camera_to_world;
+        exact[3] = [0.0, 0.0, 0.0, 1.0];
+        let c2w = DMat4::from_cols_array_2d(&exact).transpose();
         let flip = DMat4::from_diagonal(DVec4::new(1.0, -1.0, -1.0, 1.0));
-        let w2c = (flip * c2w.inverse()).transpose().to_cols_array_2d();
+        let mut w2c = (flip * c2w.inverse()).transpose().to_cols_array_2d();
+        w2c[3] = [0.0, 0.0, 0.0, 1.0];
         Camera::new(width, height, intrinsics, w2c)
     }
 

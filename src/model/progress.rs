@@ -7,6 +7,9 @@ pub trait Progress: Send {
     fn start(&mut self, phase: &str, total: usize);
     /// One tick of the current phase is done.
     fn tick(&mut self);
+    /// Something the user should know now (a key ignored in an input, a choice made from
+    /// the data); the default drops it.
+    fn note(&mut self, _text: &str) {}
 }
 
 /// Progress reported nowhere.

@@ -26,6 +26,8 @@ pub struct Dataset {
     pub val: Vec<View>,
     /// Held-out views for final evaluation.
     pub test: Vec<View>,
-    /// True when some image had an alpha channel (composited over the background).
-    pub had_alpha: bool,
+    /// True when some pixel had alpha below 1 (and was composited over a background).
+    pub transparent: bool,
+    /// What the reader noticed and skipped (keys it does not read), for the user to see.
+    pub notes: Vec<String>,
 }

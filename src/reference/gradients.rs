@@ -50,6 +50,11 @@ pub fn reference_loss_and_gradients(
         .zip(target)
         .map(|(c, &t)| scale * (c - f64::from(t)))
         .collect();
+    for pixel in v_image.chunks_exact(3) {
+        for (total, v) in grads.v_background.iter_mut().zip(pixel) {
+            *total += v;
+        }
+    }
     let rc = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
     for kernel in reference_kernels(scene, camera, tau, options) {
         let q_mat = DMat2::from_cols_array_2d(&kernel.conic).transpose();

@@ -18,7 +18,7 @@ use std::time::Instant;
 use crate::fit::adam::LearningRates;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
 use crate::fit::loss::{mse, psnr};
-use crate::fit::plan::DEFAULT_RATES;
+use crate::fit::plan::{DEFAULT_INIT_AMPLITUDE, DEFAULT_RATES};
 use crate::fit::plan::{FitPlan, Init, PreparedFit};
 use crate::fit::train::{FitMode, FitOptions, StepRecord, evaluate, fit};
 use crate::model::Image;
@@ -345,7 +345,7 @@ fn fit_adaptive(
     };
     let PreparedFit {
         mut scene, options, ..
-    } = plan.prepare(Init::Auto, &dataset.train, dataset.had_alpha)?;
+    } = plan.prepare(Init::Auto, &dataset.train)?;
     let start = Instant::now();
     fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
         progress.tick()
@@ -403,7 +403,7 @@ fn blob_model_size(
         config.model_kernels,
         &bounds,
         Some(config.model_scale),
-        FitPlan::default().init_amplitude,
+        DEFAULT_INIT_AMPLITUDE,
         config.seed,
     )?;
     let start = Instant::now();
@@ -448,7 +448,7 @@ fn fit_4d(
         config.model_kernels,
         bounds,
         Some(scale),
-        FitPlan::default().init_amplitude,
+        DEFAULT_INIT_AMPLITUDE,
         config.seed,
     )?;
     let start = Instant::now();
@@ -558,7 +558,7 @@ pub fn run_experiment(
             config.frame_kernels,
             &frame_box,
             Some([sigma, sigma, sigma, 1e3]),
-            FitPlan::default().init_amplitude,
+            DEFAULT_INIT_AMPLITUDE,
             config.seed + 1 + k as u64,
         )?;
         fit(

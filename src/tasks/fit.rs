@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use crate::fit::loss::psnr;
 use crate::fit::plan::{FitPlan, Init};
 use crate::fit::train::{StepRecord, evaluate, fit};
-use crate::io::dataset::load_dataset;
+use crate::io::dataset::{DatasetOptions, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::write_bytes_atomically;
 use crate::model::{Result, Silent};
@@ -16,8 +16,10 @@ use crate::tasks::with_threads;
 /// `splat4d fit`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitRequest {
-    /// Dataset folder (D-NeRF layout).
+    /// Dataset folder (D-NeRF layout, or one `transforms.json`).
     pub views: PathBuf,
+    /// Average N×N pixel blocks of every image (1: as they are).
+    pub downscale: u32,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
     /// Everything else about the fit.
@@ -37,6 +39,7 @@ pub struct FitSummary {
     kernels: usize,
     steps: usize,
     seconds: f64,
+    background: [f64; 3],
     /// `(split, views, MSE)` for every non-empty split.
     pub splits: Vec<(&'static str, usize, f64)>,
 }
@@ -45,11 +48,14 @@ impl fmt::Display for FitSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "{}: {} kernels fitted in {} steps, {:.1} s",
+            "{}: {} kernels fitted in {} steps, {:.1} s; background ({:.4}, {:.4}, {:.4})",
             self.out.display(),
             self.kernels,
             self.steps,
-            self.seconds
+            self.seconds,
+            self.background[0],
+            self.background[1],
+            self.background[2]
         )?;
         for (split, views, mse) in &self.splits {
             write!(
@@ -66,12 +72,15 @@ impl fmt::Display for FitSummary {
 pub trait FitProgress: Send {
     /// The fit of `steps` steps begins.
     fn start(&mut self, steps: usize);
+    /// Something the user should know before the fit runs.
+    fn note(&mut self, text: &str);
     /// A step is done; `heldout_psnr` is the latest held-out PSNR measured.
     fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>);
 }
 
 impl FitProgress for Silent {
     fn start(&mut self, _: usize) {}
+    fn note(&mut self, _: &str) {}
     fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
 }
 
@@ -79,14 +88,30 @@ impl FitProgress for Silent {
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
     let plan = &request.plan;
     plan.validate()?;
-    let composite_on = plan.background.unwrap_or([1.0; 3]).map(|b| b as f32);
-    let dataset = load_dataset(&request.views, composite_on)?;
+    let options = DatasetOptions {
+        background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
+        downscale: request.downscale,
+    };
+    let dataset = load_dataset(&request.views, &options)?;
+    for note in &dataset.notes {
+        progress.note(note);
+    }
+    if dataset.transparent && plan.background.is_none() {
+        progress.note("images with transparency were composited over black (--background r,g,b chooses the colour)");
+    }
     let init = match Init::parse_builtin(&request.init)? {
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
     };
-    let prepared = plan.prepare(init, &dataset.train, dataset.had_alpha)?;
+    let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
+    let [r, g, b] = scene.background;
+    let fitted = if prepared.options.learning_rates.background > 0.0 {
+        "fitted from"
+    } else {
+        "fixed at"
+    };
+    progress.note(&format!("background {fitted} ({r:.4}, {g:.4}, {b:.4})"));
     let heldout = if dataset.val.is_empty() {
         &dataset.test
     } else {
@@ -136,6 +161,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         kernels: scene.len(),
         steps: plan.steps,
         seconds: records.last().map_or(0.0, |r| r.seconds),
+        background: scene.background,
         splits,
     })
 }

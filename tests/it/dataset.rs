@@ -2,7 +2,7 @@
 //! times and images; other tools' RGBA PNGs are composited over the background.
 
 use splat4d::RenderOptions;
-use splat4d::io::dataset::{SPLITS, load_dataset, write_split};
+use splat4d::io::dataset::{DatasetOptions, SPLITS, load_dataset, write_split};
 use splat4d::scenes::dataset::{DatasetSpec, frame_count, render_dataset};
 
 #[test]
@@ -47,8 +47,8 @@ fn cameras_times_and_images_round_trip() {
         {
             write_split(dir.path(), split, views, exr).unwrap();
         }
-        let read = load_dataset(dir.path(), [1.0; 3]).unwrap();
-        assert!(!read.had_alpha);
+        let read = load_dataset(dir.path(), &DatasetOptions::default()).unwrap();
+        assert!(!read.transparent);
         for (a_views, b_views) in [
             (&written.train, &read.train),
             (&written.val, &read.val),
@@ -108,8 +108,17 @@ fn rgba_pngs_of_other_datasets_are_composited_over_the_background() {
             "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#,
     )
     .unwrap();
-    let white = load_dataset(dir.path(), [1.0; 3]).unwrap();
-    assert!(white.had_alpha);
+    let over_white = DatasetOptions {
+        background: [1.0; 3],
+        ..DatasetOptions::default()
+    };
+    let white = load_dataset(dir.path(), &over_white).unwrap();
+    assert!(white.transparent);
+    assert!(
+        white.notes.is_empty(),
+        "rotation is a known key: {:?}",
+        white.notes
+    );
     let view = &white.train[0];
     assert_eq!(view.time, 0.25);
     let expected = [1.0, 0.0, 0.0, 0.8, 1.0, 0.8];

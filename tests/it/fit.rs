@@ -38,6 +38,7 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
             amplitude: 1e-2,
             velocity: 0.0,
             scale: 0.0,
+            background: 0.0,
         },
         final_rate_factor: 0.01,
         ..FitOptions::default()
@@ -86,6 +87,7 @@ fn a_diverging_fit_stops_with_an_error() {
             amplitude: 1e300,
             velocity: 0.0,
             scale: 0.0,
+            background: 0.0,
         },
         ..FitOptions::default()
     };
@@ -118,7 +120,7 @@ fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
     };
     let PreparedFit {
         mut scene, options, ..
-    } = plan.prepare(Init::Auto, &dataset.train, false).unwrap();
+    } = plan.prepare(Init::Auto, &dataset.train).unwrap();
     let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
     assert_eq!(records.last().unwrap().kernels, scene.len());
     let mut context = RenderContext::new();

@@ -123,6 +123,6 @@ fn dataset_transforms() {
     let good = std::fs::read(&transforms).unwrap();
     fuzz("transforms_train.json", &good, 3000, 5, |b| {
         std::fs::write(&transforms, b).unwrap();
-        splat4d::io::dataset::load_dataset(dir.path(), [1.0; 3]).is_ok()
+        splat4d::io::dataset::load_dataset(dir.path(), &Default::default()).is_ok()
     });
 }

@@ -374,3 +374,40 @@ fn match_the_independent_gradient_vectors() {
         println!("{name}: f64 backward at {worst_ref:.3} of its bound, fast at {worst_fast:.3}");
     }
 }
+
+#[test]
+fn background_gradient_matches_finite_differences_and_the_f64_backward() {
+    use splat4d::reference::{mse, render_reference};
+    let camera = test_camera(40, 30);
+    for seed in 0..3 {
+        let mut scene = hard_random_scene(&camera, seed, 60);
+        scene.background = [0.1, -0.2, 0.3];
+        let options = RenderOptions::default();
+        let tau = 0.5;
+        let target = crate::common::jittered_target(&scene, &camera, tau, &options, 5);
+        let (_, analytic) = reference_loss_and_gradients(&scene, &camera, tau, &options, &target);
+        let (_, fast) = fast_gradients(&scene, &camera, tau, &options, &target);
+        for c in 0..3 {
+            // The background moves no pair: central differences are exact up to rounding.
+            let h = 1e-6;
+            let loss_at = |delta: f64| {
+                let mut moved = scene.clone();
+                moved.background[c] += delta;
+                mse(
+                    &render_reference(&moved, &camera, tau, &options).pixels,
+                    &target,
+                )
+            };
+            let fd = (loss_at(h) - loss_at(-h)) / (2.0 * h);
+            let (a, f) = (analytic.v_background[c], fast.v_background[c]);
+            assert!(
+                (a - fd).abs() <= 1e-7 * fd.abs().max(1e-3) + 1e-9,
+                "seed {seed}, channel {c}: analytic {a} vs finite difference {fd}"
+            );
+            assert!(
+                (f - a).abs() <= RTOL_FAST * a.abs() + 1e-7,
+                "seed {seed}, channel {c}: fast {f} vs f64 {a}"
+            );
+        }
+    }
+}

@@ -10,6 +10,8 @@ mod bad_input;
 mod cli;
 /// Synthetic datasets: splits, cameras, times, and D-NeRF files read back.
 mod dataset;
+/// Datasets as other tools write them (RGBA, nerfstudio, static, JPEG, rounded matrices), fitted with the default command.
+mod dataset_variants;
 /// The same bits for every thread count.
 mod determinism;
 /// Fitting recovers known scenes; adaptive fits find the kernels they need.

@@ -1,7 +1,8 @@
 //! Every command of `tests/data/recorded/commands.txt` writes the same bytes, file for file,
 //! as the code did before the layered move (issue 15): renders, gradients, datasets, fits,
 //! imports, exports, volumes and videos. The outputs were recorded by
-//! `tests/data/recorded/record.sh` with the release binary before any code moved.
+//! `tests/data/recorded/record.sh` with the release binary before any code moved; outputs
+//! re-recorded since for a deliberate change are listed in `tests/data/README.md`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
