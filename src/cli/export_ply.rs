@@ -27,12 +27,16 @@ pub struct ExportPlyArgs {
 }
 
 pub fn run(args: &ExportPlyArgs) -> Result<()> {
-    super::print(export_ply(&ExportRequest {
+    let summary = export_ply(&ExportRequest {
         scene: args.scene.clone(),
         time: args.time,
         out: args.out.clone(),
         cutoff: args.cutoff,
         sh_rest: args.sh_rest,
-    })?);
+    })?;
+    for warning in &summary.warnings {
+        eprintln!("warning: {warning}");
+    }
+    super::print(summary);
     Ok(())
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use splat4d::Result;
 use splat4d::io::video::VideoOptions;
-use splat4d::scenes::paths::{Circle, Lens};
+use splat4d::scenes::paths::{Circle, Lens, Up};
 use splat4d::tasks::video::{CircleSpec as Spec, VideoRequest, write_videos};
 
 use super::args::{RenderFlags, TimeList, parse_list, parse_size, parse_times};
@@ -27,25 +27,30 @@ fn parse_circle(text: &str) -> std::result::Result<CircleSpec, String> {
 }
 
 #[derive(Debug, clap::Args)]
-#[command(group(clap::ArgGroup::new("path_kind").required(true).multiple(true).args(["orbit", "spiral", "path"])))]
 pub struct VideoArgs {
     /// Scene JSON file.
     #[arg(long)]
     scene: PathBuf,
     /// Orbit at each of --times: `cx,cy,cz,radius,elevation_degrees,frames`, or alone for
-    /// one framing the scene (a value starting with `-` needs `--orbit=-1,...`).
+    /// one framing the scene (a value starting with `-` needs `--orbit=-1,...`). Without
+    /// --orbit, --spiral and --path: one framing orbit.
     #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
     orbit: Option<CircleSpec>,
-    /// Times of the orbits, comma-separated.
-    #[arg(long, default_value = "0.5", value_parser = parse_times, allow_hyphen_values = true)]
-    times: TimeList,
+    /// Times of the orbits, comma-separated (default: the start, middle and end of the
+    /// scene's time range, the range of its kernels' time means).
+    #[arg(long, value_parser = parse_times, allow_hyphen_values = true)]
+    times: Option<TimeList>,
     /// One turn while time runs over --time-range and the elevation rises from -e to +e:
     /// `cx,cy,cz,radius,elevation_degrees,frames`, or alone for one framing the scene.
     #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
     spiral: Option<CircleSpec>,
-    /// Time range of the spiral, `t0,t1`.
-    #[arg(long, value_parser = parse_list::<2>, default_value = "0,1", allow_hyphen_values = true)]
-    time_range: [f64; 2],
+    /// Time range of the spiral, `t0,t1` (default: the scene's time range).
+    #[arg(long, value_parser = parse_list::<2>, allow_hyphen_values = true)]
+    time_range: Option<[f64; 2]>,
+    /// The axis orbits and spirals turn about, and the cameras' up: `x`, `y`, `z`, `-x`,
+    /// `-y` or `-z` (Blender and D-NeRF scenes are `z` up).
+    #[arg(long, default_value = "y", allow_hyphen_values = true)]
+    up: Up,
     /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
     #[arg(long)]
     path: Option<PathBuf>,
@@ -72,13 +77,14 @@ pub struct VideoArgs {
 }
 
 impl CircleSpec {
-    fn spec(&self) -> Spec {
+    fn spec(&self, up: Up) -> Spec {
         match self.0 {
             Some([cx, cy, cz, radius, elevation, frames]) => Spec::Given(Circle {
                 centre: [cx, cy, cz],
                 radius,
                 elevation_degrees: elevation,
                 frames: frames as usize,
+                up,
             }),
             None => Spec::Auto,
         }
@@ -88,10 +94,11 @@ impl CircleSpec {
 pub fn run(args: &VideoArgs) -> Result<()> {
     let request = VideoRequest {
         scene: args.scene.clone(),
-        orbit: args.orbit.as_ref().map(CircleSpec::spec),
-        times: args.times.0.clone(),
-        spiral: args.spiral.as_ref().map(CircleSpec::spec),
+        orbit: args.orbit.as_ref().map(|c| c.spec(args.up)),
+        times: args.times.as_ref().map(|t| t.0.clone()),
+        spiral: args.spiral.as_ref().map(|c| c.spec(args.up)),
         time_range: args.time_range,
+        up: args.up,
         path: args.path.clone(),
         out: args.out.clone(),
         lens: Lens {

@@ -70,6 +70,7 @@ mod tests {
             radius: 2.0,
             elevation_degrees: 10.0,
             frames: 3,
+            up: Default::default(),
         };
         let lens = Lens {
             width: 32,

@@ -1,9 +1,10 @@
 //! Camera paths for videos: a sequence of (camera, time).
 //!
 //! - [`orbit`]: `frames` cameras evenly around a circle of `radius` about `centre` at a fixed
-//!   `elevation` (degrees above the horizontal plane, +y up), looking at the centre, all at one
-//!   time ("frozen time"); the first camera is on the +z side, azimuth advancing
-//!   counter-clockwise seen from above.
+//!   `elevation` (degrees above the plane perpendicular to the circle's [`Up`] axis, +y by
+//!   default; Blender and D-NeRF scenes are +z up), looking at the centre, all at one time
+//!   ("frozen time"). With +y up the first camera is on the +z side and the azimuth advances
+//!   from +z towards +x; with another axis up, [`Up::basis`] names the two directions.
 //! - [`spiral`]: one turn like the orbit while time advances evenly from `t0` to `t1` and the
 //!   elevation rises from `-elevation` to `+elevation`.
 //! - A path file: `[{"camera": {camera JSON}, "time": t}, ...]` ([`crate::io::path_file`]).
@@ -42,6 +43,69 @@ pub struct Circle {
     pub elevation_degrees: f64,
     /// Number of frames.
     pub frames: usize,
+    /// The axis the circle turns about, and the cameras' up.
+    pub up: Up,
+}
+
+/// A world axis with its sign: the up direction of orbits and spirals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Up {
+    /// +x.
+    X,
+    /// +y (OpenGL, glTF, the project's own scenes).
+    #[default]
+    Y,
+    /// +z (Blender, D-NeRF, nerfstudio).
+    Z,
+    /// -x.
+    NegX,
+    /// -y (OpenCV camera conventions).
+    NegY,
+    /// -z.
+    NegZ,
+}
+
+impl Up {
+    /// `(up, side, front)`: the first camera of an orbit sits along `front` from the
+    /// centre, and the azimuth turns it towards `side`. For +y: (+y, +x, +z).
+    #[must_use]
+    pub fn basis(self) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        let axis = |k: usize, sign: f64| {
+            let mut v = [0.0; 3];
+            v[k] = sign;
+            v
+        };
+        let (k, sign) = match self {
+            Up::X => (0, 1.0),
+            Up::Y => (1, 1.0),
+            Up::Z => (2, 1.0),
+            Up::NegX => (0, -1.0),
+            Up::NegY => (1, -1.0),
+            Up::NegZ => (2, -1.0),
+        };
+        (
+            axis(k, sign),
+            axis((k + 2) % 3, 1.0),
+            axis((k + 1) % 3, 1.0),
+        )
+    }
+}
+
+impl std::str::FromStr for Up {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        match text.trim_start_matches('+') {
+            "x" => Ok(Up::X),
+            "y" => Ok(Up::Y),
+            "z" => Ok(Up::Z),
+            "-x" => Ok(Up::NegX),
+            "-y" => Ok(Up::NegY),
+            "-z" => Ok(Up::NegZ),
+            _ => Err(format!(
+                "`{text}` is not an axis: use x, y, z, -x, -y or -z"
+            )),
+        }
+    }
 }
 
 /// Distance from a ball of `radius` at which a camera with `lens` sees all of it with a 5%
@@ -58,36 +122,47 @@ pub fn framing_distance(radius: f64, lens: &Lens) -> f64 {
     1.05 * radius / half.sin()
 }
 
-/// The circle that frames every kernel of `scene` alive at `times` (slice centres ± 3σ, at
-/// cut-off `cutoff`): centred on them at [`framing_distance`], 20° above the horizontal
-/// plane, 60 frames. A scene with nothing alive gets the unit ball at the origin.
+/// The circle about `up` that frames every kernel of `scene` alive at `times` (slice
+/// centres ± 3σ, at cut-off `cutoff`): centred on them at [`framing_distance`], 20° above
+/// the plane, 60 frames. A scene with nothing alive gets the unit ball at the origin.
 #[must_use]
-pub fn framing_circle(scene: &Scene, times: &[f64], cutoff: f64, lens: &Lens) -> Circle {
+pub fn framing_circle(scene: &Scene, times: &[f64], cutoff: f64, lens: &Lens, up: Up) -> Circle {
     let (centre, r) = scene_sphere(scene, times, cutoff).unwrap_or(([0.0; 3], 3f64.sqrt()));
     Circle {
         centre,
         radius: framing_distance(r, lens),
         elevation_degrees: 20.0,
         frames: 60,
+        up,
     }
+}
+
+/// The range `[t0, t1]` of the scene's kernel time means: the times a video of it shows by
+/// default. `[0, 0]` for an empty scene.
+#[must_use]
+pub fn time_range(scene: &Scene) -> [f64; 2] {
+    if scene.is_empty() {
+        return [0.0; 2];
+    }
+    scene
+        .means
+        .iter()
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], m| {
+            [lo.min(m[3]), hi.max(m[3])]
+        })
 }
 
 fn camera_at(circle: &Circle, lens: &Lens, azimuth: f64, elevation_degrees: f64) -> Result<Camera> {
     let e = elevation_degrees.to_radians();
     let c = circle.centre;
-    let eye = [
-        c[0] + circle.radius * e.cos() * azimuth.sin(),
-        c[1] + circle.radius * e.sin(),
-        c[2] + circle.radius * e.cos() * azimuth.cos(),
-    ];
-    Camera::look_at(
-        eye,
-        c,
-        [0.0, 1.0, 0.0],
-        lens.fov_y_degrees,
-        lens.width,
-        lens.height,
-    )
+    let (up, side, front) = circle.up.basis();
+    // Written term by term so that +y up gives exactly the numbers it always gave.
+    let eye: [f64; 3] = std::array::from_fn(|k| {
+        c[k] + circle.radius * e.cos() * azimuth.sin() * side[k]
+            + circle.radius * e.sin() * up[k]
+            + circle.radius * e.cos() * azimuth.cos() * front[k]
+    });
+    Camera::look_at(eye, c, up, lens.fov_y_degrees, lens.width, lens.height)
 }
 
 fn check(circle: &Circle) -> Result<()> {
@@ -169,6 +244,7 @@ mod tests {
             radius: 4.0,
             elevation_degrees: 30.0,
             frames: 8,
+            up: Default::default(),
         };
         let lens = Lens {
             width: 64,
@@ -218,5 +294,35 @@ mod tests {
             )
             .is_err()
         );
+    }
+
+    #[test]
+    fn orbits_turn_about_the_up_axis_they_are_given() {
+        let lens = Lens {
+            width: 32,
+            height: 24,
+            fov_y_degrees: 40.0,
+        };
+        for (up, axis, sign) in [(Up::Z, 2, 1.0), (Up::NegY, 1, -1.0), (Up::X, 0, 1.0)] {
+            let circle = Circle {
+                centre: [1.0, 2.0, 3.0],
+                radius: 4.0,
+                elevation_degrees: 30.0,
+                frames: 12,
+                up,
+            };
+            for frame in orbit(&circle, &lens, 0.0).unwrap() {
+                let eye = frame.camera.centre();
+                // Every eye is 2 units (r sin 30°) above the centre along the up axis...
+                let height = sign * (eye[axis] - circle.centre[axis]);
+                assert!((height - 2.0).abs() < 1e-9, "{up:?}: {eye:?}");
+                // ...and image-up (camera -y, OpenCV) leans towards the up axis.
+                let down = frame.camera.rotation()[1];
+                assert!(sign * down[axis] < -0.5, "{up:?}: camera y {down:?}");
+            }
+        }
+        assert_eq!("-z".parse::<Up>().unwrap(), Up::NegZ);
+        assert_eq!("+x".parse::<Up>().unwrap(), Up::X);
+        assert!("w".parse::<Up>().is_err());
     }
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use crate::io::gltf_import::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
-use crate::model::{Error, Result};
+use crate::model::{Error, Result, Scene};
 use crate::scenes::toy::{blob_scene, points_scene};
 
 /// Which toy scene (SPEC §7).
@@ -23,6 +23,8 @@ pub enum ToyKind {
 pub struct SceneSummary {
     out: PathBuf,
     line: String,
+    /// Warnings for the user (stderr), such as what a viewer cannot show.
+    pub warnings: Vec<String>,
 }
 
 impl fmt::Display for SceneSummary {
@@ -41,6 +43,7 @@ pub fn write_toy(kind: ToyKind, seed: u64, out: &Path) -> Result<SceneSummary> {
     Ok(SceneSummary {
         out: out.to_path_buf(),
         line: format!("{} kernels", scene.len()),
+        warnings: Vec::new(),
     })
 }
 
@@ -72,6 +75,7 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
             imported.points,
             imported.times
         ),
+        warnings: Vec::new(),
     })
 }
 
@@ -126,5 +130,32 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             scene.len(),
             request.time
         ),
+        warnings: viewer_warnings(&scene),
     })
+}
+
+/// What an alpha-compositing splat viewer cannot show of `scene`: negative amplitudes (a
+/// viewer's colours and opacities are ≥ 0, so those kernels come out clamped) and a
+/// background other than black (a viewer draws its own).
+#[must_use]
+pub fn viewer_warnings(scene: &Scene) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let negative = scene
+        .amplitudes
+        .iter()
+        .filter(|a| a.iter().any(|&v| v < 0.0))
+        .count();
+    if negative > 0 {
+        warnings.push(format!(
+            "{negative} of {} kernels have negative amplitudes, which splat viewers cannot show (their colour is negative and viewers clamp it to black)",
+            scene.len()
+        ));
+    }
+    if scene.background != [0.0; 3] {
+        let [r, g, b] = scene.background;
+        warnings.push(format!(
+            "the scene's background ({r}, {g}, {b}) is not written: set it as the viewer's background colour"
+        ));
+    }
+    warnings
 }

@@ -9,7 +9,9 @@ use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
 use crate::render::{RenderContext, RenderOptions};
-use crate::scenes::paths::{Circle, Lens, PathFrame, framing_circle, orbit, spiral};
+use crate::scenes::paths::{
+    Circle, Lens, PathFrame, Up, framing_circle, orbit, spiral, time_range,
+};
 use crate::slice::TemporalIndex;
 use crate::tasks::with_threads;
 
@@ -27,14 +29,16 @@ pub enum CircleSpec {
 pub struct VideoRequest {
     /// Scene file.
     pub scene: PathBuf,
-    /// An orbit at each of `times`.
+    /// An orbit at each of `times` (with neither a spiral nor a path: one framing orbit).
     pub orbit: Option<CircleSpec>,
-    /// Times of the orbits.
-    pub times: Vec<f64>,
+    /// Times of the orbits (default: the start, middle and end of the scene's time range).
+    pub times: Option<Vec<f64>>,
     /// One turn while time runs over `time_range`.
     pub spiral: Option<CircleSpec>,
-    /// Time range of the spiral.
-    pub time_range: [f64; 2],
+    /// Time range of the spiral (default: the scene's, [`time_range`]).
+    pub time_range: Option<[f64; 2]>,
+    /// The axis framing orbits and spirals turn about.
+    pub up: Up,
     /// A camera path file.
     pub path: Option<PathBuf>,
     /// Output folder.
@@ -81,11 +85,22 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
     let lens = &request.lens;
     let circle = |spec: &CircleSpec, times: &[f64]| match spec {
         CircleSpec::Given(circle) => *circle,
-        CircleSpec::Auto => framing_circle(scene, times, request.options.cutoff, lens),
+        CircleSpec::Auto => framing_circle(scene, times, request.options.cutoff, lens, request.up),
     };
+    let [t0, t1] = request.time_range.unwrap_or_else(|| time_range(scene));
+    let times = request.times.clone().unwrap_or_else(|| {
+        if t0 == t1 {
+            vec![t0]
+        } else {
+            vec![t0, 0.5 * (t0 + t1), t1]
+        }
+    });
+    let nothing_asked =
+        request.orbit.is_none() && request.spiral.is_none() && request.path.is_none();
+    let orbit_spec = request.orbit.or(nothing_asked.then_some(CircleSpec::Auto));
     let mut videos = Vec::new();
-    if let Some(spec) = &request.orbit {
-        for &tau in &request.times {
+    if let Some(spec) = &orbit_spec {
+        for &tau in &times {
             videos.push((
                 format!("orbit_t{tau:.2}"),
                 orbit(&circle(spec, &[tau]), lens, tau)?,
@@ -93,13 +108,12 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         }
     }
     if let Some(spec) = &request.spiral {
-        let [t0, t1] = request.time_range;
         let sweep: Vec<f64> = (0..=10)
             .map(|k| t0 + (t1 - t0) * f64::from(k) / 10.0)
             .collect();
         videos.push((
             "spiral".into(),
-            spiral(&circle(spec, &sweep), lens, request.time_range)?,
+            spiral(&circle(spec, &sweep), lens, [t0, t1])?,
         ));
     }
     if let Some(path) = &request.path {

@@ -816,3 +816,51 @@ fn exit_status_follows_the_kind_of_error() {
     assert!(stderr(&output).contains("diverged"), "{}", stderr(&output));
     assert!(!d.join("fit.json").exists());
 }
+
+#[test]
+fn export_ply_warns_about_what_splat_viewers_cannot_show() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("s.json"),
+        r#"{"kernels": [{"mean": [0, 0, 0, 0], "scale": [0.1, 0.1, 0.1, 1], "amplitude": [-0.5, 0.2, 0.2]},
+                        {"mean": [1, 0, 0, 0], "scale": [0.1, 0.1, 0.1, 1], "amplitude": [0.5, 0.2, 0.2]}],
+            "background": [1, 1, 1]}"#,
+    )
+    .unwrap();
+    let args = [
+        "export-ply",
+        "--scene",
+        "s.json",
+        "--time",
+        "0",
+        "--out",
+        "s.ply",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let message = stderr(&output);
+    assert!(
+        message.contains("1 of 2 kernels have negative amplitudes"),
+        "{message}"
+    );
+    assert!(message.contains("background (1, 1, 1)"), "{message}");
+    // A scene a viewer shows as it is: no warning.
+    std::fs::write(
+        d.join("t.json"),
+        r#"{"kernels": [{"mean": [0, 0, 0, 0], "scale": [0.1, 0.1, 0.1, 1], "amplitude": [0.5, 0.2, 0.2]}]}"#,
+    )
+    .unwrap();
+    let args = [
+        "export-ply",
+        "--scene",
+        "t.json",
+        "--time",
+        "0",
+        "--out",
+        "t.ply",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success());
+    assert!(!stderr(&output).contains("warning"), "{}", stderr(&output));
+}

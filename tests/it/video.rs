@@ -40,6 +40,7 @@ fn orbit_frames_are_the_renders_and_the_gif_has_them_all() {
         radius: 4.0,
         elevation_degrees: 15.0,
         frames: 6,
+        up: Default::default(),
     };
     let lens = Lens {
         width: 40,
@@ -101,6 +102,7 @@ fn video_command_writes_orbits_spiral_and_path_videos() {
             radius: 3.0,
             elevation_degrees: 10.0,
             frames: 4,
+            up: Default::default(),
         },
         &lens,
         [0.0, 1.0],
@@ -203,4 +205,48 @@ fn mp4_goes_through_ffmpeg_when_it_is_on_path() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(names.iter().all(|n| !n.contains("partial")), "{names:?}");
+}
+
+#[test]
+fn video_without_a_path_flag_orbits_the_scene_at_its_times() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let common = [
+        "--scene",
+        "blob.json",
+        "--size",
+        "24x16",
+        "--no-mp4",
+        "--no-gif",
+    ];
+    // --times alone: the default orbit at each time.
+    let mut args = vec!["video", "--times", "0,0.5,1", "--out", "a"];
+    args.extend_from_slice(&common);
+    let output = splat4d(&args, d, None);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    for t in ["0.00", "0.50", "1.00"] {
+        let frames = std::fs::read_dir(d.join(format!("a/orbit_t{t}")))
+            .unwrap()
+            .count();
+        assert_eq!(frames, 60, "t = {t}");
+    }
+    // Nothing at all: the scene's own time range (the blob's one kernel: t = 0.5), +z up.
+    let mut args = vec!["video", "--out", "b", "--up", "z"];
+    args.extend_from_slice(&common);
+    let output = splat4d(&args, d, None);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let made: Vec<String> = std::fs::read_dir(d.join("b"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(made, ["orbit_t0.50"]);
 }
