@@ -23,7 +23,7 @@ pub struct ViewFlags {
     #[arg(long, value_parser = parse_size)]
     size: Option<(u32, u32)>,
     /// Scene time τ.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, allow_negative_numbers = true)]
     time: f64,
 }
 
@@ -51,17 +51,17 @@ impl ViewFlags {
 #[derive(Debug, clap::Args)]
 pub struct RenderFlags {
     /// Variance added to each screen-space covariance, px² (SPEC §4).
-    #[arg(long, default_value_t = DEFAULT_DILATION, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_DILATION, allow_negative_numbers = true)]
     dilation: f64,
     /// Cut-off ε on a kernel's value; 0 disables truncation (SPEC §5).
-    #[arg(long, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
     cutoff: f64,
     /// How exp(-q/2) is evaluated per pixel: `poly` (inlined polynomial, relative error
     /// ≤ 4e-7, batched and vectorised) or `std` (libm).
     #[arg(long, default_value = "poly")]
     exp: ExpMode,
     /// Worker threads (default: one per core). The output does not depend on it.
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
     threads: Option<u16>,
 }
 
@@ -80,6 +80,18 @@ impl RenderFlags {
         self.threads.map(usize::from)
     }
 }
+
+/// A finite number (NaN and ±∞ are refused when the flags are read, before any work).
+pub fn finite(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(format!("{v} is not finite")),
+        Err(e) => Err(format!("`{text}`: {e}")),
+    }
+}
+
+/// Most worker threads a command starts (more only cost memory: stacks for nothing).
+pub const MAX_THREADS: u16 = 1024;
 
 /// `N` comma-separated finite numbers.
 pub fn parse_list<const N: usize>(text: &str) -> Result<[f64; N], String> {

@@ -22,7 +22,7 @@ pub struct BenchArgs {
     #[arg(long, value_parser = parse_size, default_value = "512x512")]
     size: (u32, u32),
     /// Worker threads (default: 1, and one per core).
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
     threads: Option<u16>,
     /// Timed frames per configuration (the median is reported).
     #[arg(long, default_value_t = 10)]
@@ -31,13 +31,13 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 400)]
     samples: usize,
     /// Scene time τ.
-    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = 0.5, allow_negative_numbers = true)]
     time: f64,
     /// Variance added to each screen covariance, px².
-    #[arg(long, default_value_t = DEFAULT_DILATION)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_DILATION)]
     dilation: f64,
     /// Cut-off ε.
-    #[arg(long, default_value_t = DEFAULT_CUTOFF)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
     /// How exp(-q/2) is evaluated: `poly` (inlined polynomial, batched and vectorised) or
     /// `std` (libm).

@@ -35,7 +35,7 @@ pub struct DatasetArgs {
     #[arg(long, value_parser = parse_list::<2>, default_value = "0,1", allow_hyphen_values = true)]
     time_range: [f64; 2],
     /// Vertical field of view of the cameras, degrees.
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = 40.0)]
     fov: f64,
     #[command(flatten)]
     render: RenderFlags,

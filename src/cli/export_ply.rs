@@ -12,13 +12,13 @@ pub struct ExportPlyArgs {
     #[arg(long)]
     scene: PathBuf,
     /// Scene time τ of the slice.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, allow_negative_numbers = true)]
     time: f64,
     /// Output `.ply`.
     #[arg(long)]
     out: PathBuf,
     /// Kernels whose value at τ stays below this cut-off are left out (SPEC §5).
-    #[arg(long, default_value_t = DEFAULT_CUTOFF)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
     /// Add 45 zero `f_rest_*` properties (degree-3 spherical harmonics) for loaders that
     /// require them, such as the reference 3DGS training code.

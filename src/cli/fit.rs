@@ -36,33 +36,33 @@ pub struct FitArgs {
     #[arg(long, default_value_t = FitPlan::default().rounds.every)]
     densify_every: usize,
     /// Fraction of the steps before the first densify/prune round.
-    #[arg(long, default_value_t = FitPlan::default().rounds.from)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.from)]
     densify_from: f64,
     /// Fraction of the steps after which the kernel count is frozen.
-    #[arg(long, default_value_t = FitPlan::default().rounds.until)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.until)]
     densify_until: f64,
     /// Mean positional gradient (loss per standard deviation of motion) at which a kernel
     /// is densified.
-    #[arg(long, default_value_t = FitPlan::default().rounds.gradient_threshold)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.gradient_threshold)]
     densify_threshold: f64,
     /// Kernels are densified only when the mean training loss fell by less than this
     /// fraction over the last --densify-every steps (the fit has stalled).
-    #[arg(long, default_value_t = FitPlan::default().rounds.min_improvement)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.min_improvement)]
     min_improvement: f64,
     /// Kernels within this many standard deviations of each other (position, time,
     /// velocity, log-scale) are merged into one; 0 disables merging.
-    #[arg(long, default_value_t = FitPlan::default().rounds.merge_tolerance)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.merge_tolerance)]
     merge_tolerance: f64,
     /// Largest fraction of the kernels densified in one round.
-    #[arg(long, default_value_t = FitPlan::default().rounds.max_growth)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.max_growth)]
     max_growth: f64,
     /// Peak |amplitude| below which a kernel is pruned (default: 2/255).
-    #[arg(long, default_value_t = FitPlan::default().rounds.prune_below)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rounds.prune_below)]
     prune_below: f64,
     /// Densified kernels whose mean spatial scale is above this are split (scales / 1.6),
     /// the others cloned (default: when the scales are not fitted, an eighth of the largest
     /// initial scale; otherwise never split: the fit sizes the kernels).
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::finite)]
     min_scale: Option<f64>,
     /// Adam steps.
     #[arg(long, default_value_t = FitPlan::default().steps)]
@@ -81,25 +81,25 @@ pub struct FitArgs {
     init_scale: Option<[f64; 4]>,
     /// Amplitude of every channel of a `random:N` or `auto` start (default: the data's mean
     /// colour above the background, so the sign follows the data).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::args::finite, allow_negative_numbers = true)]
     init_amplitude: Option<f64>,
     /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
     #[arg(long)]
     log: Option<PathBuf>,
     /// Learning rate of the spatial means.
-    #[arg(long, default_value_t = FitPlan::default().rates.mean)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.mean)]
     lr_mean: f64,
     /// Learning rate of the time means.
-    #[arg(long, default_value_t = FitPlan::default().rates.time)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.time)]
     lr_time: f64,
     /// Learning rate of the amplitudes.
-    #[arg(long, default_value_t = FitPlan::default().rates.amplitude)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.amplitude)]
     lr_amplitude: f64,
     /// Learning rate of the velocities (with `--mode velocity` or --fit-velocity).
-    #[arg(long, default_value_t = FitPlan::default().rates.velocity)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.velocity)]
     lr_velocity: f64,
     /// Learning rates at the last step as a fraction of the first (exponential decay).
-    #[arg(long, default_value_t = FitPlan::default().final_rate_factor)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().final_rate_factor)]
     lr_final: f64,
     /// What the fit moves: `paper` (means and amplitudes; kernels static in space, scales
     /// fixed, as in the seed paper), `static` (also the scales), `velocity` (also the
@@ -115,7 +115,7 @@ pub struct FitArgs {
     fit_scale: bool,
     /// Learning rate of the scales, a relative change per step (modes `static` and
     /// `velocity`, or --fit-scale).
-    #[arg(long, default_value_t = FitPlan::default().rates.scale)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.scale)]
     lr_scale: f64,
     /// Keep the spatial means fixed.
     #[arg(long)]
@@ -131,7 +131,7 @@ pub struct FitArgs {
     #[arg(long)]
     freeze_background: bool,
     /// Learning rate of the background colour.
-    #[arg(long, default_value_t = FitPlan::default().rates.background)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.background)]
     lr_background: f64,
     /// Average N×N blocks of pixels of every image (a box filter, like nerfstudio's
     /// `images_N`); the intrinsics are divided by N.

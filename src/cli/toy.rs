@@ -11,6 +11,9 @@ pub enum ToyKind {
     Points,
     /// The single velocity kernel behind the points (SPEC §7).
     Blob,
+    /// Three blobs of non-linear motion: one circling, one static and elongated, one
+    /// fading in along a line (a test of fitting, not from the paper).
+    ThreeBlobs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -30,6 +33,7 @@ pub fn run(args: &ToyArgs) -> Result<()> {
     let kind = match args.kind {
         ToyKind::Points => Kind::Points,
         ToyKind::Blob => Kind::Blob,
+        ToyKind::ThreeBlobs => Kind::ThreeBlobs,
     };
     super::print(write_toy(kind, args.seed, &args.out)?);
     Ok(())

@@ -61,7 +61,7 @@ pub struct VideoArgs {
     #[arg(long, value_parser = parse_size, default_value = "256x256")]
     size: (u32, u32),
     /// Vertical field of view of orbits and spirals, degrees.
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = 40.0)]
     fov: f64,
     /// Frames per second of the GIF and MP4.
     #[arg(long, default_value_t = 25, value_parser = clap::value_parser!(u32).range(1..=100))]

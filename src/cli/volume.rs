@@ -22,10 +22,10 @@ pub struct VolumeArgs {
     #[arg(long)]
     out: PathBuf,
     /// Cut-off ε per kernel (SPEC §5 applied in 3D); 0 sums every kernel everywhere.
-    #[arg(long, default_value_t = 1e-6)]
+    #[arg(long, value_parser = super::args::finite, default_value_t = 1e-6)]
     cutoff: f64,
     /// Worker threads (default: one per core).
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
     threads: Option<u16>,
 }
 

@@ -9,6 +9,24 @@ use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::{Kernel, Scene};
 
+impl SpaceTimeBox {
+    /// An error unless every bound and every side of the box is finite and ordered (a box
+    /// from `-1e308` to `1e308` has an infinite side).
+    pub fn check(&self) -> Result<()> {
+        let sides = (0..3)
+            .map(|c| (self.min[c], self.max[c]))
+            .chain([(self.time[0], self.time[1])]);
+        for (lo, hi) in sides {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi && (hi - lo).is_finite()) {
+                return Err(Error::usage(format!(
+                    "the space-time box side {lo}..{hi} is not finite and ordered (--box, --time-range)"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// An axis-aligned space-time box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpaceTimeBox {
@@ -74,6 +92,7 @@ pub fn random_scene(
     amplitude: f64,
     seed: u64,
 ) -> Result<Scene> {
+    bounds.check()?;
     let side = (0..3).map(|c| bounds.max[c] - bounds.min[c]).sum::<f64>() / 3.0;
     let span = bounds.time[1] - bounds.time[0];
     let per_axis = (n.max(1) as f64).powf(0.25);

@@ -5,9 +5,9 @@
 //! [`FitPlan::default`]); [`FitPlan::prepare`] turns it and the training views into the
 //! initial scene and the [`FitOptions`] of the training loop:
 //!
-//! - **start**: [`Init::Auto`] is one kernel at the centre of the box the cameras look at
-//!   (or `start_kernels` spread at random in it), then densify, prune and merge so the count
-//!   follows the data; [`Init::Random`] is N kernels at random in the box, a fixed count
+//! - **start**: [`Init::Auto`] is [`DEFAULT_START_KERNELS`] kernels spread at random in the
+//!   box the cameras look at (`start_kernels = 1`: one at its centre), then densify, prune
+//!   and merge so the count follows the data; [`Init::Random`] is N kernels at random in the box, a fixed count
 //!   unless `adaptive`; [`Init::Scene`] starts from a given scene.
 //! - **mode**: what the fit moves ([`FitMode`]); by default `velocity` for `Auto` (the most
 //!   compact models in the report) and `paper` otherwise.
@@ -30,7 +30,13 @@ use crate::model::{Camera, Error, Result, Scene, View};
 use crate::render::RenderOptions;
 
 /// Adam steps of a fit (`splat4d fit` without `--steps`).
-pub const DEFAULT_STEPS: usize = 2000;
+pub const DEFAULT_STEPS: usize = 4000;
+/// Kernels an automatic start spreads at random in the box: several, so that separate
+/// objects each draw one (a single start at the centre converges on the brightest object
+/// and can leave the others unexplained: measured on the three-blob scene, 4 of 4 camera
+/// sets reach 38.4–39.3 dB with 4 starts; with 1, one set stays at 33 dB with 4 kernels).
+pub const DEFAULT_START_KERNELS: usize = 4;
+
 /// Views per step.
 pub const DEFAULT_BATCH_SIZE: usize = 8;
 /// Learning rates at the last step as a fraction of the first (exponential decay).
@@ -59,7 +65,7 @@ pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
     every: 50,
     from: 0.3,
     until: 0.7,
-    gradient_threshold: 2e-5,
+    gradient_threshold: 1e-5,
     min_improvement: 0.05,
     prune_below: 2.0 / 255.0,
     max_growth: 0.5,
@@ -106,7 +112,8 @@ impl Init {
 pub struct FitPlan {
     /// Adam steps.
     pub steps: usize,
-    /// Kernels [`Init::Auto`] starts from (1: one at the centre of the box).
+    /// Kernels [`Init::Auto`] starts from ([`DEFAULT_START_KERNELS`], spread at random in
+    /// the box; 1: one at the centre of the box).
     pub start_kernels: usize,
     /// Densify and prune with [`Init::Random`] or [`Init::Scene`] too.
     pub adaptive: bool,
@@ -158,7 +165,7 @@ impl Default for FitPlan {
     fn default() -> Self {
         FitPlan {
             steps: DEFAULT_STEPS,
-            start_kernels: 1,
+            start_kernels: DEFAULT_START_KERNELS,
             adaptive: false,
             rounds: DEFAULT_ROUNDS,
             min_scale: None,
@@ -206,18 +213,74 @@ impl FitPlan {
         })
     }
 
-    /// Checks the values no type rules out.
+    /// Checks the values no type rules out: rates ≥ 0, fractions in range, a finite box.
     pub fn validate(&self) -> Result<()> {
         self.render.validate()?;
+        let r = &self.rates;
+        for (flag, value) in [
+            ("--lr-mean", r.mean),
+            ("--lr-time", r.time),
+            ("--lr-amplitude", r.amplitude),
+            ("--lr-velocity", r.velocity),
+            ("--lr-scale", r.scale),
+            ("--lr-background", r.background),
+            ("--densify-threshold", self.rounds.gradient_threshold),
+            ("--merge-tolerance", self.rounds.merge_tolerance),
+            ("--max-growth", self.rounds.max_growth),
+            ("--prune-below", self.rounds.prune_below),
+            ("--min-scale", self.min_scale.unwrap_or(0.0)),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(Error::usage(format!(
+                    "{flag} {value} must be finite and ≥ 0"
+                )));
+            }
+        }
+        for (flag, value) in [
+            ("--densify-from", self.rounds.from),
+            ("--densify-until", self.rounds.until),
+        ] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err(Error::usage(format!("{flag} {value} must be in [0, 1]")));
+            }
+        }
+        let f = self.final_rate_factor;
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::usage(format!(
+                "--lr-final {f} must be finite and > 0"
+            )));
+        }
+        if !self.rounds.min_improvement.is_finite() {
+            return Err(Error::usage("--min-improvement must be finite"));
+        }
+        if let Some(a) = self.init_amplitude
+            && !a.is_finite()
+        {
+            return Err(Error::usage(format!("--init-amplitude {a} must be finite")));
+        }
+        if self.batch_size == 0 {
+            return Err(Error::usage("--batch must be at least 1"));
+        }
         if let Some([x0, y0, z0, x1, y1, z1]) = self.bounds
             && !(x0 < x1 && y0 < y1 && z0 < z1)
         {
             return Err(Error::usage("--box: need x0 < x1, y0 < y1, z0 < z1"));
         }
         if let Some(scale) = self.init_scale
-            && scale.iter().any(|&s| s <= 0.0)
+            && scale.iter().any(|&s| !(s > 0.0 && s.is_finite()))
         {
-            return Err(Error::usage("--init-scale: every scale must be > 0"));
+            return Err(Error::usage(
+                "--init-scale: every scale must be finite and > 0",
+            ));
+        }
+        if let Some([x0, y0, z0, x1, y1, z1]) = self.bounds {
+            let time = self.time_range.unwrap_or([0.0; 2]);
+            SpaceTimeBox {
+                min: [x0, y0, z0],
+                max: [x1, y1, z1],
+                time,
+            }
+            .check()?;
         }
         Ok(())
     }
@@ -406,18 +469,27 @@ mod tests {
     }
 
     #[test]
-    fn auto_starts_from_one_kernel_with_velocity_and_rounds_that_never_split() {
+    fn auto_starts_from_a_few_kernels_with_velocity_and_rounds_that_never_split() {
         let prepared = FitPlan::default().prepare(Init::Auto, &views()).unwrap();
         assert_eq!(prepared.mode, FitMode::Velocity);
-        assert_eq!(prepared.scene.len(), 1);
-        assert_eq!(
-            prepared.scene.means[0][3], 0.5,
-            "the middle of the training times"
-        );
+        assert_eq!(prepared.scene.len(), DEFAULT_START_KERNELS);
+        for mean in &prepared.scene.means {
+            assert!(
+                (0.0..=1.0).contains(&mean[3]),
+                "within the training times: {mean:?}"
+            );
+        }
         let rounds = prepared.options.adaptive.expect("auto is adaptive");
         assert_eq!(rounds.min_scale, f64::INFINITY, "the fit sizes the kernels");
         assert_eq!(prepared.options.learning_rates, DEFAULT_RATES);
         assert_eq!(prepared.options.steps, DEFAULT_STEPS);
+        let one = FitPlan {
+            start_kernels: 1,
+            ..FitPlan::default()
+        };
+        let centre = one.prepare(Init::Auto, &views()).unwrap().scene;
+        assert_eq!(centre.len(), 1);
+        assert_eq!(centre.means[0][3], 0.5, "the middle of the training times");
     }
 
     #[test]

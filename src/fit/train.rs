@@ -111,7 +111,11 @@ impl Default for FitOptions {
         FitOptions {
             steps: plan::DEFAULT_STEPS,
             batch_size: plan::DEFAULT_BATCH_SIZE,
-            learning_rates: FitMode::Paper.learning_rates(plan::DEFAULT_RATES),
+            // The paper fits no background.
+            learning_rates: LearningRates {
+                background: 0.0,
+                ..FitMode::Paper.learning_rates(plan::DEFAULT_RATES)
+            },
             final_rate_factor: plan::DEFAULT_FINAL_RATE_FACTOR,
             adam: AdamConfig::default(),
             eval_every: plan::DEFAULT_EVAL_EVERY,
@@ -197,7 +201,8 @@ pub fn fit(
     let mut order: Vec<usize> = (0..train.len()).collect();
     let mut cursor = order.len();
     let batch_size = options.batch_size.clamp(1, train.len());
-    let mut records = Vec::with_capacity(options.steps);
+    // Grows with the steps actually run: a flag never decides an allocation up front.
+    let mut records = Vec::with_capacity(options.steps.min(1 << 12));
     for step in 1..=options.steps {
         grads.reset(scene.len());
         let mut batch_loss = 0.0;

@@ -312,19 +312,6 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         })?;
         let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
         transparent |= alpha;
-        if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
-            let pixel = k / 3;
-            return Err(Error::invalid(
-                &image_path.display().to_string(),
-                format!(
-                    "pixel ({}, {})",
-                    pixel % image.width as usize,
-                    pixel / image.width as usize
-                ),
-                "value",
-                format!("{} is not finite", image.pixels[k]),
-            ));
-        }
         let (w, h) = (image.width, image.height);
         let [fx, fy, cx, cy] = intrinsics(&file, frame, (w, h), &origin, &item)?;
         if w < n || h < n {

@@ -504,7 +504,7 @@ pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Resu
         0.0
     };
     let mut rng = seeded_rng(seed);
-    let mut kernels = Vec::with_capacity(points * samples);
+    let mut kernels = Vec::with_capacity(points.saturating_mul(samples).min(1 << 16));
     // Stratified over the cumulative area (point k in the k-th N-th of it, jittered), with
     // barycentric coordinates from the R2 low-discrepancy sequence (seeded offset): far
     // more even coverage than independent draws, whose density fluctuates by ~30% at this

@@ -118,7 +118,30 @@ pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     load_image_with_alpha(path, background).map(|(image, _)| image)
 }
 
-/// [`load_image`], also telling whether some pixel was transparent (alpha below 1).
+/// The size `(width, height)` an image file declares, read from its header alone (nothing
+/// is decoded); an error when it is larger than a frame may be
+/// ([`crate::model::camera::MAX_PIXELS`]), so a small file cannot make a huge allocation.
+pub fn image_size(path: &Path) -> Result<(u32, u32)> {
+    let origin = path.display().to_string();
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| Error::read(path, "cannot read image", e))?
+        .with_guessed_format()
+        .map_err(|e| Error::read(path, "cannot read image", e))?
+        .into_dimensions()
+        .map_err(|e| Error::malformed(&origin, format!("cannot read the image header: {e}")))?;
+    if u64::from(w) * u64::from(h) > crate::model::camera::MAX_PIXELS {
+        return Err(Error::invalid(
+            &origin,
+            "image",
+            "size",
+            format!("{w}×{h} is more than the 16384² pixels a frame may have"),
+        ));
+    }
+    Ok((w, h))
+}
+
+/// [`load_image`], also telling whether some pixel was transparent (alpha below 1). Every
+/// pixel must be finite: a NaN or infinity is an error naming the file and the pixel.
 pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image, bool)> {
     let origin = path.display().to_string();
     let readable = path
@@ -132,16 +155,32 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
             path.display()
         )));
     }
-    let reader = image::ImageReader::open(path)
+    let (w, h) = image_size(path)?;
+    let mut reader = image::ImageReader::open(path)
         .map_err(|e| Error::read(path, "cannot read image", e))?
         .with_guessed_format()
         .map_err(|e| Error::read(path, "cannot read image", e))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    reader.limits(limits);
     let decoded = reader
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
     let transparent =
         decoded.color().has_alpha() && decoded.to_rgba32f().pixels().any(|p| p.0[3] < 1.0);
-    Ok((to_linear_rgb(&decoded, background), transparent))
+    let image = to_linear_rgb(&decoded, background);
+    if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
+        let pixel = k / 3;
+        let width = image.width as usize;
+        return Err(Error::invalid(
+            &origin,
+            format!("pixel ({}, {})", pixel % width, pixel / width),
+            "value",
+            format!("{} is not finite", image.pixels[k]),
+        ));
+    }
+    Ok((image, transparent))
 }
 
 /// Converts a decoded image to linear RGB f32 (integers divided by `2^bits - 1`), alpha

@@ -63,6 +63,9 @@ pub struct ExperimentConfig {
     pub adaptive_steps: usize,
     /// The seed blob's dataset for the model size section.
     pub blob_dataset: DatasetSpec,
+    /// The dataset of the three blobs of non-linear motion ([`crate::scenes::motion`]) for
+    /// the model size section.
+    pub motion_dataset: DatasetSpec,
 }
 
 impl Default for ExperimentConfig {
@@ -88,8 +91,17 @@ impl Default for ExperimentConfig {
             sweep_times: 41,
             volume_res: 64,
             volume_times: vec![0.0, 0.5, 1.0],
-            adaptive_steps: 3000,
+            adaptive_steps: crate::fit::plan::DEFAULT_STEPS,
             blob_dataset: DatasetSpec {
+                views: 12,
+                times: 10,
+                width: 64,
+                height: 64,
+                time_range: [0.0, 1.0],
+                fov_y_degrees: 40.0,
+                seed: crate::scenes::toy::DEFAULT_SEED,
+            },
+            motion_dataset: DatasetSpec {
                 views: 12,
                 times: 10,
                 width: 64,
@@ -124,6 +136,7 @@ impl ExperimentConfig {
         config.blob_dataset.times = 3;
         config.blob_dataset.width = 24;
         config.blob_dataset.height = 24;
+        config.motion_dataset = config.blob_dataset;
         config
     }
 }
@@ -313,9 +326,12 @@ fn fit_options(steps: usize, seed: u64, rates: LearningRates) -> FitOptions {
     }
 }
 
-/// The paper's setting: means and amplitudes, scales fixed.
+/// The paper's setting: means and amplitudes, scales fixed, no background.
 fn model_rates() -> LearningRates {
-    FitMode::Paper.learning_rates(DEFAULT_RATES)
+    LearningRates {
+        background: 0.0,
+        ..FitMode::Paper.learning_rates(DEFAULT_RATES)
+    }
 }
 
 /// A static fit per frame: the paper's setting with the time means fixed too.
@@ -387,14 +403,15 @@ fn heldout_and_speed(
 
 /// The model size comparison on the seed blob: the paper's fixed-count model against the
 /// adaptive static and velocity fits.
-fn blob_model_size(
+fn synthetic_model_size(
+    name: &str,
+    truth: &Scene,
+    spec: DatasetSpec,
     config: &ExperimentConfig,
     progress: &mut dyn Progress,
 ) -> Result<Vec<ModelSizeRow>> {
-    let blob = crate::scenes::toy::blob_scene();
-    let spec = config.blob_dataset;
     let options = RenderOptions::default();
-    let dataset = render_dataset(&blob, &spec, &options, || {})?;
+    let dataset = render_dataset(truth, &spec, &options, || {})?;
     let cameras: Vec<crate::Camera> = dataset.train.iter().map(|v| v.camera).collect();
     let bounds = box_from_cameras(&cameras, spec.time_range)?;
     let mut context = RenderContext::new();
@@ -420,12 +437,7 @@ fn blob_model_size(
     for fitted in &fits {
         let (heldout_psnr, render_ms) =
             heldout_and_speed(&fitted.2, &dataset.test, &options, &mut context)?;
-        rows.push(ModelSizeRow::of_fit(
-            "seed blob",
-            fitted,
-            heldout_psnr,
-            render_ms,
-        ));
+        rows.push(ModelSizeRow::of_fit(name, fitted, heldout_psnr, render_ms));
     }
     Ok(rows)
 }
@@ -641,7 +653,7 @@ pub fn run_experiment(
 
     // Model size: adaptive static and velocity fits against the fixed count and the frames,
     // on the points, then the same on the continuous blob.
-    progress.start("model size", 5 * config.adaptive_steps);
+    progress.start("model size", 8 * config.adaptive_steps);
     let mut model_size = Vec::new();
     for method in &methods {
         if method.name == "4D (paper)" || method.name == "frame 3D" {
@@ -677,7 +689,20 @@ pub fn run_experiment(
             render_ms,
         ));
     }
-    model_size.extend(blob_model_size(config, progress)?);
+    model_size.extend(synthetic_model_size(
+        "seed blob",
+        &crate::scenes::toy::blob_scene(),
+        config.blob_dataset,
+        config,
+        progress,
+    )?);
+    model_size.extend(synthetic_model_size(
+        "three blobs",
+        &crate::scenes::motion::three_blobs_scene(),
+        config.motion_dataset,
+        config,
+        progress,
+    )?);
 
     // Volumes on one grid: the ground truth's and the model's.
     progress.start("volumes", 2 * config.volume_times.len());

@@ -47,6 +47,44 @@ impl Default for DatasetSpec {
     }
 }
 
+/// Most cameras, and most times, of a synthetic dataset.
+pub const MAX_VIEWS: usize = 10_000;
+
+impl DatasetSpec {
+    /// Checks the spec before any camera is placed or frame rendered: counts from 1 to
+    /// [`MAX_VIEWS`], a frame size a camera accepts, a field of view in (0°, 180°), a finite
+    /// ordered time range.
+    pub fn validate(&self) -> Result<()> {
+        for (flag, value) in [("--views", self.views), ("--times", self.times)] {
+            if !(1..=MAX_VIEWS).contains(&value) {
+                return Err(Error::usage(format!(
+                    "{flag} {value} must be between 1 and {MAX_VIEWS}"
+                )));
+            }
+        }
+        let pixels = u64::from(self.width) * u64::from(self.height);
+        if self.width == 0 || self.height == 0 || pixels > crate::model::camera::MAX_PIXELS {
+            return Err(Error::usage(format!(
+                "--size {}x{} must be at least 1×1 and at most 16384² pixels",
+                self.width, self.height
+            )));
+        }
+        let fov = self.fov_y_degrees;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(Error::usage(format!(
+                "--fov {fov} must be in (0, 180) degrees"
+            )));
+        }
+        let [t0, t1] = self.time_range;
+        if !(t0.is_finite() && t1.is_finite() && t0 <= t1 && (t1 - t0).is_finite()) {
+            return Err(Error::usage(format!(
+                "time range {t0}..{t1} is not a finite, ordered pair"
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Renders the dataset of `spec` from `scene`, calling `on_frame` after each image.
 pub fn render_dataset(
     scene: &Scene,
@@ -54,17 +92,8 @@ pub fn render_dataset(
     options: &RenderOptions,
     mut on_frame: impl FnMut(),
 ) -> Result<Dataset> {
-    if spec.views == 0 || spec.times == 0 || spec.width == 0 || spec.height == 0 {
-        return Err(Error::Usage(
-            "views, times, width and height must all be at least 1".into(),
-        ));
-    }
+    spec.validate()?;
     let [t0, t1] = spec.time_range;
-    if !(t0.is_finite() && t1.is_finite() && t0 <= t1) {
-        return Err(Error::Usage(format!(
-            "time range {t0}..{t1} is not a finite, ordered pair"
-        )));
-    }
     let train_times: Vec<f64> = (0..spec.times)
         .map(|k| {
             if spec.times == 1 {
@@ -95,7 +124,12 @@ pub fn render_dataset(
         spec.width,
         spec.height,
         &mut rng,
-    );
+    )?;
+    if !radius.is_finite() {
+        return Err(Error::Numeric(
+            "the scene's extent is not finite: no camera can frame it".into(),
+        ));
+    }
     let (train_cameras, test_cameras) = cameras.split_at(spec.views);
     let mut context = RenderContext::new();
     let mut render =
@@ -132,6 +166,9 @@ pub fn render_dataset(
 /// Frames [`render_dataset`] will render for `spec`.
 #[must_use]
 pub fn frame_count(spec: &DatasetSpec) -> usize {
-    let mids = if spec.times == 1 { 1 } else { spec.times - 1 };
-    spec.views * spec.times + mids * (spec.views.min(4) + (spec.views / 4).max(2))
+    let mids = spec.times.saturating_sub(1).max(1);
+    let per_mid = spec.views.min(4) + (spec.views / 4).max(2);
+    spec.views
+        .saturating_mul(spec.times)
+        .saturating_add(mids.saturating_mul(per_mid))
 }

@@ -3,6 +3,7 @@
 //! them to a scene, and synthetic multi-view datasets rendered from a scene.
 
 pub mod dataset;
+pub mod motion;
 pub mod paths;
 pub mod synthetic;
 pub mod toy;

@@ -7,6 +7,7 @@ use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 
 use crate::model::random::{log_uniform, random_rotation, seeded_rng};
+use crate::model::{Error, Result};
 use crate::scenes::paths::{Lens, framing_distance};
 
 use crate::model::camera::Camera;
@@ -119,9 +120,14 @@ pub fn bounding_sphere(scene: &Scene, times: &[f64]) -> ([f64; 3], f64) {
     (centre, radius)
 }
 
+/// Tries per camera before [`sphere_cameras`] gives up.
+pub const MAX_CAMERA_TRIES: usize = 100;
+
 /// `n` seeded cameras on a sphere around `centre`, each looking at it with +y up, far enough
 /// for a ball of `radius` to fill its `fov_y_degrees` with a 5% margin. Directions are
-/// uniform over the sphere away from the poles (|y| < 0.9 of the distance).
+/// uniform over the sphere away from the poles (|y| < 0.9 of the distance). An error when
+/// no camera can be placed (a degenerate field of view, size or sphere), after
+/// [`MAX_CAMERA_TRIES`] tries per camera.
 pub fn sphere_cameras(
     centre: [f64; 3],
     radius: f64,
@@ -130,15 +136,23 @@ pub fn sphere_cameras(
     width: u32,
     height: u32,
     rng: &mut ChaCha8Rng,
-) -> Vec<Camera> {
+) -> Result<Vec<Camera>> {
     let lens = Lens {
         width,
         height,
         fov_y_degrees,
     };
     let distance = framing_distance(radius, &lens);
-    let mut cameras = Vec::with_capacity(n);
+    let mut cameras = Vec::with_capacity(n.min(1 << 12));
+    let mut tries = 0_usize;
     while cameras.len() < n {
+        tries += 1;
+        if tries > MAX_CAMERA_TRIES.saturating_mul(n) {
+            return Err(Error::usage(format!(
+                "cannot place cameras around ({:?}, radius {radius}) with a {fov_y_degrees}° field of view at {width}×{height}",
+                centre
+            )));
+        }
         let y: f64 = rng.random_range(-0.9..0.9);
         let phi: f64 = rng.random_range(0.0..std::f64::consts::TAU);
         let r = (1.0 - y * y).sqrt();
@@ -150,5 +164,5 @@ pub fn sphere_cameras(
             cameras.push(camera);
         }
     }
-    cameras
+    Ok(cameras)
 }

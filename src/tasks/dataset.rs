@@ -54,6 +54,7 @@ pub fn write_dataset(
     progress: &mut dyn Progress,
 ) -> Result<DatasetSummary> {
     request.options.validate()?;
+    request.spec.validate()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
     progress.start("render", frame_count(spec));

@@ -99,6 +99,13 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     if dataset.transparent && plan.background.is_none() {
         progress.note("images with transparency were composited over black (--background r,g,b chooses the colour)");
     }
+    if let Some(up) = cameras_up(&dataset.train)
+        && up != "y"
+    {
+        progress.note(&format!(
+            "the cameras' mean up is {up}: render videos of the fitted scene with `splat4d video --up {up}`"
+        ));
+    }
     let init = match Init::parse_builtin(&request.init)? {
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
@@ -163,5 +170,33 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         seconds: records.last().map_or(0.0, |r| r.seconds),
         background: scene.background,
         splits,
+    })
+}
+
+/// The world axis nearest the training cameras' mean up direction (image up, the camera's
+/// -y in OpenCV axes), as `video --up` names it; `None` when the ups cancel out.
+fn cameras_up(views: &[crate::model::View]) -> Option<&'static str> {
+    let mut up = [0.0_f64; 3];
+    for view in views {
+        let down = view.camera.rotation()[1];
+        let norm = down.iter().map(|v| v * v).sum::<f64>().sqrt();
+        for c in 0..3 {
+            up[c] -= down[c] / norm;
+        }
+    }
+    let (axis, value) = up
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+    if value.abs() < 1e-9 * views.len() as f64 {
+        return None;
+    }
+    Some(match (axis, *value > 0.0) {
+        (0, true) => "x",
+        (0, false) => "-x",
+        (1, true) => "y",
+        (1, false) => "-y",
+        (2, true) => "z",
+        _ => "-z",
     })
 }

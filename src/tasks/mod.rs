@@ -30,11 +30,17 @@ pub mod volume;
 
 use crate::model::{Error, Result};
 
+/// Most worker threads a task starts.
+pub const MAX_THREADS: usize = 1024;
+
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool (one thread per
 /// core) when `None`. Results do not depend on the thread count.
 pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(work()),
+        Some(n) if n == 0 || n > MAX_THREADS => Err(Error::usage(format!(
+            "--threads {n} must be between 1 and {MAX_THREADS}"
+        ))),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)

@@ -9,7 +9,9 @@ use crate::fit::loss::{psnr, view_loss_and_gradients};
 use crate::io::camera_file::load_camera;
 use crate::io::gltf_import::{load_camera as load_gltf_camera, split_camera_spec};
 use crate::io::gradients_file::gradients_to_json;
-use crate::io::image_file::{BitDepth, ImageKind, load_image, save_image, save_rgb8_png};
+use crate::io::image_file::{
+    BitDepth, ImageKind, image_size, load_image, save_image, save_rgb8_png,
+};
 use crate::io::scene_file::load_scene;
 use crate::io::write_bytes_atomically;
 use crate::model::{Camera, Error, Result, Scene};
@@ -186,18 +188,20 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
     let view = &request.view;
     let (scene, camera) = view.load()?;
     let background = scene.background.map(|b| b as f32);
-    let target = load_image(&request.target, background)?;
-    if (target.width, target.height) != (camera.width, camera.height) {
+    // The header first: a target of the wrong size is refused before it is decoded.
+    let size = image_size(&request.target)?;
+    if size != (camera.width, camera.height) {
         return Err(Error::usage(format!(
             "{}: the target is {}×{} but {} is {}×{}",
             request.target.display(),
-            target.width,
-            target.height,
+            size.0,
+            size.1,
             view.camera.name(),
             camera.width,
             camera.height
         )));
     }
+    let target = load_image(&request.target, background)?;
     let mut context = RenderContext::new();
     let mut grads = Gradients::zeros(scene.len());
     let loss = with_threads(view.threads, || {

@@ -7,6 +7,7 @@ use crate::io::gltf_import::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::model::{Error, Result, Scene};
+use crate::scenes::motion::three_blobs_scene;
 use crate::scenes::toy::{blob_scene, points_scene};
 
 /// Which toy scene (SPEC §7).
@@ -16,6 +17,8 @@ pub enum ToyKind {
     Points,
     /// The single velocity kernel behind the points.
     Blob,
+    /// Three blobs of non-linear motion ([`crate::scenes::motion`]).
+    ThreeBlobs,
 }
 
 /// What a scene-writing task wrote: the file and its kernel count, and a detail.
@@ -38,6 +41,7 @@ pub fn write_toy(kind: ToyKind, seed: u64, out: &Path) -> Result<SceneSummary> {
     let scene = match kind {
         ToyKind::Points => points_scene(seed),
         ToyKind::Blob => blob_scene(),
+        ToyKind::ThreeBlobs => three_blobs_scene(),
     };
     save_scene(&scene, out)?;
     Ok(SceneSummary {

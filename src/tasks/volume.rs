@@ -86,6 +86,12 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
         let volume = with_threads(request.threads, || {
             evaluate_volume(&scene, tau, &grid, request.cutoff)
         })?;
+        if !volume.values.iter().all(|v| v.is_finite()) {
+            return Err(Error::Numeric(format!(
+                "{}: the volume at t = {tau} is not finite in f32 (amplitudes or scales too extreme to evaluate)",
+                request.scene.display()
+            )));
+        }
         volumes.push((tau, volume, start.elapsed().as_secs_f64()));
     }
     let vmax = volumes

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use splat4d::fit::plan::FitPlan;
 use splat4d::io::image_file::load_image;
 use splat4d::model::image::quantize;
 use splat4d::{RenderOptions, render};
@@ -425,8 +426,8 @@ fn dataset_then_fit_as_a_new_user_would() {
         7
     );
 
-    // No kernel count: one kernel at the box centre, velocity mode, densify and prune; the
-    // log records the count per step.
+    // No kernel count: a few kernels spread in the box, velocity mode, densify and prune;
+    // the log records the count per step.
     let args = [
         "fit",
         "--views",
@@ -446,7 +447,7 @@ fn dataset_then_fit_as_a_new_user_would() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    assert_eq!(rows[0]["kernels"], 1);
+    assert_eq!(rows[0]["kernels"], FitPlan::default().start_kernels);
     assert_eq!(rows[599]["kernels"], auto.len());
     assert!(auto.len() <= 20, "{} kernels", auto.len());
     assert!(
