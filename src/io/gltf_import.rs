@@ -39,8 +39,202 @@ const SURFEL_THICKNESS: f64 = 0.3;
 fn parse_document(path: &Path) -> Result<gltf::Gltf> {
     let origin = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read glTF", e))?;
-    gltf::Gltf::from_slice(&bytes)
-        .map_err(|e| Error::malformed(&origin, format!("not a valid glTF 2.0 file: {e}")))
+    let malformed =
+        |e: gltf::Error| Error::malformed(&origin, format!("not a valid glTF 2.0 file: {e}"));
+    // Our checks first: the crate's own validation indexes arrays without bounds checks.
+    let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(malformed)?;
+    check_structure(unchecked.document.as_json(), &origin)?;
+    gltf::Gltf::from_slice(&bytes).map_err(malformed)
+}
+
+/// What the importer relies on and the `gltf` crate does not check (a file that breaks it
+/// would panic or loop inside the crate's walkers): every index in range, a node hierarchy
+/// that is a forest (no cycle, no node with two parents), a camera's projection object
+/// present, index accessors of unsigned integers, and strides that hold their elements.
+/// Errors name the JSON path.
+fn check_structure(root: &gltf::json::Root, origin: &str) -> Result<()> {
+    use gltf::json::accessor::ComponentType;
+    use gltf::json::validation::Checked;
+    let bad =
+        |item: String, field: &str, message: String| Error::invalid(origin, item, field, message);
+    let in_range = |index: usize, len: usize, item: String, field: &str| -> Result<()> {
+        if index < len {
+            Ok(())
+        } else {
+            Err(bad(
+                item,
+                field,
+                format!("index {index} is out of range ({len} items)"),
+            ))
+        }
+    };
+    let (nodes, accessors) = (root.nodes.len(), root.accessors.len());
+    let mut parent: Vec<Option<usize>> = vec![None; nodes];
+    for (i, node) in root.nodes.iter().enumerate() {
+        for child in node.children.iter().flatten() {
+            let c = child.value();
+            in_range(c, nodes, format!("nodes[{i}]"), "children")?;
+            if c == i || parent[c].is_some() {
+                return Err(bad(
+                    format!("nodes[{i}]"),
+                    "children",
+                    format!(
+                        "node {c} has two parents or is its own child: the node hierarchy must be a tree"
+                    ),
+                ));
+            }
+            parent[c] = Some(i);
+        }
+        if let Some(camera) = &node.camera {
+            in_range(
+                camera.value(),
+                root.cameras.len(),
+                format!("nodes[{i}]"),
+                "camera",
+            )?;
+        }
+        if let Some(mesh) = &node.mesh {
+            in_range(
+                mesh.value(),
+                root.meshes.len(),
+                format!("nodes[{i}]"),
+                "mesh",
+            )?;
+        }
+    }
+    // With one parent each, a cycle is a chain of parents that comes back to its start.
+    for start in 0..nodes {
+        let mut node = start;
+        for _ in 0..=nodes {
+            match parent[node] {
+                Some(p) if p == start => {
+                    return Err(bad(
+                        format!("nodes[{start}]"),
+                        "children",
+                        "the node hierarchy has a cycle".into(),
+                    ));
+                }
+                Some(p) => node = p,
+                None => break,
+            }
+        }
+    }
+    for (s, scene) in root.scenes.iter().enumerate() {
+        for node in &scene.nodes {
+            in_range(node.value(), nodes, format!("scenes[{s}]"), "nodes")?;
+            if let Some(p) = parent[node.value()] {
+                return Err(bad(
+                    format!("scenes[{s}]"),
+                    "nodes",
+                    format!(
+                        "node {} is a root of the scene and a child of node {p}",
+                        node.value()
+                    ),
+                ));
+            }
+        }
+    }
+    for (c, camera) in root.cameras.iter().enumerate() {
+        let missing = match camera.type_ {
+            Checked::Valid(gltf::json::camera::Type::Perspective) => camera.perspective.is_none(),
+            Checked::Valid(gltf::json::camera::Type::Orthographic) => camera.orthographic.is_none(),
+            Checked::Invalid => true,
+        };
+        if missing {
+            return Err(bad(
+                format!("cameras[{c}]"),
+                "type",
+                "the projection object named by `type` is missing".into(),
+            ));
+        }
+    }
+    for (a, accessor) in root.accessors.iter().enumerate() {
+        let item = format!("accessors[{a}]");
+        let Some(view) = &accessor.buffer_view else {
+            return Err(bad(
+                item,
+                "bufferView",
+                "accessors without a buffer view are not supported".into(),
+            ));
+        };
+        in_range(
+            view.value(),
+            root.buffer_views.len(),
+            item.clone(),
+            "bufferView",
+        )?;
+        let stride = root.buffer_views[view.value()]
+            .byte_stride
+            .as_ref()
+            .map(|s| s.0);
+        if let (Some(stride), Checked::Valid(kind), Checked::Valid(component)) =
+            (stride, &accessor.type_, &accessor.component_type)
+        {
+            let element = kind.multiplicity() * component.0.size();
+            if stride < element {
+                return Err(bad(
+                    item,
+                    "bufferView",
+                    format!("byteStride {stride} is smaller than one element ({element} bytes)"),
+                ));
+            }
+        }
+    }
+    for (v, view) in root.buffer_views.iter().enumerate() {
+        in_range(
+            view.buffer.value(),
+            root.buffers.len(),
+            format!("bufferViews[{v}]"),
+            "buffer",
+        )?;
+    }
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let item = format!("meshes[{m}].primitives[{p}]");
+            for accessor in primitive.attributes.values() {
+                in_range(accessor.value(), accessors, item.clone(), "attributes")?;
+            }
+            if let Some(indices) = &primitive.indices {
+                in_range(indices.value(), accessors, item.clone(), "indices")?;
+                let component = &root.accessors[indices.value()].component_type;
+                if !matches!(
+                    component,
+                    Checked::Valid(gltf::json::accessor::GenericComponentType(
+                        ComponentType::U8 | ComponentType::U16 | ComponentType::U32
+                    ))
+                ) {
+                    return Err(bad(
+                        item,
+                        "indices",
+                        "indices must be unsigned integers (UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT)".into(),
+                    ));
+                }
+            }
+        }
+    }
+    for (a, animation) in root.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let item = format!("animations[{a}].channels[{c}]");
+            in_range(
+                channel.target.node.value(),
+                nodes,
+                item.clone(),
+                "target.node",
+            )?;
+            in_range(
+                channel.sampler.value(),
+                animation.samplers.len(),
+                item,
+                "sampler",
+            )?;
+        }
+        for (s, sampler) in animation.samplers.iter().enumerate() {
+            let item = format!("animations[{a}].samplers[{s}]");
+            in_range(sampler.input.value(), accessors, item.clone(), "input")?;
+            in_range(sampler.output.value(), accessors, item, "output")?;
+        }
+    }
+    Ok(())
 }
 
 fn load_buffers(document: &gltf::Gltf, path: &Path) -> Result<Vec<Vec<u8>>> {
@@ -433,6 +627,9 @@ pub struct Imported {
     pub times: usize,
 }
 
+/// Most kernels an import makes (surface points × time samples): about 1.5 GB of scene.
+pub const MAX_IMPORT_KERNELS: usize = 10_000_000;
+
 /// Samples the glTF at `path` into 4D kernels (see the module docs): `points` surface
 /// points, `times` samples over the animation.
 pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
@@ -441,6 +638,11 @@ pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Resu
         return Err(Error::Usage(
             "--kernels and --times must be at least 1".into(),
         ));
+    }
+    if points.saturating_mul(times) > MAX_IMPORT_KERNELS {
+        return Err(Error::usage(format!(
+            "--kernels {points} × --times {times} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
+        )));
     }
     let gltf = parse_document(path)?;
     let buffers = load_buffers(&gltf, path)?;

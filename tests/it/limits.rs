@@ -1,0 +1,408 @@
+//! Hostile flags and files, each reproduced from bytes or flags through the executable (the
+//! defects were found by a fuzzing round; see the README's reliability section): every one
+//! ends quickly with a message and exit status 2 (4 for a computation that leaves the
+//! finite numbers), never a panic (101), a hang or an unbounded allocation.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(name)
+}
+
+/// Runs the executable with a time limit (a hang is a failure, not a stuck test).
+fn run<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splat4d"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(20) {
+            child.kill().unwrap();
+            panic!("{args:?} ran for more than 20 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn refused<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(
+    args: &[S],
+    cwd: &Path,
+    code: i32,
+    needle: &str,
+) {
+    let output = run(args, cwd);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(code), "{args:?}: {stderr}");
+    assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+}
+
+#[test]
+fn extreme_counts_and_sizes_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let blob = blob.to_str().unwrap();
+    let dataset = |extra: &[&'static str]| -> Vec<String> {
+        let mut args = vec!["dataset", "--scene", blob, "--out", "ds"];
+        args.extend_from_slice(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let huge = "18446744073709551615";
+    refused(
+        &dataset(&["--views", huge, "--times", "2", "--size", "8x8"]),
+        d,
+        2,
+        "--views",
+    );
+    refused(
+        &dataset(&["--views", "2", "--times", huge, "--size", "8x8"]),
+        d,
+        2,
+        "--times",
+    );
+    for fov in ["0", "180", "nan"] {
+        let args = dataset(&[
+            "--views", "2", "--times", "2", "--size", "8x8", "--fov", fov,
+        ]);
+        refused(&args, d, 2, "fov");
+    }
+    refused(
+        &dataset(&["--views", "2", "--times", "2", "--size", "16385x16385"]),
+        d,
+        2,
+        "--size",
+    );
+    refused(
+        &dataset(&[
+            "--views",
+            "2",
+            "--times",
+            "2",
+            "--size",
+            "8x8",
+            "--time-range=-1e308,1e308",
+        ]),
+        d,
+        2,
+        "time range",
+    );
+    assert!(!d.join("ds").exists(), "nothing written");
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    let args = [
+        "import-gltf",
+        gltf.to_str().unwrap(),
+        "--kernels",
+        huge,
+        "--out",
+        "m.json",
+    ];
+    refused(&args, d, 2, "--kernels");
+    let camera = data("blob_camera.json");
+    let render = [
+        "render",
+        "--scene",
+        blob,
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--out",
+        "r.png",
+        "--threads",
+        "65535",
+    ];
+    refused(&render, d, 2, "--threads");
+}
+
+#[test]
+fn non_finite_flags_are_refused_when_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let ok = run(
+        &[
+            "dataset",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--views",
+            "4",
+            "--times",
+            "2",
+            "--size",
+            "8x8",
+            "--out",
+            "ds",
+        ],
+        d,
+    );
+    assert!(ok.status.success());
+    for flag in [
+        "--lr-mean=nan",
+        "--lr-final=-inf",
+        "--merge-tolerance=nan",
+        "--prune-below=inf",
+        "--init-amplitude=nan",
+    ] {
+        refused(
+            &[
+                "fit", "--views", "ds", "--steps", "3", "--out", "f.json", flag,
+            ],
+            d,
+            2,
+            "not finite",
+        );
+    }
+    refused(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--steps",
+            "3",
+            "--out",
+            "f.json",
+            "--lr-mean=-1",
+        ],
+        d,
+        2,
+        "--lr-mean",
+    );
+    refused(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--init",
+            "random:3",
+            "--box=-1e308,-1e308,-1e308,1e308,1e308,1e308",
+            "--steps",
+            "3",
+            "--out",
+            "f.json",
+        ],
+        d,
+        2,
+        "box",
+    );
+    assert!(!d.join("f.json").exists());
+}
+
+#[test]
+fn values_too_large_to_evaluate_are_a_numeric_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("huge.json"),
+        r#"{"kernels": [{"mean": [0, 0, 0, 0.5], "scale": [0.1, 0.1, 0.1, 1], "amplitude": [1e300, 1, 1]}]}"#,
+    )
+    .unwrap();
+    refused(
+        &[
+            "volume",
+            "--scene",
+            "huge.json",
+            "--res",
+            "8",
+            "--times",
+            "0.5",
+            "--out",
+            "v",
+        ],
+        d,
+        4,
+        "not finite",
+    );
+    assert!(!d.join("v").exists(), "no figure written");
+}
+
+#[test]
+fn images_are_checked_by_their_header_and_their_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let camera = data("blob_camera.json");
+    let grad = |target: &str| {
+        vec![
+            "grad".to_owned(),
+            "--scene".into(),
+            blob.display().to_string(),
+            "--camera".into(),
+            camera.display().to_string(),
+            "--time".into(),
+            "0.5".into(),
+            "--target".into(),
+            target.into(),
+            "--out".into(),
+            "g.json".into(),
+        ]
+    };
+    // A PNG header declaring 20000 × 20000 pixels: refused from the header, nothing decoded.
+    let mut png = Vec::new();
+    png.extend_from_slice(&[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a]);
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&20000u32.to_be_bytes());
+    ihdr.extend_from_slice(&20000u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+    png.extend_from_slice(&13u32.to_be_bytes());
+    png.extend_from_slice(&ihdr);
+    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    for (kind, body) in [
+        (&b"IDAT"[..], &[0x78, 0x9c, 0x03, 0x00][..]),
+        (&b"IEND"[..], &[][..]),
+    ] {
+        let mut chunk = kind.to_vec();
+        chunk.extend_from_slice(body);
+        png.extend_from_slice(&(body.len() as u32).to_be_bytes());
+        png.extend_from_slice(&chunk);
+        png.extend_from_slice(&crc32(&chunk).to_be_bytes());
+    }
+    std::fs::write(d.join("big.png"), &png).unwrap();
+    let args = grad("big.png");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    refused(&args, d, 2, "20000×20000");
+    // A float image with a NaN: refused naming the pixel.
+    let mut pixels = vec![0.25_f32; 320 * 240 * 3];
+    pixels[3 * (7 * 320 + 5)] = f32::NAN;
+    let image = image::Rgb32FImage::from_raw(320, 240, pixels).unwrap();
+    image::DynamicImage::ImageRgb32F(image)
+        .save(d.join("nan.exr"))
+        .unwrap();
+    let args = grad("nan.exr");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    refused(&args, d, 2, "pixel (5, 7)");
+    assert!(!d.join("g.json").exists());
+}
+
+/// CRC-32 (ISO-HDLC) of PNG chunks.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xffff_ffff_u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xedb8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+/// A change to a glTF document.
+type Mutation = Box<dyn Fn(&mut serde_json::Value)>;
+
+#[test]
+fn gltf_files_that_break_the_crates_walkers_are_refused_with_their_json_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/BoxAnimated.gltf");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    let cases: Vec<(&str, Mutation, &str)> = vec![
+        (
+            "cycle",
+            Box::new(|g| g["nodes"][0]["children"] = serde_json::json!([1, 0])),
+            "nodes[0]",
+        ),
+        (
+            "two parents",
+            Box::new(|g| g["nodes"][3]["children"] = serde_json::json!([2])),
+            "two parents",
+        ),
+        (
+            "root and child",
+            Box::new(|g| g["nodes"][1]["children"] = serde_json::json!([2, 3])),
+            "a root of the scene",
+        ),
+        (
+            "dangling channel",
+            Box::new(|g| {
+                g["animations"][0]["channels"][0]["target"]["node"] = serde_json::json!(99)
+            }),
+            "target.node",
+        ),
+        (
+            "camera without object",
+            Box::new(|g| g["cameras"] = serde_json::json!([{"type": "perspective"}])),
+            "cameras[0]",
+        ),
+        (
+            "no accessors",
+            Box::new(|g| g["accessors"] = serde_json::json!([])),
+            "out of range",
+        ),
+        (
+            "float indices",
+            Box::new(|g| {
+                let i = g["meshes"][0]["primitives"][0]["indices"].as_u64().unwrap() as usize;
+                g["accessors"][i]["componentType"] = serde_json::json!(5126);
+            }),
+            "indices",
+        ),
+        (
+            "small stride",
+            Box::new(|g| {
+                let a = g["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+                    .as_u64()
+                    .unwrap() as usize;
+                let v = g["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
+                g["bufferViews"][v]["byteStride"] = serde_json::json!(4);
+            }),
+            "byteStride",
+        ),
+    ];
+    for (name, mutate, needle) in cases {
+        let mut gltf = original.clone();
+        mutate(&mut gltf);
+        let path = d.join(format!("{}.gltf", name.replace(' ', "_")));
+        std::fs::write(&path, gltf.to_string()).unwrap();
+        let file = path.to_str().unwrap();
+        let output = run(
+            &[
+                "import-gltf",
+                file,
+                "--kernels",
+                "50",
+                "--times",
+                "3",
+                "--out",
+                "m.json",
+            ],
+            d,
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(needle), "{name}: {stderr}");
+        let camera = format!("{file}#0");
+        let render = [
+            "render",
+            "--scene",
+            "m.json",
+            "--camera-from",
+            &camera,
+            "--time",
+            "0",
+            "--out",
+            "r.png",
+        ];
+        let output = run(&render, d);
+        assert_ne!(
+            output.status.code(),
+            Some(101),
+            "{name}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    assert!(!d.join("m.json").exists());
+}
