@@ -70,6 +70,16 @@ pub struct ExperimentConfig {
 
 impl Default for ExperimentConfig {
     fn default() -> Self {
+        // The model size section's synthetic scenes (the seed blob, the three blobs).
+        let synthetic = DatasetSpec {
+            views: 12,
+            times: 10,
+            width: 64,
+            height: 64,
+            time_range: [0.0, 1.0],
+            fov_y_degrees: 40.0,
+            seed: crate::scenes::toy::DEFAULT_SEED,
+        };
         ExperimentConfig {
             seed: crate::scenes::toy::DEFAULT_SEED,
             dataset: DatasetSpec {
@@ -92,24 +102,8 @@ impl Default for ExperimentConfig {
             volume_res: 64,
             volume_times: vec![0.0, 0.5, 1.0],
             adaptive_steps: crate::fit::plan::DEFAULT_STEPS,
-            blob_dataset: DatasetSpec {
-                views: 12,
-                times: 10,
-                width: 64,
-                height: 64,
-                time_range: [0.0, 1.0],
-                fov_y_degrees: 40.0,
-                seed: crate::scenes::toy::DEFAULT_SEED,
-            },
-            motion_dataset: DatasetSpec {
-                views: 12,
-                times: 10,
-                width: 64,
-                height: 64,
-                time_range: [0.0, 1.0],
-                fov_y_degrees: 40.0,
-                seed: crate::scenes::toy::DEFAULT_SEED,
-            },
+            blob_dataset: synthetic,
+            motion_dataset: synthetic,
         }
     }
 }

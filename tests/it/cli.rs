@@ -2,7 +2,8 @@
 //! default job, and bad input (exit status 2, a message naming file and field, no output).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use crate::common::{splat4d, stderr};
 
 use splat4d::fit::plan::FitPlan;
 use splat4d::io::image_file::load_image;
@@ -15,14 +16,6 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn splat4d(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splat4d"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("the executable runs")
-}
-
 fn render_args<'a>(scene: &'a str, camera: &'a str, out: &'a str) -> Vec<&'a str> {
     vec![
         "render", "--scene", scene, "--camera", camera, "--time", "0.5", "--out", out,
@@ -33,10 +26,6 @@ fn blob_image() -> splat4d::Image {
     let scene = splat4d::io::scene_file::load_scene(&data("blob.json")).unwrap();
     let camera = splat4d::io::camera_file::load_camera(&data("blob_camera.json")).unwrap();
     render(&scene, &camera, 0.5, &RenderOptions::default()).unwrap()
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
 fn files_in(dir: &Path) -> Vec<String> {

@@ -331,3 +331,17 @@ pub fn fast_gradients(
     .unwrap();
     (loss, grads)
 }
+
+/// Runs the `splat4d` executable in `cwd`.
+pub fn splat4d(args: &[&str], cwd: &std::path::Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_splat4d"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("the executable runs")
+}
+
+/// A command's stderr as text.
+pub fn stderr(output: &std::process::Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}

@@ -5,25 +5,14 @@
 //! `--downscale`. Each must reach 45 dB on held-out views of the seed blob.
 
 use std::path::Path;
-use std::process::{Command, Output};
+
+use crate::common::{splat4d, stderr};
 
 use image::{ImageBuffer, Rgba, RgbaImage};
 use serde_json::{Value, json};
 
 /// Colour of the tinted blob in the RGBA variants.
 const TINT: [f64; 3] = [0.9, 0.5, 0.2];
-
-fn splat4d(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splat4d"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("the executable runs")
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
 
 /// Renders the seed blob (or a static blob) with `splat4d dataset` into `dir/name`.
 fn rendered(dir: &Path, name: &str, scene: &str) -> std::path::PathBuf {
