@@ -34,6 +34,62 @@ use crate::model::{Error, Result};
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
 pub type AtomicWriter = BufWriter<tempfile::NamedTempFile>;
 
+/// Checks, before any work, that a command may write `out`: its extension is one of
+/// `extensions` (lower case, without the dot; empty: any), it is none of the command's
+/// `inputs` (so a typo never replaces an input), and its folder can be made and written
+/// (a temporary file is created there and removed).
+pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result<()> {
+    let extension = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !extensions.is_empty()
+        && !extension
+            .as_deref()
+            .is_some_and(|e| extensions.contains(&e))
+    {
+        return Err(Error::usage(format!(
+            "{}: this command writes {}",
+            out.display(),
+            extensions
+                .iter()
+                .map(|e| format!(".{e}"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        )));
+    }
+    if out.is_dir() {
+        return Err(Error::usage(format!(
+            "{}: is a folder; name a file to write",
+            out.display()
+        )));
+    }
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(input) = inputs.iter().find(|input| same(out, input)) {
+        return Err(Error::usage(format!(
+            "{}: is an input of this command ({}); write the output elsewhere",
+            out.display(),
+            input.display()
+        )));
+    }
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(parent).map_err(|e| {
+        let message = format!("cannot create its folder {}", parent.display());
+        Error::write(out, &message, e)
+    })?;
+    tempfile::Builder::new()
+        .prefix(".splat4d-")
+        .tempfile_in(parent)
+        .map(drop)
+        .map_err(|e| Error::write(out, "cannot write in its folder", e))
+}
+
 /// Writes `bytes` to `path` with [`write_atomically`].
 pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |w| w.write_all(bytes))

@@ -8,7 +8,7 @@ use crate::fit::plan::{FitPlan, Init};
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
-use crate::io::write_bytes_atomically;
+use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Result, Silent};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
@@ -88,6 +88,29 @@ impl FitProgress for Silent {
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
     let plan = &request.plan;
     plan.validate()?;
+    // Outputs are checked before the work: a fit is never lost to an unwritable path, and
+    // never replaces its dataset or its start.
+    let mut inputs: Vec<PathBuf> = [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "transforms.json",
+    ]
+    .iter()
+    .map(|name| request.views.join(name))
+    .collect();
+    inputs.push(PathBuf::from(&request.init));
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    check_output(&request.out, &["json", "ply"], &inputs)?;
+    if let Some(log) = &request.log {
+        check_output(log, &[], &inputs)?;
+        if same_file(log, &request.out) {
+            return Err(crate::model::Error::usage(format!(
+                "{}: --log and --out name the same file",
+                log.display()
+            )));
+        }
+    }
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
@@ -199,4 +222,9 @@ fn cameras_up(views: &[crate::model::View]) -> Option<&'static str> {
         (2, true) => "z",
         _ => "-z",
     })
+}
+
+/// Whether two paths name one file (as written, or once both exist).
+fn same_file(a: &Path, b: &Path) -> bool {
+    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }

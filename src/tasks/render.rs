@@ -13,7 +13,7 @@ use crate::io::image_file::{
     BitDepth, ImageKind, image_size, load_image, save_image, save_rgb8_png,
 };
 use crate::io::scene_file::load_scene;
-use crate::io::write_bytes_atomically;
+use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Camera, Error, Result, Scene};
 use crate::overlay::draw_overlay;
 use crate::render::{RenderContext, RenderOptions};
@@ -186,6 +186,7 @@ impl fmt::Display for GradSummary {
 /// The MSE of a render against a target image and its gradient per kernel, as JSON.
 pub fn grad(request: &GradRequest) -> Result<GradSummary> {
     let view = &request.view;
+    check_output(&request.out, &["json"], &[&view.scene, &request.target])?;
     let (scene, camera) = view.load()?;
     let background = scene.background.map(|b| b as f32);
     // The header first: a target of the wrong size is refused before it is decoded.

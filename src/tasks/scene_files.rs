@@ -3,6 +3,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::io::check_output;
 use crate::io::gltf_import::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
@@ -68,6 +69,7 @@ pub struct ImportRequest {
 
 /// Samples a glTF model and its node animation into 4D kernels.
 pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
+    check_output(&request.out, &["json", "ply"], &[&request.model])?;
     let imported = import_scene(&request.model, request.kernels, request.times, request.seed)?;
     save_scene(&imported.scene, &request.out)?;
     let [t0, t1] = imported.time_range;
@@ -109,16 +111,7 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     if !request.time.is_finite() {
         return Err(Error::usage("--time must be finite"));
     }
-    if !request
-        .out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
-    {
-        return Err(Error::usage(format!(
-            "{}: the output of export-ply must end in .ply",
-            request.out.display()
-        )));
-    }
+    check_output(&request.out, &["ply"], &[&request.scene])?;
     let scene = load_scene(&request.scene)?;
     let n = write_slice_ply(
         &scene,

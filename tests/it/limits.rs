@@ -406,3 +406,113 @@ fn gltf_files_that_break_the_crates_walkers_are_refused_with_their_json_path() {
     }
     assert!(!d.join("m.json").exists());
 }
+
+#[test]
+fn outputs_are_checked_before_the_work_and_never_replace_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let camera = data("blob_camera.json");
+    std::fs::copy(&blob, d.join("s.json")).unwrap();
+    let ok = run(
+        &[
+            "dataset", "--scene", "s.json", "--views", "4", "--times", "2", "--size", "8x8",
+            "--out", "ds",
+        ],
+        d,
+    );
+    assert!(ok.status.success());
+    let before = std::fs::read(d.join("ds/transforms_train.json")).unwrap();
+    // A fit aimed at its dataset, at its start, or at an unwritable place: refused at once.
+    refused(
+        &["fit", "--views", "ds", "--out", "ds/transforms_train.json"],
+        d,
+        2,
+        "input",
+    );
+    refused(
+        &[
+            "fit", "--views", "ds", "--init", "s.json", "--out", "s.json",
+        ],
+        d,
+        2,
+        "input",
+    );
+    std::fs::write(d.join("file"), "x").unwrap();
+    refused(
+        &["fit", "--views", "ds", "--out", "file/f.json"],
+        d,
+        3,
+        "file/f.json",
+    );
+    refused(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "f.json",
+            "--log",
+            "file/log.jsonl",
+        ],
+        d,
+        3,
+        "log.jsonl",
+    );
+    refused(
+        &["fit", "--views", "ds", "--out", "f.txt"],
+        d,
+        2,
+        ".json or .ply",
+    );
+    assert_eq!(
+        std::fs::read(d.join("ds/transforms_train.json")).unwrap(),
+        before
+    );
+    // grad writes JSON, never over its target; export-ply never over its scene.
+    let png = d.join("ds/train/r_000.png");
+    let grad = [
+        "grad",
+        "--scene",
+        "s.json",
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--target",
+        png.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+    ];
+    refused(&grad, d, 2, ".json");
+    let ply = run(&["toy", "--kind", "blob", "--out", "scene.ply"], d);
+    assert!(ply.status.success());
+    let before = std::fs::read(d.join("scene.ply")).unwrap();
+    refused(
+        &[
+            "export-ply",
+            "--scene",
+            "scene.ply",
+            "--time",
+            "0.5",
+            "--out",
+            "scene.ply",
+        ],
+        d,
+        2,
+        "input",
+    );
+    assert_eq!(
+        std::fs::read(d.join("scene.ply")).unwrap(),
+        before,
+        "the 4D scene is intact"
+    );
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    std::fs::copy(&gltf, d.join("m.gltf")).unwrap();
+    refused(
+        &["import-gltf", "m.gltf", "--out", "m.gltf"],
+        d,
+        2,
+        ".json or .ply",
+    );
+}
