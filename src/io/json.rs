@@ -9,6 +9,8 @@ use crate::model::error::{Error, Result};
 /// Parses `text` as a `T`. `origin` (a file name) and `what` (the document's item name, such
 /// as `camera`) go into error messages.
 pub fn parse_json<T: DeserializeOwned>(text: &str, origin: &str, what: &str) -> Result<T> {
+    // A UTF-8 byte order mark (some Windows editors write one) is not JSON, but harmless.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut deserializer = serde_json::Deserializer::from_str(text);
     let value: T =
         serde_path_to_error::deserialize(&mut deserializer).map_err(|e| locate(e, origin, what))?;
@@ -16,6 +18,22 @@ pub fn parse_json<T: DeserializeOwned>(text: &str, origin: &str, what: &str) -> 
         .end()
         .map_err(|e| Error::malformed(origin, format!("malformed JSON after the {what}: {e}")))?;
     Ok(value)
+}
+
+/// Longest message echoed from the parser: values quoted in it are cut, so a 10 MB string
+/// in a file does not come back whole.
+const MAX_MESSAGE: usize = 300;
+
+/// `message` cut to [`MAX_MESSAGE`] characters, with an ellipsis.
+fn shorten(message: &str) -> String {
+    match message.char_indices().nth(MAX_MESSAGE) {
+        Some((end, _)) => format!(
+            "{}… ({} characters in all)",
+            &message[..end],
+            message.chars().count()
+        ),
+        None => message.to_owned(),
+    }
 }
 
 fn locate(error: serde_path_to_error::Error<serde_json::Error>, origin: &str, what: &str) -> Error {
@@ -40,7 +58,7 @@ fn locate(error: serde_path_to_error::Error<serde_json::Error>, origin: &str, wh
             Segment::Unknown => {}
         }
     }
-    let message = error.inner().to_string();
+    let message = shorten(&error.inner().to_string());
     if field.is_empty() {
         Error::malformed(origin, format!("{item}: {message}"))
     } else {

@@ -202,9 +202,10 @@ pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
             ["format", "binary_little_endian", "1.0"] => format_seen = true,
-            ["format", other, ..] => {
+            ["format", rest @ ..] => {
                 return Err(bad(format!(
-                    "format `{other}` is not supported (binary_little_endian only)"
+                    "format `{}` is not supported (only `binary_little_endian 1.0`)",
+                    rest.join(" ")
                 )));
             }
             ["comment", "background", r, g, b] => {

@@ -516,3 +516,125 @@ fn outputs_are_checked_before_the_work_and_never_replace_an_input() {
         ".json or .ply",
     );
 }
+
+#[test]
+fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    // The embedded buffer as a file beside the model: read as before.
+    let uri = original["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let payload = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',').unwrap().1)
+        .unwrap();
+    std::fs::create_dir(d.join("models")).unwrap();
+    std::fs::write(d.join("models/box.bin"), &payload).unwrap();
+    let with_uri = |uri: &str| {
+        let mut gltf = original.clone();
+        gltf["buffers"][0]["uri"] = serde_json::json!(uri);
+        std::fs::write(d.join("models/m.gltf"), gltf.to_string()).unwrap();
+        run(
+            &[
+                "import-gltf",
+                "models/m.gltf",
+                "--kernels",
+                "20",
+                "--out",
+                "m.json",
+            ],
+            d,
+        )
+    };
+    let output = with_uri("box.bin");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    std::fs::remove_file(d.join("m.json")).unwrap();
+    #[cfg(unix)]
+    assert!(
+        Command::new("mkfifo")
+            .arg(d.join("models/pipe"))
+            .status()
+            .unwrap()
+            .success()
+    );
+    for (uri, needle) in [
+        ("/etc/passwd", "absolute"),
+        ("../../../../etc/passwd", "leaves the model's folder"),
+        ("%2e%2e/%2e%2e/etc/passwd", "leaves the model's folder"),
+        ("/dev/zero", "absolute"),
+        ("sub/../../x.bin", "leaves the model's folder"),
+        ("pipe", "not a regular file"),
+        (".", "not a regular file"),
+    ] {
+        let output = with_uri(uri);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{uri}: {stderr}");
+        assert!(
+            stderr.contains(needle) && stderr.contains("buffer 0"),
+            "{uri}: {stderr}"
+        );
+    }
+    assert!(!d.join("m.json").exists());
+}
+
+#[test]
+fn messages_stay_short_and_a_byte_order_mark_is_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let camera = data("blob_camera.json");
+    let camera = camera.to_str().unwrap();
+    let blob = std::fs::read_to_string(data("blob.json")).unwrap();
+    std::fs::write(d.join("bom.json"), format!("\u{feff}{blob}")).unwrap();
+    let render = [
+        "render", "--scene", "bom.json", "--camera", camera, "--time", "0.5", "--out", "r.png",
+    ];
+    let output = run(&render, d);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    // A 10 MB string where a number belongs: the message quotes a few hundred characters.
+    let long = "x".repeat(10_000_000);
+    std::fs::write(
+        d.join("long.json"),
+        format!(r#"{{"kernels": [{{"mean": "{long}", "scale": [1, 1, 1, 1], "amplitude": [1, 1, 1]}}]}}"#),
+    )
+    .unwrap();
+    let render = [
+        "render",
+        "--scene",
+        "long.json",
+        "--camera",
+        camera,
+        "--time",
+        "0.5",
+        "--out",
+        "l.png",
+    ];
+    let output = run(&render, d);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(
+        stderr.len() < 1000 && stderr.contains("kernel 0"),
+        "{} bytes: {}",
+        stderr.len(),
+        &stderr[..200.min(stderr.len())]
+    );
+    // A PLY of another format version names the one it reads.
+    std::fs::write(
+        d.join("v2.ply"),
+        "ply\nformat binary_little_endian 2.0\nend_header\n",
+    )
+    .unwrap();
+    let render = [
+        "render", "--scene", "v2.ply", "--camera", camera, "--time", "0.5", "--out", "p.png",
+    ];
+    refused(&render, d, 2, "only `binary_little_endian 1.0`");
+}
