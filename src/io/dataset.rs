@@ -414,35 +414,37 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
     Ok(dataset)
 }
 
-/// Writes one split: its images (16-bit PNG, and float EXR when `exr`) and its
-/// `transforms_{split}.json`. Every camera must share one set of intrinsics.
-pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result<()> {
-    let Some(first) = views.first() else {
-        return Err(Error::Usage(format!("split {split} has no views")));
-    };
-    let c = first.camera;
-    let mut frames = Vec::with_capacity(views.len());
-    for (index, view) in views.iter().enumerate() {
-        let v = &view.camera;
-        if (v.width, v.height, v.fx, v.fy, v.cx, v.cy)
-            != (c.width, c.height, c.fx, c.fy, c.cx, c.cy)
-        {
-            return Err(Error::Usage(format!(
-                "split {split}: view {index} has other intrinsics than view 0"
-            )));
-        }
-        let file_path = format!("./{split}/r_{index:03}");
-        let base = dir.join(&file_path);
-        save_image(&view.image, &base.with_extension("png"), BitDepth::Sixteen)?;
-        if exr {
-            save_image(&view.image, &base.with_extension("exr"), BitDepth::Sixteen)?;
-        }
-        frames.push(WrittenFrame {
-            file_path,
-            time: view.time,
-            transform_matrix: v.opengl_camera_to_world(),
-        });
+/// Saves the images of frame `index` of `split` under `dir` and returns its entry; `first`
+/// is the split's first camera (every view must share its intrinsics).
+fn save_frame(
+    dir: &Path,
+    split: &str,
+    index: usize,
+    view: &View,
+    first: &Camera,
+    exr: bool,
+) -> Result<WrittenFrame> {
+    let (v, c) = (&view.camera, first);
+    if (v.width, v.height, v.fx, v.fy, v.cx, v.cy) != (c.width, c.height, c.fx, c.fy, c.cx, c.cy) {
+        return Err(Error::Usage(format!(
+            "split {split}: view {index} has other intrinsics than view 0"
+        )));
     }
+    let file_path = format!("./{split}/r_{index:03}");
+    let base = dir.join(&file_path);
+    save_image(&view.image, &base.with_extension("png"), BitDepth::Sixteen)?;
+    if exr {
+        save_image(&view.image, &base.with_extension("exr"), BitDepth::Sixteen)?;
+    }
+    Ok(WrittenFrame {
+        file_path,
+        time: view.time,
+        transform_matrix: v.opengl_camera_to_world(),
+    })
+}
+
+/// Writes `dir/transforms_{split}.json` for `frames` taken with intrinsics `c`.
+fn write_transforms(dir: &Path, split: &str, c: &Camera, frames: Vec<WrittenFrame>) -> Result<()> {
     let file = WrittenTransforms {
         camera_angle_x: 2.0 * (0.5 * f64::from(c.width) / c.fx).atan(),
         fl_x: c.fx,
@@ -458,4 +460,119 @@ pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result
         &dir.join(format!("transforms_{split}.json")),
         text.as_bytes(),
     )
+}
+
+/// Writes a dataset frame by frame into a temporary folder beside `out`, renamed into
+/// place by [`DatasetWriter::finish`]: memory does not grow with the dataset, and a run that
+/// fails (a full disk, a kill) leaves no partial dataset at `out` for `fit` to accept. An
+/// existing `out` is replaced only when it is empty or a dataset (has a `transforms_*.json`).
+pub struct DatasetWriter {
+    out: PathBuf,
+    temp: tempfile::TempDir,
+    exr: bool,
+    /// Per split: the first camera (all must share its intrinsics) and the frames.
+    splits: [(Option<Camera>, Vec<WrittenFrame>); 3],
+}
+
+impl DatasetWriter {
+    /// A writer for `out`; checks before any work that `out` may be written.
+    pub fn new(out: &Path, exr: bool) -> Result<Self> {
+        if out.exists() && !replaceable(out) {
+            return Err(Error::usage(format!(
+                "{}: exists and is not a dataset; choose a new folder",
+                out.display()
+            )));
+        }
+        let parent = match out.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        std::fs::create_dir_all(parent).map_err(|e| {
+            Error::write(
+                out,
+                &format!("cannot create its folder {}", parent.display()),
+                e,
+            )
+        })?;
+        let temp = tempfile::Builder::new()
+            .prefix(".splat4d-dataset-")
+            .tempdir_in(parent)
+            .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
+        Ok(DatasetWriter {
+            out: out.to_path_buf(),
+            temp,
+            exr,
+            splits: Default::default(),
+        })
+    }
+
+    /// Writes the images of one view of `split` (`train`, `val` or `test`).
+    pub fn add(&mut self, split: &str, view: &View) -> Result<()> {
+        let k = SPLITS
+            .iter()
+            .position(|s| *s == split)
+            .ok_or_else(|| Error::usage(format!("unknown split {split}")))?;
+        let (first, frames) = &mut self.splits[k];
+        let c = *first.get_or_insert(view.camera);
+        let frame = save_frame(self.temp.path(), split, frames.len(), view, &c, self.exr)?;
+        frames.push(frame);
+        Ok(())
+    }
+
+    /// Writes the `transforms_*.json` of every split that has frames and moves the dataset
+    /// into place.
+    pub fn finish(self) -> Result<()> {
+        for (split, (first, frames)) in SPLITS.iter().zip(self.splits) {
+            if let Some(c) = first {
+                write_transforms(self.temp.path(), split, &c, frames)?;
+            }
+        }
+        let out = &self.out;
+        let temp = self.temp.keep();
+        if out.exists() {
+            // Move the old dataset aside, the new one in, then drop the old.
+            let old = temp.with_extension("old");
+            std::fs::rename(out, &old)
+                .map_err(|e| Error::write(out, "cannot move the previous dataset aside", e))?;
+            std::fs::rename(&temp, out)
+                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
+            std::fs::remove_dir_all(&old)
+                .map_err(|e| Error::write(&old, "cannot remove the previous dataset", e))?;
+        } else {
+            std::fs::rename(&temp, out)
+                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Whether `dir` may be replaced by a new dataset: an empty folder or a dataset.
+fn replaceable(dir: &Path) -> bool {
+    dir.is_dir()
+        && std::fs::read_dir(dir).is_ok_and(|mut entries| {
+            let names: Vec<String> = entries
+                .by_ref()
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            names.is_empty()
+                || names
+                    .iter()
+                    .any(|n| n.starts_with("transforms") && n.ends_with(".json"))
+        })
+}
+
+/// Writes one split: its images (16-bit PNG, and float EXR when `exr`) and its
+/// `transforms_{split}.json`, into the existing folder `dir`. Every camera must share one
+/// set of intrinsics.
+pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result<()> {
+    let Some(first) = views.first() else {
+        return Err(Error::Usage(format!("split {split} has no views")));
+    };
+    let frames = views
+        .iter()
+        .enumerate()
+        .map(|(index, view)| save_frame(dir, split, index, view, &first.camera, exr))
+        .collect::<Result<Vec<_>>>()?;
+    write_transforms(dir, split, &first.camera, frames)
 }

@@ -92,6 +92,39 @@ pub fn render_dataset(
     options: &RenderOptions,
     mut on_frame: impl FnMut(),
 ) -> Result<Dataset> {
+    let mut dataset = Dataset::default();
+    render_views(scene, spec, options, |split, view| {
+        on_frame();
+        match split {
+            Split::Train => dataset.train.push(view),
+            Split::Val => dataset.val.push(view),
+            Split::Test => dataset.test.push(view),
+        }
+        Ok(())
+    })?;
+    Ok(dataset)
+}
+
+/// The split a rendered view belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// Seen cameras at training times.
+    Train,
+    /// Seen cameras at the times between.
+    Val,
+    /// New cameras at the times between.
+    Test,
+}
+
+/// Renders the views of `spec` one at a time, in file order (train, then val and test by
+/// time), handing each to `sink` as soon as it is rendered: memory does not grow with the
+/// dataset ([`render_dataset`] collects them).
+pub fn render_views(
+    scene: &Scene,
+    spec: &DatasetSpec,
+    options: &RenderOptions,
+    mut sink: impl FnMut(Split, View) -> Result<()>,
+) -> Result<()> {
     spec.validate()?;
     let [t0, t1] = spec.time_range;
     let train_times: Vec<f64> = (0..spec.times)
@@ -132,35 +165,41 @@ pub fn render_dataset(
     }
     let (train_cameras, test_cameras) = cameras.split_at(spec.views);
     let mut context = RenderContext::new();
+    let mut counts = [0_usize; 3];
     let mut render =
-        |camera: &crate::model::camera::Camera, time: f64, name: String| -> Result<View> {
+        |camera: &crate::model::camera::Camera, time: f64, split: Split| -> Result<()> {
             context.render(scene, camera, time, options)?;
-            on_frame();
-            Ok(View {
-                camera: *camera,
-                time,
-                image: context.image().clone(),
-                name,
-            })
+            let (k, folder) = match split {
+                Split::Train => (0, "train"),
+                Split::Val => (1, "val"),
+                Split::Test => (2, "test"),
+            };
+            let name = format!("./{folder}/r_{:03}", counts[k]);
+            counts[k] += 1;
+            sink(
+                split,
+                View {
+                    camera: *camera,
+                    time,
+                    image: context.image().clone(),
+                    name,
+                },
+            )
         };
-    let mut dataset = Dataset::default();
     for &time in &train_times {
         for camera in train_cameras {
-            let name = format!("./train/r_{:03}", dataset.train.len());
-            dataset.train.push(render(camera, time, name)?);
+            render(camera, time, Split::Train)?;
         }
     }
     for &time in &mid_times {
         for camera in train_cameras.iter().take(4) {
-            let name = format!("./val/r_{:03}", dataset.val.len());
-            dataset.val.push(render(camera, time, name)?);
+            render(camera, time, Split::Val)?;
         }
         for camera in test_cameras {
-            let name = format!("./test/r_{:03}", dataset.test.len());
-            dataset.test.push(render(camera, time, name)?);
+            render(camera, time, Split::Test)?;
         }
     }
-    Ok(dataset)
+    Ok(())
 }
 
 /// Frames [`render_dataset`] will render for `spec`.

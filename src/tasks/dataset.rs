@@ -3,11 +3,11 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use crate::io::dataset::{SPLITS, write_split};
+use crate::io::dataset::DatasetWriter;
 use crate::io::scene_file::load_scene;
 use crate::model::{Progress, Result};
 use crate::render::RenderOptions;
-use crate::scenes::dataset::{DatasetSpec, frame_count, render_dataset};
+use crate::scenes::dataset::{DatasetSpec, Split, frame_count, render_views};
 use crate::tasks::with_threads;
 
 /// `splat4d dataset`.
@@ -57,17 +57,26 @@ pub fn write_dataset(
     request.spec.validate()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
+    let mut writer = DatasetWriter::new(&request.out, request.exr)?;
     progress.start("render", frame_count(spec));
-    let dataset = with_threads(request.threads, || {
-        render_dataset(&scene, spec, &request.options, || progress.tick())
+    let mut frames = [0_usize; 3];
+    with_threads(request.threads, || {
+        render_views(&scene, spec, &request.options, |split, view| {
+            let (k, name) = match split {
+                Split::Train => (0, "train"),
+                Split::Val => (1, "val"),
+                Split::Test => (2, "test"),
+            };
+            frames[k] += 1;
+            writer.add(name, &view)?;
+            progress.tick();
+            Ok(())
+        })
     })??;
-    let splits = [&dataset.train, &dataset.val, &dataset.test];
-    for (split, views) in SPLITS.iter().zip(splits) {
-        write_split(&request.out, split, views, request.exr)?;
-    }
+    writer.finish()?;
     Ok(DatasetSummary {
         out: request.out.clone(),
-        frames: splits.map(Vec::len),
+        frames,
         size: (spec.width, spec.height),
     })
 }

@@ -638,3 +638,65 @@ fn messages_stay_short_and_a_byte_order_mark_is_accepted() {
     ];
     refused(&render, d, 2, "only `binary_little_endian 1.0`");
 }
+
+#[test]
+fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let dataset = |views: &str, out: &str| {
+        run(
+            &[
+                "dataset",
+                "--scene",
+                blob.to_str().unwrap(),
+                "--views",
+                views,
+                "--times",
+                "2",
+                "--size",
+                "8x8",
+                "--out",
+                out,
+            ],
+            d,
+        )
+    };
+    assert!(dataset("6", "ds").status.success());
+    let count = |split: &str| std::fs::read_dir(d.join("ds").join(split)).unwrap().count();
+    assert_eq!(count("train"), 12);
+    // Again with fewer views: the new dataset replaces the old one whole (no stale frames).
+    assert!(dataset("4", "ds").status.success());
+    assert_eq!(count("train"), 8);
+    // Nothing else left beside it: no temporary folder, no old copy.
+    let names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["ds"]);
+    // A folder that is not a dataset is never replaced.
+    std::fs::create_dir(d.join("photos")).unwrap();
+    std::fs::write(d.join("photos/keep.txt"), "mine").unwrap();
+    refused(
+        &[
+            "dataset",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--views",
+            "2",
+            "--times",
+            "2",
+            "--size",
+            "8x8",
+            "--out",
+            "photos",
+        ],
+        d,
+        2,
+        "not a dataset",
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("photos/keep.txt")).unwrap(),
+        "mine"
+    );
+}
