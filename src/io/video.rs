@@ -17,6 +17,19 @@ use crate::io::write_atomically;
 use crate::model::image::quantize;
 use crate::model::{Error, Image, Result};
 
+/// Largest side of a GIF frame (the format stores sides in 16 bits).
+pub const MAX_GIF_SIDE: u32 = 65_535;
+
+/// Whether `dir` holds nothing but a video's numbered frames (so it may be replaced).
+fn only_frames(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.filter_map(|e| e.ok()).all(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.starts_with("frame_") && name.ends_with(".png")
+        })
+    })
+}
+
 /// What was written for one video.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VideoFiles {
@@ -83,12 +96,32 @@ pub fn write_video(
         return Err(Error::usage("--fps must be at least 1"));
     }
     let frames_dir = dir.join(name);
+    if frames_dir.exists() && !only_frames(&frames_dir) {
+        return Err(Error::usage(format!(
+            "{}: exists and holds more than the frames of a video; choose another --out",
+            frames_dir.display()
+        )));
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Error::write(dir, "cannot create the output folder", e))?;
+    // Frames go to a temporary folder renamed into place at the end: a re-run never mixes
+    // its frames with an older video's, and a failed one leaves the old video as it was.
+    let temp = tempfile::Builder::new()
+        .prefix(".splat4d-frames-")
+        .tempdir_in(dir)
+        .map_err(|e| Error::write(dir, "cannot create a temporary folder", e))?;
     let mut image = Image::default();
     let mut write_frame = |k: usize| -> Result<RgbaImage> {
         next_frame(k, &mut image)?;
+        if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
+            return Err(Error::usage(format!(
+                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): use --no-gif",
+                image.width, image.height
+            )));
+        }
         save_image(
             &image,
-            &frames_dir.join(format!("frame_{k:04}.png")),
+            &temp.path().join(format!("frame_{k:04}.png")),
             BitDepth::Eight,
         )?;
         Ok(to_rgba8(&image))
@@ -127,6 +160,13 @@ pub fn write_video(
         }
         None
     };
+    if frames_dir.exists() {
+        std::fs::remove_dir_all(&frames_dir)
+            .map_err(|e| Error::write(&frames_dir, "cannot remove the previous frames", e))?;
+    }
+    let temp = temp.keep();
+    std::fs::rename(&temp, &frames_dir)
+        .map_err(|e| Error::write(&frames_dir, "cannot move the frames into place", e))?;
     let (mp4, mp4_note) = if options.mp4 {
         encode_mp4(&frames_dir, dir, name, options.fps)
     } else {

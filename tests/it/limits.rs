@@ -700,3 +700,76 @@ fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
         "mine"
     );
 }
+
+#[test]
+fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let video = |orbit: &str, size: &str| {
+        let orbit = format!("--orbit={orbit}");
+        run(
+            &[
+                "video",
+                "--scene",
+                blob.to_str().unwrap(),
+                &orbit,
+                "--times",
+                "0.5",
+                "--size",
+                size,
+                "--no-mp4",
+                "--out",
+                "v",
+            ],
+            d,
+        )
+    };
+    assert!(video("0.5,0.5,0.5,3,20,6", "16x12").status.success());
+    assert!(video("0.5,0.5,0.5,3,20,3", "16x12").status.success());
+    let frames = std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count();
+    assert_eq!(frames, 3, "no stale frames from the longer video");
+    let names: Vec<String> = std::fs::read_dir(d.join("v"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        names.iter().all(|n| !n.starts_with(".splat4d")),
+        "{names:?}"
+    );
+    // A GIF cannot hold a frame wider than 65 535 pixels: refused before any frame is kept.
+    let output = video("0.5,0.5,0.5,3,20,2", "70000x1");
+    assert_eq!(
+        output.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--no-gif"));
+    assert_eq!(
+        std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count(),
+        3,
+        "the old video is intact"
+    );
+    // A folder of other files is never replaced.
+    std::fs::create_dir_all(d.join("w/orbit_t0.50")).unwrap();
+    std::fs::write(d.join("w/orbit_t0.50/notes.txt"), "mine").unwrap();
+    let output = run(
+        &[
+            "video",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "8x8",
+            "--no-mp4",
+            "--out",
+            "w",
+        ],
+        d,
+    );
+    assert_eq!(output.status.code(), Some(2));
+    assert!(d.join("w/orbit_t0.50/notes.txt").exists());
+}
