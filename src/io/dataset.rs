@@ -494,8 +494,9 @@ impl DatasetWriter {
                 e,
             )
         })?;
+        crate::io::remove_stale_temps(parent);
         let temp = tempfile::Builder::new()
-            .prefix(".splat4d-dataset-")
+            .prefix(&format!("{}dataset-", crate::io::temp_prefix()))
             .tempdir_in(parent)
             .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
         Ok(DatasetWriter {

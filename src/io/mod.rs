@@ -31,6 +31,44 @@ use std::path::Path;
 
 use crate::model::{Error, Result};
 
+/// The name prefix of this process's temporary files and folders: `.splat4d-PID-`. The
+/// process id lets a later run tell a leftover of a killed run (its process is gone) from
+/// the live temporary file of a concurrent one.
+#[must_use]
+pub fn temp_prefix() -> String {
+    format!(".splat4d-{}-", std::process::id())
+}
+
+/// Removes from `dir` the temporary files and folders that runs killed before they could
+/// rename them left behind (`.splat4d-PID-*` whose process no longer runs). Linux only
+/// (processes are looked up in `/proc`); best effort, errors are ignored.
+pub fn remove_stale_temps(dir: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.filter_map(std::result::Result::ok) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix(".splat4d-")
+            .and_then(|rest| rest.split('-').next())
+            .and_then(|pid| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let path = entry.path();
+            let _ = if path.is_dir() {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+        }
+    }
+}
+
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
 pub type AtomicWriter = BufWriter<tempfile::NamedTempFile>;
 
@@ -84,7 +122,7 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         Error::write(out, &message, e)
     })?;
     tempfile::Builder::new()
-        .prefix(".splat4d-")
+        .prefix(&temp_prefix())
         .tempfile_in(parent)
         .map(drop)
         .map_err(|e| Error::write(out, "cannot write in its folder", e))
@@ -118,8 +156,15 @@ pub fn write_atomically(
         let message = format!("cannot create its folder {}", parent.display());
         Error::write(path, &message, e)
     })?;
+    // Inside our own temporary folders there is nothing stale to look for.
+    let in_temp = parent
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with(".splat4d-"));
+    if !in_temp {
+        remove_stale_temps(parent);
+    }
     let temp = tempfile::Builder::new()
-        .prefix(".splat4d-")
+        .prefix(&temp_prefix())
         .tempfile_in(parent)
         .map_err(|e| Error::write(path, "cannot create a temporary file beside the output", e))?;
     let mut writer = BufWriter::new(temp);

@@ -104,10 +104,11 @@ pub fn write_video(
     }
     std::fs::create_dir_all(dir)
         .map_err(|e| Error::write(dir, "cannot create the output folder", e))?;
+    crate::io::remove_stale_temps(dir);
     // Frames go to a temporary folder renamed into place at the end: a re-run never mixes
     // its frames with an older video's, and a failed one leaves the old video as it was.
     let temp = tempfile::Builder::new()
-        .prefix(".splat4d-frames-")
+        .prefix(&format!("{}frames-", crate::io::temp_prefix()))
         .tempdir_in(dir)
         .map_err(|e| Error::write(dir, "cannot create a temporary folder", e))?;
     let mut image = Image::default();

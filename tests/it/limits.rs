@@ -773,3 +773,38 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert_eq!(output.status.code(), Some(2));
     assert!(d.join("w/orbit_t0.50/notes.txt").exists());
 }
+
+#[cfg(target_os = "linux")]
+#[test]
+fn leftovers_of_killed_runs_are_removed_and_live_ones_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A run that was killed (no process 999999999 can exist: Linux pids stop at 2^22) and
+    // a run still going (this test's own process).
+    std::fs::write(d.join(".splat4d-999999999-a1b2c3"), vec![0u8; 1000]).unwrap();
+    std::fs::create_dir(d.join(".splat4d-999999999-dataset-x")).unwrap();
+    let live = format!(".splat4d-{}-d4e5f6", std::process::id());
+    std::fs::write(d.join(&live), "in progress").unwrap();
+    std::fs::write(d.join(".splat4d-notes"), "not ours to judge").unwrap();
+    let (blob, camera) = (data("blob.json"), data("blob_camera.json"));
+    let render = [
+        "render",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--out",
+        "r.png",
+    ];
+    assert!(run(&render, d).status.success());
+    let mut names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let mut expected = vec![".splat4d-notes".to_owned(), live, "r.png".to_owned()];
+    expected.sort();
+    assert_eq!(names, expected);
+}
