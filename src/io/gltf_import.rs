@@ -181,12 +181,55 @@ fn check_structure(root: &gltf::json::Root, origin: &str) -> Result<()> {
         }
     }
     for (v, view) in root.buffer_views.iter().enumerate() {
+        let item = format!("bufferViews[{v}]");
         in_range(
             view.buffer.value(),
             root.buffers.len(),
-            format!("bufferViews[{v}]"),
+            item.clone(),
             "buffer",
         )?;
+        let end = view
+            .byte_offset
+            .map_or(0, |o| o.0)
+            .checked_add(view.byte_length.0);
+        let buffer = root.buffers[view.buffer.value()].byte_length.0;
+        if end.is_none_or(|end| end > buffer) {
+            return Err(bad(
+                item,
+                "byteLength",
+                format!("the view ends past its buffer's {buffer} bytes"),
+            ));
+        }
+    }
+    // Every element an accessor reads lies inside its view.
+    for (a, accessor) in root.accessors.iter().enumerate() {
+        let (Some(view), Checked::Valid(kind), Checked::Valid(component)) = (
+            &accessor.buffer_view,
+            &accessor.type_,
+            &accessor.component_type,
+        ) else {
+            continue;
+        };
+        let view = &root.buffer_views[view.value()];
+        let element = (kind.multiplicity() * component.0.size()) as u64;
+        let stride = view.byte_stride.as_ref().map_or(element, |s| s.0 as u64);
+        let count = accessor.count.0;
+        let offset = accessor.byte_offset.map_or(0, |o| o.0);
+        let end = count
+            .checked_sub(1)
+            .and_then(|last| last.checked_mul(stride))
+            .and_then(|span| span.checked_add(element))
+            .and_then(|span| span.checked_add(offset));
+        if count > 0 && end.is_none_or(|end| end > view.byte_length.0) {
+            return Err(bad(
+                format!("accessors[{a}]"),
+                "count",
+                format!(
+                    "{count} elements from byteOffset {offset} do not fit the view's {} bytes",
+                    view.byte_length.0
+                ),
+            ));
+        }
     }
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
@@ -210,6 +253,86 @@ fn check_structure(root: &gltf::json::Root, origin: &str) -> Result<()> {
                     ));
                 }
             }
+        }
+    }
+    for (i, node) in root.nodes.iter().enumerate() {
+        if let Some(skin) = &node.skin {
+            in_range(
+                skin.value(),
+                root.skins.len(),
+                format!("nodes[{i}]"),
+                "skin",
+            )?;
+        }
+    }
+    for (s, skin) in root.skins.iter().enumerate() {
+        for joint in &skin.joints {
+            in_range(joint.value(), nodes, format!("skins[{s}]"), "joints")?;
+        }
+        if let Some(matrices) = &skin.inverse_bind_matrices {
+            in_range(
+                matrices.value(),
+                accessors,
+                format!("skins[{s}]"),
+                "inverseBindMatrices",
+            )?;
+        }
+    }
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(material) = &primitive.material {
+                let item = format!("meshes[{m}].primitives[{p}]");
+                in_range(material.value(), root.materials.len(), item, "material")?;
+            }
+        }
+    }
+    let textures = root.textures.len();
+    for (m, material) in root.materials.iter().enumerate() {
+        let pbr = &material.pbr_metallic_roughness;
+        let indices = [
+            (
+                "pbrMetallicRoughness.baseColorTexture",
+                pbr.base_color_texture.as_ref().map(|t| t.index.value()),
+            ),
+            (
+                "pbrMetallicRoughness.metallicRoughnessTexture",
+                pbr.metallic_roughness_texture
+                    .as_ref()
+                    .map(|t| t.index.value()),
+            ),
+            (
+                "normalTexture",
+                material.normal_texture.as_ref().map(|t| t.index.value()),
+            ),
+            (
+                "occlusionTexture",
+                material.occlusion_texture.as_ref().map(|t| t.index.value()),
+            ),
+            (
+                "emissiveTexture",
+                material.emissive_texture.as_ref().map(|t| t.index.value()),
+            ),
+        ];
+        for (field, index) in indices {
+            if let Some(index) = index {
+                in_range(index, textures, format!("materials[{m}]"), field)?;
+            }
+        }
+    }
+    for (t, texture) in root.textures.iter().enumerate() {
+        in_range(
+            texture.source.value(),
+            root.images.len(),
+            format!("textures[{t}]"),
+            "source",
+        )?;
+        if let Some(sampler) = &texture.sampler {
+            in_range(
+                sampler.value(),
+                root.samplers.len(),
+                format!("textures[{t}]"),
+                "sampler",
+            )?;
         }
     }
     for (a, animation) in root.animations.iter().enumerate() {
@@ -347,6 +470,27 @@ fn read_at_most(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
     Ok(data)
 }
 
+/// Runs `work` and turns a panic inside it (the `gltf` crate's readers index buffers it has
+/// not checked; [`check_structure`] covers what this importer walks, this is the net under
+/// it) into an input error naming the file. The panic message is not printed.
+fn without_panics<T>(path: &Path, work: impl FnOnce() -> Result<T>) -> Result<T> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+    std::panic::set_hook(hook);
+    result.unwrap_or_else(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(Error::malformed(
+            &path.display().to_string(),
+            format!("a structure the glTF reader does not check is broken ({what})"),
+        ))
+    })
+}
+
 /// A `MODEL[#index]` argument: the path and the camera index (0 by default).
 pub fn split_camera_spec(spec: &str) -> Result<(&Path, usize)> {
     match spec.rsplit_once('#') {
@@ -363,6 +507,10 @@ pub fn split_camera_spec(spec: &str) -> Result<(&Path, usize)> {
 /// The `index`-th camera node (in node order) of the glTF at `path`, as a SPEC §3 camera of
 /// `size` (default: 512 pixels high, the camera's aspect ratio wide).
 pub fn load_camera(path: &Path, index: usize, size: Option<(u32, u32)>) -> Result<Camera> {
+    without_panics(path, || load_camera_unguarded(path, index, size))
+}
+
+fn load_camera_unguarded(path: &Path, index: usize, size: Option<(u32, u32)>) -> Result<Camera> {
     let origin = path.display().to_string();
     let document = parse_document(path)?;
     let world = world_matrices_at(&document, &[], 0.0);
@@ -697,6 +845,10 @@ pub const MAX_IMPORT_KERNELS: usize = 10_000_000;
 /// Samples the glTF at `path` into 4D kernels (see the module docs): `points` surface
 /// points, `times` samples over the animation.
 pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
+    without_panics(path, || import_scene_unguarded(path, points, times, seed))
+}
+
+fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
     let origin = path.display().to_string();
     if points == 0 || times == 0 {
         return Err(Error::Usage(

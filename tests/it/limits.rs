@@ -361,6 +361,26 @@ fn gltf_files_that_break_the_crates_walkers_are_refused_with_their_json_path() {
             }),
             "byteStride",
         ),
+        (
+            "huge count",
+            Box::new(|g| g["accessors"][0]["count"] = serde_json::json!(1_000_000_000u64)),
+            "accessors[0]",
+        ),
+        (
+            "view past its buffer",
+            Box::new(|g| g["bufferViews"][0]["byteLength"] = serde_json::json!(100_000_000u64)),
+            "bufferViews[0]",
+        ),
+        (
+            "dangling material",
+            Box::new(|g| g["meshes"][0]["primitives"][0]["material"] = serde_json::json!(99)),
+            "material",
+        ),
+        (
+            "dangling skin",
+            Box::new(|g| g["nodes"][2]["skin"] = serde_json::json!(99)),
+            "skin",
+        ),
     ];
     for (name, mutate, needle) in cases {
         let mut gltf = original.clone();
