@@ -1,20 +1,14 @@
 //! The `splat4d` executable on the shipped fixtures in `data/`: outputs, formats, the
 //! default job, and bad input (exit status 2, a message naming file and field, no output).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use crate::common::{splat4d, stderr};
+use crate::common::{data, splat4d, stderr};
 
 use splat4d::fit::plan::FitPlan;
 use splat4d::io::image_file::load_image;
 use splat4d::model::image::quantize;
 use splat4d::{RenderOptions, render};
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(name)
-}
 
 fn render_args<'a>(scene: &'a str, camera: &'a str, out: &'a str) -> Vec<&'a str> {
     vec![

@@ -3,15 +3,11 @@
 //! ends quickly with a message and exit status 2 (4 for a computation that leaves the
 //! finite numbers), never a panic (101), a hang or an unbounded allocation.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(name)
-}
+use crate::common::data;
 
 /// Runs the executable with a time limit (a hang is a failure, not a stuck test).
 fn run<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> Output {
