@@ -167,9 +167,7 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
     let decoded = reader
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
-    let transparent =
-        decoded.color().has_alpha() && decoded.to_rgba32f().pixels().any(|p| p.0[3] < 1.0);
-    let image = to_linear_rgb(&decoded, background);
+    let (image, transparent) = composite(&decoded, background);
     if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
         let pixel = k / 3;
         let width = image.width as usize;
@@ -187,6 +185,11 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
 /// composited over `background`.
 #[must_use]
 pub fn to_linear_rgb(decoded: &DynamicImage, background: [f32; 3]) -> Image {
+    composite(decoded, background).0
+}
+
+/// [`to_linear_rgb`], and whether some pixel had alpha below 1.
+fn composite(decoded: &DynamicImage, background: [f32; 3]) -> (Image, bool) {
     let (w, h) = (decoded.width(), decoded.height());
     let rgba: Vec<[f32; 4]> = match decoded {
         DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => {
@@ -200,16 +203,19 @@ pub fn to_linear_rgb(decoded: &DynamicImage, background: [f32; 3]) -> Image {
             .collect(),
     };
     let mut pixels = Vec::with_capacity(3 * rgba.len());
+    let mut transparent = false;
     for [r, g, b, a] in rgba {
+        transparent |= a < 1.0;
         for (c, bg) in [r, g, b].into_iter().zip(background) {
             pixels.push(if a == 1.0 { c } else { a * c + (1.0 - a) * bg });
         }
     }
-    Image {
+    let image = Image {
         width: w,
         height: h,
         pixels,
-    }
+    };
+    (image, transparent)
 }
 
 #[cfg(test)]
