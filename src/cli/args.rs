@@ -61,7 +61,7 @@ pub struct RenderFlags {
     #[arg(long, default_value = "poly")]
     exp: ExpMode,
     /// Worker threads (default: one per core). The output does not depend on it.
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=splat4d::tasks::MAX_THREADS as i64))]
     threads: Option<u16>,
 }
 
@@ -89,9 +89,6 @@ pub fn finite(text: &str) -> Result<f64, String> {
         Err(e) => Err(format!("`{text}`: {e}")),
     }
 }
-
-/// Most worker threads a command starts (more only cost memory: stacks for nothing).
-pub const MAX_THREADS: u16 = 1024;
 
 /// `N` comma-separated finite numbers.
 pub fn parse_list<const N: usize>(text: &str) -> Result<[f64; N], String> {

@@ -22,7 +22,7 @@ pub struct BenchArgs {
     #[arg(long, value_parser = parse_size, default_value = "512x512")]
     size: (u32, u32),
     /// Worker threads (default: 1, and one per core).
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=splat4d::tasks::MAX_THREADS as i64))]
     threads: Option<u16>,
     /// Timed frames per configuration (the median is reported).
     #[arg(long, default_value_t = 10)]

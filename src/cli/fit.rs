@@ -135,7 +135,7 @@ pub struct FitArgs {
     lr_background: f64,
     /// Average N×N blocks of pixels of every image (a box filter, like nerfstudio's
     /// `images_N`); the intrinsics are divided by N.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=i64::from(splat4d::io::dataset::MAX_DOWNSCALE)))]
     downscale: u32,
     /// Views per step.
     #[arg(long, default_value_t = FitPlan::default().batch_size)]

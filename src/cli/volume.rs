@@ -25,7 +25,7 @@ pub struct VolumeArgs {
     #[arg(long, value_parser = super::args::finite, default_value_t = 1e-6)]
     cutoff: f64,
     /// Worker threads (default: one per core).
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=i64::from(super::args::MAX_THREADS)))]
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=splat4d::tasks::MAX_THREADS as i64))]
     threads: Option<u16>,
 }
 

@@ -483,10 +483,7 @@ impl DatasetWriter {
                 out.display()
             )));
         }
-        let parent = match out.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
+        let parent = crate::io::folder_of(out);
         std::fs::create_dir_all(parent).map_err(|e| {
             Error::write(
                 out,

@@ -72,6 +72,32 @@ pub fn remove_stale_temps(dir: &Path) {
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
 pub type AtomicWriter = BufWriter<tempfile::NamedTempFile>;
 
+/// The folder a file `path` is written in (`.` for a bare file name).
+#[must_use]
+pub fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// Whether two paths name one file: the same as written, or the same once both exist.
+#[must_use]
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+}
+
+/// A usage error when `path`, where a file is to be written, is a folder.
+fn refuse_folder(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        return Err(Error::usage(format!(
+            "{}: is a folder; name a file to write",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Checks, before any work, that a command may write `out`: its extension is one of
 /// `extensions` (lower case, without the dot; empty: any), it is none of the command's
 /// `inputs` (so a typo never replaces an input), and its folder can be made and written
@@ -96,27 +122,15 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
                 .join(" or ")
         )));
     }
-    if out.is_dir() {
-        return Err(Error::usage(format!(
-            "{}: is a folder; name a file to write",
-            out.display()
-        )));
-    }
-    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if let Some(input) = inputs.iter().find(|input| same(out, input)) {
+    refuse_folder(out)?;
+    if let Some(input) = inputs.iter().find(|input| same_file(out, input)) {
         return Err(Error::usage(format!(
             "{}: is an input of this command ({}); write the output elsewhere",
             out.display(),
             input.display()
         )));
     }
-    let parent = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let parent = folder_of(out);
     std::fs::create_dir_all(parent).map_err(|e| {
         let message = format!("cannot create its folder {}", parent.display());
         Error::write(out, &message, e)
@@ -142,16 +156,8 @@ pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut AtomicWriter) -> std::io::Result<()>,
 ) -> Result<()> {
-    if path.is_dir() {
-        return Err(Error::usage(format!(
-            "{}: is a folder; name a file to write",
-            path.display()
-        )));
-    }
-    let parent = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    refuse_folder(path)?;
+    let parent = folder_of(path);
     std::fs::create_dir_all(parent).map_err(|e| {
         let message = format!("cannot create its folder {}", parent.display());
         Error::write(path, &message, e)

@@ -116,6 +116,20 @@ pub enum Split {
     Test,
 }
 
+impl Split {
+    /// Its place in file order (train, val, test).
+    #[must_use]
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its name in file and folder names.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        ["train", "val", "test"][self.index()]
+    }
+}
+
 /// Renders the views of `spec` one at a time, in file order (train, then val and test by
 /// time), handing each to `sink` as soon as it is rendered: memory does not grow with the
 /// dataset ([`render_dataset`] collects them).
@@ -169,13 +183,8 @@ pub fn render_views(
     let mut render =
         |camera: &crate::model::camera::Camera, time: f64, split: Split| -> Result<()> {
             context.render(scene, camera, time, options)?;
-            let (k, folder) = match split {
-                Split::Train => (0, "train"),
-                Split::Val => (1, "val"),
-                Split::Test => (2, "test"),
-            };
-            let name = format!("./{folder}/r_{:03}", counts[k]);
-            counts[k] += 1;
+            let name = format!("./{}/r_{:03}", split.name(), counts[split.index()]);
+            counts[split.index()] += 1;
             sink(
                 split,
                 View {

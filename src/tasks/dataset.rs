@@ -7,7 +7,7 @@ use crate::io::dataset::DatasetWriter;
 use crate::io::scene_file::load_scene;
 use crate::model::{Progress, Result};
 use crate::render::RenderOptions;
-use crate::scenes::dataset::{DatasetSpec, Split, frame_count, render_views};
+use crate::scenes::dataset::{DatasetSpec, frame_count, render_views};
 use crate::tasks::with_threads;
 
 /// `splat4d dataset`.
@@ -62,13 +62,8 @@ pub fn write_dataset(
     let mut frames = [0_usize; 3];
     with_threads(request.threads, || {
         render_views(&scene, spec, &request.options, |split, view| {
-            let (k, name) = match split {
-                Split::Train => (0, "train"),
-                Split::Val => (1, "val"),
-                Split::Test => (2, "test"),
-            };
-            frames[k] += 1;
-            writer.add(name, &view)?;
+            frames[split.index()] += 1;
+            writer.add(split.name(), &view)?;
             progress.tick();
             Ok(())
         })

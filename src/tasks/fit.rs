@@ -8,7 +8,7 @@ use crate::fit::plan::{FitPlan, Init};
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
-use crate::io::{check_output, write_bytes_atomically};
+use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Result, Silent};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
@@ -222,9 +222,4 @@ fn cameras_up(views: &[crate::model::View]) -> Option<&'static str> {
         (2, true) => "z",
         _ => "-z",
     })
-}
-
-/// Whether two paths name one file (as written, or once both exist).
-fn same_file(a: &Path, b: &Path) -> bool {
-    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }
