@@ -48,9 +48,10 @@ pub struct VideoArgs {
     #[arg(long, value_parser = parse_list::<2>, allow_hyphen_values = true)]
     time_range: Option<[f64; 2]>,
     /// The axis orbits and spirals turn about, and the cameras' up: `x`, `y`, `z`, `-x`,
-    /// `-y` or `-z` (Blender and D-NeRF scenes are `z` up).
-    #[arg(long, default_value = "y", allow_hyphen_values = true)]
-    up: Up,
+    /// `-y` or `-z` (Blender and D-NeRF scenes are `z` up). Default: the scene's own `up`
+    /// (a scene fitted from a dataset carries its cameras' mean up), else `y`.
+    #[arg(long, allow_hyphen_values = true)]
+    up: Option<Up>,
     /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
     #[arg(long)]
     path: Option<PathBuf>,
@@ -94,9 +95,15 @@ impl CircleSpec {
 pub fn run(args: &VideoArgs) -> Result<()> {
     let request = VideoRequest {
         scene: args.scene.clone(),
-        orbit: args.orbit.as_ref().map(|c| c.spec(args.up)),
+        orbit: args
+            .orbit
+            .as_ref()
+            .map(|c| c.spec(args.up.unwrap_or_default())),
         times: args.times.as_ref().map(|t| t.0.clone()),
-        spiral: args.spiral.as_ref().map(|c| c.spec(args.up)),
+        spiral: args
+            .spiral
+            .as_ref()
+            .map(|c| c.spec(args.up.unwrap_or_default())),
         time_range: args.time_range,
         up: args.up,
         path: args.path.clone(),

@@ -1,8 +1,10 @@
 //! Scene files: JSON, and 4D scene PLY ([`super::ply`]) for paths ending in `.ply`.
 //!
-//! JSON layout (keys in this order, `rotation`, `velocity` and `background` optional):
+//! JSON layout (keys in this order, `rotation`, `velocity`, `background` and `up` optional):
 //! `{"kernels":[{"mean":[x,y,z,t],"scale":[sx,sy,sz,st],"amplitude":[r,g,b],
-//! "rotation":[w,x,y,z],"velocity":[vx,vy,vz]}],"background":[r,g,b]}` (SPEC §1). Unknown
+//! "rotation":[w,x,y,z],"velocity":[vx,vy,vz]}],"background":[r,g,b],"up":"z"}` (SPEC §1;
+//! `up` is the world's up axis, `x`, `y`, `z`, `-x`, `-y` or `-z`, written only when known:
+//! videos turn about it). Unknown
 //! keys are errors, so that a typo never silently falls back to a default. Numbers are
 //! written so that they read back exactly (serde_json's `float_roundtrip`).
 
@@ -12,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::io::json::parse_json;
 use crate::io::write_bytes_atomically;
-use crate::model::{Error, Kernel, Result, Scene};
+use crate::model::{Error, Kernel, Result, Scene, Up};
 
 #[derive(Serialize, Deserialize)]
 #[serde(
@@ -23,12 +25,16 @@ struct SceneFile {
     kernels: Vec<Kernel>,
     #[serde(default)]
     background: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    up: Option<Up>,
 }
 
 /// Parses and validates a scene JSON document. `origin` names it in error messages.
 pub fn scene_from_json(text: &str, origin: &str) -> Result<Scene> {
     let file: SceneFile = parse_json(text, origin, "scene")?;
-    Scene::from_kernels(&file.kernels, file.background, origin)
+    let mut scene = Scene::from_kernels(&file.kernels, file.background, origin)?;
+    scene.up = file.up;
+    Ok(scene)
 }
 
 /// The scene as a JSON document (the format of [`scene_from_json`]).
@@ -37,6 +43,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
     let file = SceneFile {
         kernels: scene.kernels(),
         background: scene.background,
+        up: scene.up,
     };
     serde_json::to_string_pretty(&file).expect("a scene of finite numbers serialises")
 }

@@ -1,7 +1,7 @@
 //! The model: plain data and math, no files, no threads of its own.
 //!
 //! - [`Scene`] / [`Kernel`]: 4D Gaussian kernels as struct-of-arrays (SPEC §1);
-//! - [`Camera`]: a pinhole camera, OpenCV axes (SPEC §3);
+//! - [`Camera`]: a pinhole camera, OpenCV axes (SPEC §3); [`Up`]: the world's up axis;
 //! - [`Image`]: linear RGB, row-major (SPEC §5);
 //! - [`View`] / [`Dataset`]: images with their camera and time, in splits, to fit;
 //! - [`Error`] / [`ErrorKind`]: what went wrong, by kind, naming file, item and field;
@@ -10,6 +10,7 @@
 //!
 //! Every other module builds on these; nothing here imports from the rest of the crate.
 
+pub mod axis;
 pub mod camera;
 pub mod error;
 pub mod image;
@@ -18,6 +19,7 @@ pub mod random;
 pub mod scene;
 pub mod view;
 
+pub use axis::Up;
 pub use camera::Camera;
 pub use error::{Error, ErrorKind, Result, check_finite};
 pub use image::Image;

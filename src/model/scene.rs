@@ -13,6 +13,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Up;
+
 use crate::model::error::{Error, Result, check_finite};
 
 /// One 4D kernel, as read from or written to a file. The renderer works on [`Scene`].
@@ -67,6 +69,9 @@ pub struct Scene {
     pub velocities: Vec<[f64; 3]>,
     /// `[r, g, b]`, linear.
     pub background: [f64; 3],
+    /// The world's up axis when known (a scene fitted from a dataset carries its cameras'
+    /// up); videos turn about it unless told otherwise, +y when `None`.
+    pub up: Option<Up>,
 }
 
 impl Scene {

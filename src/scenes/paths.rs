@@ -9,6 +9,7 @@
 //!   elevation rises from `-elevation` to `+elevation`.
 //! - A path file: `[{"camera": {camera JSON}, "time": t}, ...]` ([`crate::io::path_file`]).
 
+pub use crate::model::Up;
 use crate::model::{Camera, Error, Result, Scene};
 use crate::volume::scene_sphere;
 
@@ -45,67 +46,6 @@ pub struct Circle {
     pub frames: usize,
     /// The axis the circle turns about, and the cameras' up.
     pub up: Up,
-}
-
-/// A world axis with its sign: the up direction of orbits and spirals.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Up {
-    /// +x.
-    X,
-    /// +y (OpenGL, glTF, the project's own scenes).
-    #[default]
-    Y,
-    /// +z (Blender, D-NeRF, nerfstudio).
-    Z,
-    /// -x.
-    NegX,
-    /// -y (OpenCV camera conventions).
-    NegY,
-    /// -z.
-    NegZ,
-}
-
-impl Up {
-    /// `(up, side, front)`: the first camera of an orbit sits along `front` from the
-    /// centre, and the azimuth turns it towards `side`. For +y: (+y, +x, +z).
-    #[must_use]
-    pub fn basis(self) -> ([f64; 3], [f64; 3], [f64; 3]) {
-        let axis = |k: usize, sign: f64| {
-            let mut v = [0.0; 3];
-            v[k] = sign;
-            v
-        };
-        let (k, sign) = match self {
-            Up::X => (0, 1.0),
-            Up::Y => (1, 1.0),
-            Up::Z => (2, 1.0),
-            Up::NegX => (0, -1.0),
-            Up::NegY => (1, -1.0),
-            Up::NegZ => (2, -1.0),
-        };
-        (
-            axis(k, sign),
-            axis((k + 2) % 3, 1.0),
-            axis((k + 1) % 3, 1.0),
-        )
-    }
-}
-
-impl std::str::FromStr for Up {
-    type Err = String;
-    fn from_str(text: &str) -> std::result::Result<Self, String> {
-        match text.trim_start_matches('+') {
-            "x" => Ok(Up::X),
-            "y" => Ok(Up::Y),
-            "z" => Ok(Up::Z),
-            "-x" => Ok(Up::NegX),
-            "-y" => Ok(Up::NegY),
-            "-z" => Ok(Up::NegZ),
-            _ => Err(format!(
-                "`{text}` is not an axis: use x, y, z, -x, -y or -z"
-            )),
-        }
-    }
 }
 
 /// Distance from a ball of `radius` at which a camera with `lens` sees all of it with a 5%

@@ -9,7 +9,7 @@ use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
-use crate::model::{Result, Silent};
+use crate::model::{Result, Silent, Up};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
 
@@ -122,11 +122,12 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     if dataset.transparent && plan.background.is_none() {
         progress.note("images with transparency were composited over black (--background r,g,b chooses the colour)");
     }
-    if let Some(up) = cameras_up(&dataset.train)
-        && up != "y"
+    let up = cameras_up(&dataset.train);
+    if let Some(up) = up
+        && up != Up::Y
     {
         progress.note(&format!(
-            "the cameras' mean up is {up}: render videos of the fitted scene with `splat4d video --up {up}`"
+            "the cameras' mean up is {up}: the fitted scene records it, and videos of it turn about it"
         ));
     }
     let init = match Init::parse_builtin(&request.init)? {
@@ -135,6 +136,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     };
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
+    let up = up.or(scene.up);
     let [r, g, b] = scene.background;
     let fitted = if prepared.options.learning_rates.background > 0.0 {
         "fitted from"
@@ -163,6 +165,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             },
         )
     })??;
+    scene.up = up;
     save_scene(&scene, &request.out)?;
     if let Some(log) = &request.log {
         let mut lines = String::new();
@@ -197,8 +200,8 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
 }
 
 /// The world axis nearest the training cameras' mean up direction (image up, the camera's
-/// -y in OpenCV axes), as `video --up` names it; `None` when the ups cancel out.
-fn cameras_up(views: &[crate::model::View]) -> Option<&'static str> {
+/// -y in OpenCV axes); `None` when the ups cancel out.
+fn cameras_up(views: &[crate::model::View]) -> Option<Up> {
     let mut up = [0.0_f64; 3];
     for view in views {
         let down = view.camera.rotation()[1];
@@ -207,19 +210,9 @@ fn cameras_up(views: &[crate::model::View]) -> Option<&'static str> {
             up[c] -= down[c] / norm;
         }
     }
-    let (axis, value) = up
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
-    if value.abs() < 1e-9 * views.len() as f64 {
+    let largest = up.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if largest < 1e-9 * views.len() as f64 {
         return None;
     }
-    Some(match (axis, *value > 0.0) {
-        (0, true) => "x",
-        (0, false) => "-x",
-        (1, true) => "y",
-        (1, false) => "-y",
-        (2, true) => "z",
-        _ => "-z",
-    })
+    Up::nearest(up)
 }

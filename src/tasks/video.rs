@@ -37,8 +37,9 @@ pub struct VideoRequest {
     pub spiral: Option<CircleSpec>,
     /// Time range of the spiral (default: the scene's, [`time_range`]).
     pub time_range: Option<[f64; 2]>,
-    /// The axis framing orbits and spirals turn about.
-    pub up: Up,
+    /// The axis orbits and spirals turn about (given circles' own `up` included); `None`:
+    /// the scene's [`Scene::up`], else +y.
+    pub up: Option<Up>,
     /// A camera path file.
     pub path: Option<PathBuf>,
     /// Output folder.
@@ -83,9 +84,10 @@ impl fmt::Display for VideoSummary {
 /// The named camera paths of `request`.
 fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathFrame>)>> {
     let lens = &request.lens;
+    let up = request.up.or(scene.up).unwrap_or_default();
     let circle = |spec: &CircleSpec, times: &[f64]| match spec {
-        CircleSpec::Given(circle) => *circle,
-        CircleSpec::Auto => framing_circle(scene, times, request.options.cutoff, lens, request.up),
+        CircleSpec::Given(circle) => Circle { up, ..*circle },
+        CircleSpec::Auto => framing_circle(scene, times, request.options.cutoff, lens, up),
     };
     let [t0, t1] = request.time_range.unwrap_or_else(|| time_range(scene));
     let times = request.times.clone().unwrap_or_else(|| {

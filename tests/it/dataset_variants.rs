@@ -286,10 +286,10 @@ fn non_linear_motion_fits_compactly_with_the_default_command() {
     assert!(kernels <= 80, "{kernels} kernels");
 }
 
-/// A dataset whose world is +z up (Blender's convention): the fit says which `--up` its
-/// videos want.
+/// A dataset whose world is +z up (Blender's convention): the fitted scene records it, and
+/// `video` without `--up` turns about it.
 #[test]
-fn a_z_up_world_is_noted_for_videos() {
+fn a_z_up_world_is_carried_to_videos() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = rendered(tmp.path(), "zup", &blob_scene(tmp.path(), [1.0; 3]));
     // Turn the world 90° about x, so that +y becomes +z: c2w ← R c2w.
@@ -318,11 +318,24 @@ fn a_z_up_world_is_noted_for_videos() {
     }
     let (psnr, notes) = fit(&dir, &[], "test");
     assert!(psnr >= 45.0, "{psnr} dB");
-    assert!(notes.contains("--up z"), "{notes}");
-    let (_, notes) = fit(
-        &rendered(tmp.path(), "yup", &blob_scene(tmp.path(), [1.0; 3])),
-        &["--steps", "10"],
-        "test",
-    );
-    assert!(!notes.contains("--up"), "{notes}");
+    assert!(notes.contains("mean up is z"), "{notes}");
+    assert_eq!(read_json(&dir.join("fitted.json"))["up"], "z");
+    // The same frames without --up as with --up z, and not those of --up y.
+    let frames = |name: &str, up: &[&str]| {
+        let out = dir.join(name);
+        let mut args = vec!["video", "--scene", "fitted.json", "--out", name];
+        args.extend_from_slice(&["--size", "24x24", "--orbit", "--times", "0.5"]);
+        args.extend_from_slice(&["--no-gif", "--no-mp4"]);
+        args.extend_from_slice(up);
+        let output = splat4d(&args, &dir);
+        assert!(output.status.success(), "{}", stderr(&output));
+        std::fs::read(out.join("orbit_t0.50/frame_0010.png")).unwrap()
+    };
+    let default = frames("v_default", &[]);
+    assert_eq!(default, frames("v_z", &["--up", "z"]));
+    assert_ne!(default, frames("v_y", &["--up", "y"]));
+    let yup = rendered(tmp.path(), "yup", &blob_scene(tmp.path(), [1.0; 3]));
+    let (_, notes) = fit(&yup, &["--steps", "10"], "test");
+    assert!(!notes.contains("mean up"), "{notes}");
+    assert_eq!(read_json(&yup.join("fitted.json"))["up"], "y");
 }

@@ -35,12 +35,14 @@ fn scene() -> Scene {
 
 #[test]
 fn scene_ply_round_trips_exactly_and_is_smaller_than_json() {
-    let scene = scene();
+    let mut scene = scene();
+    scene.up = Some(splat4d::model::Up::NegZ);
     let dir = tempfile::tempdir().unwrap();
     let (ply, json) = (dir.path().join("s.ply"), dir.path().join("s.json"));
     splat4d::io::scene_file::save_scene(&scene, &ply).unwrap();
     splat4d::io::scene_file::save_scene(&scene, &json).unwrap();
     assert_eq!(splat4d::io::scene_file::load_scene(&ply).unwrap(), scene);
+    assert_eq!(splat4d::io::scene_file::load_scene(&json).unwrap(), scene);
     let (ply_size, json_size) = (
         std::fs::metadata(&ply).unwrap().len(),
         std::fs::metadata(&json).unwrap().len(),
