@@ -30,7 +30,17 @@
 //!    accumulated gradient, so the two separate under the same loss. A kernel whose mean
 //!    spatial scale `s̄` is above `min_scale` is **split**: both halves take spatial scales
 //!    divided by 1.6 (finer detail where the data asks for it, for fits that keep scales
-//!    fixed, SPEC §6). At or below `min_scale` it is **cloned** at its own scale.
+//!    fixed, SPEC §6). At or below `min_scale` it is **cloned** at its own scale. A kernel
+//!    whose temporal scale `st` is above `min_time_scale` (velocity fits: two training-time
+//!    spacings) is instead **split in time**: two kernels `d = st/√2` before and after its
+//!    time on its own path, each with `st/√2` and `A/√2` — the same temporal mean, variance
+//!    (`σ² + d² = st²`) and integral — so that a curved motion is followed by straight
+//!    pieces, each with its own velocity.
+//! 4. **rejoin** (with the merges): two kernels that are pieces of one straight path (same
+//!    velocity and position at their midpoint time, overlapping in time; see
+//!    `halves_of_one_path`) become one again, keeping their temporal variance and integral —
+//!    the inverse of a time split that the data did not need. The schedule's last round
+//!    only prunes, merges and rejoins, so no useless split survives into the refining steps.
 //!
 //! No randomness: the result depends only on the data and the step schedule. Adam's
 //! moments follow the kernels (a clone starts from zero moments).
@@ -65,6 +75,9 @@ pub struct AdaptiveOptions {
     /// Kernels with a mean spatial scale above this are split (scales / 1.6), the others
     /// cloned; 0 splits every kernel, `∞` only clones.
     pub min_scale: f64,
+    /// Kernels with a temporal scale `st` above this are split in time instead (two halves
+    /// along their own path, see the module docs); `∞` never splits in time.
+    pub min_time_scale: f64,
 }
 
 /// [`crate::fit::plan::DEFAULT_ROUNDS`].
@@ -83,6 +96,23 @@ impl AdaptiveOptions {
             && step < steps
             && (step as f64) >= self.from * steps as f64
             && (step as f64) <= self.until * steps as f64
+    }
+
+    /// Whether the round after `step` is the schedule's last: it only prunes and merges
+    /// ([`AdaptiveOptions::without_growth`]), so that kernels split before it and left on one
+    /// path by the fit are rejoined rather than kept for the refining steps.
+    #[must_use]
+    pub fn last_round_after(&self, step: usize, steps: usize) -> bool {
+        self.round_after(step, steps) && !self.round_after(step + self.every, steps)
+    }
+
+    /// These options with no room to add kernels (prune and merge only).
+    #[must_use]
+    pub fn without_growth(&self) -> Self {
+        AdaptiveOptions {
+            max_kernels: 0,
+            ..*self
+        }
     }
 }
 
@@ -206,18 +236,28 @@ pub fn densify_and_prune(
     }
     let pruned = n - keep.len();
     // Merge: `absorbed[k]` lists the kept kernels folded into kept kernel `k`.
-    let mut merged_into: Vec<Option<usize>> = vec![None; keep.len()];
+    // `merged_into[b] = (a, rejoined)`: kept kernel `b` folds into kept kernel `a`, as the
+    // same Gaussian or (rejoined) as the other half of its path.
+    let mut merged_into: Vec<Option<(usize, bool)>> = vec![None; keep.len()];
     let mut merged = 0;
     if options.merge_tolerance > 0.0 && keep.len() <= MERGE_LIMIT {
+        let tolerance = options.merge_tolerance;
         for a in 0..keep.len() {
             if merged_into[a].is_some() {
                 continue;
             }
+            let mut rejoined = false;
             for b in a + 1..keep.len() {
-                if merged_into[b].is_none()
-                    && same_kernel(scene, keep[a], keep[b], options.merge_tolerance)
-                {
-                    merged_into[b] = Some(a);
+                if merged_into[b].is_some() {
+                    continue;
+                }
+                if same_kernel(scene, keep[a], keep[b], tolerance) {
+                    merged_into[b] = Some((a, false));
+                    merged += 1;
+                } else if !rejoined && halves_of_one_path(scene, keep[a], keep[b], tolerance) {
+                    // One rejoin per kernel and round: the joined kernel is a new one.
+                    merged_into[b] = Some((a, true));
+                    rejoined = true;
                     merged += 1;
                 }
             }
@@ -225,9 +265,13 @@ pub fn densify_and_prune(
     }
     let mut kernels_kept: Vec<Kernel> = keep.iter().map(|&i| scene.kernel(i)).collect();
     for b in 0..keep.len() {
-        if let Some(a) = merged_into[b] {
+        if let Some((a, rejoined)) = merged_into[b] {
             let other = kernels_kept[b];
-            merge_into(&mut kernels_kept[a], &other);
+            if rejoined {
+                kernels_kept[a] = rejoin(&kernels_kept[a], &other);
+            } else {
+                merge_into(&mut kernels_kept[a], &other);
+            }
         }
     }
     let survivors: Vec<usize> = (0..keep.len())
@@ -259,6 +303,13 @@ pub fn densify_and_prune(
     for &i in &candidates {
         let slot = keep.binary_search(&i).expect("candidates are kept kernels");
         let parent = &mut kernels[slot];
+        if parent.scale[3] > options.min_time_scale {
+            let later = split_in_time(parent);
+            kernels.push(later);
+            sources.push(None);
+            split += 1;
+            continue;
+        }
         for a in &mut parent.amplitude {
             *a *= 0.5;
         }
@@ -294,6 +345,87 @@ pub fn densify_and_prune(
             split,
         },
     ))
+}
+
+/// Splits `parent` in time: it and the returned kernel sit `d = st/√2` before and after its
+/// time on its own path (`mean.xyz` moved by `velocity · Δt`), each with `st/√2`, so that each
+/// can follow its half of a curved motion with a velocity of its own. The pair keeps the
+/// parent's temporal mean and variance (`σ² + d² = st²`) and its integral over time (each
+/// half takes `A/√2`); [`rejoin`] is its inverse.
+fn split_in_time(parent: &mut Kernel) -> Kernel {
+    let half = parent.scale[3] * std::f64::consts::FRAC_1_SQRT_2;
+    parent.scale[3] = half;
+    for a in &mut parent.amplitude {
+        *a *= std::f64::consts::FRAC_1_SQRT_2;
+    }
+    let mut later = *parent;
+    for (kernel, dt) in [(&mut *parent, -half), (&mut later, half)] {
+        kernel.mean[3] += dt;
+        for c in 0..3 {
+            kernel.mean[c] += kernel.velocity[c] * dt;
+        }
+    }
+    later
+}
+
+/// Whether kernels `i` and `j` are two pieces of one straight path (what [`split_in_time`]
+/// makes, when the fit left both halves on the line their parent followed): same rotation,
+/// spatial scales within `tolerance` (relative), amplitudes of the same sign, the same
+/// velocity over one `st` and the same position at their midpoint time within `tolerance`
+/// spatial standard deviations, and times at most `(st_i + st_j)(1 + tolerance)` apart
+/// (their temporal Gaussians overlap). Their `st` and amplitudes may differ: [`rejoin`] keeps
+/// the pair's integral over time.
+fn halves_of_one_path(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
+    let (qi, qj) = (scene.rotations[i], scene.rotations[j]);
+    let dot: f64 = (0..4).map(|k| qi[k] * qj[k]).sum();
+    if dot.abs() < 1.0 - 1e-6 {
+        return false;
+    }
+    let (si, sj) = (scene.scales[i], scene.scales[j]);
+    if (0..3).any(|k| (si[k] / sj[k]).ln().abs() > tolerance) {
+        return false;
+    }
+    let (ai, aj) = (scene.amplitudes[i], scene.amplitudes[j]);
+    if (0..3).any(|c| ai[c] * aj[c] < 0.0) {
+        return false;
+    }
+    let spatial = ((si[0] * si[1] * si[2]).cbrt() * (sj[0] * sj[1] * sj[2]).cbrt()).sqrt();
+    let temporal = (si[3] * sj[3]).sqrt();
+    let (mi, mj) = (scene.means[i], scene.means[j]);
+    if (mi[3] - mj[3]).abs() > (si[3] + sj[3]) * (1.0 + tolerance) {
+        return false;
+    }
+    let (vi, vj) = (scene.velocities[i], scene.velocities[j]);
+    let tau = 0.5 * (mi[3] + mj[3]);
+    (0..3).all(|c| {
+        let pi = mi[c] + vi[c] * (tau - mi[3]);
+        let pj = mj[c] + vj[c] * (tau - mj[3]);
+        (pi - pj).abs() <= tolerance * spatial
+            && (vi[c] - vj[c]).abs() * temporal <= tolerance * spatial
+    })
+}
+
+/// One kernel from two pieces of a path: the midpoint time, `st² = σ̄² + (Δt/2)²` (the
+/// pair's temporal variance when `σ̄ = √(st_a st_b)`), each channel's integral over time
+/// `A_a st_a + A_b st_b` kept; position on the mean path at the new time; spatial scales and
+/// velocities averaged. The exact inverse of [`split_in_time`].
+fn rejoin(a: &Kernel, b: &Kernel) -> Kernel {
+    let tau = 0.5 * (a.mean[3] + b.mean[3]);
+    let half_gap = 0.5 * (a.mean[3] - b.mean[3]).abs();
+    let sigma = (a.scale[3] * b.scale[3]).sqrt();
+    let st = (sigma * sigma + half_gap * half_gap).sqrt();
+    let mut joined = *a;
+    joined.mean[3] = tau;
+    for c in 0..3 {
+        let pa = a.mean[c] + a.velocity[c] * (tau - a.mean[3]);
+        let pb = b.mean[c] + b.velocity[c] * (tau - b.mean[3]);
+        joined.mean[c] = 0.5 * (pa + pb);
+        joined.velocity[c] = 0.5 * (a.velocity[c] + b.velocity[c]);
+        joined.scale[c] = (a.scale[c] * b.scale[c]).sqrt();
+        joined.amplitude[c] = (a.amplitude[c] * a.scale[3] + b.amplitude[c] * b.scale[3]) / st;
+    }
+    joined.scale[3] = st;
+    joined
 }
 
 /// Merging compares every pair, so it runs on at most this many kernels.
@@ -354,6 +486,93 @@ mod tests {
             .map(|(i, &a)| Kernel::new([i as f64, 0.0, 0.0, 0.5], [0.1, 0.1, 0.1, 0.2], [a; 3]))
             .collect();
         Scene::from_kernels(&kernels, [0.0; 3], "<test>").unwrap()
+    }
+
+    /// The temporal weights `A e^{-(τ-t)²/2st²}` of `kernels` summed at `tau`, and their
+    /// integral's first and second moments over time, numerically on a fine grid.
+    fn temporal_moments(kernels: &[Kernel]) -> (f64, f64, f64) {
+        let (mut mass, mut first, mut second) = (0.0, 0.0, 0.0);
+        let dt = 1e-4;
+        for k in -200_000..200_000 {
+            let tau = f64::from(k) * dt;
+            let w: f64 = kernels
+                .iter()
+                .map(|q| {
+                    let z = (tau - q.mean[3]) / q.scale[3];
+                    q.amplitude[0] * (-0.5 * z * z).exp()
+                })
+                .sum();
+            mass += w * dt;
+            first += w * tau * dt;
+            second += w * tau * tau * dt;
+        }
+        let mean = first / mass;
+        (mass, mean, second / mass - mean * mean)
+    }
+
+    #[test]
+    fn a_time_split_keeps_the_path_and_the_temporal_moments_and_rejoin_undoes_it() {
+        let parent = Kernel {
+            velocity: [0.8, -0.3, 0.1],
+            ..Kernel::new(
+                [0.2, 0.4, -0.1, 0.6],
+                [0.1, 0.12, 0.08, 0.3],
+                [0.7, 0.5, -0.2],
+            )
+        };
+        let mut first = parent;
+        let second = split_in_time(&mut first);
+        assert!(first.mean[3] < parent.mean[3] && second.mean[3] > parent.mean[3]);
+        // Both halves sit on the parent's path: m(τ) = mean + v (τ - t).
+        for half in [&first, &second] {
+            for c in 0..3 {
+                let on_path = parent.mean[c] + parent.velocity[c] * (half.mean[3] - parent.mean[3]);
+                assert!((half.mean[c] - on_path).abs() < 1e-15);
+            }
+        }
+        // Same integral, temporal mean and variance as the parent.
+        let (m0, t0, v0) = temporal_moments(&[parent]);
+        let (m1, t1, v1) = temporal_moments(&[first, second]);
+        assert!((m1 / m0 - 1.0).abs() < 1e-9, "{m0} {m1}");
+        assert!(
+            (t1 - t0).abs() < 1e-9 && (v1 / v0 - 1.0).abs() < 1e-9,
+            "{t0} {t1} {v0} {v1}"
+        );
+        // The pieces of one path are recognised and rejoin to the parent exactly.
+        let scene = Scene::from_kernels(&[first, second], [0.0; 3], "<test>").unwrap();
+        assert!(halves_of_one_path(&scene, 0, 1, 0.1));
+        let joined = rejoin(&first, &second);
+        for (a, b) in [
+            (&joined.mean[..], &parent.mean[..]),
+            (&joined.scale[..], &parent.scale[..]),
+            (&joined.amplitude[..], &parent.amplitude[..]),
+            (&joined.velocity[..], &parent.velocity[..]),
+        ] {
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() < 1e-12, "{joined:?} vs {parent:?}");
+            }
+        }
+        // Pieces that turned (velocities differ by a spatial σ over one st) stay apart, as do
+        // pieces far apart in time and pieces of opposite sign.
+        let mut turned = second;
+        turned.velocity[2] += 0.1 / first.scale[3];
+        let far = Kernel {
+            mean: [
+                second.mean[0] + second.velocity[0],
+                second.mean[1] + second.velocity[1],
+                second.mean[2] + second.velocity[2],
+                second.mean[3] + 1.0,
+            ],
+            ..second
+        };
+        let negative = Kernel {
+            amplitude: second.amplitude.map(|a| -a),
+            ..second
+        };
+        for other in [turned, far, negative] {
+            let scene = Scene::from_kernels(&[first, other], [0.0; 3], "<test>").unwrap();
+            assert!(!halves_of_one_path(&scene, 0, 1, 0.1), "{other:?}");
+        }
     }
 
     #[test]

@@ -72,6 +72,7 @@ pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
     max_kernels: 100_000,
     merge_tolerance: 0.1,
     min_scale: f64::INFINITY,
+    min_time_scale: f64::INFINITY,
 };
 
 /// Where a fit starts.
@@ -328,9 +329,17 @@ impl FitPlan {
             } else {
                 initial_scale / 8.0
             };
+            // A velocity kernel spanning several training times is split in time: its two
+            // halves follow a curved path with a velocity each.
+            let split_time_above = if mode == FitMode::Velocity {
+                TIME_SPLIT_SPACINGS * time_spacing(train)
+            } else {
+                f64::INFINITY
+            };
             AdaptiveOptions {
                 max_kernels: self.rounds.max_kernels.max(1),
                 min_scale: self.min_scale.unwrap_or(split_above),
+                min_time_scale: self.rounds.min_time_scale.min(split_time_above),
                 ..self.rounds
             }
         });
@@ -418,6 +427,24 @@ pub fn border_median(views: &[View]) -> [f64; 3] {
     })
 }
 
+/// A velocity kernel whose `st` exceeds this many training-time spacings is split in time
+/// by the adaptive rounds ([`crate::fit::adaptive`]).
+pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
+
+/// The median gap between consecutive distinct training times; `∞` with fewer than two.
+#[must_use]
+pub fn time_spacing(views: &[View]) -> f64 {
+    let mut times: Vec<f64> = views.iter().map(|v| v.time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let mut gaps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    if gaps.is_empty() {
+        return f64::INFINITY;
+    }
+    gaps.sort_by(f64::total_cmp);
+    gaps[gaps.len() / 2]
+}
+
 /// The amplitude a random or automatic start gives every kernel: the mean colour above
 /// `background` of the foreground pixels (those that differ from it by more than
 /// [`FOREGROUND_THRESHOLD`] in some channel), so that a dark object on a bright background
@@ -469,7 +496,7 @@ mod tests {
     }
 
     #[test]
-    fn auto_starts_from_a_few_kernels_with_velocity_and_rounds_that_never_split() {
+    fn auto_starts_from_a_few_kernels_with_velocity_and_rounds_that_split_only_in_time() {
         let prepared = FitPlan::default().prepare(Init::Auto, &views()).unwrap();
         assert_eq!(prepared.mode, FitMode::Velocity);
         assert_eq!(prepared.scene.len(), DEFAULT_START_KERNELS);
@@ -481,6 +508,9 @@ mod tests {
         }
         let rounds = prepared.options.adaptive.expect("auto is adaptive");
         assert_eq!(rounds.min_scale, f64::INFINITY, "the fit sizes the kernels");
+        // Training times 0 and 1: velocity kernels longer than two spacings split in time.
+        assert_eq!(time_spacing(&views()), 1.0);
+        assert_eq!(rounds.min_time_scale, TIME_SPLIT_SPACINGS);
         assert_eq!(prepared.options.learning_rates, DEFAULT_RATES);
         assert_eq!(prepared.options.steps, DEFAULT_STEPS);
         let one = FitPlan {
@@ -507,6 +537,11 @@ mod tests {
             (rounds.min_scale - 0.05).abs() < 1e-15,
             "{}",
             rounds.min_scale
+        );
+        assert_eq!(
+            rounds.min_time_scale,
+            f64::INFINITY,
+            "no time split in paper mode"
         );
         let rates = prepared.options.learning_rates;
         assert_eq!((rates.velocity, rates.scale), (0.0, 0.0), "paper mode");

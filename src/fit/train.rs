@@ -244,7 +244,12 @@ pub fn fit(
             stats.accumulate(scene, &grads);
             if adaptive.round_after(step, options.steps) {
                 stats.record_loss(evaluate(scene, train, &options.render, &mut context)?);
-                let (next, sources, _) = densify_and_prune(scene, &stats, adaptive)?;
+                let round = if adaptive.last_round_after(step, options.steps) {
+                    adaptive.without_growth()
+                } else {
+                    *adaptive
+                };
+                let (next, sources, _) = densify_and_prune(scene, &stats, &round)?;
                 *scene = next;
                 adam.remap(&sources);
                 stats = stats.next_window(scene.len());
