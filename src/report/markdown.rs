@@ -347,11 +347,12 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
     let _ = writeln!(w, "## Model size: only the kernels a scene needs\n");
     let _ = writeln!(
         w,
-        "Adaptive fits start from one kernel at the centre of the cameras' box and run {} steps with densify/prune/merge rounds (`src/fit/adaptive.rs`), \
+        "Adaptive fits start from {} kernels spread at random (seeded) in the cameras' box and run {} steps with densify/prune/merge rounds and, for velocity kernels, splits in time (`src/fit/adaptive.rs`), \
          as `splat4d fit` does without `--init`: *static kernels* fit means, amplitudes and scales; *velocity kernels* also velocities. \
          The fixed-count model is the paper's ({} kernels, scales fixed). Parameters: 11 per static 4D kernel (mean 4, σ 4, amplitude 3), 14 per velocity kernel, 9 per frame kernel. \
          Held-out = new cameras at times between the training times. The seed blob: the continuous object behind the points (one velocity kernel, SPEC §7), {} views × {} times at {}×{}. \
          Three blobs (`splat4d toy --kind three-blobs`): non-linear motion — one blob circling once, one static and elongated, one fading in along a line — {} views × {} times at {}×{}.\n",
+        crate::fit::plan::DEFAULT_START_KERNELS,
         c.adaptive_steps,
         c.model_kernels,
         b.views,
