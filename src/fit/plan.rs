@@ -98,15 +98,21 @@ impl Init {
             Some(count) => count
                 .parse()
                 .ok()
-                .filter(|&n| n > 0)
+                .filter(|&n| (1..=MAX_START_KERNELS).contains(&n))
                 .map(|n| Some(Init::Random(n)))
                 .ok_or_else(|| {
-                    Error::usage(format!("--init {text}: N must be a whole number ≥ 1"))
+                    Error::usage(format!(
+                        "--init {text}: N must be a whole number from 1 to {MAX_START_KERNELS}"
+                    ))
                 }),
             None => Ok(None),
         }
     }
 }
+
+/// Most kernels a fit may start from (`random:N`, `--start-kernels`): a bound checked before
+/// anything is allocated for them.
+pub const MAX_START_KERNELS: usize = 10_000_000;
 
 /// Everything a user can choose about a fit, with its defaults.
 #[derive(Clone, Debug, PartialEq)]
@@ -244,6 +250,12 @@ impl FitPlan {
             if !(0.0..=1.0).contains(&value) {
                 return Err(Error::usage(format!("{flag} {value} must be in [0, 1]")));
             }
+        }
+        if self.start_kernels > MAX_START_KERNELS {
+            return Err(Error::usage(format!(
+                "--start-kernels {} is more than {MAX_START_KERNELS}",
+                self.start_kernels
+            )));
         }
         let f = self.final_rate_factor;
         if !(f.is_finite() && f > 0.0) {
@@ -611,6 +623,7 @@ mod tests {
     #[test]
     fn bad_starts_are_refused() {
         assert!(Init::parse_builtin("random:0").is_err());
+        assert!(Init::parse_builtin("random:18446744073709551615").is_err());
         assert!(Init::parse_builtin("random:x").is_err());
         assert_eq!(
             Init::parse_builtin("random:3").unwrap(),

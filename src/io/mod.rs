@@ -70,7 +70,61 @@ pub fn remove_stale_temps(dir: &Path) {
 }
 
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
-pub type AtomicWriter = BufWriter<tempfile::NamedTempFile>;
+pub type AtomicWriter = FirstError<BufWriter<tempfile::NamedTempFile>>;
+
+/// A writer that remembers the first I/O error its inner writer returned. Encoders (EXR,
+/// PNG, GIF) wrap I/O errors in their own types and lose their kind — a full disk came back as
+/// "Format error decoding OpenExr" — so [`write_atomically`] reports this one instead.
+pub struct FirstError<W> {
+    inner: W,
+    first: Option<std::io::Error>,
+}
+
+impl<W> FirstError<W> {
+    /// Wraps `inner`.
+    pub fn new(inner: W) -> Self {
+        FirstError { inner, first: None }
+    }
+
+    /// The first error seen (a copy with its kind and OS code), if any.
+    #[must_use]
+    pub fn first_error(&self) -> Option<std::io::Error> {
+        self.first.as_ref().map(|e| match e.raw_os_error() {
+            Some(code) => std::io::Error::from_raw_os_error(code),
+            None => std::io::Error::new(e.kind(), e.to_string()),
+        })
+    }
+
+    fn record<T>(&mut self, result: std::io::Result<T>) -> std::io::Result<T> {
+        if let Err(e) = &result
+            && self.first.is_none()
+        {
+            self.first = Some(match e.raw_os_error() {
+                Some(code) => std::io::Error::from_raw_os_error(code),
+                None => std::io::Error::new(e.kind(), e.to_string()),
+            });
+        }
+        result
+    }
+}
+
+impl<W: Write> Write for FirstError<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let result = self.inner.write(buf);
+        self.record(result)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        let result = self.inner.flush();
+        self.record(result)
+    }
+}
+
+impl<W: std::io::Seek> std::io::Seek for FirstError<W> {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        let result = self.inner.seek(pos);
+        self.record(result)
+    }
+}
 
 /// The folder a file `path` is written in (`.` for a bare file name).
 #[must_use]
@@ -173,11 +227,12 @@ pub fn write_atomically(
         .prefix(&temp_prefix())
         .tempfile_in(parent)
         .map_err(|e| Error::write(path, "cannot create a temporary file beside the output", e))?;
-    let mut writer = BufWriter::new(temp);
+    let mut writer = FirstError::new(BufWriter::new(temp));
     write(&mut writer)
         .and_then(|()| writer.flush())
-        .map_err(|e| Error::write(path, "cannot write", e))?;
+        .map_err(|e| Error::write(path, "cannot write", writer.first_error().unwrap_or(e)))?;
     let temp = writer
+        .inner
         .into_inner()
         .map_err(|e| Error::write(path, "cannot write", e.into_error()))?;
     // Temporary files are private (0600); a finished output is an ordinary file.
@@ -196,6 +251,55 @@ pub fn write_atomically(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A seekable sink that takes `room` bytes, then fails like a full disk (ENOSPC).
+    struct SmallDisk {
+        data: std::io::Cursor<Vec<u8>>,
+        room: usize,
+    }
+
+    impl Write for SmallDisk {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.data.get_ref().len() + buf.len() > self.room {
+                return Err(std::io::Error::from_raw_os_error(28));
+            }
+            self.data.write(buf)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl std::io::Seek for SmallDisk {
+        fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+            self.data.seek(pos)
+        }
+    }
+
+    #[test]
+    fn a_full_disk_under_an_encoder_is_reported_as_a_full_disk() {
+        use crate::io::image_file::{BitDepth, ImageKind, encode_image};
+        let image = crate::model::Image::filled(64, 64, [0.25, 0.5, 0.75]);
+        for kind in [ImageKind::Exr, ImageKind::Png] {
+            let mut disk = FirstError::new(SmallDisk {
+                data: std::io::Cursor::new(Vec::new()),
+                room: 64,
+            });
+            let wrapped = encode_image(&image, kind, BitDepth::Sixteen, &mut disk).unwrap_err();
+            let first = disk.first_error().expect("the sink's error is kept");
+            assert_eq!(
+                first.kind(),
+                std::io::ErrorKind::StorageFull,
+                "{kind:?}: {wrapped}"
+            );
+            let message = Error::write(Path::new("out.img"), "cannot write", first).to_string();
+            assert!(message.contains("disk full"), "{message}");
+        }
+        // Other errors are not called a full disk.
+        let denied = std::io::Error::from(std::io::ErrorKind::PermissionDenied);
+        let message = Error::write(Path::new("out.img"), "cannot write", denied).to_string();
+        assert!(!message.contains("disk full"), "{message}");
+    }
 
     #[test]
     fn writes_whole_files_readable_by_others_and_leaves_nothing_on_failure() {

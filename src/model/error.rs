@@ -88,12 +88,20 @@ impl Error {
         }
     }
 
-    /// Writing `path` failed.
+    /// Writing `path` failed. A full disk (or quota) says so in the message.
     #[must_use]
     pub fn write(path: &Path, message: &str, source: std::io::Error) -> Self {
+        let full = matches!(
+            source.kind(),
+            std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+        ) || matches!(source.raw_os_error(), Some(28 | 122));
         Error::Write {
             origin: path.display().to_string(),
-            message: message.to_owned(),
+            message: if full {
+                format!("{message} (disk full)")
+            } else {
+                message.to_owned()
+            },
             source,
         }
     }

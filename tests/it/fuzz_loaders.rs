@@ -126,3 +126,187 @@ fn dataset_transforms() {
         splat4d::io::dataset::load_dataset(dir.path(), &Default::default()).is_ok()
     });
 }
+
+/// Every JSON path to a number, string or array in `value` (object keys and array indices).
+fn paths(value: &serde_json::Value, at: &mut Vec<String>, out: &mut Vec<Vec<String>>) {
+    match value {
+        serde_json::Value::Object(map) => {
+            for (key, v) in map {
+                at.push(key.clone());
+                out.push(at.clone());
+                paths(v, at, out);
+                at.pop();
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for (i, v) in items.iter().enumerate() {
+                at.push(i.to_string());
+                out.push(at.clone());
+                paths(v, at, out);
+                at.pop();
+            }
+        }
+        _ => {}
+    }
+}
+
+/// The value at `path`, if an earlier mutation left it there.
+fn at_path<'a>(
+    value: &'a mut serde_json::Value,
+    path: &[String],
+) -> Option<&'a mut serde_json::Value> {
+    path.iter().try_fold(value, |v, key| match v {
+        serde_json::Value::Array(items) => items.get_mut(key.parse::<usize>().ok()?),
+        serde_json::Value::Object(map) => map.get_mut(key),
+        _ => None,
+    })
+}
+
+/// Structural mutations of a glTF document, the kinds that broke the gltf crate's walkers:
+/// dangling and self-referencing indices (node cycles, children that point up), wrong
+/// component types and strides, counts and offsets past their views, URIs that leave the
+/// model's folder or name devices, values of the wrong JSON type, removed keys.
+fn mutate_gltf(rng: &mut ChaCha8Rng, good: &serde_json::Value) -> serde_json::Value {
+    let mut doc = good.clone();
+    let mut all = Vec::new();
+    paths(&doc, &mut Vec::new(), &mut all);
+    for _ in 0..rng.random_range(1..4) {
+        let path = &all[rng.random_range(0..all.len())];
+        let last = path.last().unwrap().as_str();
+        let replacement = match (last, rng.random_range(0..12)) {
+            ("uri", k) => serde_json::json!(
+                [
+                    "/etc/passwd",
+                    "../../../../etc/passwd",
+                    "/dev/zero",
+                    "%2e%2e/x.bin",
+                    "data:application/octet-stream;base64,AAAA",
+                    "data:,",
+                    "missing.bin",
+                    "",
+                    ".",
+                    "/proc/self/cmdline",
+                    "a/../../b.bin",
+                    "BoxAnimated0.bin"
+                ][k]
+            ),
+            ("componentType", k) => {
+                serde_json::json!(
+                    [
+                        5120, 5121, 5122, 5123, 5125, 5126, 5124, 0, 1, 9999, 5126, 5123
+                    ][k]
+                )
+            }
+            ("type", k) => serde_json::json!(
+                [
+                    "SCALAR", "VEC2", "VEC3", "VEC4", "MAT4", "MAT2", "VEC9", "", "scalar", "VEC3",
+                    "MAT3", "X"
+                ][k]
+            ),
+            (_, 0) => serde_json::json!(0),
+            (_, 1) => serde_json::json!(99),
+            (_, 2) => serde_json::json!(-1),
+            (_, 3) => serde_json::json!(4_294_967_295_u64),
+            (_, 4) => serde_json::json!(1e300),
+            (_, 5) => serde_json::json!(0.5),
+            (_, 6) => serde_json::json!("x"),
+            (_, 7) => serde_json::Value::Null,
+            (_, 8) => serde_json::json!([0, 0, 1]),
+            (_, 9) => serde_json::json!([]),
+            (_, 10) => serde_json::json!({}),
+            _ => serde_json::json!(rng.random_range(0..4)),
+        };
+        if let Some(slot) = at_path(&mut doc, path) {
+            *slot = replacement;
+        }
+    }
+    // Sometimes a node cycle: a node lists itself or its parent among its children.
+    if rng.random_range(0..4) == 0
+        && let Some(nodes) = doc["nodes"].as_array_mut()
+        && !nodes.is_empty()
+    {
+        let n = nodes.len();
+        let (a, b) = (rng.random_range(0..n), rng.random_range(0..n));
+        if let Some(node) = nodes[a].as_object_mut() {
+            node.insert("children".into(), serde_json::json!([b, a]));
+        }
+    }
+    doc
+}
+
+#[test]
+fn gltf_structural_mutations() {
+    let source =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/BoxAnimated.gltf");
+    let good: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&source).unwrap()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // The model's buffer beside it, so that unmutated URIs resolve.
+    for entry in std::fs::read_dir(source.parent().unwrap()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "bin") {
+            std::fs::copy(&path, dir.path().join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    let target = dir.path().join("m.gltf");
+    let mut rng = seeded_rng(6);
+    let (runs, mut refused) = (5000, 0);
+    for run in 0..runs {
+        let doc = mutate_gltf(&mut rng, &good);
+        std::fs::write(&target, doc.to_string()).unwrap();
+        let start = std::time::Instant::now();
+        let outcome = catch_unwind(AssertUnwindSafe(|| {
+            let scene = splat4d::io::gltf_import::import_scene(&target, 20, 3, 0);
+            let camera = splat4d::io::gltf_import::load_camera(&target, 0, Some((8, 8)));
+            (scene.is_ok(), camera.is_ok())
+        }));
+        match outcome {
+            Ok((true, _)) => {}
+            Ok((false, _)) => refused += 1,
+            Err(_) => panic!("glTF structure: run {run} panicked on {doc}"),
+        }
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(5),
+            "glTF structure: run {run} took {:?} on {doc}",
+            start.elapsed()
+        );
+    }
+    println!("glTF structure: {runs} mutated documents, {refused} refused, none panicked");
+    assert!(
+        refused > 300,
+        "{refused} refused: the mutations should break most documents"
+    );
+}
+
+/// Float images with NaN or ±∞ at a random pixel and channel: always refused, the message
+/// naming the file and that pixel.
+#[test]
+fn non_finite_pixels_are_refused_naming_the_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.exr");
+    let mut rng = seeded_rng(7);
+    for run in 0..200 {
+        let (w, h) = (rng.random_range(1..24_u32), rng.random_range(1..24_u32));
+        let mut image = splat4d::Image::filled(w, h, [0.5; 3]);
+        let (x, y, c) = (
+            rng.random_range(0..w),
+            rng.random_range(0..h),
+            rng.random_range(0..3_usize),
+        );
+        let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][run % 3];
+        image.pixels[3 * (y * w + x) as usize + c] = bad;
+        splat4d::io::image_file::save_image(
+            &image,
+            &path,
+            splat4d::io::image_file::BitDepth::Sixteen,
+        )
+        .unwrap();
+        let error = splat4d::io::image_file::load_image(&path, [0.0; 3])
+            .expect_err("a non-finite pixel is refused")
+            .to_string();
+        assert!(
+            error.contains("t.exr") && error.contains(&format!("({x}, {y})")),
+            "run {run}: {bad} at ({x}, {y}) channel {c}: {error}"
+        );
+    }
+}
