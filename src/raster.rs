@@ -4,19 +4,28 @@
 //! C(p, τ) = b + Σ_i [q_i(p) ≤ qmax_i] a_i(τ) exp(-½ q_i(p))
 //! ```
 //!
-//! in ascending kernel order, no sorting and no compositing. Each tile accumulates into its
-//! own 16×16 block of a tile-major buffer, so tiles run in parallel without sharing and
-//! every pixel adds the same terms in the same order whatever the number of threads. Each
-//! term `a exp(-½ q)` is computed in f32 and added to an f64 sum per pixel and channel, so
-//! the error does not grow with the number of kernels on a pixel.
+//! in ascending kernel order, no sorting and no compositing.
 //!
-//! Per (kernel, row) the row's offsets are formed in f64 and the per-pixel loop runs in f32
-//! (SPEC §5, precision). With `Δv` the row's offset from the centre, the quadratic form is
-//! `q = Qxx t² + Δv²/Σ2yy` where `t = Δu + k Δv` (see [`crate::project`]); `t` at the pixel
-//! of the span nearest the ellipse's centre line is rounded once from f64, and the other
-//! pixels add exact integer steps. The row's
-//! span comes from the padded cut-off ([`crate::tiles::padded_qmax`]); the f32 test
-//! `q ≤ qmax` decides each pair.
+//! **Layout of the work.** One tile row of 16 pixels is the vector. Per tile, each listed
+//! kernel is set up once in f64 (no division or square root: the per-kernel constants come
+//! from [`row_forms`]) into a per-row list of entries: the rows whose chord of the padded
+//! ellipse ([`crate::tiles::padded_qmax`]) reaches a pixel centre of the tile. Then rows
+//! outer, kernels inner: three accumulators of 16 lanes (RGB) stay in registers **in f64**
+//! while every entry of the row passes over them, and the row is rounded to f32 and written
+//! straight into the image. Tile rows (bands of 16 image rows) run in parallel; every pixel
+//! adds the same terms in the same order whatever the number of threads.
+//!
+//! **Per pixel** (SPEC §5, precision): with `Δv` the row's offset from the centre, the
+//! quadratic form is `q = Qxx t² + Δv²/Σ2yy` with `t = Δu + k Δv` (see [`crate::project`]);
+//! `t` at the tile pixel nearest the ellipse's centre line is rounded once from f64, and the
+//! other lanes add exact integer steps. `q`, the test `q ≤ qmax` (which alone decides each
+//! pair: lanes outside the ellipse add zero) and `G = exp(-½ q)` are f32; each term
+//! `a_c · G` is an exact f64 product added to the f64 sum, so the error does not grow with
+//! the number of kernels on a pixel.
+//!
+//! **Paths.** The same loop is compiled for AVX-512, AVX2+FMA and baseline x86-64 and one is
+//! chosen at run time ([`SimdPath`]); no fused operations are formed and every conversion is
+//! exact, so all paths give the same image bit for bit.
 
 use std::fmt;
 use std::str::FromStr;
@@ -26,9 +35,6 @@ use rayon::prelude::*;
 use crate::model::Image;
 use crate::project::ProjectedKernels;
 use crate::tiles::{TILE_SIZE, TileBins, padded_qmax, pixel_span};
-
-/// Floats per tile in the tile-major buffer (16 × 16 pixels × RGB).
-const TILE_FLOATS: usize = (TILE_SIZE * TILE_SIZE * 3) as usize;
 
 /// How the per-pixel loops evaluate `G = exp(-½ q)` in f32.
 ///
@@ -111,26 +117,508 @@ pub(crate) fn gaussian<const FAST: bool>(q: f32) -> f32 {
     }
 }
 
+/// The instruction set the per-pixel loops are compiled for, chosen once per render from
+/// what the CPU has. Every path runs the same operations in the same order (no fused
+/// multiply-adds are formed, conversions are exact), so the image is the same bit for bit on
+/// every path; only the vector width differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimdPath {
+    /// Baseline x86-64 (SSE2) or any other architecture.
+    Baseline,
+    /// AVX2 and FMA (x86-64).
+    Avx2,
+    /// AVX-512 F/BW/DQ/VL with AVX2 and FMA (x86-64).
+    Avx512,
+}
+
+impl SimdPath {
+    /// The widest path this CPU runs.
+    #[must_use]
+    pub fn detect() -> Self {
+        *Self::available()
+            .last()
+            .expect("the baseline is always available")
+    }
+
+    /// Every path this CPU runs, narrowest first (the tests compare them all).
+    #[must_use]
+    pub fn available() -> Vec<SimdPath> {
+        let mut paths = vec![SimdPath::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+                paths.push(SimdPath::Avx2);
+                if is_x86_feature_detected!("avx512f")
+                    && is_x86_feature_detected!("avx512bw")
+                    && is_x86_feature_detected!("avx512dq")
+                    && is_x86_feature_detected!("avx512vl")
+                {
+                    paths.push(SimdPath::Avx512);
+                }
+            }
+        }
+        paths
+    }
+}
+
+impl fmt::Display for SimdPath {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            SimdPath::Baseline => "baseline",
+            SimdPath::Avx2 => "avx2",
+            SimdPath::Avx512 => "avx512",
+        })
+    }
+}
+
+/// Pixels of one tile row.
+const ROW: usize = TILE_SIZE as usize;
+
+/// Pixels of one half tile row: the vector the per-pixel loop works on (8 f32 lanes, one
+/// AVX2 register; the accumulators, 3 × 8 f64, fit in registers beside the exp's constants).
+const LANES: usize = ROW / 2;
+
+/// Per projected kernel, the f64 constants of its rows (from [`ProjectedKernels`]; computed
+/// once per frame so that the per-(kernel, tile) setup needs no division or square root).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RowForm {
+    /// `m2`.
+    mean: [f64; 2],
+    /// `Qxx`.
+    qxx: f64,
+    /// `k = -Σ2xy/Σ2yy`: the centre line is `centre(Δv) = m2x - k Δv`.
+    shear: f64,
+    /// `1/Σ2yy`.
+    inv_syy: f64,
+    /// [`padded_qmax`]: rows and tiles are kept for this slightly larger cut-off.
+    q_reach: f64,
+    /// The kernel's pixel box (from the bins), so that a tile reads one record per kernel.
+    bounds: [u32; 4],
+    /// What the per-pixel loop needs.
+    pixel: TileKernel,
+}
+
+/// Fills `forms` for `proj` binned in `bins` (in parallel; the values do not depend on the
+/// thread count).
+pub fn row_forms(proj: &ProjectedKernels, bins: &TileBins, forms: &mut Vec<RowForm>) {
+    forms.clear();
+    forms.resize(proj.len(), RowForm::default());
+    forms.par_iter_mut().enumerate().for_each(|(p, form)| {
+        let [_, sxy, syy] = proj.covariances[p];
+        *form = RowForm {
+            mean: proj.means[p],
+            qxx: proj.conics[p][0],
+            shear: -sxy / syy,
+            inv_syy: 1.0 / syy,
+            q_reach: padded_qmax(proj.qmax[p]),
+            bounds: bins.pixel_bounds[p],
+            pixel: TileKernel {
+                qxx: proj.conics[p][0] as f32,
+                qmax: proj.qmax[p] as f32,
+                amplitude: proj.amplitudes[p].map(f64::from),
+            },
+        };
+    });
+}
+
+/// A kernel of the tile being summed: what every row of it shares.
+#[derive(Clone, Copy, Debug, Default)]
+struct TileKernel {
+    /// `Qxx`, f32.
+    qxx: f32,
+    /// `qmax` (may be `+∞`).
+    qmax: f32,
+    /// `a(τ)`, widened to f64 (exactly) for the f64 products.
+    amplitude: [f64; 3],
+}
+
+/// One kernel on one row of the tile: lane `i` (pixel `x0 + i`) has
+/// `t = ((i - offset) + t_anchor)`, `q = Qxx t² + row_q`.
+#[derive(Clone, Copy, Debug)]
+struct RowEntry {
+    /// `t` at the anchor pixel (the tile pixel nearest the ellipse's centre line), rounded
+    /// once from f64: a thin ellipse multiplies this rounding by its large `Qxx`, so it is
+    /// taken where `|t|` is smallest; the other lanes add exact integers.
+    t_anchor: f32,
+    /// The anchor's lane, as f32 (exact).
+    offset: f32,
+    /// `Δv²/Σ2yy`, the row's part of `q`.
+    row_q: f32,
+    /// Index into the tile's [`TileKernel`]s.
+    kernel: u32,
+}
+
+/// Scratch of one worker: the current tile's kernels and, per half row of the tile (row
+/// `r`, half `h` at index `2 r + h`), its entries in ascending kernel order.
+#[derive(Default)]
+struct TileScratch {
+    kernels: Vec<TileKernel>,
+    halves: [Vec<RowEntry>; 2 * ROW],
+}
+
+thread_local! {
+    /// One scratch per worker thread, kept between tiles and frames.
+    static SCRATCH: std::cell::RefCell<TileScratch> = std::cell::RefCell::new(TileScratch::default());
+}
+
 /// Sums the binned kernels into `image` (resized to the bins' size) over `background`,
-/// evaluating the Gaussian as `exp` says, using `tile_buffer` as scratch. Returns the number of (pixel, kernel) pairs summed.
+/// evaluating the Gaussian as `exp` says, on the widest [`SimdPath`] the CPU has. `forms` is
+/// scratch for [`row_forms`]. Returns the number of (pixel, kernel) pairs summed.
 pub fn rasterize(
     proj: &ProjectedKernels,
     bins: &TileBins,
     background: [f32; 3],
     exp: ExpMode,
-    tile_buffer: &mut Vec<f32>,
+    forms: &mut Vec<RowForm>,
     image: &mut Image,
 ) -> u64 {
-    tile_buffer.resize(bins.tile_count() * TILE_FLOATS, 0.0);
-    let pairs = tile_buffer
-        .par_chunks_mut(TILE_FLOATS)
+    rasterize_on(
+        SimdPath::detect(),
+        proj,
+        bins,
+        background,
+        exp,
+        forms,
+        image,
+    )
+}
+
+/// [`rasterize`] on a chosen path (which the CPU must have: see [`SimdPath::available`]).
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+pub fn rasterize_on(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    image: &mut Image,
+) -> u64 {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+    row_forms(proj, bins, forms);
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    image.width = bins.width;
+    image.height = bins.height;
+    image.pixels.clear();
+    image.pixels.resize(3 * w * h, 0.0);
+    if w == 0 || h == 0 {
+        return 0;
+    }
+    let frame = Frame {
+        bins,
+        forms,
+        background: background.map(f64::from),
+    };
+    // Tile rows (bands of 16 image rows) in parallel: each writes only its own rows.
+    image
+        .pixels
+        .par_chunks_mut(3 * w * ROW)
         .enumerate()
-        .map(|(t, block)| match exp {
-            ExpMode::Std => rasterize_tile::<false>(proj, bins, t, background, block),
-            ExpMode::Poly => rasterize_tile_batched(proj, bins, t, background, block),
+        .map(|(ty, band)| {
+            SCRATCH.with(|cell| {
+                let scratch = &mut *cell.borrow_mut();
+                let mut pairs = 0;
+                for tx in 0..bins.tiles_x as usize {
+                    let t = ty * bins.tiles_x as usize + tx;
+                    pairs += tile_on(path, exp, &frame, t, scratch, band);
+                }
+                pairs
+            })
         })
-        .sum();
-    untile(bins, tile_buffer, image);
+        .sum()
+}
+
+/// Fills `scratch` with tile `t`'s kernels and, per half row of the tile, the entries of the
+/// kernels whose padded ellipse reaches a pixel centre of that half row inside the tile (and
+/// its box). f64 throughout; no division or square root. Inlined into each path's compiled
+/// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
+/// path).
+#[inline(always)]
+fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut TileScratch) {
+    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+    scratch.kernels.clear();
+    for half in &mut scratch.halves {
+        half.clear();
+    }
+    let last_lane = f64::from(tx1 - tx0 - 1);
+    // Pixel centres of each half of the tile row.
+    let x0 = f64::from(tx0);
+    let half_ends = [
+        (x0 + 0.5, x0 + (LANES as f64 - 0.5).min(last_lane + 0.5)),
+        (x0 + LANES as f64 + 0.5, x0 + last_lane + 0.5),
+    ];
+    const ROW_OFFSETS: [f64; ROW] = {
+        let mut offsets = [0.0; ROW];
+        let mut r = 0;
+        while r < ROW {
+            offsets[r] = r as f64;
+            r += 1;
+        }
+        offsets
+    };
+    let max = |a: f64, b: f64| if a > b { a } else { b };
+    let min = |a: f64, b: f64| if a < b { a } else { b };
+    let entries = bins.tile_entries(t);
+    for (n, &p) in entries.iter().enumerate() {
+        // Kernels are met in scene order, scattered in memory: ask for a later one's record
+        // now (a hint only; no effect on results).
+        #[cfg(target_arch = "x86_64")]
+        if let Some(&ahead) = entries.get(n + 8) {
+            // SAFETY: prefetching never faults; the pointer is in bounds anyway.
+            unsafe {
+                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+                _mm_prefetch::<_MM_HINT_T0>(forms.as_ptr().add(ahead as usize).cast());
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = n;
+        let form = &forms[p as usize];
+        let [bx0, bx1, by0, by1] = form.bounds;
+        // Pixel centres of the tile within the kernel's box, per half row.
+        let (left, right) = (f64::from(bx0.max(tx0)) + 0.5, f64::from(bx1.min(tx1)) - 0.5);
+        let (from0, to0) = (max(half_ends[0].0, left), min(half_ends[0].1, right));
+        let (from1, to1) = (max(half_ends[1].0, left), min(half_ends[1].1, right));
+        let (open0, open1) = (from0 <= to0, from1 <= to1);
+        let [mx, my] = form.mean;
+        let (first_row, end_row) = (by0.max(ty0), by1.min(ty1));
+        // All 16 rows at once, branch-free (vectorised), from the kernel's first row in the
+        // tile; rows past `end_row` are computed and ignored.
+        let j0 = f64::from(first_row);
+        let mut reaches0 = [false; ROW];
+        let mut reaches1 = [false; ROW];
+        let mut t_anchor = [0.0_f32; ROW];
+        let mut offset = [0.0_f32; ROW];
+        let mut row_q32 = [0.0_f32; ROW];
+        for r in 0..ROW {
+            let dv = (j0 + ROW_OFFSETS[r]) + 0.5 - my;
+            let row_q = dv * dv * form.inv_syy;
+            let reach = form.q_reach - row_q;
+            // The chord of the row is centre ± √(reach/Qxx): it reaches a pixel centre of a
+            // half row when the nearest one is within it.
+            let centre = mx - form.shear * dv;
+            let gap0 = max(max(from0 - centre, centre - to0), 0.0);
+            let gap1 = max(max(from1 - centre, centre - to1), 0.0);
+            reaches0[r] = open0 & (form.qxx * gap0 * gap0 <= reach);
+            reaches1[r] = open1 & (form.qxx * gap1 * gap1 <= reach);
+            let anchor = min(max(centre.floor() - x0, 0.0), last_lane);
+            t_anchor[r] = (x0 + anchor + 0.5 - centre) as f32;
+            offset[r] = anchor as f32;
+            row_q32[r] = row_q as f32;
+        }
+        let kernel = scratch.kernels.len() as u32;
+        let mut used = false;
+        for r in 0..(end_row - first_row) as usize {
+            let entry = RowEntry {
+                t_anchor: t_anchor[r],
+                offset: offset[r],
+                row_q: row_q32[r],
+                kernel,
+            };
+            let row = (first_row - ty0) as usize + r;
+            if reaches0[r] {
+                scratch.halves[2 * row].push(entry);
+                used = true;
+            }
+            if reaches1[r] {
+                scratch.halves[2 * row + 1].push(entry);
+                used = true;
+            }
+        }
+        if used {
+            scratch.kernels.push(form.pixel);
+        }
+    }
+}
+
+/// What every tile of a frame shares.
+struct Frame<'a> {
+    bins: &'a TileBins,
+    forms: &'a [RowForm],
+    background: [f64; 3],
+}
+
+/// Prepares and sums tile `t` into `band` with the loops compiled for `path`.
+fn tile_on(
+    path: SimdPath,
+    exp: ExpMode,
+    frame: &Frame,
+    t: usize,
+    scratch: &mut TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    match (path, exp) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `rasterize_on` checked that the CPU has the path's features.
+        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            tile_avx512::<true>(frame, t, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx512, ExpMode::Std) => unsafe {
+            tile_avx512::<false>(frame, t, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Poly) => unsafe { tile_avx2::<true>(frame, t, scratch, band) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Std) => unsafe { tile_avx2::<false>(frame, t, scratch, band) },
+        (_, ExpMode::Poly) => tile::<true, false>(frame, t, scratch, band),
+        (_, ExpMode::Std) => tile::<false, false>(frame, t, scratch, band),
+    }
+}
+
+/// [`tile`] compiled for AVX-512 (the half rows use the AVX2 loop).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+fn tile_avx512<const FAST: bool>(
+    frame: &Frame,
+    t: usize,
+    scratch: &mut TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    tile::<FAST, true>(frame, t, scratch, band)
+}
+
+/// [`tile`] compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn tile_avx2<const FAST: bool>(
+    frame: &Frame,
+    t: usize,
+    scratch: &mut TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    tile::<FAST, true>(frame, t, scratch, band)
+}
+
+/// [`prepare_tile`] then [`sum_tile`], inlined into each path's compiled copy.
+#[inline(always)]
+fn tile<const FAST: bool, const AVX2: bool>(
+    frame: &Frame,
+    t: usize,
+    scratch: &mut TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    prepare_tile(frame.bins, frame.forms, t, scratch);
+    sum_tile::<FAST, AVX2>(frame.bins, t, frame.background, scratch, band)
+}
+
+/// Sums the entries of one half row into `acc` (set to the background first; `+ 0.0` makes
+/// a background of -0 a +0, so that adding a lane's zero or skipping it cannot change a
+/// sign). Lane `i` is pixel `first + i` of the tile row; lanes at or beyond `lanes` (past the
+/// image's edge) never count. Returns the pairs.
+#[inline(always)]
+fn sum_half_row<const FAST: bool>(
+    entries: &[RowEntry],
+    kernels: &[TileKernel],
+    first: f32,
+    lanes: f32,
+    background: [f64; 3],
+    acc: &mut [[f64; LANES]; 3],
+) -> u64 {
+    const IOTA: [f32; LANES] = {
+        let mut iota = [0.0; LANES];
+        let mut i = 0;
+        while i < LANES {
+            iota[i] = i as f32;
+            i += 1;
+        }
+        iota
+    };
+    for (channel, &b) in acc.iter_mut().zip(&background) {
+        *channel = [b + 0.0; LANES];
+    }
+    let mut pairs = 0_u64;
+    for entry in entries {
+        let kernel = &kernels[entry.kernel as usize];
+        // Lane i is tile pixel first + i: its offset from the anchor is exact.
+        let shift = first - entry.offset;
+        let mut g = [0.0_f32; LANES];
+        let mut inside = 0_u32;
+        for i in 0..LANES {
+            let t = (IOTA[i] + shift) + entry.t_anchor;
+            let q = kernel.qxx * t * t + entry.row_q;
+            let hit = q <= kernel.qmax && IOTA[i] < lanes;
+            let value = gaussian::<FAST>(q);
+            g[i] = if hit { value } else { 0.0 };
+            inside += u32::from(hit);
+        }
+        pairs += u64::from(inside);
+        for (channel, &a) in acc.iter_mut().zip(&kernel.amplitude) {
+            for i in 0..LANES {
+                channel[i] += a * f64::from(g[i]);
+            }
+        }
+    }
+    pairs
+}
+
+/// Sums the prepared tile `t` half row by half row into `band` (the image rows of its tile
+/// row): per half row, three f64 accumulators of 8 lanes start at the background and take
+/// `a_c · G` (an exact f64 product of f32 values) for every entry, in ascending kernel
+/// order; the half row is then rounded to f32 and written in place.
+#[inline(always)]
+fn sum_tile<const FAST: bool, const AVX2: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    scratch: &TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+    let width = bins.width as usize;
+    let tile_width = (tx1 - tx0) as usize;
+    let mut pairs = 0_u64;
+    for r in 0..(ty1 - ty0) as usize {
+        for h in 0..2 {
+            let first = h * LANES;
+            if first >= tile_width {
+                break;
+            }
+            let lanes = (tile_width - first).min(LANES);
+            let mut acc = [[0.0_f64; LANES]; 3];
+            let entries = &scratch.halves[2 * r + h];
+            let (first_lane, lanes_f) = (first as f32, lanes as f32);
+            pairs += if AVX2 {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: AVX2 is only asked for on the AVX2 and AVX-512 paths, which
+                // `rasterize_on` checked the CPU has.
+                unsafe {
+                    avx2::sum_half_row::<FAST>(
+                        entries,
+                        &scratch.kernels,
+                        first_lane,
+                        lanes_f,
+                        background,
+                        &mut acc,
+                    )
+                }
+                #[cfg(not(target_arch = "x86_64"))]
+                unreachable!("AVX2 on x86-64 only")
+            } else {
+                sum_half_row::<FAST>(
+                    entries,
+                    &scratch.kernels,
+                    first_lane,
+                    lanes_f,
+                    background,
+                    &mut acc,
+                )
+            };
+            let out = &mut band[3 * (r * width + tx0 as usize + first)..][..3 * lanes];
+            for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+                for c in 0..3 {
+                    pixel[c] = acc[c][i] as f32;
+                }
+            }
+        }
+    }
     pairs
 }
 
@@ -235,232 +723,197 @@ pub(crate) fn for_each_row_span(
     }
 }
 
-/// Sums tile `t` into `block` (its 16×16 RGB pixels, row-major within the tile).
-fn rasterize_tile<const FAST: bool>(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    t: usize,
-    background: [f32; 3],
-    block: &mut [f32],
-) -> u64 {
-    let rect = bins.tile_rect(t);
-    let [tx0, _, ty0, _] = rect;
-    let mut pairs = 0_u64;
-    let mut sums = background_sums(background);
-    for &p in bins.tile_entries(t) {
-        for_each_row_span(proj, bins, p as usize, rect, |kernel, row| {
-            let base = ((row.j - ty0) * TILE_SIZE + (row.i0 - tx0)) as usize;
-            for n in 0..row.i1 - row.i0 {
-                let q = kernel.q(&row, n);
-                if q <= kernel.qmax {
-                    let g = gaussian::<FAST>(q);
-                    let k = 3 * (base + n as usize);
-                    for c in 0..3 {
-                        sums[k + c] += f64::from(kernel.amplitude[c] * g);
-                    }
-                    pairs += 1;
-                }
-            }
-        });
-    }
-    store_sums(&sums, block);
-    pairs
-}
-
-/// A tile's per-pixel sums, starting at the background. They are f64 (q and exp stay f32):
-/// their error does not grow with the number of terms (10 000 kernels on one pixel gave 7e-6
-/// relative error with f32 sums, 3.5× the documented bound).
-#[inline(always)]
-fn background_sums(background: [f32; 3]) -> [f64; TILE_FLOATS] {
-    let mut sums = [0.0_f64; TILE_FLOATS];
-    for pixel in sums.chunks_exact_mut(3) {
-        for (sum, &b) in pixel.iter_mut().zip(&background) {
-            *sum = f64::from(b);
-        }
-    }
-    sums
-}
-
-/// Rounds a tile's sums to the f32 image block.
-#[inline(always)]
-fn store_sums(sums: &[f64; TILE_FLOATS], block: &mut [f32]) {
-    for (b, &sum) in block.iter_mut().zip(sums.iter()) {
-        *b = sum as f32;
-    }
-}
-
-/// Pairs evaluated per batch of [`rasterize_tile_batched`].
-const BATCH: usize = 512;
-
-/// One batch of candidate pairs of a tile, struct-of-arrays, in the order they were met
-/// (kernel by kernel, row by row, pixel by pixel).
-struct Batch {
-    /// `t` of the pair's pixel.
-    t: [f32; BATCH],
-    /// The kernel's `Qxx`.
-    qxx: [f32; BATCH],
-    /// The row's `Δv²/Σ2yy`.
-    row_q: [f32; BATCH],
-    /// The kernel's `qmax`.
-    qmax: [f32; BATCH],
-    /// `G`, or 0 where `q > qmax`.
-    gaussian: [f32; BATCH],
-    /// Pixel index within the tile, `16 (j - ty0) + (i - tx0)`.
-    pixel: [u16; BATCH],
-    /// Projected kernel.
-    kernel: [u32; BATCH],
-    /// Candidates held.
-    len: usize,
-}
-
-impl Batch {
-    fn new() -> Box<Self> {
-        Box::new(Batch {
-            t: [0.0; BATCH],
-            qxx: [0.0; BATCH],
-            row_q: [0.0; BATCH],
-            qmax: [0.0; BATCH],
-            gaussian: [0.0; BATCH],
-            pixel: [0; BATCH],
-            kernel: [0; BATCH],
-            len: 0,
+/// The ceiling probe: the ideal inner loop of an additive tile rasterizer on this CPU, to
+/// measure the renderer against (`splat4d bench --ceiling`). One row of 16 pixels, three
+/// channels of f32 accumulators kept in registers while every one of `kernels` kernels
+/// passes over it (`q = Qxx t² + row_q`, the degree-5 polynomial exp, `acc += a G`); the
+/// kernels' constants sit in L1; no binning, no test, no memory traffic. Every lane counts as
+/// a pair. Compiled for `path` like the renderer. Returns the pairs evaluated and a checksum
+/// (so that the work cannot be optimised away).
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+#[must_use]
+pub fn ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f32) {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+    // Kernels of a few pixels, centred near the row, with q in the exp's useful range.
+    let constants: Vec<[f32; 6]> = (0..kernels.max(1))
+        .map(|k| {
+            let x = k as f32;
+            [
+                -7.5 + (x * 0.37) % 3.0,
+                0.02 + (x * 0.013) % 0.1,
+                (x * 0.21) % 2.0,
+                0.3 + (x * 0.07) % 0.5,
+                0.2,
+                0.1,
+            ]
         })
-    }
+        .collect();
+    let checksum = match path {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: checked above.
+        SimdPath::Avx2 | SimdPath::Avx512 => unsafe { avx2::ceiling(&constants, passes) },
+        _ => ceiling_portable(&constants, passes),
+    };
+    ((constants.len() * passes * ROW) as u64, checksum)
+}
 
-    /// Evaluates `q` and `G` for every candidate (a loop without branches over full
-    /// arrays, which the compiler vectorises), then adds the pairs to `sums` in candidate
-    /// order and empties the batch. Returns the pairs added.
-    #[inline(always)]
-    fn flush(&mut self, amplitudes: &[[f32; 3]], sums: &mut [f64; TILE_FLOATS]) -> u64 {
-        let n = self.len;
-        for i in 0..n {
-            let t = self.t[i];
-            let q = self.qxx[i] * t * t + self.row_q[i];
-            let g = fast_exp_neg_half(q);
-            self.gaussian[i] = if q <= self.qmax[i] { g } else { 0.0 };
-        }
-        let mut pairs = 0;
-        for i in 0..n {
-            let g = self.gaussian[i];
-            // `fast_exp_neg_half` is never 0, so 0 marks a pair outside the cut-off.
-            if g != 0.0 {
-                let a = amplitudes[self.kernel[i] as usize];
-                let k = 3 * self.pixel[i] as usize;
-                for c in 0..3 {
-                    sums[k + c] += f64::from(a[c] * g);
-                }
-                pairs += 1;
+/// The portable [`ceiling_probe`] loop.
+fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
+    let mut checksum = 0.0;
+    for _ in 0..passes {
+        let mut acc = [[0.0_f32; 3]; ROW];
+        for &[t0, qxx, row_q, r, g, b] in constants {
+            for (i, pixel) in acc.iter_mut().enumerate() {
+                let t = t0 + i as f32;
+                let value = fast_exp_neg_half(qxx * t * t + row_q);
+                pixel[0] += r * value;
+                pixel[1] += g * value;
+                pixel[2] += b * value;
             }
         }
-        self.len = 0;
+        checksum += acc.iter().flatten().sum::<f32>();
+    }
+    checksum
+}
+
+/// The half-row loop with AVX2 intrinsics: the operations of [`sum_half_row`] in the same
+/// order, 8 lanes at a time (no fused multiply-add is formed), so the result is the same bit
+/// for bit.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    use super::{LANES, RowEntry, TileKernel};
+
+    /// [`super::fast_exp_neg_half`] on 8 lanes.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    fn exp_neg_half(q: __m256) -> __m256 {
+        let x = _mm256_max_ps(
+            _mm256_mul_ps(_mm256_set1_ps(-0.5), q),
+            _mm256_set1_ps(-87.0),
+        );
+        let shift = _mm256_set1_ps(12_582_912.0);
+        let shifted = _mm256_add_ps(
+            _mm256_mul_ps(x, _mm256_set1_ps(std::f32::consts::LOG2_E)),
+            shift,
+        );
+        let n = _mm256_sub_ps(shifted, shift);
+        let r = _mm256_sub_ps(
+            _mm256_sub_ps(x, _mm256_mul_ps(n, _mm256_set1_ps(0.693_145_75))),
+            _mm256_mul_ps(n, _mm256_set1_ps(1.428_606_8e-6)),
+        );
+        let step = |c: f32, p: __m256| _mm256_add_ps(_mm256_set1_ps(c), _mm256_mul_ps(r, p));
+        // Horner, as the scalar: 1.0000001 + r (c1 + r (c2 + r (c3 + r (c4 + r c5)))).
+        let p = step(0.041_915_03, _mm256_set1_ps(0.008_291_717));
+        let p = step(0.166_676_63, p);
+        let p = step(0.499_989, p);
+        let p = step(0.999_999_64, p);
+        let p = step(1.000_000_1, p);
+        let n_int = _mm256_sub_epi32(_mm256_castps_si256(shifted), _mm256_castps_si256(shift));
+        let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(n_int, _mm256_set1_epi32(127)));
+        _mm256_mul_ps(p, _mm256_castsi256_ps(scale))
+    }
+
+    /// [`super::ceiling_probe`]'s loop: 16 lanes as two registers, f32 accumulators.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn ceiling(constants: &[[f32; 6]], passes: usize) -> f32 {
+        let iota_lo = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+        let iota_hi = _mm256_add_ps(iota_lo, _mm256_set1_ps(8.0));
+        let mut checksum = 0.0;
+        for _ in 0..passes {
+            let mut acc = [_mm256_setzero_ps(); 6];
+            for &[t0, qxx, row_q, r, g, b] in constants {
+                let (qxx, row_q) = (_mm256_set1_ps(qxx), _mm256_set1_ps(row_q));
+                let amplitude = [_mm256_set1_ps(r), _mm256_set1_ps(g), _mm256_set1_ps(b)];
+                for (h, iota) in [iota_lo, iota_hi].into_iter().enumerate() {
+                    let t = _mm256_add_ps(iota, _mm256_set1_ps(t0));
+                    let q = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(qxx, t), t), row_q);
+                    let value = exp_neg_half(q);
+                    for c in 0..3 {
+                        acc[2 * c + h] =
+                            _mm256_add_ps(acc[2 * c + h], _mm256_mul_ps(amplitude[c], value));
+                    }
+                }
+            }
+            let mut lanes = [0.0_f32; 8];
+            for a in acc {
+                // SAFETY: `lanes` holds 8 floats.
+                unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), a) };
+                checksum += lanes.iter().sum::<f32>();
+            }
+        }
+        checksum
+    }
+
+    /// [`super::sum_half_row`] with AVX2.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn sum_half_row<const FAST: bool>(
+        entries: &[RowEntry],
+        kernels: &[TileKernel],
+        first: f32,
+        lanes: f32,
+        background: [f64; 3],
+        acc: &mut [[f64; LANES]; 3],
+    ) -> u64 {
+        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+        let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(iota, _mm256_set1_ps(lanes));
+        let mut lo = background.map(|b| _mm256_set1_pd(b + 0.0));
+        let mut hi = lo;
+        let mut pairs = 0_u64;
+        for entry in entries {
+            let kernel = &kernels[entry.kernel as usize];
+            let shift = first - entry.offset;
+            let t = _mm256_add_ps(
+                _mm256_add_ps(iota, _mm256_set1_ps(shift)),
+                _mm256_set1_ps(entry.t_anchor),
+            );
+            let q = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
+                _mm256_set1_ps(entry.row_q),
+            );
+            let hit = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
+                valid,
+            );
+            let mask = _mm256_movemask_ps(hit);
+            if mask == 0 {
+                continue;
+            }
+            pairs += u64::from(mask.count_ones());
+            let g = if FAST {
+                exp_neg_half(q)
+            } else {
+                let mut values = [0.0_f32; LANES];
+                // SAFETY: `values` holds 8 floats.
+                unsafe { _mm256_storeu_ps(values.as_mut_ptr(), q) };
+                let values = values.map(|q| (-0.5 * q).exp());
+                // SAFETY: as above.
+                unsafe { _mm256_loadu_ps(values.as_ptr()) }
+            };
+            let g = _mm256_and_ps(g, hit);
+            let g_lo = _mm256_cvtps_pd(_mm256_castps256_ps128(g));
+            let g_hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(g));
+            for c in 0..3 {
+                let a = _mm256_set1_pd(kernel.amplitude[c]);
+                lo[c] = _mm256_add_pd(lo[c], _mm256_mul_pd(a, g_lo));
+                hi[c] = _mm256_add_pd(hi[c], _mm256_mul_pd(a, g_hi));
+            }
+        }
+        for c in 0..3 {
+            // SAFETY: each channel holds 8 doubles: 4 in `lo`, 4 in `hi`.
+            unsafe {
+                _mm256_storeu_pd(acc[c].as_mut_ptr(), lo[c]);
+                _mm256_storeu_pd(acc[c].as_mut_ptr().add(4), hi[c]);
+            }
+        }
         pairs
     }
-}
-
-/// [`rasterize_tile`] with the polynomial exp, pairs gathered into batches so that `q` and
-/// `G` are computed with full vectors whatever the length of each row span (spans are a few
-/// pixels in typical scenes, too short to vectorise one at a time). The pairs, their values
-/// and their order per pixel are those of `rasterize_tile::<true>`, so the image is the same
-/// bit for bit. With AVX2 and FMA (detected at run time) the batch loop runs 8 lanes wide;
-/// the result does not depend on it (no fused operations are formed).
-fn rasterize_tile_batched(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    t: usize,
-    background: [f32; 3],
-    block: &mut [f32],
-) -> u64 {
-    thread_local! {
-        // One batch per worker thread, kept between tiles and frames.
-        static SCRATCH: std::cell::RefCell<Box<Batch>> = std::cell::RefCell::new(Batch::new());
-    }
-    SCRATCH.with(|cell| {
-        let batch = &mut **cell.borrow_mut();
-        #[cfg(target_arch = "x86_64")]
-        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU has the features the function is compiled for.
-            return unsafe { rasterize_tile_batched_avx2(proj, bins, t, background, block, batch) };
-        }
-        rasterize_tile_batched_portable(proj, bins, t, background, block, batch)
-    })
-}
-
-/// [`rasterize_tile_batched_portable`] compiled for AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn rasterize_tile_batched_avx2(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    t: usize,
-    background: [f32; 3],
-    block: &mut [f32],
-    batch: &mut Batch,
-) -> u64 {
-    rasterize_tile_batched_portable(proj, bins, t, background, block, batch)
-}
-
-/// The batched tile loop: fills `batch` kernel by kernel, row by row, pixel by pixel, and
-/// flushes it into the tile's sums whenever it is full.
-#[inline(always)]
-fn rasterize_tile_batched_portable(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    t: usize,
-    background: [f32; 3],
-    block: &mut [f32],
-    batch: &mut Batch,
-) -> u64 {
-    let rect = bins.tile_rect(t);
-    let [tx0, _, ty0, _] = rect;
-    let mut sums = background_sums(background);
-    let mut pairs = 0_u64;
-    batch.len = 0;
-    for &p in bins.tile_entries(t) {
-        for_each_row_span(proj, bins, p as usize, rect, |kernel, row| {
-            let base = ((row.j - ty0) * TILE_SIZE + (row.i0 - tx0)) as u16;
-            for n in 0..row.i1 - row.i0 {
-                if batch.len == BATCH {
-                    pairs += batch.flush(&proj.amplitudes, &mut sums);
-                }
-                let i = batch.len;
-                batch.t[i] = row.t(n);
-                batch.qxx[i] = kernel.qxx;
-                batch.row_q[i] = row.row_q;
-                batch.qmax[i] = kernel.qmax;
-                batch.pixel[i] = base + n as u16;
-                batch.kernel[i] = p;
-                batch.len += 1;
-            }
-        });
-    }
-    pairs += batch.flush(&proj.amplitudes, &mut sums);
-    store_sums(&sums, block);
-    pairs
-}
-
-/// Copies the tile-major buffer into the row-major image.
-fn untile(bins: &TileBins, tile_buffer: &[f32], image: &mut Image) {
-    let (w, h) = (bins.width as usize, bins.height as usize);
-    image.width = bins.width;
-    image.height = bins.height;
-    image.pixels.resize(3 * w * h, 0.0);
-    let tile = TILE_SIZE as usize;
-    image
-        .pixels
-        .par_chunks_mut(3 * w * tile)
-        .enumerate()
-        .for_each(|(ty, band)| {
-            for (r, row) in band.chunks_exact_mut(3 * w).enumerate() {
-                for tx in 0..bins.tiles_x as usize {
-                    let t = ty * bins.tiles_x as usize + tx;
-                    let x0 = tx * tile;
-                    let n = tile.min(w - x0);
-                    let src = &tile_buffer[t * TILE_FLOATS + 3 * r * tile..][..3 * n];
-                    row[3 * x0..3 * (x0 + n)].copy_from_slice(src);
-                }
-            }
-        });
-    debug_assert!(image.pixels.len() == 3 * w * h);
 }
 
 #[cfg(test)]
@@ -489,37 +942,71 @@ mod tests {
     }
 
     #[test]
-    fn batched_tiles_equal_the_span_loop_bit_for_bit() {
+    fn every_simd_path_gives_the_same_image_bit_for_bit() {
         use crate::render::{RenderContext, RenderOptions};
-        let camera = crate::scenes::synthetic::bench_camera(160, 96);
-        for (n, cutoff) in [(3000, 1.0 / 255.0), (300, 0.0)] {
+        // 161 × 97: partial tiles on the right and at the bottom.
+        let camera = crate::scenes::synthetic::bench_camera(161, 97);
+        let paths = SimdPath::available();
+        eprintln!("paths on this CPU: {paths:?}");
+        for (n, cutoff, exp) in [
+            (3000, 1.0 / 255.0, ExpMode::Poly),
+            (300, 0.0, ExpMode::Poly),
+            (500, 1.0 / 255.0, ExpMode::Std),
+        ] {
             let scene = crate::scenes::synthetic::bench_scene(n, 5);
             let options = RenderOptions {
                 cutoff,
-                exp: ExpMode::Poly,
+                exp,
                 ..RenderOptions::default()
             };
             let mut context = RenderContext::new();
             context.render(&scene, &camera, 0.5, &options).unwrap();
             let (proj, bins) = (&context.projected, &context.bins);
-            let background = [0.1, 0.2, 0.3];
-            let mut most = 0;
-            for t in 0..bins.tile_count() {
-                let (mut a, mut b) = ([0.0_f32; TILE_FLOATS], [0.0_f32; TILE_FLOATS]);
-                let pairs_a = rasterize_tile::<true>(proj, bins, t, background, &mut a);
-                let pairs_b = rasterize_tile_batched(proj, bins, t, background, &mut b);
-                assert_eq!(pairs_a, pairs_b, "tile {t}");
-                assert!(
-                    a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
-                    "tile {t} differs"
+            let mut forms = Vec::new();
+            let mut first: Option<(Image, u64)> = None;
+            for &path in &paths {
+                let mut image = Image::default();
+                let pairs = rasterize_on(
+                    path,
+                    proj,
+                    bins,
+                    [0.1, 0.2, 0.3],
+                    exp,
+                    &mut forms,
+                    &mut image,
                 );
-                most = most.max(pairs_a);
+                assert!(pairs > 0);
+                match &first {
+                    None => first = Some((image, pairs)),
+                    Some((reference, reference_pairs)) => {
+                        assert_eq!(pairs, *reference_pairs, "{path}: pairs");
+                        assert!(
+                            image
+                                .pixels
+                                .iter()
+                                .zip(&reference.pixels)
+                                .all(|(a, b)| a.to_bits() == b.to_bits()),
+                            "{path} differs from {}",
+                            paths[0]
+                        );
+                    }
+                }
             }
-            if cutoff == 0.0 {
-                // Every kernel reaches every pixel: tiles hold more than one batch, so
-                // flushing in the middle of a tile is covered.
-                assert!(most > BATCH as u64, "at most {most} pairs in a tile");
-            }
+        }
+    }
+
+    #[test]
+    fn the_ceiling_probe_counts_every_lane_and_agrees_across_paths() {
+        let mut sums = Vec::new();
+        for path in SimdPath::available() {
+            let (pairs, checksum) = ceiling_probe(path, 37, 3);
+            assert_eq!(pairs, 37 * 3 * 16, "{path}");
+            assert!(checksum.is_finite() && checksum > 0.0, "{path}: {checksum}");
+            sums.push(checksum);
+        }
+        // f32 sums in another order: equal to rounding.
+        for s in &sums {
+            assert!((s / sums[0] - 1.0).abs() < 1e-5, "{sums:?}");
         }
     }
 

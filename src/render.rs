@@ -96,7 +96,7 @@ pub struct RenderContext {
     pub bins: TileBins,
     /// Buffers of the backward pass.
     pub backward: BackwardBuffers,
-    tile_buffer: Vec<f32>,
+    row_forms: Vec<crate::raster::RowForm>,
     image: Image,
 }
 
@@ -168,7 +168,7 @@ impl RenderContext {
             &self.bins,
             background,
             options.exp,
-            &mut self.tile_buffer,
+            &mut self.row_forms,
             &mut self.image,
         );
         RenderStats {

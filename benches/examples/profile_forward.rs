@@ -1,5 +1,5 @@
 //! Renders the 100k-kernel bench scene repeatedly, for profilers (perf, callgrind):
-//! `cargo run --profile profiling -p splat4d-benches --example profile_forward -- [kernels] [frames] [std|poly]`.
+//! `cargo run --profile profiling -p splat4d-benches --example profile_forward -- [kernels] [frames] [std|poly] [width] [height]`.
 
 use splat4d::scenes::synthetic::{bench_camera, bench_scene};
 use splat4d::{RenderContext, RenderOptions};
@@ -12,8 +12,10 @@ fn main() {
         exp: args.next().and_then(|a| a.parse().ok()).unwrap_or_default(),
         ..RenderOptions::default()
     };
+    let width: u32 = args.next().and_then(|a| a.parse().ok()).unwrap_or(512);
+    let height: u32 = args.next().and_then(|a| a.parse().ok()).unwrap_or(512);
     let scene = bench_scene(kernels, 42);
-    let camera = bench_camera(512, 512);
+    let camera = bench_camera(width, height);
     let mut context = RenderContext::new();
     let start = std::time::Instant::now();
     let mut pairs = 0;

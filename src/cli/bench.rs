@@ -55,6 +55,10 @@ pub struct BenchArgs {
     /// to --out.
     #[arg(long)]
     sweep: bool,
+    /// Only run the ceiling probe (the ideal inner loop every figure is compared with) and
+    /// print its pairs per second.
+    #[arg(long)]
+    ceiling: bool,
     /// Output folder of --sweep.
     #[arg(long, default_value = "out/bench")]
     out: PathBuf,
@@ -82,6 +86,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             None
         },
         sweep: args.sweep,
+        ceiling: args.ceiling,
         out: args.out.clone(),
     };
     super::with_progress(|bars| bench(&request, bars))

@@ -66,6 +66,50 @@ pub struct BenchRow {
     pub bound_ratio: f64,
     /// For tile rows: the dense baseline's time over this row's, when it was measured.
     pub speedup: Option<f64>,
+    /// `pairs_per_second` over the ceiling probe's pairs per second on the same threads in
+    /// the same run ([`measure_ceiling`]), when it was measured.
+    pub efficiency: Option<f64>,
+}
+
+/// The ceiling probe ([`crate::raster::ceiling_probe`]) on `threads` workers, each running
+/// its own probe on the widest SIMD path: total pairs per second, the median of 3 runs of
+/// about 0.2 s.
+pub fn measure_ceiling(threads: usize) -> Result<f64> {
+    use rayon::prelude::*;
+    const KERNELS: usize = 256;
+    let path = crate::raster::SimdPath::detect();
+    let pool = thread_pool(threads)?;
+    let run = |passes: usize| -> (f64, u64) {
+        pool.install(|| {
+            let start = Instant::now();
+            let (pairs, checksum) = (0..threads.max(1))
+                .into_par_iter()
+                .map(|_| crate::raster::ceiling_probe(path, KERNELS, passes))
+                .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            std::hint::black_box(checksum);
+            (start.elapsed().as_secs_f64(), pairs)
+        })
+    };
+    let (seconds, _) = run(200);
+    let passes = ((0.2 / seconds.max(1e-6)) * 200.0).clamp(200.0, 1e8) as usize;
+    let mut rates: Vec<f64> = (0..3)
+        .map(|_| {
+            let (seconds, pairs) = run(passes);
+            pairs as f64 / seconds
+        })
+        .collect();
+    rates.sort_by(f64::total_cmp);
+    Ok(rates[1])
+}
+
+/// Fills each row's `efficiency` from `ceilings` (pairs per second by thread count).
+pub fn fill_efficiencies(rows: &mut [BenchRow], ceilings: &[(usize, f64)]) {
+    for row in rows {
+        row.efficiency = ceilings
+            .iter()
+            .find(|(threads, _)| *threads == row.threads)
+            .map(|(_, ceiling)| row.pairs_per_second / ceiling);
+    }
 }
 
 /// How to measure one configuration.
@@ -199,6 +243,7 @@ pub fn bench_render(
         mean_error,
         bound_ratio,
         speedup: None,
+        efficiency: None,
     })
 }
 
@@ -379,7 +424,7 @@ pub fn sweep_table(points: &[SweepPoint]) -> String {
 #[must_use]
 pub fn format_table(rows: &[BenchRow]) -> String {
     let mut out = format!(
-        "{:<18} {:>9} {:>11} {:>7} {:>6} {:>10} {:>12} {:>12} {:>10} {:>10} {:>7} {:>9}\n",
+        "{:<18} {:>9} {:>11} {:>7} {:>6} {:>10} {:>12} {:>12} {:>8} {:>10} {:>10} {:>7} {:>9}\n",
         "scene",
         "kernels",
         "size",
@@ -388,6 +433,7 @@ pub fn format_table(rows: &[BenchRow]) -> String {
         "ms/frame",
         "pairs/frame",
         "pairs/s",
+        "ceiling",
         "max-err",
         "mean-err",
         "/bound",
@@ -395,7 +441,7 @@ pub fn format_table(rows: &[BenchRow]) -> String {
     );
     for r in rows {
         out.push_str(&format!(
-            "{:<18} {:>9} {:>11} {:>7} {:>6} {:>10.2} {:>12} {:>12.3e} {:>10.2e} {:>10.2e} {:>7.3} {:>9}\n",
+            "{:<18} {:>9} {:>11} {:>7} {:>6} {:>10.2} {:>12} {:>12.3e} {:>8} {:>10.2e} {:>10.2e} {:>7.3} {:>9}\n",
             r.scene,
             r.kernels,
             format!("{}x{}", r.size.0, r.size.1),
@@ -404,6 +450,8 @@ pub fn format_table(rows: &[BenchRow]) -> String {
             r.ms_per_frame,
             r.pairs,
             r.pairs_per_second,
+            r.efficiency
+                .map_or("-".to_owned(), |e| format!("{:.1}%", 100.0 * e)),
             r.max_error,
             r.mean_error,
             r.bound_ratio,

@@ -8,10 +8,11 @@ use crate::io::camera_file::load_camera;
 use crate::io::scene_file::load_scene;
 use crate::io::write_bytes_atomically;
 use crate::model::{Camera, Error, Progress, Result, Scene};
+use crate::raster::SimdPath;
 use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use crate::report::bench::{
-    BenchSettings, Method, SWEEP_ROUNDS, SweepGrid, SweepPoint, bench_render, fill_speedups,
-    format_table, sweep, sweep_table,
+    BenchSettings, Method, SWEEP_ROUNDS, SweepGrid, SweepPoint, bench_render, fill_efficiencies,
+    fill_speedups, format_table, measure_ceiling, sweep, sweep_table,
 };
 use crate::report::charts::{TradeOffPoint, pareto_chart};
 use crate::scenes::paths::{Lens, framing_distance};
@@ -44,6 +45,8 @@ pub struct BenchRequest {
     /// Sweep speed against error on the first scene, writing `sweep.md` and `sweep.png`
     /// to `out`.
     pub sweep: bool,
+    /// Only measure the ceiling probe ([`crate::raster::ceiling_probe`]).
+    pub ceiling: bool,
     /// Output folder of the sweep.
     pub out: PathBuf,
 }
@@ -132,15 +135,47 @@ fn bench_scenes(request: &BenchRequest) -> Result<Vec<(String, Scene, Camera)>> 
 }
 
 /// Measures the renderer as `request` asks.
+/// The ceiling probe's pairs per second for each thread count.
+fn ceilings(threads: &[usize], progress: &mut dyn Progress) -> Result<Vec<(usize, f64)>> {
+    progress.start("ceiling", threads.len());
+    let mut ceilings = Vec::new();
+    for &t in threads {
+        ceilings.push((t, measure_ceiling(t)?));
+        progress.tick();
+    }
+    Ok(ceilings)
+}
+
+/// One line per thread count: the ceiling and the SIMD path it ran on.
+fn ceiling_lines(ceilings: &[(usize, f64)]) -> String {
+    ceilings
+        .iter()
+        .map(|(threads, rate)| {
+            format!(
+                "ceiling probe ({} path, {threads} thread{}): {rate:.3e} pairs/s",
+                SimdPath::detect(),
+                if *threads == 1 { "" } else { "s" }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<BenchSummary> {
     request.options.validate()?;
-    let scenes = bench_scenes(request)?;
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     let threads: Vec<usize> = match request.threads {
         Some(n) => vec![n],
         None if cores > 1 => vec![1, cores],
         None => vec![1],
     };
+    if request.ceiling {
+        let ceilings = ceilings(&threads, progress)?;
+        return Ok(BenchSummary {
+            text: ceiling_lines(&ceilings),
+        });
+    }
+    let scenes = bench_scenes(request)?;
     let settings = |threads: usize| BenchSettings {
         tau: request.time,
         options: request.options,
@@ -192,9 +227,14 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
         }
     }
     fill_speedups(&mut rows);
+    let ceilings = ceilings(&threads, progress)?;
+    fill_efficiencies(&mut rows, &ceilings);
     let text = format!(
-        "{}\nerror: |render - f64 reference| at {} seeded pixels per row; /bound = largest ratio to 1e-6 + 2e-6·Σ|a|; speed-up = dense ms / tiles ms",
+        "{}\n{}\nColumns: ceiling = pairs/s over the ceiling probe's on the same threads in this run; \
+         max-err, mean-err = |render - f64 reference| at {} seeded pixels; /bound = largest ratio \
+         to 1e-6 + 2e-6·Σ|a|; speed-up = dense ms / tiles ms.",
         format_table(&rows).trim_end(),
+        ceiling_lines(&ceilings),
         request.samples
     );
     Ok(BenchSummary { text })
