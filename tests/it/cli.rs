@@ -674,7 +674,7 @@ fn bench_rows(stdout: &str) -> Vec<std::collections::HashMap<String, String>> {
         .split_whitespace()
         .collect();
     lines
-        .take_while(|l| !l.starts_with("error:"))
+        .take_while(|l| l.split_whitespace().count() == header.len())
         .map(|l| {
             header
                 .iter()
@@ -712,6 +712,22 @@ fn bench_runs_builtin_scenes_by_size() {
         rows.iter()
             .all(|r| r["size"] == "96x64" && r["method"] == "tiles")
     );
+    // Every row shows its share of the ceiling probe measured in the same run.
+    for row in &rows {
+        let share: f64 = row["ceiling"].trim_end_matches('%').parse().unwrap();
+        assert!(share > 0.0 && share < 100.0, "{stdout}");
+    }
+    assert!(stdout.contains("ceiling probe ("), "{stdout}");
+    let output = splat4d(&["bench", "--ceiling", "--threads", "1"], dir.path());
+    assert!(output.status.success(), "{}", stderr(&output));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let rate: f64 = stdout
+        .split("1 thread): ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(rate > 1e7, "{stdout}");
     let output = splat4d(&["bench", "--scene", "no-such-scene.json"], dir.path());
     assert_eq!(output.status.code(), Some(2));
     assert!(stderr(&output).contains("no-such-scene.json"));
