@@ -782,8 +782,9 @@ fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
 }
 
 /// The half-row loop with AVX2 intrinsics: the operations of [`sum_half_row`] in the same
-/// order, 8 lanes at a time (no fused multiply-add is formed), so the result is the same bit
-/// for bit.
+/// order, 8 lanes at a time, so the result is the same bit for bit: the f32 part forms no
+/// fused multiply-add, and the f64 accumulation `acc + a G` uses one only because `a G` is
+/// exact there.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use std::arch::x86_64::*;
@@ -866,7 +867,8 @@ mod avx2 {
         let mut lo = background.map(|b| _mm256_set1_pd(b + 0.0));
         let mut hi = lo;
         let mut pairs = 0_u64;
-        for entry in entries {
+        // `G` (zero outside the ellipse) and the pair count of one entry.
+        let evaluate = |entry: &RowEntry| -> (__m256, u32) {
             let kernel = &kernels[entry.kernel as usize];
             let shift = first - entry.offset;
             let t = _mm256_add_ps(
@@ -881,11 +883,7 @@ mod avx2 {
                 _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
                 valid,
             );
-            let mask = _mm256_movemask_ps(hit);
-            if mask == 0 {
-                continue;
-            }
-            pairs += u64::from(mask.count_ones());
+            let count = _mm256_movemask_ps(hit).count_ones();
             let g = if FAST {
                 exp_neg_half(q)
             } else {
@@ -896,14 +894,34 @@ mod avx2 {
                 // SAFETY: as above.
                 unsafe { _mm256_loadu_ps(values.as_ptr()) }
             };
-            let g = _mm256_and_ps(g, hit);
+            (_mm256_and_ps(g, hit), count)
+        };
+        let mut add = |entry: &RowEntry, g: __m256| {
+            let kernel = &kernels[entry.kernel as usize];
             let g_lo = _mm256_cvtps_pd(_mm256_castps256_ps128(g));
             let g_hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(g));
+            // `a G` is exact in f64 (two 24-bit significands), so the fused multiply-add
+            // rounds exactly as the portable loop's `acc + a G` does.
             for c in 0..3 {
                 let a = _mm256_set1_pd(kernel.amplitude[c]);
-                lo[c] = _mm256_add_pd(lo[c], _mm256_mul_pd(a, g_lo));
-                hi[c] = _mm256_add_pd(hi[c], _mm256_mul_pd(a, g_hi));
+                lo[c] = _mm256_fmadd_pd(a, g_lo, lo[c]);
+                hi[c] = _mm256_fmadd_pd(a, g_hi, hi[c]);
             }
+        };
+        // Two entries at a time: their exps are independent, so they overlap; the sums
+        // still take them in entry order.
+        let mut pairs_of = entries.chunks_exact(2);
+        for two in &mut pairs_of {
+            let (g0, n0) = evaluate(&two[0]);
+            let (g1, n1) = evaluate(&two[1]);
+            pairs += u64::from(n0 + n1);
+            add(&two[0], g0);
+            add(&two[1], g1);
+        }
+        for entry in pairs_of.remainder() {
+            let (g, n) = evaluate(entry);
+            pairs += u64::from(n);
+            add(entry, g);
         }
         for c in 0..3 {
             // SAFETY: each channel holds 8 doubles: 4 in `lo`, 4 in `hi`.

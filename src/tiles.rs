@@ -64,8 +64,22 @@ pub struct TileBins {
     pub tile_offsets: Vec<u32>,
     /// Projected-kernel indices, grouped by tile, ascending within a tile.
     pub proj_from_entry: Vec<u32>,
-    /// Scratch for the fill pass: the next free slot of each tile.
-    fill_cursor: Vec<u32>,
+    /// Scratch: per tile row (band of 16 pixel rows), its kernels in ascending order (CSR
+    /// by `band_offsets`), then its entries and per-tile counts.
+    band_offsets: Vec<u32>,
+    band_kernels: Vec<u32>,
+    bands: Vec<BandScratch>,
+}
+
+/// What one tile row's binning builds, kept between frames.
+#[derive(Clone, Debug, Default)]
+struct BandScratch {
+    /// `(kernel, first tile column, end tile column)` per kernel reaching the band.
+    reaches: Vec<(u32, u32, u32)>,
+    /// Entries per tile of the band, then their start offsets within the band.
+    counts: Vec<u32>,
+    /// The band's part of `proj_from_entry`, tile by tile.
+    entries: Vec<u32>,
 }
 
 impl TileBins {
@@ -97,63 +111,143 @@ impl TileBins {
     }
 }
 
-/// Bins `proj` for a `width × height` image into `out`, reusing its buffers.
+/// Bins `proj` for a `width × height` image into `out`, reusing its buffers. Tile rows are
+/// binned in parallel (one ellipse–tile-row test per kernel and tile row); the lists are the
+/// same whatever the number of threads.
 pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins) {
+    use rayon::prelude::*;
     out.width = width;
     out.height = height;
     out.tiles_x = width.div_ceil(TILE_SIZE);
     out.tiles_y = height.div_ceil(TILE_SIZE);
-    let tiles_x = out.tiles_x as usize;
+    let (tiles_x, tiles_y) = (out.tiles_x as usize, out.tiles_y as usize);
     out.pixel_bounds.clear();
-    for p in 0..proj.len() {
-        let [mx, my] = proj.means[p];
-        let [sxx, _, syy] = proj.covariances[p];
-        let q = padded_qmax(proj.qmax[p]);
-        let bounds = match (
-            pixel_span(mx, (q * sxx).sqrt(), 0, width),
-            pixel_span(my, (q * syy).sqrt(), 0, height),
-        ) {
-            (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1],
-            _ => [0, 0, 0, 0],
-        };
-        out.pixel_bounds.push(bounds);
-    }
-    // Count, prefix-sum, fill: kernels enter each tile's list in ascending order.
-    out.tile_offsets.clear();
-    out.tile_offsets.resize(out.tile_count() + 1, 0);
-    for p in 0..proj.len() {
-        for_each_tile_row(proj, p, out.pixel_bounds[p], |ty, txs| {
-            for tx in txs {
-                out.tile_offsets[ty as usize * tiles_x + tx as usize + 1] += 1;
-            }
+    out.pixel_bounds.resize(proj.len(), [0; 4]);
+    out.pixel_bounds
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(p, bounds)| {
+            let [mx, my] = proj.means[p];
+            let [sxx, _, syy] = proj.covariances[p];
+            let q = padded_qmax(proj.qmax[p]);
+            *bounds = match (
+                pixel_span(mx, (q * sxx).sqrt(), 0, width),
+                pixel_span(my, (q * syy).sqrt(), 0, height),
+            ) {
+                (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1],
+                _ => [0, 0, 0, 0],
+            };
         });
+    // Kernels by tile row (counting sort, ascending within each row).
+    let band_range = |[x0, x1, y0, y1]: [u32; 4]| {
+        if x0 >= x1 || y0 >= y1 {
+            0..0
+        } else {
+            (y0 / TILE_SIZE) as usize..y1.div_ceil(TILE_SIZE) as usize
+        }
+    };
+    out.band_offsets.clear();
+    out.band_offsets.resize(tiles_y + 1, 0);
+    for bounds in &out.pixel_bounds {
+        for band in band_range(*bounds) {
+            out.band_offsets[band + 1] += 1;
+        }
     }
-    for t in 0..out.tile_count() {
-        out.tile_offsets[t + 1] += out.tile_offsets[t];
+    for band in 0..tiles_y {
+        out.band_offsets[band + 1] += out.band_offsets[band];
     }
-    out.proj_from_entry.clear();
-    out.proj_from_entry
-        .resize(out.tile_offsets[out.tile_count()] as usize, 0);
-    out.fill_cursor.clear();
-    out.fill_cursor
-        .extend_from_slice(&out.tile_offsets[..out.tile_count()]);
-    for p in 0..proj.len() {
-        for_each_tile_row(proj, p, out.pixel_bounds[p], |ty, txs| {
-            for tx in txs {
-                let slot = &mut out.fill_cursor[ty as usize * tiles_x + tx as usize];
-                out.proj_from_entry[*slot as usize] = p as u32;
+    out.band_kernels.clear();
+    out.band_kernels
+        .resize(out.band_offsets[tiles_y] as usize, 0);
+    {
+        let mut cursor = out.band_offsets[..tiles_y].to_vec();
+        for (p, bounds) in out.pixel_bounds.iter().enumerate() {
+            for band in band_range(*bounds) {
+                out.band_kernels[cursor[band] as usize] = p as u32;
+                cursor[band] += 1;
+            }
+        }
+    }
+    // Each tile row: its kernels' tile columns, then a counting sort by tile.
+    out.bands.resize_with(tiles_y, BandScratch::default);
+    let (band_offsets, band_kernels, pixel_bounds) =
+        (&out.band_offsets, &out.band_kernels, &out.pixel_bounds);
+    out.bands.par_iter_mut().enumerate().for_each(|(ty, band)| {
+        band.reaches.clear();
+        band.counts.clear();
+        band.counts.resize(tiles_x + 1, 0);
+        let kernels = &band_kernels[band_offsets[ty] as usize..band_offsets[ty + 1] as usize];
+        for &p in kernels {
+            if let Some(columns) =
+                tile_columns(proj, p as usize, pixel_bounds[p as usize], ty as u32)
+            {
+                for tx in columns.clone() {
+                    band.counts[tx as usize + 1] += 1;
+                }
+                band.reaches.push((p, columns.start, columns.end));
+            }
+        }
+        for tx in 0..tiles_x {
+            band.counts[tx + 1] += band.counts[tx];
+        }
+        band.entries.clear();
+        band.entries.resize(band.counts[tiles_x] as usize, 0);
+        for &(p, c0, c1) in &band.reaches {
+            for tx in c0..c1 {
+                let slot = &mut band.counts[tx as usize];
+                band.entries[*slot as usize] = p;
                 *slot += 1;
             }
-        });
+        }
+        // `counts[tx]` is now the end of tile tx's entries within the band.
+    });
+    // Concatenate the bands: offsets per tile, then the entries.
+    out.tile_offsets.clear();
+    out.tile_offsets.resize(out.tile_count() + 1, 0);
+    let mut total = 0_u32;
+    for (ty, band) in out.bands.iter().enumerate() {
+        for tx in 0..tiles_x {
+            out.tile_offsets[ty * tiles_x + tx + 1] = total + band.counts[tx];
+        }
+        total += band.entries.len() as u32;
     }
+    out.proj_from_entry.clear();
+    out.proj_from_entry.resize(total as usize, 0);
+    let mut rest = out.proj_from_entry.as_mut_slice();
+    let mut chunks = Vec::with_capacity(tiles_y);
+    for band in &out.bands {
+        let (head, tail) = rest.split_at_mut(band.entries.len());
+        chunks.push((head, &band.entries));
+        rest = tail;
+    }
+    chunks
+        .into_par_iter()
+        .for_each(|(to, from)| to.copy_from_slice(from));
 }
 
-/// Calls `visit(ty, tx0..tx1)` for each tile row of projected kernel `p` (pixel rectangle
-/// `bounds`) with the tile columns its ellipse reaches there (see the module docs).
+/// The tile columns of tile row `ty` that projected kernel `p` (pixel rectangle `bounds`)
+/// reaches (see the module docs), or `None`.
+fn tile_columns(
+    proj: &ProjectedKernels,
+    p: usize,
+    bounds: [u32; 4],
+    ty: u32,
+) -> Option<std::ops::Range<u32>> {
+    let mut columns = None;
+    for_each_tile_row(proj, p, bounds, ty..ty + 1, |_, range| {
+        columns = Some(range)
+    });
+    columns
+}
+
+/// Calls `visit(ty, tx0..tx1)` for each tile row `ty` in `rows` of projected kernel `p`
+/// (pixel rectangle `bounds`) with the tile columns its ellipse reaches there (see the module
+/// docs).
 fn for_each_tile_row(
     proj: &ProjectedKernels,
     p: usize,
     [x0, x1, y0, y1]: [u32; 4],
+    rows: std::ops::Range<u32>,
     mut visit: impl FnMut(u32, std::ops::Range<u32>),
 ) {
     if x0 >= x1 || y0 >= y1 {
@@ -173,7 +267,7 @@ fn for_each_tile_row(
         let centre = mx + shear * dv;
         (centre - half, centre + half)
     };
-    for ty in y0 / TILE_SIZE..y1.div_ceil(TILE_SIZE) {
+    for ty in (y0 / TILE_SIZE).max(rows.start)..y1.div_ceil(TILE_SIZE).min(rows.end) {
         // Pixel rows of this tile row that the kernel's box covers, as offsets from m2y.
         let first = (ty * TILE_SIZE).max(y0);
         let last = ((ty + 1) * TILE_SIZE).min(y1) - 1;

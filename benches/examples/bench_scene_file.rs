@@ -1,0 +1,20 @@
+//! Writes a seeded bench scene and its camera as files, for timing whole `splat4d render`
+//! processes:
+//! `cargo run --release -p splat4d-benches --example bench_scene_file -- KERNELS WIDTH HEIGHT SCENE.ply CAMERA.json`.
+
+use splat4d::scenes::synthetic::{bench_camera, bench_scene};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [kernels, width, height, scene_path, camera_path] = args.as_slice() else {
+        return Err("usage: bench_scene_file KERNELS WIDTH HEIGHT SCENE.ply CAMERA.json".into());
+    };
+    let scene = bench_scene(kernels.parse()?, 42);
+    let camera = bench_camera(width.parse()?, height.parse()?);
+    splat4d::io::scene_file::save_scene(&scene, std::path::Path::new(scene_path))?;
+    std::fs::write(
+        camera_path,
+        splat4d::io::camera_file::camera_to_json(&camera),
+    )?;
+    Ok(())
+}
