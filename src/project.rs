@@ -42,6 +42,8 @@ pub struct ProjectedKernels {
     pub radii: Vec<[f64; 2]>,
     /// Sliced amplitude `a(τ)`, f32 for the per-pixel loop.
     pub amplitudes: Vec<[f32; 3]>,
+    /// Scratch of [`project`]: every sliced kernel's projection, kept between frames.
+    scratch: Vec<Option<Projection>>,
 }
 
 impl ProjectedKernels {
@@ -175,11 +177,23 @@ pub fn project_one(
 }
 
 /// Projects every sliced kernel into `out` (reset first). `dilation` is `s` of SPEC §4, px².
+/// The kernels are projected in parallel, then kept in ascending order (the result does not
+/// depend on the thread count).
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
+    use rayon::prelude::*;
     out.reset();
-    for s in 0..sliced.len() {
-        let Some(proj) = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
-        else {
+    let mut projections = std::mem::take(&mut out.scratch);
+    projections.clear();
+    projections.resize(sliced.len(), None);
+    projections
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(256)
+        .for_each(|(s, slot)| {
+            *slot = project_one(camera, dilation, sliced.means[s], sliced.covariances[s]);
+        });
+    for (s, projection) in projections.iter().enumerate() {
+        let Some(proj) = projection else {
             continue;
         };
         let qmax = sliced.qmax[s];
@@ -195,4 +209,5 @@ pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut
         ]);
         out.amplitudes.push(sliced.amplitudes[s].map(|a| a as f32));
     }
+    out.scratch = projections;
 }

@@ -64,10 +64,28 @@ pub fn encode_image<W: Write + Seek>(
     let (w, h) = (image.width, image.height);
     match (kind, depth) {
         (ImageKind::Exr, _) => {
-            let buf: ImageBuffer<Rgb<f32>, Vec<f32>> =
-                ImageBuffer::from_raw(w, h, image.pixels.clone())
-                    .expect("image size matches its pixels");
-            buf.write_to(out, ImageFormat::OpenExr)
+            // Uncompressed scan lines: float renders hardly compress, and writing them is a
+            // copy (RLE cost more time than the 1080p frame's binning, for no size gained).
+            use exr::prelude::{Encoding, Image as ExrImage, SpecificChannels, WritableImage};
+            let width = w as usize;
+            let pixels = &image.pixels;
+            ExrImage::from_encoded_channels(
+                (width, h as usize),
+                Encoding::UNCOMPRESSED,
+                SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
+                    let k = 3 * (p.y() * width + p.x());
+                    (pixels[k], pixels[k + 1], pixels[k + 2])
+                }),
+            )
+            .write()
+            .to_buffered(out)
+            .map_err(|e| match e {
+                exr::error::Error::Io(io) => image::ImageError::IoError(io),
+                other => image::ImageError::Encoding(image::error::EncodingError::new(
+                    image::error::ImageFormatHint::Exact(ImageFormat::OpenExr),
+                    other,
+                )),
+            })
         }
         (ImageKind::Png, BitDepth::Eight) => {
             let data = image
