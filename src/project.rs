@@ -188,7 +188,7 @@ pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut
     projections
         .par_iter_mut()
         .enumerate()
-        .with_min_len(256)
+        .with_min_len(1024)
         .for_each(|(s, slot)| {
             *slot = project_one(camera, dilation, sliced.means[s], sliced.covariances[s]);
         });

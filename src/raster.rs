@@ -203,7 +203,7 @@ pub struct RowForm {
 pub fn row_forms(proj: &ProjectedKernels, bins: &TileBins, forms: &mut Vec<RowForm>) {
     forms.clear();
     forms.resize(proj.len(), RowForm::default());
-    forms.par_iter_mut().enumerate().for_each(|(p, form)| {
+    forms.par_iter_mut().enumerate().with_min_len(1024).for_each(|(p, form)| {
         let [_, sxy, syy] = proj.covariances[p];
         *form = RowForm {
             mean: proj.means[p],

@@ -126,6 +126,7 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
     out.pixel_bounds
         .par_iter_mut()
         .enumerate()
+        .with_min_len(1024)
         .for_each(|(p, bounds)| {
             let [mx, my] = proj.means[p];
             let [sxx, _, syy] = proj.covariances[p];
