@@ -34,7 +34,7 @@ use rayon::prelude::*;
 
 use crate::model::Image;
 use crate::project::ProjectedKernels;
-use crate::tiles::{TILE_SIZE, TileBins, padded_qmax, pixel_span};
+use crate::tiles::{TILE_SIZE, TileBins, padded_qmax};
 
 /// How the per-pixel loops evaluate `G = exp(-½ q)` in f32.
 ///
@@ -172,11 +172,11 @@ impl fmt::Display for SimdPath {
 }
 
 /// Pixels of one tile row.
-const ROW: usize = TILE_SIZE as usize;
+pub(crate) const ROW: usize = TILE_SIZE as usize;
 
 /// Pixels of one half tile row: the vector the per-pixel loop works on (8 f32 lanes, one
 /// AVX2 register; the accumulators, 3 × 8 f64, fit in registers beside the exp's constants).
-const LANES: usize = ROW / 2;
+pub(crate) const LANES: usize = ROW / 2;
 
 /// Per projected kernel, the f64 constants of its rows (from [`ProjectedKernels`]; computed
 /// once per frame so that the per-(kernel, tile) setup needs no division or square root).
@@ -203,57 +203,65 @@ pub struct RowForm {
 pub fn row_forms(proj: &ProjectedKernels, bins: &TileBins, forms: &mut Vec<RowForm>) {
     forms.clear();
     forms.resize(proj.len(), RowForm::default());
-    forms.par_iter_mut().enumerate().with_min_len(1024).for_each(|(p, form)| {
-        let [_, sxy, syy] = proj.covariances[p];
-        *form = RowForm {
-            mean: proj.means[p],
-            qxx: proj.conics[p][0],
-            shear: -sxy / syy,
-            inv_syy: 1.0 / syy,
-            q_reach: padded_qmax(proj.qmax[p]),
-            bounds: bins.pixel_bounds[p],
-            pixel: TileKernel {
-                qxx: proj.conics[p][0] as f32,
-                qmax: proj.qmax[p] as f32,
-                amplitude: proj.amplitudes[p].map(f64::from),
-            },
-        };
-    });
+    forms
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(p, form)| {
+            let [_, sxy, syy] = proj.covariances[p];
+            *form = RowForm {
+                mean: proj.means[p],
+                qxx: proj.conics[p][0],
+                shear: -sxy / syy,
+                inv_syy: 1.0 / syy,
+                q_reach: padded_qmax(proj.qmax[p]),
+                bounds: bins.pixel_bounds[p],
+                pixel: TileKernel {
+                    qxx: proj.conics[p][0] as f32,
+                    qmax: proj.qmax[p] as f32,
+                    amplitude: proj.amplitudes[p].map(f64::from),
+                },
+            };
+        });
 }
 
 /// A kernel of the tile being summed: what every row of it shares.
 #[derive(Clone, Copy, Debug, Default)]
-struct TileKernel {
+pub(crate) struct TileKernel {
     /// `Qxx`, f32.
-    qxx: f32,
+    pub(crate) qxx: f32,
     /// `qmax` (may be `+∞`).
-    qmax: f32,
+    pub(crate) qmax: f32,
     /// `a(τ)`, widened to f64 (exactly) for the f64 products.
-    amplitude: [f64; 3],
+    pub(crate) amplitude: [f64; 3],
 }
 
 /// One kernel on one row of the tile: lane `i` (pixel `x0 + i`) has
 /// `t = ((i - offset) + t_anchor)`, `q = Qxx t² + row_q`.
 #[derive(Clone, Copy, Debug)]
-struct RowEntry {
+pub(crate) struct RowEntry {
     /// `t` at the anchor pixel (the tile pixel nearest the ellipse's centre line), rounded
     /// once from f64: a thin ellipse multiplies this rounding by its large `Qxx`, so it is
     /// taken where `|t|` is smallest; the other lanes add exact integers.
-    t_anchor: f32,
+    pub(crate) t_anchor: f32,
     /// The anchor's lane, as f32 (exact).
-    offset: f32,
+    pub(crate) offset: f32,
     /// `Δv²/Σ2yy`, the row's part of `q`.
-    row_q: f32,
+    pub(crate) row_q: f32,
+    /// `Δv`, the row's offset from the centre (for the backward's moments).
+    pub(crate) dv: f32,
     /// Index into the tile's [`TileKernel`]s.
-    kernel: u32,
+    pub(crate) kernel: u32,
 }
 
 /// Scratch of one worker: the current tile's kernels and, per half row of the tile (row
 /// `r`, half `h` at index `2 r + h`), its entries in ascending kernel order.
 #[derive(Default)]
-struct TileScratch {
-    kernels: Vec<TileKernel>,
-    halves: [Vec<RowEntry>; 2 * ROW],
+pub(crate) struct TileScratch {
+    pub(crate) kernels: Vec<TileKernel>,
+    /// For each of `kernels`, its position in the tile's list (`TileBins::tile_entries`).
+    pub(crate) entry_of: Vec<u32>,
+    pub(crate) halves: [Vec<RowEntry>; 2 * ROW],
 }
 
 thread_local! {
@@ -339,9 +347,15 @@ pub fn rasterize_on(
 /// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
 /// path).
 #[inline(always)]
-fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut TileScratch) {
+pub(crate) fn prepare_tile(
+    bins: &TileBins,
+    forms: &[RowForm],
+    t: usize,
+    scratch: &mut TileScratch,
+) {
     let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
     scratch.kernels.clear();
+    scratch.entry_of.clear();
     for half in &mut scratch.halves {
         half.clear();
     }
@@ -375,8 +389,6 @@ fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut Tile
                 _mm_prefetch::<_MM_HINT_T0>(forms.as_ptr().add(ahead as usize).cast());
             }
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = n;
         let form = &forms[p as usize];
         let [bx0, bx1, by0, by1] = form.bounds;
         // Pixel centres of the tile within the kernel's box, per half row.
@@ -394,6 +406,7 @@ fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut Tile
         let mut t_anchor = [0.0_f32; ROW];
         let mut offset = [0.0_f32; ROW];
         let mut row_q32 = [0.0_f32; ROW];
+        let mut dv32 = [0.0_f32; ROW];
         for r in 0..ROW {
             let dv = (j0 + ROW_OFFSETS[r]) + 0.5 - my;
             let row_q = dv * dv * form.inv_syy;
@@ -409,6 +422,7 @@ fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut Tile
             t_anchor[r] = (x0 + anchor + 0.5 - centre) as f32;
             offset[r] = anchor as f32;
             row_q32[r] = row_q as f32;
+            dv32[r] = dv as f32;
         }
         let kernel = scratch.kernels.len() as u32;
         let mut used = false;
@@ -417,6 +431,7 @@ fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut Tile
                 t_anchor: t_anchor[r],
                 offset: offset[r],
                 row_q: row_q32[r],
+                dv: dv32[r],
                 kernel,
             };
             let row = (first_row - ty0) as usize + r;
@@ -431,6 +446,7 @@ fn prepare_tile(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut Tile
         }
         if used {
             scratch.kernels.push(form.pixel);
+            scratch.entry_of.push(n as u32);
         }
     }
 }
@@ -622,107 +638,6 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
     pairs
 }
 
-/// One row of one kernel inside one tile: the pixels `i0..i1` of row `j` that may hold a
-/// pair, and what the per-pixel f32 loop needs.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RowSpan {
-    /// Pixel row.
-    pub j: u32,
-    /// First pixel column of the span.
-    pub i0: u32,
-    /// One past the last pixel column.
-    pub i1: u32,
-    /// `t = Δu + k Δv` at pixel `anchor`, rounded once from f64. The anchor is the pixel of
-    /// the span nearest the ellipse's centre line, where `|t|` and so its rounding are
-    /// smallest: a thin ellipse multiplies that rounding by its large `Qxx`.
-    pub t_anchor: f32,
-    /// The pixel column `t_anchor` belongs to.
-    pub anchor: u32,
-    /// `Δv = j + 0.5 - m2y`.
-    pub dv: f32,
-    /// `Δv²/Σ2yy`, the row's part of `q`.
-    pub row_q: f32,
-}
-
-impl RowSpan {
-    /// `t` at the `n`-th pixel of the span: the anchor's `t` plus an exact integer step.
-    #[inline(always)]
-    pub fn t(&self, n: u32) -> f32 {
-        // Pixel columns are below 2²⁸ (camera validation), so the difference is exact in i32.
-        self.t_anchor + ((self.i0 + n) as i32 - self.anchor as i32) as f32
-    }
-}
-
-/// The per-pixel constants of projected kernel `p`.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PixelKernel {
-    /// `Qxx`.
-    pub qxx: f32,
-    /// `qmax` (may be `+∞`).
-    pub qmax: f32,
-    /// `a(τ)`.
-    pub amplitude: [f32; 3],
-}
-
-impl PixelKernel {
-    /// `q` at the `n`-th pixel of `row`.
-    #[inline(always)]
-    pub fn q(&self, row: &RowSpan, n: u32) -> f32 {
-        let t = row.t(n);
-        self.qxx * t * t + row.row_q
-    }
-}
-
-/// Calls `visit` for each row span of projected kernel `p` inside the pixel rectangle
-/// `[x0, x1) × [y0, y1)` (a tile), in ascending rows. Forward and backward both walk pairs
-/// through here, so they sum exactly the same pairs.
-#[inline(always)]
-pub(crate) fn for_each_row_span(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    p: usize,
-    [tx0, tx1, ty0, ty1]: [u32; 4],
-    mut visit: impl FnMut(&PixelKernel, RowSpan),
-) {
-    let [bx0, bx1, by0, by1] = bins.pixel_bounds[p];
-    let (x_lo, x_hi) = (bx0.max(tx0), bx1.min(tx1));
-    let [mx, my] = proj.means[p];
-    let [_, sxy, syy] = proj.covariances[p];
-    let qxx = proj.conics[p][0];
-    let shear = -sxy / syy;
-    let inv_syy = 1.0 / syy;
-    let q_reach = padded_qmax(proj.qmax[p]);
-    let kernel = PixelKernel {
-        qxx: qxx as f32,
-        qmax: proj.qmax[p] as f32,
-        amplitude: proj.amplitudes[p],
-    };
-    for j in by0.max(ty0)..by1.min(ty1) {
-        let dv = f64::from(j) + 0.5 - my;
-        let row_q = dv * dv * inv_syy;
-        let reach = q_reach - row_q;
-        if reach.is_nan() || reach < 0.0 {
-            continue;
-        }
-        let centre = mx - shear * dv;
-        let Some((i0, i1)) = pixel_span(centre, (reach / qxx).sqrt(), x_lo, x_hi) else {
-            continue;
-        };
-        // Pixel i has its centre at i + ½: floor(centre) is the pixel nearest the centre line.
-        let anchor = centre.floor().clamp(f64::from(i0), f64::from(i1 - 1));
-        let row = RowSpan {
-            j,
-            i0,
-            i1,
-            t_anchor: (anchor + 0.5 - centre) as f32,
-            anchor: anchor as u32,
-            dv: dv as f32,
-            row_q: row_q as f32,
-        };
-        visit(&kernel, row);
-    }
-}
-
 /// The ceiling probe: the ideal inner loop of an additive tile rasterizer on this CPU, to
 /// measure the renderer against (`splat4d bench --ceiling`). One row of 16 pixels, three
 /// channels of f32 accumulators kept in registers while every one of `kernels` kernels
@@ -786,7 +701,7 @@ fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
 /// fused multiply-add, and the f64 accumulation `acc + a G` uses one only because `a G` is
 /// exact there.
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+pub(crate) mod avx2 {
     use std::arch::x86_64::*;
 
     use super::{LANES, RowEntry, TileKernel};
@@ -794,7 +709,7 @@ mod avx2 {
     /// [`super::fast_exp_neg_half`] on 8 lanes.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    fn exp_neg_half(q: __m256) -> __m256 {
+    pub(crate) fn exp_neg_half(q: __m256) -> __m256 {
         let x = _mm256_max_ps(
             _mm256_mul_ps(_mm256_set1_ps(-0.5), q),
             _mm256_set1_ps(-87.0),

@@ -196,6 +196,7 @@ impl RenderContext {
         rasterize_backward(
             &self.projected,
             &self.bins,
+            &self.row_forms,
             v_image,
             options.exp,
             &mut buffers.entry_partials,

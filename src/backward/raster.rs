@@ -21,7 +21,9 @@
 use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
-use crate::raster::{ExpMode, for_each_row_span, gaussian};
+use crate::raster::{
+    ExpMode, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, gaussian, prepare_tile,
+};
 use crate::tiles::TileBins;
 
 /// Per projected kernel: the gradients at the screen-space stage.
@@ -36,23 +38,48 @@ pub struct ScreenGradients {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major, `width` pixels per row) into `out`, one
-/// entry per projected kernel (reset first). `partials` (one per tile entry) and `sums`
-/// (one per projected kernel) are scratch, kept between calls.
+/// entry per projected kernel (reset first). `forms` are the row forms of the forward render
+/// of the same frame ([`crate::raster::row_forms`]); `partials` (one per tile entry) and
+/// `sums` (one per projected kernel) are scratch, kept between calls.
+#[allow(clippy::too_many_arguments)]
 pub fn rasterize_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
+    forms: &[RowForm],
     v_image: &[f32],
     exp: ExpMode,
     partials: &mut Vec<[f32; 8]>,
     sums: &mut Vec<[f64; 8]>,
     out: &mut ScreenGradients,
 ) {
+    let path = SimdPath::detect();
+    rasterize_backward_on(path, proj, bins, forms, v_image, exp, partials, sums, out);
+}
+
+/// [`rasterize_backward`] on `path` (which the CPU must have).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rasterize_backward_on(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    forms: &[RowForm],
+    v_image: &[f32],
+    exp: ExpMode,
+    partials: &mut Vec<[f32; 8]>,
+    sums: &mut Vec<[f64; 8]>,
+    out: &mut ScreenGradients,
+) {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run {path}"
+    );
     let width = bins.width as usize;
     assert_eq!(
         v_image.len(),
         3 * width * bins.height as usize,
         "∂L/∂C has the image's size"
     );
+    assert_eq!(forms.len(), proj.len(), "the forward's row forms");
     partials.clear();
     partials.resize(bins.proj_from_entry.len(), [0.0; 8]);
     // One disjoint run of partials per tile.
@@ -63,98 +90,266 @@ pub fn rasterize_backward(
         runs.push((t, run));
         rest = tail;
     }
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
     runs.into_par_iter().for_each(|(t, run)| {
-        #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: the CPU has the features the function is compiled for.
-            unsafe { backward_tile_avx2(proj, bins, v_image, t, run, exp) };
-            return;
-        }
-        backward_tile_with(proj, bins, v_image, t, run, exp);
+        SCRATCH.with(|cell| {
+            let scratch = &mut *cell.borrow_mut();
+            backward_tile_on(path, exp, bins, forms, v_image, t, run, scratch);
+        });
     });
     reduce(proj, bins, partials, sums, out);
 }
 
-/// [`backward_tile`] compiled for AVX2 and FMA (inline rounding for the row spans, wider
-/// registers); the same operations, so the same bits (no fused operations are formed).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn backward_tile_avx2(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    v_image: &[f32],
-    t: usize,
-    run: &mut [[f32; 8]],
-    exp: ExpMode,
-) {
-    backward_tile_with(proj, bins, v_image, t, run, exp);
+/// Scratch of one worker: the tile's row entries (as the forward builds them) and, per
+/// kernel of the tile, its eight moments lane by lane.
+#[derive(Default)]
+struct BackwardScratch {
+    tile: TileScratch,
+    moments: Vec<Moments>,
 }
 
-/// [`backward_tile`] for `exp`.
-#[inline(always)]
-fn backward_tile_with(
-    proj: &ProjectedKernels,
+/// Per lane of a half row, the eight sums of one kernel over the tile's rows:
+/// `Σ ∂L/∂C_c G` (3), `Σ w t`, `Σ w t²`, `Σ Δv w`, `Σ Δv w t`, `Σ Δv² w`.
+type Moments = [[f32; LANES]; 8];
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<BackwardScratch> =
+        std::cell::RefCell::new(BackwardScratch::default());
+}
+
+/// [`backward_tile`] compiled for `path`.
+#[allow(clippy::too_many_arguments)]
+fn backward_tile_on(
+    path: SimdPath,
+    exp: ExpMode,
     bins: &TileBins,
+    forms: &[RowForm],
     v_image: &[f32],
     t: usize,
     run: &mut [[f32; 8]],
-    exp: ExpMode,
+    scratch: &mut BackwardScratch,
 ) {
-    match exp {
-        ExpMode::Std => backward_tile::<false>(proj, bins, v_image, t, run),
-        ExpMode::Poly => backward_tile::<true>(proj, bins, v_image, t, run),
+    match (path, exp) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `SimdPath::detect` found the features.
+        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            backward_tile_avx2::<true>(bins, forms, v_image, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+            backward_tile_avx2::<false>(bins, forms, v_image, t, run, scratch);
+        },
+        (_, ExpMode::Poly) => backward_tile::<true, false>(bins, forms, v_image, t, run, scratch),
+        (_, ExpMode::Std) => backward_tile::<false, false>(bins, forms, v_image, t, run, scratch),
     }
 }
 
-/// Accumulates tile `t`'s entries into `run` (one partial per entry).
-#[inline(always)]
-fn backward_tile<const FAST: bool>(
-    proj: &ProjectedKernels,
+/// [`backward_tile`] compiled for AVX2 and FMA, its half rows with intrinsics.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_tile_avx2<const FAST: bool>(
     bins: &TileBins,
+    forms: &[RowForm],
     v_image: &[f32],
     t: usize,
     run: &mut [[f32; 8]],
+    scratch: &mut BackwardScratch,
 ) {
+    backward_tile::<FAST, true>(bins, forms, v_image, t, run, scratch);
+}
+
+/// Accumulates tile `t`'s entries into `run` (one partial per entry): the forward's row
+/// entries, half row by half row; each kernel's moments are summed lane by lane over the
+/// tile's rows (f32, at most 16 terms a lane), then over the lanes in f64.
+#[inline(always)]
+fn backward_tile<const FAST: bool, const AVX2: bool>(
+    bins: &TileBins,
+    forms: &[RowForm],
+    v_image: &[f32],
+    t: usize,
+    run: &mut [[f32; 8]],
+    scratch: &mut BackwardScratch,
+) {
+    prepare_tile(bins, forms, t, &mut scratch.tile);
+    let tile = &scratch.tile;
+    scratch.moments.clear();
+    scratch
+        .moments
+        .resize(tile.kernels.len(), [[0.0; LANES]; 8]);
+    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
     let width = bins.width as usize;
-    {
-        let rect = bins.tile_rect(t);
-        for (slot, &p) in run.iter_mut().zip(bins.tile_entries(t)) {
-            let mut acc = [0.0_f32; 8];
-            for_each_row_span(proj, bins, p as usize, rect, |kernel, row| {
-                let mut v_a = [0.0_f32; 3];
-                let (mut w0, mut w1, mut w2) = (0.0_f32, 0.0_f32, 0.0_f32);
-                let base = 3 * (row.j as usize * width + row.i0 as usize);
-                for n in 0..row.i1 - row.i0 {
-                    let q = kernel.q(&row, n);
-                    if q <= kernel.qmax {
-                        let g = gaussian::<FAST>(q);
-                        let k = base + 3 * n as usize;
-                        let v_c = [v_image[k], v_image[k + 1], v_image[k + 2]];
-                        v_a[0] += v_c[0] * g;
-                        v_a[1] += v_c[1] * g;
-                        v_a[2] += v_c[2] * g;
-                        let w = (v_c[0] * kernel.amplitude[0]
-                            + v_c[1] * kernel.amplitude[1]
-                            + v_c[2] * kernel.amplitude[2])
-                            * g;
-                        let t = row.t(n);
-                        w0 += w;
-                        w1 += w * t;
-                        w2 += w * t * t;
-                    }
+    let tile_width = (tx1 - tx0) as usize;
+    for r in 0..(ty1 - ty0) as usize {
+        for h in 0..2 {
+            let first = h * LANES;
+            if first >= tile_width {
+                break;
+            }
+            let lanes = (tile_width - first).min(LANES);
+            // ∂L/∂C of the half row, channel by channel; zero past the image's edge.
+            let mut v = [[0.0_f32; LANES]; 3];
+            let start = 3 * ((ty0 as usize + r) * width + tx0 as usize + first);
+            for (i, pixel) in v_image[start..start + 3 * lanes]
+                .chunks_exact(3)
+                .enumerate()
+            {
+                for c in 0..3 {
+                    v[c][i] = pixel[c];
                 }
-                acc[0] += v_a[0];
-                acc[1] += v_a[1];
-                acc[2] += v_a[2];
-                acc[3] += w1;
-                acc[4] += w2;
-                acc[5] += row.dv * w0;
-                acc[6] += row.dv * w1;
-                acc[7] += row.dv * row.dv * w0;
-            });
-            *slot = acc;
+            }
+            let entries = &tile.halves[2 * r + h];
+            let (first_lane, lanes_f) = (first as f32, lanes as f32);
+            if AVX2 {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: AVX2 is only asked for on the paths that have it.
+                unsafe {
+                    avx2::half_row::<FAST>(
+                        entries,
+                        &tile.kernels,
+                        first_lane,
+                        lanes_f,
+                        &v,
+                        &mut scratch.moments,
+                    );
+                }
+            } else {
+                half_row::<FAST>(
+                    entries,
+                    &tile.kernels,
+                    first_lane,
+                    lanes_f,
+                    &v,
+                    &mut scratch.moments,
+                );
+            }
+        }
+    }
+    for (moments, &n) in scratch.moments.iter().zip(&tile.entry_of) {
+        run[n as usize] =
+            std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32);
+    }
+}
+
+/// One half row's entries into their kernels' moments (lane `i` is tile pixel `first + i`;
+/// lanes at or past `lanes` are outside the image and add zero).
+#[inline(always)]
+fn half_row<const FAST: bool>(
+    entries: &[RowEntry],
+    kernels: &[TileKernel],
+    first: f32,
+    lanes: f32,
+    v: &[[f32; LANES]; 3],
+    moments: &mut [Moments],
+) {
+    for entry in entries {
+        let kernel = &kernels[entry.kernel as usize];
+        let a = kernel.amplitude.map(|a| a as f32);
+        let shift = first - entry.offset;
+        let (dv, dv2) = (entry.dv, entry.dv * entry.dv);
+        let m = &mut moments[entry.kernel as usize];
+        for i in 0..LANES {
+            let lane = i as f32;
+            let t = (lane + shift) + entry.t_anchor;
+            let q = kernel.qxx * t * t + entry.row_q;
+            let hit = q <= kernel.qmax && lane < lanes;
+            let value = gaussian::<FAST>(q);
+            let g = if hit { value } else { 0.0 };
+            let w = (v[0][i] * a[0] + v[1][i] * a[1] + v[2][i] * a[2]) * g;
+            let wt = w * t;
+            m[0][i] += v[0][i] * g;
+            m[1][i] += v[1][i] * g;
+            m[2][i] += v[2][i] * g;
+            m[3][i] += wt;
+            m[4][i] += wt * t;
+            m[5][i] += dv * w;
+            m[6][i] += dv * wt;
+            m[7][i] += dv2 * w;
+        }
+    }
+}
+
+/// [`half_row`] with AVX2 intrinsics: the same operations in the same order (no fused
+/// multiply-add), so the same bits.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    use super::Moments;
+    use crate::raster::avx2::exp_neg_half;
+    use crate::raster::{LANES, RowEntry, TileKernel};
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn half_row<const FAST: bool>(
+        entries: &[RowEntry],
+        kernels: &[TileKernel],
+        first: f32,
+        lanes: f32,
+        v: &[[f32; LANES]; 3],
+        moments: &mut [Moments],
+    ) {
+        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+        let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(iota, _mm256_set1_ps(lanes));
+        // SAFETY: each channel holds 8 floats.
+        let v = v.map(|c| unsafe { _mm256_loadu_ps(c.as_ptr()) });
+        for entry in entries {
+            let kernel = &kernels[entry.kernel as usize];
+            let a = kernel.amplitude.map(|a| _mm256_set1_ps(a as f32));
+            let shift = first - entry.offset;
+            let t = _mm256_add_ps(
+                _mm256_add_ps(iota, _mm256_set1_ps(shift)),
+                _mm256_set1_ps(entry.t_anchor),
+            );
+            let q = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
+                _mm256_set1_ps(entry.row_q),
+            );
+            let hit = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
+                valid,
+            );
+            if _mm256_movemask_ps(hit) == 0 {
+                // Every term is zero: adding them would change nothing (sums start at +0).
+                continue;
+            }
+            let value = if FAST {
+                exp_neg_half(q)
+            } else {
+                let mut values = [0.0_f32; LANES];
+                // SAFETY: `values` holds 8 floats.
+                unsafe { _mm256_storeu_ps(values.as_mut_ptr(), q) };
+                let values = values.map(|q| (-0.5 * q).exp());
+                // SAFETY: as above.
+                unsafe { _mm256_loadu_ps(values.as_ptr()) }
+            };
+            let g = _mm256_and_ps(value, hit);
+            let w = _mm256_mul_ps(
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(v[0], a[0]), _mm256_mul_ps(v[1], a[1])),
+                    _mm256_mul_ps(v[2], a[2]),
+                ),
+                g,
+            );
+            let wt = _mm256_mul_ps(w, t);
+            let dv = _mm256_set1_ps(entry.dv);
+            let dv2 = _mm256_set1_ps(entry.dv * entry.dv);
+            let terms = [
+                _mm256_mul_ps(v[0], g),
+                _mm256_mul_ps(v[1], g),
+                _mm256_mul_ps(v[2], g),
+                wt,
+                _mm256_mul_ps(wt, t),
+                _mm256_mul_ps(dv, w),
+                _mm256_mul_ps(dv, wt),
+                _mm256_mul_ps(dv2, w),
+            ];
+            let m = &mut moments[entry.kernel as usize];
+            for (sum, term) in m.iter_mut().zip(terms) {
+                // SAFETY: each moment holds 8 floats.
+                unsafe {
+                    let p = sum.as_mut_ptr();
+                    _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), term));
+                }
+            }
         }
     }
 }
@@ -191,5 +386,63 @@ fn reduce(
             0.5 * a * (b * s_tt + e * s_tv),
             0.5 * (b * b * s_tt + 2.0 * b * e * s_tv + e * e * s_vv),
         ]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::random::seeded_rng;
+    use crate::render::{RenderContext, RenderOptions};
+    use rand::RngExt;
+
+    #[test]
+    fn every_simd_path_gives_the_same_gradients_bit_for_bit() {
+        // 161 × 97: partial tiles on the right and at the bottom.
+        let camera = crate::scenes::synthetic::bench_camera(161, 97);
+        let scene = crate::scenes::synthetic::bench_scene(2000, 9);
+        for exp in ExpMode::ALL {
+            let options = RenderOptions {
+                exp,
+                ..RenderOptions::default()
+            };
+            let mut context = RenderContext::new();
+            context.render(&scene, &camera, 0.5, &options).unwrap();
+            let mut rng = seeded_rng(3);
+            let v_image: Vec<f32> = (0..3 * 161 * 97)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect();
+            let mut forms = Vec::new();
+            crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
+            let mut results = Vec::new();
+            for path in SimdPath::available() {
+                let (mut partials, mut sums) = (Vec::new(), Vec::new());
+                let mut out = ScreenGradients::default();
+                rasterize_backward_on(
+                    path,
+                    &context.projected,
+                    &context.bins,
+                    &forms,
+                    &v_image,
+                    exp,
+                    &mut partials,
+                    &mut sums,
+                    &mut out,
+                );
+                assert!(partials.iter().flatten().any(|&p| p != 0.0));
+                results.push((path, partials));
+            }
+            for (path, partials) in &results[1..] {
+                assert!(
+                    partials
+                        .iter()
+                        .flatten()
+                        .zip(results[0].1.iter().flatten())
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{exp}: {path} differs from {}",
+                    results[0].0
+                );
+            }
+        }
     }
 }
