@@ -6,14 +6,16 @@
 //!
 //! in ascending kernel order, no sorting and no compositing.
 //!
-//! **Layout of the work.** One tile row of 16 pixels is the vector. Per tile, each listed
-//! kernel is set up once in f64 (no division or square root: the per-kernel constants come
-//! from [`row_forms`]) into a per-row list of entries: the rows whose chord of the padded
-//! ellipse ([`crate::tiles::padded_qmax`]) reaches a pixel centre of the tile. Then rows
-//! outer, kernels inner: three accumulators of 16 lanes (RGB) stay in registers **in f64**
-//! while every entry of the row passes over them, and the row is rounded to f32 and written
+//! **Layout of the work.** Half a tile row (8 pixels) is the vector. Per tile, each listed
+//! kernel is set up once in f64, branch-free over the tile's 16 rows (no division or square
+//! root: the per-kernel constants come from [`row_forms`], once per frame), into per-half-row
+//! lists of entries: the rows whose chord of the padded ellipse
+//! ([`crate::tiles::padded_qmax`]) reaches a pixel centre of that half row. Then rows outer,
+//! kernels inner: three accumulators of 8 lanes (RGB) stay in registers **in f64** while every
+//! entry of the half row passes over them, and the half row is rounded to f32 and written
 //! straight into the image. Tile rows (bands of 16 image rows) run in parallel; every pixel
-//! adds the same terms in the same order whatever the number of threads.
+//! adds the same terms in the same order whatever the number of threads. The backward
+//! ([`crate::backward::raster`]) walks the same entries.
 //!
 //! **Per pixel** (SPEC §5, precision): with `Δv` the row's offset from the centre, the
 //! quadratic form is `q = Qxx t² + Δv²/Σ2yy` with `t = Δu + k Δv` (see [`crate::project`]);
@@ -23,9 +25,13 @@
 //! `a_c · G` is an exact f64 product added to the f64 sum, so the error does not grow with
 //! the number of kernels on a pixel.
 //!
-//! **Paths.** The same loop is compiled for AVX-512, AVX2+FMA and baseline x86-64 and one is
-//! chosen at run time ([`SimdPath`]); no fused operations are formed and every conversion is
-//! exact, so all paths give the same image bit for bit.
+//! **Paths.** The half-row loop is written twice, with AVX2 intrinsics and portably, with the
+//! same operations in the same order; the tile set-up is one portable loop compiled for each
+//! path (AVX-512, AVX2+FMA, baseline x86-64), chosen at run time ([`SimdPath`]). No fused
+//! operation is formed in f32, the one in the f64 accumulation rounds like `acc + a G`
+//! because `a G` is exact, and every conversion is exact, so all paths give the same image
+//! bit for bit (tested on every path the CPU has). [`ceiling_probe`] is the ideal loop the
+//! renderer is measured against.
 
 use std::fmt;
 use std::str::FromStr;
@@ -39,9 +45,9 @@ use crate::tiles::{TILE_SIZE, TileBins, padded_qmax};
 /// How the per-pixel loops evaluate `G = exp(-½ q)` in f32.
 ///
 /// The default is [`ExpMode::Poly`]: `splat4d bench --sweep` measured it on the whole
-/// speed-against-error front (the forward gathers pairs into batches evaluated with full
-/// vectors, 0.67–0.89× the time of `Std`, median 0.75×), at the same error against the f64
-/// reference's model.
+/// speed-against-error front (evaluated 8 lanes at a time with the rest of the loop, while
+/// `Std` calls libm once per lane: `Std` takes 1.6–1.8× the time), at the same error
+/// against the f64 reference's model.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ExpMode {
     /// The standard library's `f32::exp` (libm, within 1 ulp), one call per pair.

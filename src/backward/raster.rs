@@ -13,10 +13,13 @@
 //! `Q d` is formed in the basis of the forward's sum of squares (see [`crate::project`]):
 //! with `t = Δu + k Δv`, `Q d = (Qxx t, Qxy t + Δv/Σ2yy)`. For a thin, tilted ellipse `Q` is
 //! huge while `t` stays short, so moments of `(t, Δv)` keep their precision where moments of
-//! `(Δu, Δv)` would cancel in f32 before being multiplied by `Q`. Each tile accumulates, per
-//! (tile, kernel) entry, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` (f32, per row first);
-//! the pairs walked are the forward's, through the same row spans. The entries are reduced
-//! in entry order (tile-major) in f64, so the result does not depend on the thread count.
+//! `(Δu, Δv)` would cancel in f32 before being multiplied by `Q`. Each tile walks the
+//! forward's per-half-row entries ([`crate::raster`]: the same pairs, the same `t` and `q`)
+//! and accumulates, per kernel, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` lane by lane
+//! over the tile's rows (f32, at most 16 terms a lane), then over the 8 lanes in f64, into one
+//! partial per (tile, kernel) entry. The entries are reduced in entry order (tile-major) in
+//! f64: no atomics, and the result does not depend on the thread count or the SIMD path (the
+//! AVX2 loop performs the portable loop's operations in the same order).
 
 use rayon::prelude::*;
 

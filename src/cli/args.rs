@@ -57,7 +57,7 @@ pub struct RenderFlags {
     #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF, allow_negative_numbers = true)]
     cutoff: f64,
     /// How exp(-q/2) is evaluated per pixel: `poly` (inlined polynomial, relative error
-    /// ≤ 4e-7, batched and vectorised) or `std` (libm).
+    /// ≤ 4e-7, vectorised) or `std` (libm).
     #[arg(long, default_value = "poly")]
     exp: ExpMode,
     /// Worker threads (default: one per core). The output does not depend on it.

@@ -39,7 +39,7 @@ pub struct BenchArgs {
     /// Cut-off ε.
     #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF)]
     cutoff: f64,
-    /// How exp(-q/2) is evaluated: `poly` (inlined polynomial, batched and vectorised) or
+    /// How exp(-q/2) is evaluated: `poly` (inlined polynomial, vectorised) or
     /// `std` (libm).
     #[arg(long, default_value = "poly")]
     exp: ExpMode,

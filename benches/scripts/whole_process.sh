@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Whole `splat4d render` processes (load a 4D PLY, render, write an EXR) against the ceiling
+# probe measured in the same run: useful pairs per second over the probe's, per thread count.
+# Usage: bash benches/scripts/whole_process.sh [runs]   (from the repository root; ~1 min)
+set -euo pipefail
+runs=${1:-7}
+cargo build --release --quiet
+cargo build --release --quiet -p splat4d-benches --example bench_scene_file
+bin=target/release/splat4d
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+target/release/examples/bench_scene_file 100000 1920 1080 "$dir/s100k.ply" "$dir/c1080.json"
+target/release/examples/bench_scene_file 10000 512 512 "$dir/s10k.ply" "$dir/c512.json"
+ceilings=$("$bin" bench --ceiling 2>/dev/null)
+echo "$ceilings"
+for threads in 1 2; do
+  ceiling=$(echo "$ceilings" | grep "($(echo "$ceilings" | head -1 | sed 's/.*(\([a-z0-9]*\) path.*/\1/') path, $threads thread" | sed 's/.*: \([0-9.e+]*\) pairs.*/\1/')
+  for case in "s100k.ply c1080.json" "s10k.ply c512.json"; do
+    set -- $case
+    pairs=$("$bin" render --scene "$dir/$1" --camera "$dir/$2" --time 0.5 --out "$dir/o.exr" --threads "$threads" | sed 's/.* \([0-9]*\) pairs$/\1/')
+    times=()
+    for _ in $(seq "$runs"); do
+      start=$(date +%s.%N)
+      "$bin" render --scene "$dir/$1" --camera "$dir/$2" --time 0.5 --out "$dir/o.exr" --threads "$threads" >/dev/null
+      end=$(date +%s.%N)
+      times+=("$(echo "$end - $start" | bc -l)")
+    done
+    median=$(printf '%s\n' "${times[@]}" | sort -g | sed -n "$(( (runs + 1) / 2 ))p")
+    python3 -c "
+p, t, c = $pairs, $median, $ceiling
+print(f'{\"$1\":>10} {\"$threads\"} thread(s): median {t*1e3:.0f} ms, {p/1e6:.1f} M pairs, {p/t:.3e} pairs/s = {100*p/t/c:.1f}% of the ceiling')"
+  done
+done
