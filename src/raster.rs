@@ -318,8 +318,14 @@ pub fn rasterize_on(
     let (w, h) = (bins.width as usize, bins.height as usize);
     image.width = bins.width;
     image.height = bins.height;
-    image.pixels.clear();
-    image.pixels.resize(3 * w * h, 0.0);
+    // Every pixel is written below. A first (or larger) frame takes fresh zeroed pages from
+    // the system, so that they are touched first by the parallel tile rows, not by a serial
+    // fill here.
+    if image.pixels.capacity() < 3 * w * h {
+        image.pixels = vec![0.0; 3 * w * h];
+    } else {
+        image.pixels.resize(3 * w * h, 0.0);
+    }
     if w == 0 || h == 0 {
         return 0;
     }

@@ -33,6 +33,17 @@ pub struct SlicedKernels {
     pub amplitudes: Vec<[f64; 3]>,
     /// Cut-off `qmax` on the squared Mahalanobis radius (`+∞` without truncation).
     pub qmax: Vec<f64>,
+    /// Scratch of [`slice`]: every visited kernel's slice, kept between frames.
+    scratch: Vec<Option<SlicedKernel>>,
+}
+
+/// One kernel's slice.
+#[derive(Clone, Copy, Debug)]
+struct SlicedKernel {
+    mean: [f64; 3],
+    covariance: [f64; 6],
+    amplitude: [f64; 3],
+    qmax: f64,
 }
 
 impl SlicedKernels {
@@ -118,10 +129,7 @@ pub fn cutoff_radius_squared(amplitude: [f64; 3], d: f64, cutoff: f64) -> Option
 /// Slices `scene` at time `tau` into `out` (reset first), dropping kernels culled by the
 /// cut-off `cutoff` (ε of SPEC §5, ≥ 0).
 pub fn slice(scene: &Scene, tau: f64, cutoff: f64, out: &mut SlicedKernels) {
-    out.reset();
-    for i in 0..scene.len() {
-        slice_one(scene, i, tau, cutoff, out);
-    }
+    slice_visiting(scene, scene.len(), |k| k, tau, cutoff, out);
 }
 
 /// Slices only `candidates` (ascending scene indices, a superset of the kernels alive at
@@ -133,30 +141,63 @@ pub fn slice_candidates(
     cutoff: f64,
     out: &mut SlicedKernels,
 ) {
+    slice_visiting(
+        scene,
+        candidates.len(),
+        |k| candidates[k] as usize,
+        tau,
+        cutoff,
+        out,
+    );
+}
+
+/// Slices kernels `kernel(0..count)` (ascending) in parallel, then keeps the live ones in
+/// that order: the output does not depend on the thread count.
+fn slice_visiting(
+    scene: &Scene,
+    count: usize,
+    kernel: impl Fn(usize) -> usize + Sync,
+    tau: f64,
+    cutoff: f64,
+    out: &mut SlicedKernels,
+) {
+    use rayon::prelude::*;
     out.reset();
-    for &i in candidates {
-        slice_one(scene, i as usize, tau, cutoff, out);
+    let mut slices = std::mem::take(&mut out.scratch);
+    slices.clear();
+    slices.resize(count, None);
+    slices
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(k, slot)| *slot = slice_one(scene, kernel(k), tau, cutoff));
+    for (k, sliced) in slices.iter().enumerate() {
+        if let Some(one) = sliced {
+            out.kernel_from_slice.push(kernel(k) as u32);
+            out.means.push(one.mean);
+            out.covariances.push(one.covariance);
+            out.amplitudes.push(one.amplitude);
+            out.qmax.push(one.qmax);
+        }
     }
+    out.scratch = slices;
 }
 
 #[inline]
-fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64, out: &mut SlicedKernels) {
+fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKernel> {
     let [x, y, z, t] = scene.means[i];
     let scale = scene.scales[i];
     let dt = tau - t;
     let d = dt / scale[3];
-    let Some(qmax) = cutoff_radius_squared(scene.amplitudes[i], d, cutoff) else {
-        return;
-    };
+    let qmax = cutoff_radius_squared(scene.amplitudes[i], d, cutoff)?;
     let w = (-0.5 * d * d).exp();
     let v = scene.velocities[i];
-    out.kernel_from_slice.push(i as u32);
-    out.means
-        .push([x + v[0] * dt, y + v[1] * dt, z + v[2] * dt]);
-    out.covariances
-        .push(covariance_3d(scene.rotations[i], scale));
-    out.amplitudes.push(scene.amplitudes[i].map(|a| a * w));
-    out.qmax.push(qmax);
+    Some(SlicedKernel {
+        mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
+        covariance: covariance_3d(scene.rotations[i], scale),
+        amplitude: scene.amplitudes[i].map(|a| a * w),
+        qmax,
+    })
 }
 
 /// Which kernels can be alive at a time, so that a frame visits those and not the whole

@@ -63,30 +63,7 @@ pub fn encode_image<W: Write + Seek>(
 ) -> image::ImageResult<()> {
     let (w, h) = (image.width, image.height);
     match (kind, depth) {
-        (ImageKind::Exr, _) => {
-            // Uncompressed scan lines: float renders hardly compress, and writing them is a
-            // copy (RLE cost more time than the 1080p frame's binning, for no size gained).
-            use exr::prelude::{Encoding, Image as ExrImage, SpecificChannels, WritableImage};
-            let width = w as usize;
-            let pixels = &image.pixels;
-            ExrImage::from_encoded_channels(
-                (width, h as usize),
-                Encoding::UNCOMPRESSED,
-                SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
-                    let k = 3 * (p.y() * width + p.x());
-                    (pixels[k], pixels[k + 1], pixels[k + 2])
-                }),
-            )
-            .write()
-            .to_buffered(out)
-            .map_err(|e| match e {
-                exr::error::Error::Io(io) => image::ImageError::IoError(io),
-                other => image::ImageError::Encoding(image::error::EncodingError::new(
-                    image::error::ImageFormatHint::Exact(ImageFormat::OpenExr),
-                    other,
-                )),
-            })
-        }
+        (ImageKind::Exr, _) => write_exr(image, out).map_err(image::ImageError::IoError),
         (ImageKind::Png, BitDepth::Eight) => {
             let data = image
                 .pixels
@@ -104,6 +81,77 @@ pub fn encode_image<W: Write + Seek>(
             buf.write_to(out, ImageFormat::Png)
         }
     }
+}
+
+/// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
+/// y — the simplest layout of the format (OpenEXR file layout: magic and version, header
+/// attributes, line offset table, then per line its y, its byte count and the channels'
+/// samples in alphabetical order, B, G, R). Float renders hardly compress, so writing is a
+/// copy at memory speed; every reader of the format opens it (tested with the `exr` crate's).
+fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()> {
+    let too_large = || std::io::Error::other("the image is too large for an EXR file");
+    let (w, h) = (image.width as usize, image.height as usize);
+    let (x_max, y_max) = (
+        i32::try_from(w).map_err(|_| too_large())? - 1,
+        i32::try_from(h).map_err(|_| too_large())? - 1,
+    );
+    let line_bytes = i32::try_from(12 * w).map_err(|_| too_large())?;
+    let mut header = Vec::with_capacity(400);
+    header.extend_from_slice(&[0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0]);
+    let mut attribute = |name: &str, kind: &str, value: &[u8]| {
+        for text in [name, kind] {
+            header.extend_from_slice(text.as_bytes());
+            header.push(0);
+        }
+        header.extend_from_slice(&(value.len() as i32).to_le_bytes());
+        header.extend_from_slice(value);
+    };
+    let mut channels = Vec::new();
+    for name in ["B", "G", "R"] {
+        channels.extend_from_slice(name.as_bytes());
+        channels.push(0);
+        // FLOAT samples, not perceptually linear, reserved, x and y sampling 1.
+        channels.extend_from_slice(&2_i32.to_le_bytes());
+        channels.extend_from_slice(&[0, 0, 0, 0]);
+        channels.extend_from_slice(&1_i32.to_le_bytes());
+        channels.extend_from_slice(&1_i32.to_le_bytes());
+    }
+    channels.push(0);
+    let window: Vec<u8> = [0, 0, x_max, y_max]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    attribute("channels", "chlist", &channels);
+    attribute("compression", "compression", &[0]);
+    attribute("dataWindow", "box2i", &window);
+    attribute("displayWindow", "box2i", &window);
+    attribute("lineOrder", "lineOrder", &[0]);
+    attribute("pixelAspectRatio", "float", &1.0_f32.to_le_bytes());
+    attribute("screenWindowCenter", "v2f", &[0; 8]);
+    attribute("screenWindowWidth", "float", &1.0_f32.to_le_bytes());
+    header.push(0);
+    out.write_all(&header)?;
+    // One block per line: 8 bytes of y and size, then the samples.
+    let first_block = (header.len() + 8 * h) as u64;
+    let block = 8 + 12 * w as u64;
+    let mut offsets = Vec::with_capacity(8 * h);
+    for y in 0..h as u64 {
+        offsets.extend_from_slice(&(first_block + y * block).to_le_bytes());
+    }
+    out.write_all(&offsets)?;
+    let mut line = Vec::with_capacity(8 + 12 * w);
+    for (y, row) in image.pixels.chunks_exact(3 * w.max(1)).take(h).enumerate() {
+        line.clear();
+        line.extend_from_slice(&(y as i32).to_le_bytes());
+        line.extend_from_slice(&line_bytes.to_le_bytes());
+        for c in [2, 1, 0] {
+            for pixel in row.chunks_exact(3) {
+                line.extend_from_slice(&pixel[c].to_le_bytes());
+            }
+        }
+        out.write_all(&line)?;
+    }
+    Ok(())
 }
 
 /// Writes `image` to `path` (format from the extension), atomically.
@@ -248,6 +296,50 @@ mod tests {
         assert_eq!(quantize(0.5, 255), 128); // 127.5 rounds up
         assert_eq!(quantize(0.5, 65535), 32768);
         assert_eq!(quantize(1.0 / 255.0, 255), 1);
+    }
+
+    #[test]
+    fn exr_files_read_back_exactly_with_an_independent_reader() {
+        use exr::prelude::{ReadChannels, ReadLayers};
+        let dir = tempfile::tempdir().unwrap();
+        for (w, h) in [(1, 1), (7, 3), (64, 40)] {
+            let mut image = Image::filled(w, h, [0.0; 3]);
+            for (k, v) in image.pixels.iter_mut().enumerate() {
+                *v = (k as f32 * 0.37).sin() * 1e3 + 1e-30 * k as f32;
+            }
+            image.pixels[0] = -0.0;
+            let path = dir.path().join(format!("i{w}x{h}.exr"));
+            save_image(&image, &path, BitDepth::Eight).unwrap();
+            // The exr crate's own reader, not the image crate's.
+            let read = exr::prelude::read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .rgb_channels(
+                    |size, _| vec![[0.0_f32; 3]; size.width() * size.height()],
+                    move |pixels: &mut Vec<[f32; 3]>, p, (r, g, b): (f32, f32, f32)| {
+                        pixels[p.y() * w as usize + p.x()] = [r, g, b];
+                    },
+                )
+                .first_valid_layer()
+                .all_attributes()
+                .from_file(&path)
+                .unwrap();
+            let pixels: Vec<f32> = read.layer_data.channel_data.pixels.concat();
+            assert_eq!(pixels.len(), image.pixels.len());
+            for (a, b) in pixels.iter().zip(&image.pixels) {
+                assert_eq!(a.to_bits(), b.to_bits(), "{w}×{h}");
+            }
+            // And our loader (the image crate's decoder).
+            let loaded = load_image(&path, [0.0; 3]).unwrap();
+            assert_eq!(loaded.pixels.len(), image.pixels.len());
+            assert!(
+                loaded
+                    .pixels
+                    .iter()
+                    .zip(&image.pixels)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
     }
 
     #[test]

@@ -297,16 +297,15 @@ pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
         .collect();
     let mut kernels = Vec::with_capacity(count);
     for row in body.chunks_exact(stride.max(1)).take(count) {
-        let v: Vec<f64> = offsets
-            .iter()
-            .zip(&sizes)
-            .map(|(&o, &size)| match size {
+        let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
+            let o = offsets[k];
+            match sizes[k] {
                 8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
                 _ => f64::from(f32::from_le_bytes(
                     row[o..o + 4].try_into().expect("4 bytes"),
                 )),
-            })
-            .collect();
+            }
+        });
         kernels.push(Kernel {
             mean: [v[0], v[1], v[2], v[3]],
             scale: [v[4], v[5], v[6], v[7]],
