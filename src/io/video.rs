@@ -211,6 +211,10 @@ fn encode_mp4(
             "yuv420p",
             "-vf",
             "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+            // The index (`moov`) before the media data, so that players start before the
+            // whole file has arrived.
+            "-movflags",
+            "+faststart",
         ])
         .arg(&partial)
         .status();

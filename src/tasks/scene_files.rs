@@ -90,9 +90,9 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
 pub struct ExportRequest {
     /// Scene file.
     pub scene: PathBuf,
-    /// Scene time τ of the slice.
-    pub time: f64,
-    /// Output `.ply`.
+    /// Which slices: one time (a `.ply` out), or a sequence (a folder out).
+    pub times: ExportTimes,
+    /// Output `.ply`, or the sequence's folder.
     pub out: PathBuf,
     /// Kernels whose value at τ stays below this cut-off are left out.
     pub cutoff: f64,
@@ -100,7 +100,23 @@ pub struct ExportRequest {
     pub sh_rest: bool,
 }
 
-/// Writes the 3D Gaussian Splatting PLY of a scene's slice at one time.
+/// The times `export-ply` slices at.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ExportTimes {
+    /// One slice, written to a `.ply` file.
+    One(f64),
+    /// A sequence at these times, written to a folder.
+    List(Vec<f64>),
+    /// A sequence of this many times evenly over the scene's time range
+    /// ([`crate::scenes::paths::time_range`]), ends included.
+    Frames(usize),
+}
+
+/// Most slices one sequence may hold (a bound checked before any work).
+pub const MAX_EXPORT_FRAMES: usize = 10_000;
+
+/// Writes the 3D Gaussian Splatting PLY of a scene's slice at one time, or a sequence of them
+/// with an index ([`crate::io::ply::write_slice_sequence`]).
 pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     if !(request.cutoff.is_finite() && request.cutoff >= 0.0) {
         return Err(Error::usage(format!(
@@ -108,24 +124,81 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             request.cutoff
         )));
     }
-    if !request.time.is_finite() {
-        return Err(Error::usage("--time must be finite"));
+    let tau = match &request.times {
+        ExportTimes::One(tau) => Some(*tau),
+        _ => None,
+    };
+    match &request.times {
+        ExportTimes::One(tau) if !tau.is_finite() => {
+            return Err(Error::usage("--time must be finite"));
+        }
+        ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
+            return Err(Error::usage(format!(
+                "--times needs 1 to {MAX_EXPORT_FRAMES} times"
+            )));
+        }
+        ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
+            return Err(Error::usage("--times must be finite"));
+        }
+        ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
+            return Err(Error::usage(format!(
+                "--frames {n} must be from 1 to {MAX_EXPORT_FRAMES}"
+            )));
+        }
+        _ => {}
     }
-    check_output(&request.out, &["ply"], &[&request.scene])?;
+    if let Some(tau) = tau {
+        check_output(&request.out, &["ply"], &[&request.scene])?;
+        let scene = load_scene(&request.scene)?;
+        let n = write_slice_ply(&scene, tau, request.cutoff, request.sh_rest, &request.out)?;
+        return Ok(SceneSummary {
+            out: request.out.clone(),
+            line: format!("{n} splats of {} kernels at t = {tau}", scene.len()),
+            warnings: viewer_warnings(&scene),
+        });
+    }
+    if crate::io::same_file(&request.out, &request.scene) {
+        return Err(Error::usage(format!(
+            "{}: --out names the scene; a sequence goes to a folder",
+            request.out.display()
+        )));
+    }
     let scene = load_scene(&request.scene)?;
-    let n = write_slice_ply(
+    let times = match &request.times {
+        ExportTimes::List(times) => times.clone(),
+        ExportTimes::Frames(n) => {
+            let [t0, t1] = crate::scenes::paths::time_range(&scene);
+            (0..*n)
+                .map(|k| {
+                    if *n == 1 {
+                        t0
+                    } else {
+                        t0 + (t1 - t0) * k as f64 / (*n - 1) as f64
+                    }
+                })
+                .collect()
+        }
+        ExportTimes::One(_) => unreachable!("handled above"),
+    };
+    let counts = crate::io::ply::write_slice_sequence(
         &scene,
-        request.time,
+        &times,
         request.cutoff,
         request.sh_rest,
         &request.out,
     )?;
+    let (fewest, most) = counts
+        .iter()
+        .fold((usize::MAX, 0), |(lo, hi), &n| (lo.min(n), hi.max(n)));
     Ok(SceneSummary {
         out: request.out.clone(),
         line: format!(
-            "{n} splats of {} kernels at t = {}",
+            "{} slices (t = {} … {}) of {} kernels, {fewest}–{most} splats each, indexed in {}",
+            times.len(),
+            times[0],
+            times[times.len() - 1],
             scene.len(),
-            request.time
+            crate::io::ply::SEQUENCE_INDEX
         ),
         warnings: viewer_warnings(&scene),
     })

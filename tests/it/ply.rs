@@ -268,3 +268,125 @@ fn sh_rest_properties_for_degree_3_loaders() {
         assert_eq!(value(y, "f_rest_17"), 0.0);
     }
 }
+
+/// `export-ply --frames N` / `--times …`: one 3DGS PLY per time, each the same bytes as the
+/// single-time export at that time and readable by an independent PLY parser, an index
+/// `frames.json` with file and time, and a folder that is replaced only when it holds an
+/// earlier sequence.
+#[test]
+fn export_ply_writes_a_sequence_with_an_index() {
+    use crate::common::{splat4d, stderr};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = scene();
+    splat4d::io::scene_file::save_scene(&scene, &d.join("s.json")).unwrap();
+    let [t0, t1] = splat4d::scenes::paths::time_range(&scene);
+    let output = splat4d(
+        &[
+            "export-ply",
+            "--scene",
+            "s.json",
+            "--frames",
+            "4",
+            "--out",
+            "seq",
+        ],
+        d,
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("seq/frames.json")).unwrap()).unwrap();
+    let frames = index["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 4);
+    for (k, frame) in frames.iter().enumerate() {
+        let file = frame["file"].as_str().unwrap();
+        assert_eq!(file, format!("frame_{k:04}.ply"));
+        let tau = frame["time"].as_f64().unwrap();
+        let expected = t0 + (t1 - t0) * k as f64 / 3.0;
+        assert!(
+            (tau - expected).abs() <= 1e-12 * (1.0 + expected.abs()),
+            "{tau} {expected}"
+        );
+        let (names, rows) = independent_read(&d.join("seq").join(file));
+        assert_eq!(names, SLICE_PROPERTIES);
+        let single = d.join(format!("single_{k}.ply"));
+        let tau_text = format!("{tau:?}");
+        let output = splat4d(
+            &[
+                "export-ply",
+                "--scene",
+                "s.json",
+                "--time",
+                &tau_text,
+                "--out",
+                single.to_str().unwrap(),
+            ],
+            d,
+        );
+        assert!(output.status.success(), "{}", stderr(&output));
+        assert_eq!(
+            std::fs::read(d.join("seq").join(file)).unwrap(),
+            std::fs::read(&single).unwrap(),
+            "frame {k}"
+        );
+        assert!(!rows.is_empty());
+    }
+    // A re-run with other times replaces the earlier sequence whole.
+    let output = splat4d(
+        &[
+            "export-ply",
+            "--scene",
+            "s.json",
+            "--times",
+            "0.25,0.75",
+            "--out",
+            "seq",
+        ],
+        d,
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    let mut names: Vec<String> = std::fs::read_dir(d.join("seq"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["frame_0000.ply", "frame_0001.ply", "frames.json"]);
+    // A folder holding anything else is never replaced.
+    std::fs::write(d.join("seq/notes.txt"), "mine").unwrap();
+    let output = splat4d(
+        &[
+            "export-ply",
+            "--scene",
+            "s.json",
+            "--frames",
+            "2",
+            "--out",
+            "seq",
+        ],
+        d,
+    );
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
+    assert!(stderr(&output).contains("notes.txt"), "{}", stderr(&output));
+    assert!(d.join("seq/notes.txt").exists());
+    for bad in [["--frames", "0"], ["--times", "nan"]] {
+        let output = splat4d(
+            &[
+                "export-ply",
+                "--scene",
+                "s.json",
+                bad[0],
+                bad[1],
+                "--out",
+                "other",
+            ],
+            d,
+        );
+        assert_eq!(
+            output.status.code(),
+            Some(2),
+            "{bad:?}: {}",
+            stderr(&output)
+        );
+        assert!(!d.join("other").exists());
+    }
+}

@@ -196,7 +196,9 @@ fn mp4_goes_through_ffmpeg_when_it_is_on_path() {
     assert!(
         recorded.contains("-framerate 12")
             && recorded.contains("frame_%04d.png")
-            && recorded.contains("libx264"),
+            && recorded.contains("libx264")
+            && recorded.contains("yuv420p")
+            && recorded.contains("-movflags +faststart"),
         "{recorded}"
     );
     assert!(!d.join("v/orbit_t0.50.gif").exists());
@@ -205,6 +207,68 @@ fn mp4_goes_through_ffmpeg_when_it_is_on_path() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(names.iter().all(|n| !n.contains("partial")), "{names:?}");
+}
+
+/// The top-level boxes of an MP4 file (ISO BMFF: 32-bit big-endian size and a 4-letter type;
+/// size 1 means a 64-bit size follows, 0 means "to the end of the file").
+fn mp4_boxes(bytes: &[u8]) -> Vec<String> {
+    let mut boxes = Vec::new();
+    let mut at = 0_usize;
+    while at + 8 <= bytes.len() {
+        let size = u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+        boxes.push(String::from_utf8_lossy(&bytes[at + 4..at + 8]).into_owned());
+        let size = match size {
+            0 => bytes.len() - at,
+            1 => u64::from_be_bytes(bytes[at + 8..at + 16].try_into().unwrap()) as usize,
+            n => n,
+        };
+        assert!(size >= 8, "box {boxes:?} of size {size}");
+        at += size;
+    }
+    boxes
+}
+
+/// With a real `ffmpeg`: the MP4 is H.264 that plays as it downloads (`moov` before `mdat`).
+/// Without one the test says so and checks nothing.
+#[test]
+fn mp4_puts_its_index_before_the_media_data() {
+    if std::process::Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_err()
+    {
+        eprintln!("ffmpeg is not on PATH: the MP4 atom order is not checked here");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let args = [
+        "video",
+        "--scene",
+        "blob.json",
+        "--orbit",
+        "0.5,0.5,0.5,4,20,6",
+        "--out",
+        "v",
+        "--size",
+        "33x17",
+        "--no-gif",
+    ];
+    let output = splat4d(&args, d, None);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let bytes = std::fs::read(d.join("v/orbit_t0.50.mp4")).unwrap();
+    let boxes = mp4_boxes(&bytes);
+    let position = |name: &str| boxes.iter().position(|b| b == name);
+    let (moov, mdat) = (position("moov"), position("mdat"));
+    assert!(
+        moov.is_some() && mdat.is_some() && moov < mdat,
+        "top-level boxes {boxes:?}"
+    );
 }
 
 #[test]
