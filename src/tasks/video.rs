@@ -4,7 +4,7 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use crate::io::path_file::load_path;
+use crate::io::path_file::{load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
@@ -59,13 +59,18 @@ pub struct VideoRequest {
 pub struct VideoSummary {
     /// One entry per video.
     pub videos: Vec<VideoFiles>,
+    /// Per video, its cameras as nerfstudio's `camera_path.json` (`DIR/NAME.camera_path.json`).
+    pub camera_paths: Vec<PathBuf>,
 }
 
 impl fmt::Display for VideoSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let mut lines = Vec::new();
-        for files in &self.videos {
+        for (k, files) in self.videos.iter().enumerate() {
             let mut line = format!("{}: {} frames", files.frames_dir.display(), files.frames);
+            if let Some(path) = self.camera_paths.get(k) {
+                line.push_str(&format!(", {}", path.display()));
+            }
             if let Some(gif) = &files.gif {
                 line.push_str(&format!(", {}", gif.display()));
             }
@@ -122,7 +127,19 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         let name = path
             .file_stem()
             .map_or("path".into(), |s| s.to_string_lossy().into_owned());
-        videos.push((name, load_path(path)?));
+        // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
+        // range in order, as the spiral does.
+        let cameras = load_any_path(path)?;
+        let last = cameras.len().saturating_sub(1).max(1) as f64;
+        let frames = cameras
+            .iter()
+            .enumerate()
+            .map(|(k, c)| PathFrame {
+                camera: c.camera,
+                time: c.time.unwrap_or(t0 + (t1 - t0) * k as f64 / last),
+            })
+            .collect();
+        videos.push((name, frames));
     }
     Ok(videos)
 }
@@ -143,6 +160,7 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
     // One scene, many frames: each frame visits only the kernels alive at its time.
     let index = TemporalIndex::new(&scene, request.options.cutoff);
     let mut written = Vec::new();
+    let mut camera_paths = Vec::new();
     for (name, frames) in &videos {
         let files = with_threads(request.threads, || {
             write_video(
@@ -165,7 +183,14 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
                 },
             )
         })??;
+        // The cameras as nerfstudio's camera path, so other renderers can follow them.
+        let camera_path = request.out.join(format!("{name}.camera_path.json"));
+        save_nerfstudio_path(frames, request.video.fps, &camera_path)?;
         written.push(files);
+        camera_paths.push(camera_path);
     }
-    Ok(VideoSummary { videos: written })
+    Ok(VideoSummary {
+        videos: written,
+        camera_paths,
+    })
 }

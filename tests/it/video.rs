@@ -308,9 +308,145 @@ fn video_without_a_path_flag_orbits_the_scene_at_its_times() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let made: Vec<String> = std::fs::read_dir(d.join("b"))
+    let mut made: Vec<String> = std::fs::read_dir(d.join("b"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(made, ["orbit_t0.50"]);
+    made.sort();
+    assert_eq!(made, ["orbit_t0.50", "orbit_t0.50.camera_path.json"]);
+}
+
+/// nerfstudio's `camera_path.json` both ways: `video` writes the cameras it rendered beside
+/// each video, `video --path` reads that file (and files like it, with or without a time per
+/// camera) and renders the same frames; a file with only the viewer's keyframes is refused.
+#[test]
+fn nerfstudio_camera_paths_are_written_and_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let run = |args: &[&str]| {
+        let output = splat4d(args, d, None);
+        assert!(
+            output.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    };
+    run(&[
+        "video",
+        "--scene",
+        "blob.json",
+        "--orbit",
+        "0.5,0.5,0.5,4,20,5",
+        "--times",
+        "0.5",
+        "--out",
+        "a",
+        "--size",
+        "40x30",
+        "--no-gif",
+        "--no-mp4",
+    ]);
+    let written = d.join("a/orbit_t0.50.camera_path.json");
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&written).unwrap()).unwrap();
+    assert_eq!(file["render_width"], 40);
+    assert_eq!(file["render_height"], 30);
+    let cameras = file["camera_path"].as_array().unwrap();
+    assert_eq!(cameras.len(), 5);
+    for camera in cameras {
+        assert_eq!(camera["camera_to_world"].as_array().unwrap().len(), 16);
+        assert_eq!(camera["render_time"], 0.5);
+        assert!(
+            (camera["fov"].as_f64().unwrap() - 40.0).abs() < 1e-9,
+            "{camera}"
+        );
+    }
+    // Read back: the same frames (up to the rounding of a matrix inverted twice).
+    std::fs::copy(&written, d.join("path.json")).unwrap();
+    run(&[
+        "video",
+        "--scene",
+        "blob.json",
+        "--path",
+        "path.json",
+        "--out",
+        "b",
+        "--no-gif",
+        "--no-mp4",
+    ]);
+    for k in 0..5 {
+        let name = format!("frame_{k:04}.png");
+        let a = image::open(d.join("a/orbit_t0.50").join(&name))
+            .unwrap()
+            .to_rgb8();
+        let b = image::open(d.join("b/path").join(&name)).unwrap().to_rgb8();
+        assert_eq!(a.dimensions(), b.dimensions());
+        let worst = a
+            .as_raw()
+            .iter()
+            .zip(b.as_raw())
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap();
+        assert!(worst <= 1, "frame {k}: {worst}");
+    }
+    // A file as nerfstudio's viewer writes it, without times: they sweep the scene's range.
+    let mut edited = file.clone();
+    for camera in edited["camera_path"].as_array_mut().unwrap() {
+        camera.as_object_mut().unwrap().remove("render_time");
+    }
+    edited["keyframes"] = serde_json::json!([{"matrix": "[1,0,0,0]", "fov": 40}]);
+    edited["smoothness_value"] = serde_json::json!(0.5);
+    std::fs::write(d.join("untimed.json"), edited.to_string()).unwrap();
+    run(&[
+        "video",
+        "--scene",
+        "blob.json",
+        "--path",
+        "untimed.json",
+        "--out",
+        "c",
+        "--no-gif",
+        "--no-mp4",
+    ]);
+    let back: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(d.join("c/untimed.camera_path.json")).unwrap(),
+    )
+    .unwrap();
+    let times: Vec<f64> = back["camera_path"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["render_time"].as_f64().unwrap())
+        .collect();
+    assert_eq!(times.len(), 5);
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+    // Only the viewer's keyframes: refused, saying what to export.
+    std::fs::write(
+        d.join("keys.json"),
+        serde_json::json!({"render_width": 40, "render_height": 30, "keyframes": []}).to_string(),
+    )
+    .unwrap();
+    let output = splat4d(
+        &[
+            "video",
+            "--scene",
+            "blob.json",
+            "--path",
+            "keys.json",
+            "--out",
+            "k",
+            "--no-gif",
+            "--no-mp4",
+        ],
+        d,
+        None,
+    );
+    assert_eq!(output.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&output.stderr).contains("camera_path"),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
 }
