@@ -139,17 +139,36 @@ fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()>
         offsets.extend_from_slice(&(first_block + y * block).to_le_bytes());
     }
     out.write_all(&offsets)?;
-    let mut line = Vec::with_capacity(8 + 12 * w);
-    for (y, row) in image.pixels.chunks_exact(3 * w.max(1)).take(h).enumerate() {
-        line.clear();
-        line.extend_from_slice(&(y as i32).to_le_bytes());
-        line.extend_from_slice(&line_bytes.to_le_bytes());
-        for c in [2, 1, 0] {
-            for pixel in row.chunks_exact(3) {
-                line.extend_from_slice(&pixel[c].to_le_bytes());
-            }
-        }
-        out.write_all(&line)?;
+    // Lines are laid out in parallel, 64 at a time, and written in order.
+    use rayon::prelude::*;
+    const LINES: usize = 64;
+    let block_bytes = 8 + 12 * w;
+    let mut buffer = vec![0_u8; LINES * block_bytes];
+    for (chunk, rows) in image
+        .pixels
+        .chunks(LINES * 3 * w.max(1))
+        .take(h.div_ceil(LINES))
+        .enumerate()
+    {
+        let lines = rows.len() / (3 * w.max(1));
+        let bytes = &mut buffer[..lines * block_bytes];
+        bytes
+            .par_chunks_mut(block_bytes)
+            .zip(rows.par_chunks(3 * w.max(1)))
+            .enumerate()
+            .for_each(|(k, (block, row))| {
+                let y = (chunk * LINES + k) as i32;
+                block[..4].copy_from_slice(&y.to_le_bytes());
+                block[4..8].copy_from_slice(&line_bytes.to_le_bytes());
+                let samples = &mut block[8..];
+                for (plane, c) in [2, 1, 0].into_iter().enumerate() {
+                    for (x, pixel) in row.chunks_exact(3).enumerate() {
+                        let at = 4 * (plane * w + x);
+                        samples[at..at + 4].copy_from_slice(&pixel[c].to_le_bytes());
+                    }
+                }
+            });
+        out.write_all(bytes)?;
     }
     Ok(())
 }

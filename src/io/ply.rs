@@ -364,25 +364,31 @@ pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
                 .map_or(8, |p| p.size)
         })
         .collect();
-    let mut kernels = Vec::with_capacity(count);
-    for row in body.chunks_exact(stride.max(1)).take(count) {
-        let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
-            let o = offsets[k];
-            match sizes[k] {
-                8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
-                _ => f64::from(f32::from_le_bytes(
-                    row[o..o + 4].try_into().expect("4 bytes"),
-                )),
+    // Rows decode independently: in parallel, in order.
+    use rayon::prelude::*;
+    let kernels: Vec<Kernel> = body
+        .par_chunks_exact(stride.max(1))
+        .take(count)
+        .with_min_len(4096)
+        .map(|row| {
+            let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
+                let o = offsets[k];
+                match sizes[k] {
+                    8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
+                    _ => f64::from(f32::from_le_bytes(
+                        row[o..o + 4].try_into().expect("4 bytes"),
+                    )),
+                }
+            });
+            Kernel {
+                mean: [v[0], v[1], v[2], v[3]],
+                scale: [v[4], v[5], v[6], v[7]],
+                amplitude: [v[8], v[9], v[10]],
+                rotation: [v[11], v[12], v[13], v[14]],
+                velocity: [v[15], v[16], v[17]],
             }
-        });
-        kernels.push(Kernel {
-            mean: [v[0], v[1], v[2], v[3]],
-            scale: [v[4], v[5], v[6], v[7]],
-            amplitude: [v[8], v[9], v[10]],
-            rotation: [v[11], v[12], v[13], v[14]],
-            velocity: [v[15], v[16], v[17]],
-        });
-    }
+        })
+        .collect();
     let mut scene = Scene::from_kernels(&kernels, background, origin)?;
     scene.up = up;
     Ok(scene)
