@@ -69,3 +69,147 @@ pub fn view_loss_and_gradients(
     context.backward(scene, camera, tau, options, &v_image, grads);
     Ok(loss)
 }
+
+/// Side of the SSIM window (Wang et al. 2004: 11×11).
+pub const SSIM_WINDOW: usize = 11;
+/// Standard deviation of the SSIM window's Gaussian, pixels.
+pub const SSIM_SIGMA: f64 = 1.5;
+
+/// Mean structural similarity (Wang, Bovik, Sheikh, Simoncelli 2004) of `image` against
+/// `target`, on linear values with dynamic range `L = 1`: per channel, local means, variances
+/// and covariance under an 11×11 Gaussian window (σ = 1.5, weights summing to 1), at every
+/// position where the window fits inside the image ("valid", as the paper's reference code),
+/// `SSIM = (2 μx μy + C1)(2 σxy + C2) / ((μx² + μy² + C1)(σx² + σy² + C2))` with
+/// `C1 = (0.01 L)²`, `C2 = (0.03 L)²`; the mean over positions and channels. Images smaller
+/// than the window use one window the size of the image. f64 throughout.
+#[must_use]
+pub fn ssim(image: &Image, target: &Image) -> f64 {
+    assert_eq!(
+        (image.width, image.height),
+        (target.width, target.height),
+        "image and target sizes differ"
+    );
+    let (w, h) = (image.width as usize, image.height as usize);
+    if w == 0 || h == 0 {
+        return 1.0;
+    }
+    let (c1, c2) = (0.01_f64.powi(2), 0.03_f64.powi(2));
+    let weights = |n: usize| -> Vec<f64> {
+        let centre = (n as f64 - 1.0) / 2.0;
+        let raw: Vec<f64> = (0..n)
+            .map(|i| (-0.5 * ((i as f64 - centre) / SSIM_SIGMA).powi(2)).exp())
+            .collect();
+        let total: f64 = raw.iter().sum();
+        raw.into_iter().map(|v| v / total).collect()
+    };
+    let (wx, wy) = (weights(SSIM_WINDOW.min(w)), weights(SSIM_WINDOW.min(h)));
+    let (out_w, out_h) = (w - wx.len() + 1, h - wy.len() + 1);
+    // Separable filtering of one plane: rows, then columns ("valid" positions only).
+    let filter = |plane: &[f64]| -> Vec<f64> {
+        let mut rows = vec![0.0; out_w * h];
+        for y in 0..h {
+            for x in 0..out_w {
+                rows[y * out_w + x] = (0..wx.len()).map(|k| wx[k] * plane[y * w + x + k]).sum();
+            }
+        }
+        let mut out = vec![0.0; out_w * out_h];
+        for y in 0..out_h {
+            for x in 0..out_w {
+                out[y * out_w + x] = (0..wy.len())
+                    .map(|k| wy[k] * rows[(y + k) * out_w + x])
+                    .sum();
+            }
+        }
+        out
+    };
+    let mut total = 0.0;
+    for c in 0..3 {
+        let x: Vec<f64> = image
+            .pixels
+            .iter()
+            .skip(c)
+            .step_by(3)
+            .map(|&v| f64::from(v))
+            .collect();
+        let y: Vec<f64> = target
+            .pixels
+            .iter()
+            .skip(c)
+            .step_by(3)
+            .map(|&v| f64::from(v))
+            .collect();
+        let product =
+            |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).collect::<Vec<_>>();
+        let (mx, my) = (filter(&x), filter(&y));
+        let (xx, yy, xy) = (
+            filter(&product(&x, &x)),
+            filter(&product(&y, &y)),
+            filter(&product(&x, &y)),
+        );
+        let mut sum = 0.0;
+        for k in 0..mx.len() {
+            let (ux, uy) = (mx[k], my[k]);
+            let (vx, vy, cxy) = (xx[k] - ux * ux, yy[k] - uy * uy, xy[k] - ux * uy);
+            sum += ((2.0 * ux * uy + c1) * (2.0 * cxy + c2))
+                / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
+        }
+        total += sum / mx.len() as f64;
+    }
+    total / 3.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pattern of the independent reference value below, as f32 pixels.
+    fn pattern(w: u32, h: u32, f: impl Fn(f64, f64, f64) -> f64) -> Image {
+        let mut image = Image::filled(w, h, [0.0; 3]);
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..3 {
+                    image.pixels[3 * (y * w + x) as usize + c as usize] =
+                        f(f64::from(x), f64::from(y), f64::from(c)) as f32;
+                }
+            }
+        }
+        image
+    }
+
+    #[test]
+    fn ssim_matches_known_values() {
+        let a = pattern(24, 20, |x, y, c| 0.5 + 0.4 * (0.3 * x + 0.7 * y + c).sin());
+        // Identical images: 1.
+        assert!((ssim(&a, &a) - 1.0).abs() < 1e-12);
+        // scikit-image 0.26 `structural_similarity(a, b, gaussian_weights=True, sigma=1.5,
+        // use_sample_covariance=False, data_range=1.0, channel_axis=-1)` on the same f32
+        // values, computed in float64 (an independent implementation of Wang et al.).
+        let mut b = a.clone();
+        for y in 0..20_u32 {
+            for x in 0..24_u32 {
+                for c in 0..3_usize {
+                    let k = 3 * (y * 24 + x) as usize + c;
+                    let shift = 0.1
+                        * (0.5 * f64::from(x) - 0.2 * f64::from(y) + 2.0 * c as f64).cos()
+                        - 0.05;
+                    b.pixels[k] = (f64::from(a.pixels[k]) + shift) as f32;
+                }
+            }
+        }
+        let value = ssim(&a, &b);
+        assert!((value - 0.961_723_796_647_204_6).abs() < 1e-9, "{value}");
+        assert!((ssim(&b, &a) - value).abs() < 1e-12, "symmetric");
+        // Constant images x and y: (2xy + C1) / (x² + y² + C1), variances zero.
+        let (x, y) = (0.25_f32, 0.75_f32);
+        let value = ssim(
+            &Image::filled(16, 16, [x; 3]),
+            &Image::filled(16, 16, [y; 3]),
+        );
+        let (x, y) = (f64::from(x), f64::from(y));
+        let expected = (2.0 * x * y + 1e-4) / (x * x + y * y + 1e-4);
+        assert!((value - expected).abs() < 1e-12, "{value} vs {expected}");
+        // Smaller than the window: one window the size of the image, still 1 on itself.
+        let small = pattern(5, 4, |x, y, c| 0.1 * x + 0.2 * y + 0.05 * c);
+        assert!((ssim(&small, &small) - 1.0).abs() < 1e-12);
+    }
+}

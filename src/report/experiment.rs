@@ -17,10 +17,10 @@ use std::time::Instant;
 
 use crate::fit::adam::LearningRates;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
-use crate::fit::loss::{mse, psnr};
+use crate::fit::loss::{mse, psnr, ssim};
 use crate::fit::plan::{DEFAULT_INIT_AMPLITUDE, DEFAULT_RATES};
 use crate::fit::plan::{FitPlan, Init, PreparedFit};
-use crate::fit::train::{FitMode, FitOptions, StepRecord, evaluate, fit};
+use crate::fit::train::{FitMode, FitOptions, StepRecord, fit};
 use crate::model::Image;
 use crate::model::Progress;
 use crate::model::error::Result;
@@ -146,6 +146,8 @@ pub struct MethodResult {
     pub fit_seconds: f64,
     /// PSNR on train / val / test views, dB.
     pub psnr_splits: [f64; 3],
+    /// Mean SSIM ([`crate::fit::loss::ssim`]) on train / val / test views.
+    pub ssim_splits: [f64; 3],
     /// Temporal roughness over the sweep from the test cameras.
     pub roughness: f64,
     /// Milliseconds per rendered frame over the sweep.
@@ -167,6 +169,8 @@ pub struct ModelSizeRow {
     pub parameters: usize,
     /// PSNR on held-out views at held-out times (the test split), dB.
     pub heldout_psnr: f64,
+    /// Mean SSIM on the same views.
+    pub heldout_ssim: f64,
     /// Milliseconds per rendered test frame.
     pub render_ms: f64,
     /// Seconds spent fitting.
@@ -178,14 +182,15 @@ type Fitted = (&'static str, FitMode, Scene, f64);
 
 impl ModelSizeRow {
     /// The row of `fitted` on `dataset`, with its measured held-out PSNR and render time.
-    fn of_fit(dataset: &str, fitted: &Fitted, heldout_psnr: f64, render_ms: f64) -> Self {
+    fn of_fit(dataset: &str, fitted: &Fitted, heldout: Scores, render_ms: f64) -> Self {
         let (name, mode, scene, fit_seconds) = fitted;
         ModelSizeRow {
             dataset: dataset.into(),
             method: (*name).into(),
             kernels: scene.len(),
             parameters: mode.parameters_per_kernel() * scene.len(),
-            heldout_psnr,
+            heldout_psnr: heldout.psnr,
+            heldout_ssim: heldout.ssim,
             render_ms,
             fit_seconds: *fit_seconds,
         }
@@ -199,6 +204,8 @@ pub struct AblationRow {
     pub sigma_t: f64,
     /// PSNR on train / val / test views, dB.
     pub psnr_splits: [f64; 3],
+    /// Mean SSIM on train / val / test views.
+    pub ssim_splits: [f64; 3],
     /// Temporal roughness over the sweep.
     pub roughness: f64,
 }
@@ -241,19 +248,52 @@ pub struct ExperimentResults {
     pub seconds: f64,
 }
 
-fn split_psnr(
+/// PSNR of a split (of its mean MSE) and its mean SSIM.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scores {
+    /// dB.
+    pub psnr: f64,
+    /// Mean over views of [`crate::fit::loss::ssim`].
+    pub ssim: f64,
+}
+
+fn split_scores(
     method: &Method<'_>,
     views: &[View],
     options: &RenderOptions,
     context: &mut RenderContext,
-) -> Result<f64> {
+) -> Result<Scores> {
     let mut image = Image::default();
-    let mut total = 0.0;
+    let (mut total, mut similarity) = (0.0, 0.0);
     for view in views {
         method.render(&view.camera, view.time, options, context, &mut image)?;
         total += mse(&image, &view.image);
+        similarity += ssim(&image, &view.image);
     }
-    Ok(psnr(total / views.len().max(1) as f64))
+    let n = views.len().max(1) as f64;
+    Ok(Scores {
+        psnr: psnr(total / n),
+        ssim: similarity / n,
+    })
+}
+
+/// Scores of every split (train, val, test).
+fn all_splits(
+    method: &Method<'_>,
+    dataset: &crate::model::Dataset,
+    options: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<([f64; 3], [f64; 3])> {
+    let (mut psnrs, mut ssims) = ([0.0; 3], [0.0; 3]);
+    for (s, views) in [&dataset.train, &dataset.val, &dataset.test]
+        .iter()
+        .enumerate()
+    {
+        let scores = split_scores(method, views, options, context)?;
+        psnrs[s] = scores.psnr;
+        ssims[s] = scores.ssim;
+    }
+    Ok((psnrs, ssims))
 }
 
 /// The dense sweep: ground-truth renders from each test camera at each sweep time.
@@ -382,17 +422,17 @@ fn adaptive_fits(
     Ok(fits)
 }
 
-/// PSNR of `scene` on `views` and its milliseconds per frame there.
+/// Scores of `scene` on `views` and its milliseconds per frame there (renders and scores).
 fn heldout_and_speed(
     scene: &Scene,
     views: &[View],
     options: &RenderOptions,
     context: &mut RenderContext,
-) -> Result<(f64, f64)> {
+) -> Result<(Scores, f64)> {
     let start = Instant::now();
-    let mse = evaluate(scene, views, options, context)?;
+    let scores = split_scores(&Method::Model4d(scene), views, options, context)?;
     let ms = 1e3 * start.elapsed().as_secs_f64() / views.len().max(1) as f64;
-    Ok((psnr(mse), ms))
+    Ok((scores, ms))
 }
 
 /// The model size comparison on the seed blob: the paper's fixed-count model against the
@@ -429,9 +469,9 @@ fn synthetic_model_size(
     let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
     fits.extend(adaptive_fits(config, &dataset, progress)?);
     for fitted in &fits {
-        let (heldout_psnr, render_ms) =
+        let (heldout, render_ms) =
             heldout_and_speed(&fitted.2, &dataset.test, &options, &mut context)?;
-        rows.push(ModelSizeRow::of_fit(name, fitted, heldout_psnr, render_ms));
+        rows.push(ModelSizeRow::of_fit(name, fitted, heldout, render_ms));
     }
     Ok(rows)
 }
@@ -595,13 +635,7 @@ pub fn run_experiment(
     progress.start("evaluate", methods_to_run.len());
     let mut methods = Vec::new();
     for (name, method, fit_seconds) in methods_to_run {
-        let mut splits = [0.0; 3];
-        for (s, views) in [&dataset.train, &dataset.val, &dataset.test]
-            .iter()
-            .enumerate()
-        {
-            splits[s] = split_psnr(&method, views, &options, &mut context)?;
-        }
+        let (splits, ssims) = all_splits(&method, &dataset, &options, &mut context)?;
         let SweepMetrics {
             psnr_per_time,
             roughness,
@@ -612,6 +646,7 @@ pub fn run_experiment(
             parameters: method.parameter_count(),
             fit_seconds,
             psnr_splits: splits,
+            ssim_splits: ssims,
             roughness,
             render_ms,
             psnr_per_time,
@@ -629,18 +664,13 @@ pub fn run_experiment(
         let [sx, sy, sz, _] = config.model_scale;
         let (scene, _, _) = fit_4d(config, &dataset, &bounds, [sx, sy, sz, sigma_t], progress)?;
         let method = Method::Model4d(&scene);
-        let mut splits = [0.0; 3];
-        for (s, views) in [&dataset.train, &dataset.val, &dataset.test]
-            .iter()
-            .enumerate()
-        {
-            splits[s] = split_psnr(&method, views, &options, &mut context)?;
-        }
+        let (splits, ssims) = all_splits(&method, &dataset, &options, &mut context)?;
         let roughness =
             sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.roughness;
         ablation.push(AblationRow {
             sigma_t,
             psnr_splits: splits,
+            ssim_splits: ssims,
             roughness,
         });
     }
@@ -666,6 +696,7 @@ pub fn run_experiment(
                 kernels,
                 parameters: method.parameters,
                 heldout_psnr: method.psnr_splits[2],
+                heldout_ssim: method.ssim_splits[2],
                 render_ms: method.render_ms,
                 fit_seconds: method.fit_seconds,
             });
@@ -673,13 +704,13 @@ pub fn run_experiment(
     }
     for fitted in &adaptive_fits(config, &dataset, progress)? {
         let method = Method::Model4d(&fitted.2);
-        let heldout_psnr = split_psnr(&method, &dataset.test, &options, &mut context)?;
+        let heldout = split_scores(&method, &dataset.test, &options, &mut context)?;
         let render_ms =
             sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.render_ms;
         model_size.push(ModelSizeRow::of_fit(
             "seed points",
             fitted,
-            heldout_psnr,
+            heldout,
             render_ms,
         ));
     }
