@@ -180,18 +180,11 @@ pub fn project_one(
 /// The kernels are projected in parallel, then kept in ascending order (the result does not
 /// depend on the thread count).
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
-    use rayon::prelude::*;
     out.reset();
     let mut projections = std::mem::take(&mut out.scratch);
-    projections.clear();
-    projections.resize(sliced.len(), None);
-    projections
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(1024)
-        .for_each(|(s, slot)| {
-            *slot = project_one(camera, dilation, sliced.means[s], sliced.covariances[s]);
-        });
+    crate::slice::fill_in_parallel(&mut projections, sliced.len(), |s| {
+        project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
+    });
     for (s, projection) in projections.iter().enumerate() {
         let Some(proj) = projection else {
             continue;

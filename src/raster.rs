@@ -207,28 +207,22 @@ pub struct RowForm {
 /// Fills `forms` for `proj` binned in `bins` (in parallel; the values do not depend on the
 /// thread count).
 pub fn row_forms(proj: &ProjectedKernels, bins: &TileBins, forms: &mut Vec<RowForm>) {
-    forms.clear();
-    forms.resize(proj.len(), RowForm::default());
-    forms
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(1024)
-        .for_each(|(p, form)| {
-            let [_, sxy, syy] = proj.covariances[p];
-            *form = RowForm {
-                mean: proj.means[p],
-                qxx: proj.conics[p][0],
-                shear: -sxy / syy,
-                inv_syy: 1.0 / syy,
-                q_reach: padded_qmax(proj.qmax[p]),
-                bounds: bins.pixel_bounds[p],
-                pixel: TileKernel {
-                    qxx: proj.conics[p][0] as f32,
-                    qmax: proj.qmax[p] as f32,
-                    amplitude: proj.amplitudes[p].map(f64::from),
-                },
-            };
-        });
+    crate::slice::fill_in_parallel(forms, proj.len(), |p| {
+        let [_, sxy, syy] = proj.covariances[p];
+        RowForm {
+            mean: proj.means[p],
+            qxx: proj.conics[p][0],
+            shear: -sxy / syy,
+            inv_syy: 1.0 / syy,
+            q_reach: padded_qmax(proj.qmax[p]),
+            bounds: bins.pixel_bounds[p],
+            pixel: TileKernel {
+                qxx: proj.conics[p][0] as f32,
+                qmax: proj.qmax[p] as f32,
+                amplitude: proj.amplitudes[p].map(f64::from),
+            },
+        }
+    });
 }
 
 /// A kernel of the tile being summed: what every row of it shares.

@@ -161,16 +161,11 @@ fn slice_visiting(
     cutoff: f64,
     out: &mut SlicedKernels,
 ) {
-    use rayon::prelude::*;
     out.reset();
     let mut slices = std::mem::take(&mut out.scratch);
-    slices.clear();
-    slices.resize(count, None);
-    slices
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(1024)
-        .for_each(|(k, slot)| *slot = slice_one(scene, kernel(k), tau, cutoff));
+    fill_in_parallel(&mut slices, count, |k| {
+        slice_one(scene, kernel(k), tau, cutoff)
+    });
     for (k, sliced) in slices.iter().enumerate() {
         if let Some(one) = sliced {
             out.kernel_from_slice.push(kernel(k) as u32);
@@ -181,6 +176,30 @@ fn slice_visiting(
         }
     }
     out.scratch = slices;
+}
+
+/// Replaces the contents of `values` with `value(0..count)`, computed in parallel (chunks of at
+/// least 1024), without filling the buffer serially first: a first, large frame's fresh
+/// pages are touched by the workers that compute them. The result does not depend on the
+/// thread count.
+pub(crate) fn fill_in_parallel<T: Send>(
+    values: &mut Vec<T>,
+    count: usize,
+    value: impl Fn(usize) -> T + Sync,
+) {
+    use rayon::prelude::*;
+    values.clear();
+    values.reserve(count);
+    values.spare_capacity_mut()[..count]
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(k, slot)| {
+            slot.write(value(k));
+        });
+    // SAFETY: the loop above initialised every one of the first `count` slots (`reserve`
+    // made room for them), and `T` values are only read after this.
+    unsafe { values.set_len(count) };
 }
 
 #[inline]
