@@ -249,6 +249,89 @@ pub fn scatter_chart(
     })
 }
 
+/// One point of [`model_size_chart`]: which dataset and model (indices into its name lists),
+/// parameters and held-out PSNR.
+pub struct SizePoint {
+    /// Index into the dataset names: the marker's shape.
+    pub dataset: usize,
+    /// Index into the model names: the marker's colour.
+    pub model: usize,
+    /// Stored numbers.
+    pub parameters: f64,
+    /// dB.
+    pub psnr: f64,
+}
+
+/// Parameters (a log axis labelled in values) against held-out PSNR: one colour per model,
+/// one marker shape per dataset, and the legend beside the plot, not over it (no labels at
+/// the points, so none collide; the report's table beside the chart has the numbers).
+pub fn model_size_chart(
+    path: &Path,
+    title: &str,
+    datasets: &[&str],
+    models: &[&str],
+    points: &[SizePoint],
+) -> Result<()> {
+    let (lo, hi) = points
+        .iter()
+        .map(|p| p.parameters.max(1.0))
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    let (lo, hi) = if lo.is_finite() {
+        (lo / 1.6, hi * 1.6)
+    } else {
+        (1.0, 10.0)
+    };
+    let ys = padded_range(points.iter().map(|p| p.psnr));
+    draw_png(path, (900, 500), |root| {
+        let (plot, legend) = root.split_horizontally(690);
+        let mut chart = ChartBuilder::on(&plot)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((lo..hi).log_scale(), ys)?;
+        chart
+            .configure_mesh()
+            .x_desc("parameters (log scale)")
+            .y_desc("PSNR, held-out views and times (dB)")
+            .x_label_formatter(&|v| format!("{}", *v as u64))
+            .light_line_style(RGBColor(238, 238, 238))
+            .label_style((FONT, 14))
+            .draw()?;
+        for p in points {
+            let (at, c) = ((p.parameters.max(1.0), p.psnr), colour(p.model));
+            match p.dataset % 3 {
+                0 => chart.draw_series([Circle::new(at, 6, c.filled())])?,
+                1 => chart.draw_series([TriangleMarker::new(at, 8, c.filled())])?,
+                _ => chart.draw_series([Cross::new(at, 6, c.stroke_width(3))])?,
+            };
+        }
+        let text =
+            |s: &str, x: i32, y: i32| Text::new(s.to_owned(), (x, y), (FONT, 15).into_font());
+        legend.draw(&text("model (colour)", 10, 60))?;
+        for (k, name) in models.iter().enumerate() {
+            let y = 90 + 24 * k as i32;
+            legend.draw(&Circle::new((18, y + 7), 6, colour(k).filled()))?;
+            legend.draw(&text(name, 32, y))?;
+        }
+        let top = 110 + 24 * models.len() as i32;
+        legend.draw(&text("data (shape)", 10, top))?;
+        for (k, name) in datasets.iter().enumerate() {
+            let y = top + 30 + 24 * k as i32;
+            let grey = RGBColor(90, 90, 90);
+            match k % 3 {
+                0 => legend.draw(&Circle::new((18, y + 7), 6, grey.filled()))?,
+                1 => legend.draw(&TriangleMarker::new((18, y + 7), 8, grey.filled()))?,
+                _ => legend.draw(&Cross::new((18, y + 7), 6, grey.stroke_width(3)))?,
+            }
+            legend.draw(&text(name, 32, y))?;
+        }
+        Ok(())
+    })
+}
+
 /// One panel of a volume figure: a label and `res × res` values (row-major).
 pub struct Panel<'a> {
     /// Caption under the panel.

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use crate::fit::loss::psnr;
 use crate::io::write_bytes_atomically;
 use crate::model::error::Result;
-use crate::report::charts::{Series, bar_chart, line_chart, scatter_chart, volume_slices_figure};
+use crate::report::charts::{
+    Series, SizePoint, bar_chart, line_chart, model_size_chart, scatter_chart, volume_slices_figure,
+};
 use crate::report::experiment::{ExperimentResults, ModelSizeRow};
 
 /// The seed paper's maximum volume intensities at t = 0, 0.5, 1 (§5.2).
@@ -385,28 +387,33 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
             r.fit_seconds
         );
     }
-    let points: Vec<(String, f64, f64)> = results
+    let datasets = ["seed points", "seed blob", "three blobs"];
+    let models = [
+        "fixed count (paper)",
+        "adaptive static",
+        "adaptive velocity",
+        "frames (per-frame 3D)",
+    ];
+    let points: Vec<SizePoint> = results
         .model_size
         .iter()
-        .map(|r| {
-            let short = match r.method.as_str() {
-                m if m == crate::report::experiment::FIXED_NAME => "fixed count",
-                m if m == crate::report::experiment::VELOCITY_NAME => "velocity",
-                m if m.starts_with("frame") => "frames",
-                _ => "adaptive static",
-            };
-            (
-                format!("  {}: {short}", r.dataset.trim_start_matches("seed ")),
-                (r.parameters.max(1) as f64).log10(),
-                r.heldout_psnr,
-            )
+        .map(|r| SizePoint {
+            dataset: datasets.iter().position(|d| *d == r.dataset).unwrap_or(0),
+            model: match r.method.as_str() {
+                m if m == crate::report::experiment::FIXED_NAME => 0,
+                m if m == crate::report::experiment::VELOCITY_NAME => 2,
+                m if m.starts_with("frame") => 3,
+                _ => 1,
+            },
+            parameters: r.parameters as f64,
+            psnr: r.heldout_psnr,
         })
         .collect();
-    scatter_chart(
+    model_size_chart(
         &out.join("model_size.png"),
         "Parameters against held-out PSNR",
-        "log10 parameters",
-        "PSNR, held-out views and times (dB)",
+        &datasets,
+        &models,
         &points,
     )?;
     // Velocity kernels against the paper's fixed count, and whether any model beats them on
