@@ -254,6 +254,30 @@ pub(crate) struct RowEntry {
     pub(crate) kernel: u32,
 }
 
+impl RowEntry {
+    /// Lane `i` of a half row whose lane 0 is tile pixel `first` and whose first `lanes`
+    /// lanes are inside the image: `t`, and `G = exp(-½ q)` when the pair is summed (`q ≤
+    /// qmax` inside the image), else 0 with `false`. The forward and the backward both
+    /// evaluate pairs through here (and [`avx2::lanes`], the same operations), so they see
+    /// the same pairs and the same `t` and `G`.
+    #[inline(always)]
+    pub(crate) fn lane<const FAST: bool>(
+        &self,
+        kernel: &TileKernel,
+        first: f32,
+        lanes: f32,
+        i: usize,
+    ) -> (f32, f32, bool) {
+        let lane = i as f32;
+        // Lane i is tile pixel first + i: its offset from the anchor is exact.
+        let t = (lane + (first - self.offset)) + self.t_anchor;
+        let q = kernel.qxx * t * t + self.row_q;
+        let hit = q <= kernel.qmax && lane < lanes;
+        let value = gaussian::<FAST>(q);
+        (t, if hit { value } else { 0.0 }, hit)
+    }
+}
+
 /// Scratch of one worker: the current tile's kernels and, per half row of the tile (row
 /// `r`, half `h` at index `2 r + h`), its entries in ascending kernel order.
 #[derive(Default)]
@@ -544,31 +568,17 @@ fn sum_half_row<const FAST: bool>(
     background: [f64; 3],
     acc: &mut [[f64; LANES]; 3],
 ) -> u64 {
-    const IOTA: [f32; LANES] = {
-        let mut iota = [0.0; LANES];
-        let mut i = 0;
-        while i < LANES {
-            iota[i] = i as f32;
-            i += 1;
-        }
-        iota
-    };
     for (channel, &b) in acc.iter_mut().zip(&background) {
         *channel = [b + 0.0; LANES];
     }
     let mut pairs = 0_u64;
     for entry in entries {
         let kernel = &kernels[entry.kernel as usize];
-        // Lane i is tile pixel first + i: its offset from the anchor is exact.
-        let shift = first - entry.offset;
         let mut g = [0.0_f32; LANES];
         let mut inside = 0_u32;
-        for i in 0..LANES {
-            let t = (IOTA[i] + shift) + entry.t_anchor;
-            let q = kernel.qxx * t * t + entry.row_q;
-            let hit = q <= kernel.qmax && IOTA[i] < lanes;
-            let value = gaussian::<FAST>(q);
-            g[i] = if hit { value } else { 0.0 };
+        for (i, g) in g.iter_mut().enumerate() {
+            let (_, value, hit) = entry.lane::<FAST>(kernel, first, lanes, i);
+            *g = value;
             inside += u32::from(hit);
         }
         pairs += u64::from(inside);
@@ -773,6 +783,58 @@ pub(crate) mod avx2 {
         checksum
     }
 
+    /// The lane numbers 0..8 and the mask of the first `lanes` of them (inside the image).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) fn lane_numbers(lanes: f32) -> (__m256, __m256) {
+        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+        (
+            iota,
+            _mm256_cmp_ps::<_CMP_LT_OQ>(iota, _mm256_set1_ps(lanes)),
+        )
+    }
+
+    /// [`RowEntry::lane`] on 8 lanes (`iota` and `valid` from [`lane_numbers`]): `t`, `q`
+    /// and the mask of the pairs summed. `G` is [`gaussian`] of `q`, masked.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) fn lanes(
+        entry: &RowEntry,
+        kernel: &TileKernel,
+        (iota, valid): (__m256, __m256),
+        first: f32,
+    ) -> (__m256, __m256, __m256) {
+        let t = _mm256_add_ps(
+            _mm256_add_ps(iota, _mm256_set1_ps(first - entry.offset)),
+            _mm256_set1_ps(entry.t_anchor),
+        );
+        let q = _mm256_add_ps(
+            _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
+            _mm256_set1_ps(entry.row_q),
+        );
+        let hit = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
+            valid,
+        );
+        (t, q, hit)
+    }
+
+    /// `exp(-½ q)` on 8 lanes as [`super::gaussian`] evaluates it: the polynomial, or libm
+    /// lane by lane.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) fn gaussian<const FAST: bool>(q: __m256) -> __m256 {
+        if FAST {
+            return exp_neg_half(q);
+        }
+        let mut values = [0.0_f32; LANES];
+        // SAFETY: `values` holds 8 floats.
+        unsafe { _mm256_storeu_ps(values.as_mut_ptr(), q) };
+        let values = values.map(|q| (-0.5 * q).exp());
+        // SAFETY: as above.
+        unsafe { _mm256_loadu_ps(values.as_ptr()) }
+    }
+
     /// [`super::sum_half_row`] with AVX2.
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn sum_half_row<const FAST: bool>(
@@ -783,42 +845,15 @@ pub(crate) mod avx2 {
         background: [f64; 3],
         acc: &mut [[f64; LANES]; 3],
     ) -> u64 {
-        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-        let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(iota, _mm256_set1_ps(lanes));
+        let numbers = lane_numbers(lanes);
         let mut lo = background.map(|b| _mm256_set1_pd(b + 0.0));
         let mut hi = lo;
         let mut pairs = 0_u64;
-        // `G` (zero outside the ellipse) and the pair count of one entry.
-        let evaluate = |entry: &RowEntry| -> (__m256, u32) {
+        for entry in entries {
             let kernel = &kernels[entry.kernel as usize];
-            let shift = first - entry.offset;
-            let t = _mm256_add_ps(
-                _mm256_add_ps(iota, _mm256_set1_ps(shift)),
-                _mm256_set1_ps(entry.t_anchor),
-            );
-            let q = _mm256_add_ps(
-                _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
-                _mm256_set1_ps(entry.row_q),
-            );
-            let hit = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
-                valid,
-            );
-            let count = _mm256_movemask_ps(hit).count_ones();
-            let g = if FAST {
-                exp_neg_half(q)
-            } else {
-                let mut values = [0.0_f32; LANES];
-                // SAFETY: `values` holds 8 floats.
-                unsafe { _mm256_storeu_ps(values.as_mut_ptr(), q) };
-                let values = values.map(|q| (-0.5 * q).exp());
-                // SAFETY: as above.
-                unsafe { _mm256_loadu_ps(values.as_ptr()) }
-            };
-            (_mm256_and_ps(g, hit), count)
-        };
-        let mut add = |entry: &RowEntry, g: __m256| {
-            let kernel = &kernels[entry.kernel as usize];
+            let (_, q, hit) = self::lanes(entry, kernel, numbers, first);
+            pairs += u64::from(_mm256_movemask_ps(hit).count_ones());
+            let g = _mm256_and_ps(gaussian::<FAST>(q), hit);
             let g_lo = _mm256_cvtps_pd(_mm256_castps256_ps128(g));
             let g_hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(g));
             // `a G` is exact in f64 (two 24-bit significands), so the fused multiply-add
@@ -828,21 +863,6 @@ pub(crate) mod avx2 {
                 lo[c] = _mm256_fmadd_pd(a, g_lo, lo[c]);
                 hi[c] = _mm256_fmadd_pd(a, g_hi, hi[c]);
             }
-        };
-        // Two entries at a time: their exps are independent, so they overlap; the sums
-        // still take them in entry order.
-        let mut pairs_of = entries.chunks_exact(2);
-        for two in &mut pairs_of {
-            let (g0, n0) = evaluate(&two[0]);
-            let (g1, n1) = evaluate(&two[1]);
-            pairs += u64::from(n0 + n1);
-            add(&two[0], g0);
-            add(&two[1], g1);
-        }
-        for entry in pairs_of.remainder() {
-            let (g, n) = evaluate(entry);
-            pairs += u64::from(n);
-            add(entry, g);
         }
         for c in 0..3 {
             // SAFETY: each channel holds 8 doubles: 4 in `lo`, 4 in `hi`.

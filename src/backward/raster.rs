@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
 use crate::raster::{
-    ExpMode, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, gaussian, prepare_tile,
+    ExpMode, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, prepare_tile,
 };
 use crate::tiles::TileBins;
 
@@ -247,16 +247,10 @@ fn half_row<const FAST: bool>(
     for entry in entries {
         let kernel = &kernels[entry.kernel as usize];
         let a = kernel.amplitude.map(|a| a as f32);
-        let shift = first - entry.offset;
         let (dv, dv2) = (entry.dv, entry.dv * entry.dv);
         let m = &mut moments[entry.kernel as usize];
         for i in 0..LANES {
-            let lane = i as f32;
-            let t = (lane + shift) + entry.t_anchor;
-            let q = kernel.qxx * t * t + entry.row_q;
-            let hit = q <= kernel.qmax && lane < lanes;
-            let value = gaussian::<FAST>(q);
-            let g = if hit { value } else { 0.0 };
+            let (t, g, _) = entry.lane::<FAST>(kernel, first, lanes, i);
             let w = (v[0][i] * a[0] + v[1][i] * a[1] + v[2][i] * a[2]) * g;
             let wt = w * t;
             m[0][i] += v[0][i] * g;
@@ -278,7 +272,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::Moments;
-    use crate::raster::avx2::exp_neg_half;
+    use crate::raster::avx2::{gaussian, lane_numbers, lanes};
     use crate::raster::{LANES, RowEntry, TileKernel};
 
     #[target_feature(enable = "avx2,fma")]
@@ -286,44 +280,22 @@ mod avx2 {
         entries: &[RowEntry],
         kernels: &[TileKernel],
         first: f32,
-        lanes: f32,
+        inside: f32,
         v: &[[f32; LANES]; 3],
         moments: &mut [Moments],
     ) {
-        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-        let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(iota, _mm256_set1_ps(lanes));
+        let numbers = lane_numbers(inside);
         // SAFETY: each channel holds 8 floats.
         let v = v.map(|c| unsafe { _mm256_loadu_ps(c.as_ptr()) });
         for entry in entries {
             let kernel = &kernels[entry.kernel as usize];
             let a = kernel.amplitude.map(|a| _mm256_set1_ps(a as f32));
-            let shift = first - entry.offset;
-            let t = _mm256_add_ps(
-                _mm256_add_ps(iota, _mm256_set1_ps(shift)),
-                _mm256_set1_ps(entry.t_anchor),
-            );
-            let q = _mm256_add_ps(
-                _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
-                _mm256_set1_ps(entry.row_q),
-            );
-            let hit = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_LE_OQ>(q, _mm256_set1_ps(kernel.qmax)),
-                valid,
-            );
+            let (t, q, hit) = lanes(entry, kernel, numbers, first);
             if _mm256_movemask_ps(hit) == 0 {
                 // Every term is zero: adding them would change nothing (sums start at +0).
                 continue;
             }
-            let value = if FAST {
-                exp_neg_half(q)
-            } else {
-                let mut values = [0.0_f32; LANES];
-                // SAFETY: `values` holds 8 floats.
-                unsafe { _mm256_storeu_ps(values.as_mut_ptr(), q) };
-                let values = values.map(|q| (-0.5 * q).exp());
-                // SAFETY: as above.
-                unsafe { _mm256_loadu_ps(values.as_ptr()) }
-            };
+            let value = gaussian::<FAST>(q);
             let g = _mm256_and_ps(value, hit);
             let w = _mm256_mul_ps(
                 _mm256_add_ps(
