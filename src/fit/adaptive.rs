@@ -192,8 +192,8 @@ impl DensityStats {
             if g == [0.0; 4] {
                 continue;
             }
-            let [sx, sy, sz, st] = scene.scales[i];
-            let s = (sx * sy * sz).cbrt();
+            let st = scene.scales[i][3];
+            let s = mean_spatial_scale(scene.scales[i]);
             let scaled = [s * g[0], s * g[1], s * g[2], st * g[3]];
             for (acc, v) in self.sum[i].iter_mut().zip(scaled) {
                 *acc += v;
@@ -313,8 +313,7 @@ pub fn densify_and_prune(
         for a in &mut parent.amplitude {
             *a *= 0.5;
         }
-        let [sx, sy, sz, _] = parent.scale;
-        if (sx * sy * sz).cbrt() > options.min_scale {
+        if mean_spatial_scale(parent.scale) > options.min_scale {
             for s in &mut parent.scale[..3] {
                 *s /= SPLIT_FACTOR;
             }
@@ -376,25 +375,31 @@ fn split_in_time(parent: &mut Kernel) -> Kernel {
 /// (their temporal Gaussians overlap). Their `st` and amplitudes may differ: [`rejoin`] keeps
 /// the pair's integral over time.
 fn halves_of_one_path(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
+    let (si, sj) = (scene.scales[i], scene.scales[j]);
+    let (ai, aj) = (scene.amplitudes[i], scene.amplitudes[j]);
+    let (ti, tj) = (scene.means[i][3], scene.means[j][3]);
+    same_rotation(scene, i, j)
+        && (0..3).all(|k| (si[k] / sj[k]).ln().abs() <= tolerance)
+        && (0..3).all(|c| ai[c] * aj[c] >= 0.0)
+        && (ti - tj).abs() <= (si[3] + sj[3]) * (1.0 + tolerance)
+        && on_one_line(scene, i, j, tolerance)
+}
+
+/// Whether kernels `i` and `j` have the same rotation (up to the quaternion's sign).
+fn same_rotation(scene: &Scene, i: usize, j: usize) -> bool {
     let (qi, qj) = (scene.rotations[i], scene.rotations[j]);
     let dot: f64 = (0..4).map(|k| qi[k] * qj[k]).sum();
-    if dot.abs() < 1.0 - 1e-6 {
-        return false;
-    }
+    dot.abs() >= 1.0 - 1e-6
+}
+
+/// Whether kernels `i` and `j` move on one line: at the midpoint of their times their
+/// positions agree, and their velocities over one `st` differ, by at most `tolerance`
+/// spatial standard deviations (geometric means over the pair).
+fn on_one_line(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
     let (si, sj) = (scene.scales[i], scene.scales[j]);
-    if (0..3).any(|k| (si[k] / sj[k]).ln().abs() > tolerance) {
-        return false;
-    }
-    let (ai, aj) = (scene.amplitudes[i], scene.amplitudes[j]);
-    if (0..3).any(|c| ai[c] * aj[c] < 0.0) {
-        return false;
-    }
-    let spatial = ((si[0] * si[1] * si[2]).cbrt() * (sj[0] * sj[1] * sj[2]).cbrt()).sqrt();
+    let spatial = (mean_spatial_scale(si) * mean_spatial_scale(sj)).sqrt();
     let temporal = (si[3] * sj[3]).sqrt();
     let (mi, mj) = (scene.means[i], scene.means[j]);
-    if (mi[3] - mj[3]).abs() > (si[3] + sj[3]) * (1.0 + tolerance) {
-        return false;
-    }
     let (vi, vj) = (scene.velocities[i], scene.velocities[j]);
     let tau = 0.5 * (mi[3] + mj[3]);
     (0..3).all(|c| {
@@ -403,6 +408,11 @@ fn halves_of_one_path(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool
         (pi - pj).abs() <= tolerance * spatial
             && (vi[c] - vj[c]).abs() * temporal <= tolerance * spatial
     })
+}
+
+/// `s̄ = (sx sy sz)^(1/3)`, the geometric mean of a kernel's spatial scales.
+fn mean_spatial_scale([sx, sy, sz, _]: [f64; 4]) -> f64 {
+    (sx * sy * sz).cbrt()
 }
 
 /// One kernel from two pieces of a path: the midpoint time, `st² = σ̄² + (Δt/2)²` (the
@@ -434,29 +444,12 @@ pub const MERGE_LIMIT: usize = 4096;
 /// Whether kernels `i` and `j` of `scene` describe the same Gaussian within `tolerance`
 /// standard deviations (see the module docs).
 fn same_kernel(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
-    let (qi, qj) = (scene.rotations[i], scene.rotations[j]);
-    let dot: f64 = (0..4).map(|k| qi[k] * qj[k]).sum();
-    if dot.abs() < 1.0 - 1e-6 {
-        return false;
-    }
     let (si, sj) = (scene.scales[i], scene.scales[j]);
-    if (0..4).any(|k| (si[k] / sj[k]).ln().abs() > tolerance) {
-        return false;
-    }
-    let spatial = ((si[0] * si[1] * si[2]).cbrt() * (sj[0] * sj[1] * sj[2]).cbrt()).sqrt();
-    let temporal = (si[3] * sj[3]).sqrt();
-    let (mi, mj) = (scene.means[i], scene.means[j]);
-    if (mi[3] - mj[3]).abs() > tolerance * temporal {
-        return false;
-    }
-    let (vi, vj) = (scene.velocities[i], scene.velocities[j]);
-    let tau = 0.5 * (mi[3] + mj[3]);
-    (0..3).all(|c| {
-        let pi = mi[c] + vi[c] * (tau - mi[3]);
-        let pj = mj[c] + vj[c] * (tau - mj[3]);
-        (pi - pj).abs() <= tolerance * spatial
-            && (vi[c] - vj[c]).abs() * temporal <= tolerance * spatial
-    })
+    let (ti, tj) = (scene.means[i][3], scene.means[j][3]);
+    same_rotation(scene, i, j)
+        && (0..4).all(|k| (si[k] / sj[k]).ln().abs() <= tolerance)
+        && (ti - tj).abs() <= tolerance * (si[3] * sj[3]).sqrt()
+        && on_one_line(scene, i, j, tolerance)
 }
 
 /// Folds `other` into `kernel`: amplitudes add, the rest is the |amplitude|-weighted mean.

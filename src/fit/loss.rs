@@ -124,20 +124,15 @@ pub fn ssim(image: &Image, target: &Image) -> f64 {
     };
     let mut total = 0.0;
     for c in 0..3 {
-        let x: Vec<f64> = image
-            .pixels
-            .iter()
-            .skip(c)
-            .step_by(3)
-            .map(|&v| f64::from(v))
-            .collect();
-        let y: Vec<f64> = target
-            .pixels
-            .iter()
-            .skip(c)
-            .step_by(3)
-            .map(|&v| f64::from(v))
-            .collect();
+        let channel = |of: &Image| -> Vec<f64> {
+            of.pixels
+                .iter()
+                .skip(c)
+                .step_by(3)
+                .map(|&v| f64::from(v))
+                .collect()
+        };
+        let (x, y) = (channel(image), channel(target));
         let product =
             |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).collect::<Vec<_>>();
         let (mx, my) = (filter(&x), filter(&y));
