@@ -29,6 +29,30 @@ fn run<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> O
     child.wait_with_output().unwrap()
 }
 
+/// Renders the blob as a small dataset (`views` cameras × 2 times, 8×8) into `dir/ds`.
+fn blob_dataset(dir: &Path, views: &str) {
+    let blob = data("blob.json");
+    let args = [
+        "dataset",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--views",
+        views,
+        "--times",
+        "2",
+        "--size",
+        "8x8",
+        "--out",
+        "ds",
+    ];
+    let output = run(&args, dir);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
 fn refused<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(
     args: &[S],
     cwd: &Path,
@@ -68,11 +92,7 @@ fn extreme_counts_and_sizes_are_refused_before_any_work() {
     );
     // Found by the second fuzzing round: a random start's count allocated unchecked.
     let views = tempfile::tempdir().unwrap();
-    let made = run(
-        &dataset(&["--views", "2", "--times", "2", "--size", "8x8"]),
-        views.path(),
-    );
-    assert!(made.status.success());
+    blob_dataset(views.path(), "2");
     let init = format!("random:{huge}");
     refused(
         &["fit", "--views", "ds", "--init", &init, "--out", "f.json"],
@@ -152,24 +172,7 @@ fn extreme_counts_and_sizes_are_refused_before_any_work() {
 fn non_finite_flags_are_refused_when_read() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let blob = data("blob.json");
-    let ok = run(
-        &[
-            "dataset",
-            "--scene",
-            blob.to_str().unwrap(),
-            "--views",
-            "4",
-            "--times",
-            "2",
-            "--size",
-            "8x8",
-            "--out",
-            "ds",
-        ],
-        d,
-    );
-    assert!(ok.status.success());
+    blob_dataset(d, "4");
     for flag in [
         "--lr-mean=nan",
         "--lr-final=-inf",
@@ -936,25 +939,7 @@ fn extreme_flag_values_end_in_a_result_or_a_clear_refusal() {
     const RUNS: usize = 300;
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let made = run(
-        &[
-            "dataset", "--scene", "s.json", "--views", "2", "--times", "2", "--size", "8x8",
-            "--out", "ds",
-        ]
-        .map(|a| {
-            if a == "s.json" {
-                data("blob.json").display().to_string()
-            } else {
-                a.into()
-            }
-        }),
-        d,
-    );
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    blob_dataset(d, "2");
     let scene = data("blob.json").display().to_string();
     let camera = data("blob_camera.json").display().to_string();
     let gltf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
