@@ -146,9 +146,15 @@ impl SimdPath {
             .expect("the baseline is always available")
     }
 
-    /// Every path this CPU runs, narrowest first (the tests compare them all).
+    /// Every path this CPU runs, narrowest first (the tests compare them all). Detected
+    /// once per process: renders ask at every frame.
     #[must_use]
-    pub fn available() -> Vec<SimdPath> {
+    pub fn available() -> &'static [SimdPath] {
+        static PATHS: std::sync::OnceLock<Vec<SimdPath>> = std::sync::OnceLock::new();
+        PATHS.get_or_init(Self::detect_all)
+    }
+
+    fn detect_all() -> Vec<SimdPath> {
         let mut paths = vec![SimdPath::Baseline];
         #[cfg(target_arch = "x86_64")]
         {
@@ -923,7 +929,7 @@ mod tests {
             let (proj, bins) = (&context.projected, &context.bins);
             let mut forms = Vec::new();
             let mut first: Option<(Image, u64)> = None;
-            for &path in &paths {
+            for &path in paths {
                 let mut image = Image::default();
                 let pairs = rasterize_on(
                     path,
@@ -957,7 +963,7 @@ mod tests {
     #[test]
     fn the_ceiling_probe_counts_every_lane_and_agrees_across_paths() {
         let mut sums = Vec::new();
-        for path in SimdPath::available() {
+        for &path in SimdPath::available() {
             let (pairs, checksum) = ceiling_probe(path, 37, 3);
             assert_eq!(pairs, 37 * 3 * 16, "{path}");
             assert!(checksum.is_finite() && checksum > 0.0, "{path}: {checksum}");

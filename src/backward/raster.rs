@@ -390,7 +390,7 @@ mod tests {
             let mut forms = Vec::new();
             crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
             let mut results = Vec::new();
-            for path in SimdPath::available() {
+            for &path in SimdPath::available() {
                 let (mut partials, mut sums) = (Vec::new(), Vec::new());
                 let mut out = ScreenGradients::default();
                 rasterize_backward_on(
