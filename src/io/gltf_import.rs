@@ -876,15 +876,7 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
     let animated = !tracks.is_empty() && t1 > t0 && times > 1;
     let time_range = if animated { [t0, t1] } else { [0.0, 0.0] };
     let samples = if animated { times } else { 1 };
-    let sample_times: Vec<f64> = (0..samples)
-        .map(|k| {
-            if samples == 1 {
-                time_range[0]
-            } else {
-                t0 + (t1 - t0) * k as f64 / (samples - 1) as f64
-            }
-        })
-        .collect();
+    let sample_times = crate::scenes::paths::even_times(time_range, samples);
     let worlds: Vec<Vec<DMat4>> = sample_times
         .iter()
         .map(|&t| world_matrices_at(document, &tracks, t))

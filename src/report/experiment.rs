@@ -537,11 +537,7 @@ pub fn run_experiment(
     };
 
     // The dense sweep of ground truth and blob renders.
-    let [t0, t1] = spec.time_range;
-    let n_sweep = config.sweep_times.max(2);
-    let times: Vec<f64> = (0..n_sweep)
-        .map(|k| t0 + (t1 - t0) * k as f64 / (n_sweep - 1) as f64)
-        .collect();
+    let times = crate::scenes::paths::even_times(spec.time_range, config.sweep_times.max(2));
     progress.start("sweep", test_cameras.len() * times.len());
     let mut context = RenderContext::new();
     let mut render_all = |scene: &Scene,

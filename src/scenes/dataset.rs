@@ -140,18 +140,9 @@ pub fn render_views(
     mut sink: impl FnMut(Split, View) -> Result<()>,
 ) -> Result<()> {
     spec.validate()?;
-    let [t0, t1] = spec.time_range;
-    let train_times: Vec<f64> = (0..spec.times)
-        .map(|k| {
-            if spec.times == 1 {
-                t0
-            } else {
-                t0 + (t1 - t0) * k as f64 / (spec.times - 1) as f64
-            }
-        })
-        .collect();
+    let train_times = crate::scenes::paths::even_times(spec.time_range, spec.times);
     let mid_times: Vec<f64> = if spec.times == 1 {
-        vec![t0]
+        vec![spec.time_range[0]]
     } else {
         train_times
             .windows(2)

@@ -48,6 +48,21 @@ pub struct Circle {
     pub up: Up,
 }
 
+/// `n` times evenly over `[t0, t1]`, ends included (`t0` alone when `n = 1`):
+/// `t_k = t0 + (t1 - t0) k / (n - 1)`.
+#[must_use]
+pub fn even_times([t0, t1]: [f64; 2], n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|k| {
+            if n == 1 {
+                t0
+            } else {
+                t0 + (t1 - t0) * k as f64 / (n - 1) as f64
+            }
+        })
+        .collect()
+}
+
 /// Distance from a ball of `radius` at which a camera with `lens` sees all of it with a 5%
 /// margin: `1.05 r / sin(half)`, with `half` half the narrower of the vertical and the
 /// horizontal field of view. Every framing in the crate (orbits, spirals, dataset cameras,

@@ -124,10 +124,6 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             request.cutoff
         )));
     }
-    let tau = match &request.times {
-        ExportTimes::One(tau) => Some(*tau),
-        _ => None,
-    };
     match &request.times {
         ExportTimes::One(tau) if !tau.is_finite() => {
             return Err(Error::usage("--time must be finite"));
@@ -147,7 +143,7 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
         }
         _ => {}
     }
-    if let Some(tau) = tau {
+    if let ExportTimes::One(tau) = request.times {
         check_output(&request.out, &["ply"], &[&request.scene])?;
         let scene = load_scene(&request.scene)?;
         let n = write_slice_ply(&scene, tau, request.cutoff, request.sh_rest, &request.out)?;
@@ -167,16 +163,7 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     let times = match &request.times {
         ExportTimes::List(times) => times.clone(),
         ExportTimes::Frames(n) => {
-            let [t0, t1] = crate::scenes::paths::time_range(&scene);
-            (0..*n)
-                .map(|k| {
-                    if *n == 1 {
-                        t0
-                    } else {
-                        t0 + (t1 - t0) * k as f64 / (*n - 1) as f64
-                    }
-                })
-                .collect()
+            crate::scenes::paths::even_times(crate::scenes::paths::time_range(&scene), *n)
         }
         ExportTimes::One(_) => unreachable!("handled above"),
     };

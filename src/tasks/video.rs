@@ -10,7 +10,7 @@ use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
 use crate::render::{RenderContext, RenderOptions};
 use crate::scenes::paths::{
-    Circle, Lens, PathFrame, Up, framing_circle, orbit, spiral, time_range,
+    Circle, Lens, PathFrame, Up, even_times, framing_circle, orbit, spiral, time_range,
 };
 use crate::slice::TemporalIndex;
 use crate::tasks::with_threads;
@@ -115,9 +115,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         }
     }
     if let Some(spec) = &request.spiral {
-        let sweep: Vec<f64> = (0..=10)
-            .map(|k| t0 + (t1 - t0) * f64::from(k) / 10.0)
-            .collect();
+        let sweep = even_times([t0, t1], 11);
         videos.push((
             "spiral".into(),
             spiral(&circle(spec, &sweep), lens, [t0, t1])?,
@@ -130,13 +128,13 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
         let cameras = load_any_path(path)?;
-        let last = cameras.len().saturating_sub(1).max(1) as f64;
+        let sweep = even_times([t0, t1], cameras.len());
         let frames = cameras
             .iter()
-            .enumerate()
-            .map(|(k, c)| PathFrame {
+            .zip(sweep)
+            .map(|(c, t)| PathFrame {
                 camera: c.camera,
-                time: c.time.unwrap_or(t0 + (t1 - t0) * k as f64 / last),
+                time: c.time.unwrap_or(t),
             })
             .collect();
         videos.push((name, frames));
