@@ -9,6 +9,7 @@
 //! | layer | modules | what |
 //! |---|---|---|
 //! | model | [`model`] | [`Scene`]/[`Kernel`], [`Camera`], [`Image`], views, errors, seeded randomness: data and math, no files |
+//! | | [`parallel`] | arrays filled in parallel, the same for any thread count |
 //! | stages | [`slice`](mod@slice) → [`project`] → [`tiles`] → [`raster`] | the forward render, one function per stage from plain data to plain data |
 //! | | [`backward`] | the exact gradient (SPEC §6), the stages mirrored in reverse |
 //! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |
@@ -43,6 +44,7 @@
 //! ```
 
 pub mod model;
+pub mod parallel;
 
 pub mod backward;
 pub mod overlay;

@@ -20,6 +20,7 @@
 //! pixels inside the ellipse follows from one square root. Everything here is f64.
 
 use crate::model::camera::Camera;
+use crate::parallel::{fill_in_parallel, indices_where};
 use crate::slice::SlicedKernels;
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
@@ -180,27 +181,30 @@ pub fn project_one(
 /// The kernels are projected in parallel, then kept in ascending order (the result does not
 /// depend on the thread count).
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
-    out.reset();
     let mut projections = std::mem::take(&mut out.scratch);
-    crate::slice::fill_in_parallel(&mut projections, sliced.len(), |s| {
+    fill_in_parallel(&mut projections, sliced.len(), |s| {
         project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
     });
-    for (s, projection) in projections.iter().enumerate() {
-        let Some(proj) = projection else {
-            continue;
-        };
-        let qmax = sliced.qmax[s];
-        out.slice_from_proj.push(s as u32);
-        out.kernel_from_proj.push(sliced.kernel_from_slice[s]);
-        out.means.push(proj.mean);
-        out.covariances.push(proj.covariance);
-        out.conics.push(proj.conic);
-        out.qmax.push(qmax);
-        out.radii.push([
-            (qmax * proj.covariance[0]).sqrt(),
-            (qmax * proj.covariance[2]).sqrt(),
-        ]);
-        out.amplitudes.push(sliced.amplitudes[s].map(|a| a as f32));
-    }
+    // The ones on screen, in order, each array filled in parallel.
+    let mut kept = std::mem::take(&mut out.slice_from_proj);
+    indices_where(&mut kept, sliced.len(), |s| projections[s].is_some());
+    let n = kept.len();
+    let slice_of = |p: usize| kept[p] as usize;
+    let on_screen = |p: usize| projections[slice_of(p)].expect("kept projections exist");
+    fill_in_parallel(&mut out.kernel_from_proj, n, |p| {
+        sliced.kernel_from_slice[slice_of(p)]
+    });
+    fill_in_parallel(&mut out.means, n, |p| on_screen(p).mean);
+    fill_in_parallel(&mut out.covariances, n, |p| on_screen(p).covariance);
+    fill_in_parallel(&mut out.conics, n, |p| on_screen(p).conic);
+    fill_in_parallel(&mut out.qmax, n, |p| sliced.qmax[slice_of(p)]);
+    fill_in_parallel(&mut out.radii, n, |p| {
+        let (qmax, covariance) = (sliced.qmax[slice_of(p)], on_screen(p).covariance);
+        [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
+    });
+    fill_in_parallel(&mut out.amplitudes, n, |p| {
+        sliced.amplitudes[slice_of(p)].map(|a| a as f32)
+    });
+    out.slice_from_proj = kept;
     out.scratch = projections;
 }

@@ -213,7 +213,7 @@ pub struct RowForm {
 /// Fills `forms` for `proj` binned in `bins` (in parallel; the values do not depend on the
 /// thread count).
 pub fn row_forms(proj: &ProjectedKernels, bins: &TileBins, forms: &mut Vec<RowForm>) {
-    crate::slice::fill_in_parallel(forms, proj.len(), |p| {
+    crate::parallel::fill_in_parallel(forms, proj.len(), |p| {
         let [_, sxy, syy] = proj.covariances[p];
         RowForm {
             mean: proj.means[p],

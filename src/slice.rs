@@ -18,6 +18,7 @@
 //! whose amplitude is exactly zero are dropped. Everything is f64.
 
 use crate::model::scene::Scene;
+use crate::parallel::{fill_in_parallel, indices_where};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
@@ -35,6 +36,8 @@ pub struct SlicedKernels {
     pub qmax: Vec<f64>,
     /// Scratch of [`slice`]: every visited kernel's slice, kept between frames.
     scratch: Vec<Option<SlicedKernel>>,
+    /// Scratch of [`slice`]: the positions in `scratch` of the live slices.
+    kept: Vec<u32>,
 }
 
 /// One kernel's slice.
@@ -161,45 +164,23 @@ fn slice_visiting(
     cutoff: f64,
     out: &mut SlicedKernels,
 ) {
-    out.reset();
     let mut slices = std::mem::take(&mut out.scratch);
+    let mut kept = std::mem::take(&mut out.kept);
     fill_in_parallel(&mut slices, count, |k| {
         slice_one(scene, kernel(k), tau, cutoff)
     });
-    for (k, sliced) in slices.iter().enumerate() {
-        if let Some(one) = sliced {
-            out.kernel_from_slice.push(kernel(k) as u32);
-            out.means.push(one.mean);
-            out.covariances.push(one.covariance);
-            out.amplitudes.push(one.amplitude);
-            out.qmax.push(one.qmax);
-        }
-    }
+    // The live ones, in order, each array filled in parallel.
+    indices_where(&mut kept, count, |k| slices[k].is_some());
+    let live = |j: usize| slices[kept[j] as usize].expect("kept slices are alive");
+    fill_in_parallel(&mut out.kernel_from_slice, kept.len(), |j| {
+        kernel(kept[j] as usize) as u32
+    });
+    fill_in_parallel(&mut out.means, kept.len(), |j| live(j).mean);
+    fill_in_parallel(&mut out.covariances, kept.len(), |j| live(j).covariance);
+    fill_in_parallel(&mut out.amplitudes, kept.len(), |j| live(j).amplitude);
+    fill_in_parallel(&mut out.qmax, kept.len(), |j| live(j).qmax);
     out.scratch = slices;
-}
-
-/// Replaces the contents of `values` with `value(0..count)`, computed in parallel (chunks of at
-/// least 1024), without filling the buffer serially first: a first, large frame's fresh
-/// pages are touched by the workers that compute them. The result does not depend on the
-/// thread count.
-pub(crate) fn fill_in_parallel<T: Send>(
-    values: &mut Vec<T>,
-    count: usize,
-    value: impl Fn(usize) -> T + Sync,
-) {
-    use rayon::prelude::*;
-    values.clear();
-    values.reserve(count);
-    values.spare_capacity_mut()[..count]
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(1024)
-        .for_each(|(k, slot)| {
-            slot.write(value(k));
-        });
-    // SAFETY: the loop above initialised every one of the first `count` slots (`reserve`
-    // made room for them), and `T` values are only read after this.
-    unsafe { values.set_len(count) };
+    out.kept = kept;
 }
 
 #[inline]

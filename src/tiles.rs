@@ -21,6 +21,7 @@
 //! ascending scene order (the fill pass runs in that order), which makes every pixel's sum
 //! order, and so the image, independent of threads.
 
+use crate::parallel::fill_in_parallel;
 use crate::project::ProjectedKernels;
 
 /// Tile side in pixels.
@@ -64,23 +65,26 @@ pub struct TileBins {
     pub tile_offsets: Vec<u32>,
     /// Projected-kernel indices, grouped by tile, ascending within a tile.
     pub proj_from_entry: Vec<u32>,
-    /// Scratch: per tile row (band of 16 pixel rows), its kernels in ascending order (CSR
-    /// by `band_offsets`), then its entries and per-tile counts.
+    /// Scratch: per tile row (band of 16 pixel rows), the kernels reaching it with their
+    /// tile columns, ascending by kernel (CSR by `band_offsets`); per tile row its tile
+    /// counts; per chunk of kernels its count per tile row.
     band_offsets: Vec<u32>,
-    band_kernels: Vec<u32>,
-    bands: Vec<BandScratch>,
+    band_reaches: Vec<Reach>,
+    band_tile_counts: Vec<Vec<u32>>,
+    chunk_band_counts: Vec<u32>,
 }
 
-/// What one tile row's binning builds, kept between frames.
-#[derive(Clone, Debug, Default)]
-struct BandScratch {
-    /// `(kernel, first tile column, end tile column)` per kernel reaching the band.
-    reaches: Vec<(u32, u32, u32)>,
-    /// Entries per tile of the band, then their start offsets within the band.
-    counts: Vec<u32>,
-    /// The band's part of `proj_from_entry`, tile by tile.
-    entries: Vec<u32>,
+/// A kernel reaching a tile row: its index and the tile columns `first..end` (empty when its
+/// box covers the row but its ellipse does not).
+#[derive(Clone, Copy, Debug, Default)]
+struct Reach {
+    kernel: u32,
+    first: u32,
+    end: u32,
 }
+
+/// Kernels per chunk of the per-kernel passes.
+const CHUNK: usize = 4096;
 
 impl TileBins {
     /// Number of tiles.
@@ -111,9 +115,12 @@ impl TileBins {
     }
 }
 
-/// Bins `proj` for a `width × height` image into `out`, reusing its buffers. Tile rows are
-/// binned in parallel (one ellipse–tile-row test per kernel and tile row); the lists are the
-/// same whatever the number of threads.
+/// Bins `proj` for a `width × height` image into `out`, reusing its buffers. Every pass is
+/// parallel and reads the kernels in order: per kernel its box; per chunk of kernels how
+/// many reach each tile row; per chunk, each kernel's tile columns on each of its tile rows
+/// (one ellipse–tile-row test) written into the rows' lists; per tile row a counting sort of
+/// its kernels by tile, straight into the tiles' lists. The lists are the same whatever the
+/// number of threads.
 pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins) {
     use rayon::prelude::*;
     out.width = width;
@@ -121,134 +128,139 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
     out.tiles_x = width.div_ceil(TILE_SIZE);
     out.tiles_y = height.div_ceil(TILE_SIZE);
     let (tiles_x, tiles_y) = (out.tiles_x as usize, out.tiles_y as usize);
-    out.pixel_bounds.clear();
-    out.pixel_bounds.resize(proj.len(), [0; 4]);
-    out.pixel_bounds
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(1024)
-        .for_each(|(p, bounds)| {
-            let [mx, my] = proj.means[p];
-            let [sxx, _, syy] = proj.covariances[p];
-            let q = padded_qmax(proj.qmax[p]);
-            *bounds = match (
-                pixel_span(mx, (q * sxx).sqrt(), 0, width),
-                pixel_span(my, (q * syy).sqrt(), 0, height),
-            ) {
-                (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1],
-                _ => [0, 0, 0, 0],
-            };
-        });
-    // Kernels by tile row (counting sort, ascending within each row).
-    let band_range = |[x0, x1, y0, y1]: [u32; 4]| {
+    let n = proj.len();
+    fill_in_parallel(&mut out.pixel_bounds, n, |p| {
+        let [mx, my] = proj.means[p];
+        let [sxx, _, syy] = proj.covariances[p];
+        let q = padded_qmax(proj.qmax[p]);
+        match (
+            pixel_span(mx, (q * sxx).sqrt(), 0, width),
+            pixel_span(my, (q * syy).sqrt(), 0, height),
+        ) {
+            (Some((x0, x1)), Some((y0, y1))) => [x0, x1, y0, y1],
+            _ => [0, 0, 0, 0],
+        }
+    });
+    let pixel_bounds = &out.pixel_bounds;
+    let band_range = |p: usize| {
+        let [x0, x1, y0, y1] = pixel_bounds[p];
         if x0 >= x1 || y0 >= y1 {
             0..0
         } else {
             (y0 / TILE_SIZE) as usize..y1.div_ceil(TILE_SIZE) as usize
         }
     };
-    out.band_offsets.clear();
-    out.band_offsets.resize(tiles_y + 1, 0);
-    for bounds in &out.pixel_bounds {
-        for band in band_range(*bounds) {
-            out.band_offsets[band + 1] += 1;
-        }
-    }
-    for band in 0..tiles_y {
-        out.band_offsets[band + 1] += out.band_offsets[band];
-    }
-    out.band_kernels.clear();
-    out.band_kernels
-        .resize(out.band_offsets[tiles_y] as usize, 0);
-    {
-        let mut cursor = out.band_offsets[..tiles_y].to_vec();
-        for (p, bounds) in out.pixel_bounds.iter().enumerate() {
-            for band in band_range(*bounds) {
-                out.band_kernels[cursor[band] as usize] = p as u32;
-                cursor[band] += 1;
-            }
-        }
-    }
-    // Each tile row: its kernels' tile columns, then a counting sort by tile.
-    out.bands.resize_with(tiles_y, BandScratch::default);
-    let (band_offsets, band_kernels, pixel_bounds) =
-        (&out.band_offsets, &out.band_kernels, &out.pixel_bounds);
-    out.bands.par_iter_mut().enumerate().for_each(|(ty, band)| {
-        band.reaches.clear();
-        band.counts.clear();
-        band.counts.resize(tiles_x + 1, 0);
-        let kernels = &band_kernels[band_offsets[ty] as usize..band_offsets[ty + 1] as usize];
-        for &p in kernels {
-            if let Some(columns) =
-                tile_columns(proj, p as usize, pixel_bounds[p as usize], ty as u32)
-            {
-                for tx in columns.clone() {
-                    band.counts[tx as usize + 1] += 1;
+    // Per chunk of kernels, how many reach each tile row.
+    let chunks = n.div_ceil(CHUNK);
+    let chunk_band_counts = &mut out.chunk_band_counts;
+    chunk_band_counts.clear();
+    chunk_band_counts.resize(chunks * tiles_y, 0);
+    chunk_band_counts
+        .par_chunks_mut(tiles_y.max(1))
+        .enumerate()
+        .for_each(|(c, counts)| {
+            for p in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                for band in band_range(p) {
+                    counts[band] += 1;
                 }
-                band.reaches.push((p, columns.start, columns.end));
             }
+        });
+    let count = |c: usize, band: usize| chunk_band_counts[c * tiles_y + band] as usize;
+    out.band_offsets.clear();
+    out.band_offsets.push(0);
+    for band in 0..tiles_y {
+        let reaching: usize = (0..chunks).map(|c| count(c, band)).sum();
+        out.band_offsets
+            .push(out.band_offsets[band] + reaching as u32);
+    }
+    // Each chunk writes its kernels' reaches into its own part of every tile row's list:
+    // the lists are laid out by tile row, then chunk, then kernel.
+    out.band_reaches.clear();
+    out.band_reaches
+        .resize(out.band_offsets[tiles_y] as usize, Reach::default());
+    let mut parts: Vec<Vec<&mut [Reach]>> =
+        (0..chunks).map(|_| Vec::with_capacity(tiles_y)).collect();
+    let mut rest = out.band_reaches.as_mut_slice();
+    for band in 0..tiles_y {
+        for (c, part) in parts.iter_mut().enumerate() {
+            let (head, tail) = rest.split_at_mut(count(c, band));
+            part.push(head);
+            rest = tail;
         }
-        for tx in 0..tiles_x {
-            band.counts[tx + 1] += band.counts[tx];
+    }
+    parts.into_par_iter().enumerate().for_each(|(c, mut rows)| {
+        let mut filled = vec![0_usize; tiles_y];
+        let first = c * CHUNK;
+        for (p, &bounds) in (first..).zip(&pixel_bounds[first..(first + CHUNK).min(n)]) {
+            for_each_tile_row(proj, p, bounds, |ty, columns| {
+                let ty = ty as usize;
+                rows[ty][filled[ty]] = Reach {
+                    kernel: p as u32,
+                    first: columns.start,
+                    end: columns.end,
+                };
+                filled[ty] += 1;
+            });
         }
-        band.entries.clear();
-        band.entries.resize(band.counts[tiles_x] as usize, 0);
-        for &(p, c0, c1) in &band.reaches {
-            for tx in c0..c1 {
-                let slot = &mut band.counts[tx as usize];
-                band.entries[*slot as usize] = p;
-                *slot += 1;
-            }
-        }
-        // `counts[tx]` is now the end of tile tx's entries within the band.
     });
-    // Concatenate the bands: offsets per tile, then the entries.
+    // Per tile row, its entries per tile; the rows' totals give each its part of the tiles'
+    // lists.
+    out.band_tile_counts.resize_with(tiles_y, Vec::new);
+    let (band_offsets, band_reaches) = (&out.band_offsets, &out.band_reaches);
+    let reaches_of =
+        |ty: usize| &band_reaches[band_offsets[ty] as usize..band_offsets[ty + 1] as usize];
+    out.band_tile_counts
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(ty, counts)| {
+            counts.clear();
+            counts.resize(tiles_x + 1, 0);
+            for reach in reaches_of(ty) {
+                for tx in reach.first..reach.end {
+                    counts[tx as usize + 1] += 1;
+                }
+            }
+            for tx in 0..tiles_x {
+                counts[tx + 1] += counts[tx];
+            }
+        });
     out.tile_offsets.clear();
-    out.tile_offsets.resize(out.tile_count() + 1, 0);
+    out.tile_offsets.resize(tiles_x * tiles_y + 1, 0);
     let mut total = 0_u32;
-    for (ty, band) in out.bands.iter().enumerate() {
+    for (ty, counts) in out.band_tile_counts.iter().enumerate() {
         for tx in 0..tiles_x {
-            out.tile_offsets[ty * tiles_x + tx + 1] = total + band.counts[tx];
+            out.tile_offsets[ty * tiles_x + tx + 1] = total + counts[tx + 1];
         }
-        total += band.entries.len() as u32;
+        total += counts[tiles_x];
     }
     out.proj_from_entry.clear();
     out.proj_from_entry.resize(total as usize, 0);
     let mut rest = out.proj_from_entry.as_mut_slice();
-    let mut chunks = Vec::with_capacity(tiles_y);
-    for band in &out.bands {
-        let (head, tail) = rest.split_at_mut(band.entries.len());
-        chunks.push((head, &band.entries));
+    let mut rows = Vec::with_capacity(tiles_y);
+    for (ty, counts) in out.band_tile_counts.iter_mut().enumerate() {
+        let (head, tail) = rest.split_at_mut(counts[tiles_x] as usize);
+        rows.push((ty, head, counts));
         rest = tail;
     }
-    chunks
-        .into_par_iter()
-        .for_each(|(to, from)| to.copy_from_slice(from));
-}
-
-/// The tile columns of tile row `ty` that projected kernel `p` (pixel rectangle `bounds`)
-/// reaches (see the module docs), or `None`.
-fn tile_columns(
-    proj: &ProjectedKernels,
-    p: usize,
-    bounds: [u32; 4],
-    ty: u32,
-) -> Option<std::ops::Range<u32>> {
-    let mut columns = None;
-    for_each_tile_row(proj, p, bounds, ty..ty + 1, |_, range| {
-        columns = Some(range)
+    rows.into_par_iter().for_each(|(ty, entries, counts)| {
+        // `counts[tx]` is where tile tx's next entry goes within the row.
+        for reach in reaches_of(ty) {
+            for tx in reach.first..reach.end {
+                let slot = &mut counts[tx as usize];
+                entries[*slot as usize] = reach.kernel;
+                *slot += 1;
+            }
+        }
     });
-    columns
 }
 
-/// Calls `visit(ty, tx0..tx1)` for each tile row `ty` in `rows` of projected kernel `p`
-/// (pixel rectangle `bounds`) with the tile columns its ellipse reaches there (see the module
-/// docs).
+/// Calls `visit(ty, tx0..tx1)` for each tile row `ty` of projected kernel `p`'s pixel
+/// rectangle `bounds`, in order, with the tile columns its ellipse reaches there (see the
+/// module docs; an empty range when it reaches none).
 fn for_each_tile_row(
     proj: &ProjectedKernels,
     p: usize,
     [x0, x1, y0, y1]: [u32; 4],
-    rows: std::ops::Range<u32>,
     mut visit: impl FnMut(u32, std::ops::Range<u32>),
 ) {
     if x0 >= x1 || y0 >= y1 {
@@ -268,7 +280,7 @@ fn for_each_tile_row(
         let centre = mx + shear * dv;
         (centre - half, centre + half)
     };
-    for ty in (y0 / TILE_SIZE).max(rows.start)..y1.div_ceil(TILE_SIZE).min(rows.end) {
+    for ty in y0 / TILE_SIZE..y1.div_ceil(TILE_SIZE) {
         // Pixel rows of this tile row that the kernel's box covers, as offsets from m2y.
         let first = (ty * TILE_SIZE).max(y0);
         let last = ((ty + 1) * TILE_SIZE).min(y1) - 1;
@@ -289,7 +301,7 @@ fn for_each_tile_row(
             Some((i0, i1)) => i0 / TILE_SIZE..i1.div_ceil(TILE_SIZE),
             // Not finite (an infinite cut-off, say): keep the box's columns.
             None if !(left.is_finite() && right.is_finite()) => box_columns.clone(),
-            None => continue,
+            None => 0..0,
         };
         visit(ty, columns);
     }

@@ -23,6 +23,7 @@ use crate::io::write_atomically;
 use crate::model::Up;
 use crate::model::error::{Error, Result};
 use crate::model::scene::{Kernel, Scene};
+use crate::parallel::extend_scene;
 use crate::slice::{SlicedKernels, slice};
 
 /// The zeroth-order spherical-harmonic constant of 3DGS.
@@ -250,25 +251,79 @@ struct Property {
 
 /// Reads a 4D scene PLY. Every problem is an error naming the file (and the vertex and
 /// field for bad values); nothing is allocated before the header's counts are checked
-/// against the file's length.
+/// against the file's length. The rows are read a block at a time into one buffer and
+/// decoded in parallel straight into the scene's arrays.
 pub fn read_scene_ply(path: &Path) -> Result<Scene> {
+    use std::io::Read;
     let origin = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read scene", e))?;
-    parse_scene_ply(&bytes, &origin)
+    let cannot = |e| Error::read(path, "cannot read scene", e);
+    let mut file = std::fs::File::open(path).map_err(cannot)?;
+    let length = file.metadata().map_err(cannot)?.len();
+    let mut start = Vec::with_capacity(HEADER_LIMIT);
+    (&mut file)
+        .take(HEADER_LIMIT as u64)
+        .read_to_end(&mut start)
+        .map_err(cannot)?;
+    let layout = parse_header(&start, &origin)?;
+    layout.check_body_length(length.saturating_sub(layout.body_start as u64), &origin)?;
+    let mut scene = layout.empty_scene(&origin)?;
+    // The rows already read, then the rest a block at a time.
+    let mut pending = start.split_off(layout.body_start.min(start.len()));
+    let block_rows = (BLOCK_BYTES / layout.stride.max(1)).max(1);
+    let mut block = vec![0_u8; block_rows * layout.stride];
+    while scene.len() < layout.count {
+        let rows = (layout.count - scene.len()).min(block_rows);
+        let bytes = &mut block[..rows * layout.stride];
+        let carried = pending.len().min(bytes.len());
+        bytes[..carried].copy_from_slice(&pending[..carried]);
+        pending.drain(..carried);
+        file.read_exact(&mut bytes[carried..]).map_err(cannot)?;
+        layout.decode_into(&mut scene, bytes, &origin)?;
+    }
+    Ok(scene)
 }
+
+/// Bytes of rows read at a time: large enough to amortise a parallel pass, small enough to
+/// stay in cache.
+const BLOCK_BYTES: usize = 1 << 20;
+
+/// Where the header must end.
+const HEADER_LIMIT: usize = 64 * 1024;
 
 /// [`read_scene_ply`] on bytes in memory.
 pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
-    let bad = |message: String| Error::malformed(origin, format!("PLY: {message}"));
+    let layout = parse_header(bytes, origin)?;
+    let body = &bytes[layout.body_start..];
+    layout.check_body_length(body.len() as u64, origin)?;
+    let mut scene = layout.empty_scene(origin)?;
+    layout.decode_into(&mut scene, body, origin)?;
+    Ok(scene)
+}
+
+/// What a 4D scene PLY's header says: where the rows start, how many, and where each of
+/// [`SCENE_PROPERTIES`] sits in a row.
+struct SceneLayout {
+    body_start: usize,
+    count: usize,
+    stride: usize,
+    /// Per scene property, its byte offset in a row and its size (4 or 8).
+    fields: [(usize, usize); SCENE_PROPERTIES.len()],
+    background: [f64; 3],
+    up: Option<Up>,
+}
+
+/// The header at the start of `bytes` (which holds at least its first 64 KiB, or the whole
+/// file when shorter).
+fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
+    let bad = |message: String| bad_ply(origin, message);
     const END: &[u8] = b"end_header\n";
-    let limit = bytes.len().min(64 * 1024);
+    let limit = bytes.len().min(HEADER_LIMIT);
     let end = bytes[..limit]
         .windows(END.len())
         .position(|w| w == END)
         .ok_or_else(|| bad("no `end_header` line in the first 64 KiB".into()))?;
     let text =
         std::str::from_utf8(&bytes[..end]).map_err(|_| bad("the header is not text".into()))?;
-    let body = &bytes[end + END.len()..];
     let mut lines = text.lines();
     if lines.next() != Some("ply") {
         return Err(bad("the file does not start with `ply`".into()));
@@ -336,60 +391,93 @@ pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
     }
     let count = count.ok_or_else(|| bad("no `element vertex` line".into()))?;
     let stride: usize = properties.iter().map(|p| p.size).sum();
-    let offsets: Vec<usize> = SCENE_PROPERTIES
-        .iter()
-        .map(|name| {
-            let index = properties
-                .iter()
-                .position(|p| p.name == *name)
-                .ok_or_else(|| bad(format!("missing property `{name}`")))?;
-            Ok(properties[..index].iter().map(|p| p.size).sum())
-        })
-        .collect::<Result<_>>()?;
-    let expected = count
-        .checked_mul(stride)
-        .ok_or_else(|| bad(format!("{count} vertices of {stride} bytes overflow")))?;
-    if body.len() != expected {
-        return Err(bad(format!(
-            "{count} vertices of {stride} bytes need {expected} bytes of data, the file has {}",
-            body.len()
-        )));
+    let mut fields = [(0, 8); SCENE_PROPERTIES.len()];
+    for (field, name) in fields.iter_mut().zip(SCENE_PROPERTIES) {
+        let index = properties
+            .iter()
+            .position(|p| p.name == name)
+            .ok_or_else(|| bad(format!("missing property `{name}`")))?;
+        *field = (
+            properties[..index].iter().map(|p| p.size).sum(),
+            properties[index].size,
+        );
     }
-    let sizes: Vec<usize> = SCENE_PROPERTIES
-        .iter()
-        .map(|name| {
-            properties
-                .iter()
-                .find(|p| p.name == *name)
-                .map_or(8, |p| p.size)
-        })
-        .collect();
-    // Rows decode independently: in parallel, in order.
-    use rayon::prelude::*;
-    let kernels: Vec<Kernel> = body
-        .par_chunks_exact(stride.max(1))
-        .take(count)
-        .with_min_len(4096)
-        .map(|row| {
-            let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
-                let o = offsets[k];
-                match sizes[k] {
-                    8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
-                    _ => f64::from(f32::from_le_bytes(
-                        row[o..o + 4].try_into().expect("4 bytes"),
-                    )),
+    Ok(SceneLayout {
+        body_start: end + END.len(),
+        count,
+        stride,
+        fields,
+        background,
+        up,
+    })
+}
+
+impl SceneLayout {
+    /// The rows must fill the rest of the file exactly (before anything is allocated).
+    fn check_body_length(&self, body: u64, origin: &str) -> Result<()> {
+        let (count, stride) = (self.count, self.stride);
+        let expected = (count as u64).checked_mul(stride as u64).ok_or_else(|| {
+            bad_ply(
+                origin,
+                format!("{count} vertices of {stride} bytes overflow"),
+            )
+        })?;
+        if body != expected {
+            return Err(bad_ply(
+                origin,
+                format!(
+                    "{count} vertices of {stride} bytes need {expected} bytes of data, the file has {body}"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A scene with room for the rows.
+    fn empty_scene(&self, origin: &str) -> Result<Scene> {
+        let mut scene = Scene::from_kernels(&[], self.background, origin)?;
+        scene.up = self.up;
+        scene.means.reserve_exact(self.count);
+        scene.scales.reserve_exact(self.count);
+        scene.amplitudes.reserve_exact(self.count);
+        scene.rotations.reserve_exact(self.count);
+        scene.velocities.reserve_exact(self.count);
+        Ok(scene)
+    }
+
+    /// Decodes whole rows `bytes` (in parallel) and appends them to `scene`, checked.
+    fn decode_into(&self, scene: &mut Scene, bytes: &[u8], origin: &str) -> Result<()> {
+        let stride = self.stride.max(1);
+        let rows = bytes.len() / stride;
+        let first = scene.len();
+        extend_scene(
+            scene,
+            rows,
+            first,
+            |i| {
+                let row = &bytes[i * stride..(i + 1) * stride];
+                let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
+                    let (o, size) = self.fields[k];
+                    match size {
+                        8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
+                        _ => f64::from(f32::from_le_bytes(
+                            row[o..o + 4].try_into().expect("4 bytes"),
+                        )),
+                    }
+                });
+                Kernel {
+                    mean: [v[0], v[1], v[2], v[3]],
+                    scale: [v[4], v[5], v[6], v[7]],
+                    amplitude: [v[8], v[9], v[10]],
+                    rotation: [v[11], v[12], v[13], v[14]],
+                    velocity: [v[15], v[16], v[17]],
                 }
-            });
-            Kernel {
-                mean: [v[0], v[1], v[2], v[3]],
-                scale: [v[4], v[5], v[6], v[7]],
-                amplitude: [v[8], v[9], v[10]],
-                rotation: [v[11], v[12], v[13], v[14]],
-                velocity: [v[15], v[16], v[17]],
-            }
-        })
-        .collect();
-    let mut scene = Scene::from_kernels(&kernels, background, origin)?;
-    scene.up = up;
-    Ok(scene)
+            },
+            origin,
+        )
+    }
+}
+
+fn bad_ply(origin: &str, message: String) -> Error {
+    Error::malformed(origin, format!("PLY: {message}"))
 }

@@ -51,6 +51,58 @@ impl Kernel {
             velocity: [0.0; 3],
         }
     }
+
+    /// The kernel as a scene holds it, or an error naming kernel `index` of `origin` and the
+    /// field: every value finite, scales > 0, the rotation normalised (a quaternion within a
+    /// few ulps of unit norm is kept as it is, so that files round-trip exactly).
+    pub fn checked(&self, index: usize, origin: &str) -> Result<Kernel> {
+        let all_finite = [
+            &self.mean[..],
+            &self.scale,
+            &self.amplitude,
+            &self.rotation,
+            &self.velocity,
+        ]
+        .iter()
+        .all(|values| values.iter().all(|v| v.is_finite()));
+        // The item's name is only formatted for a message (10⁵ kernels load in milliseconds).
+        let item = || format!("kernel {index}");
+        if !all_finite {
+            let item = item();
+            check_finite(origin, &item, "mean", &self.mean)?;
+            check_finite(origin, &item, "scale", &self.scale)?;
+            check_finite(origin, &item, "amplitude", &self.amplitude)?;
+            check_finite(origin, &item, "rotation", &self.rotation)?;
+            check_finite(origin, &item, "velocity", &self.velocity)?;
+        }
+        if let Some(c) = self.scale.iter().position(|&s| s <= 0.0) {
+            return Err(Error::invalid(
+                origin,
+                item(),
+                "scale",
+                format!("scale[{c}] = {} must be > 0", self.scale[c]),
+            ));
+        }
+        let norm = self.rotation.iter().map(|q| q * q).sum::<f64>().sqrt();
+        if !(norm > 0.0 && norm.is_finite()) {
+            return Err(Error::invalid(
+                origin,
+                item(),
+                "rotation",
+                "the quaternion is zero (or its norm overflows) and cannot be normalised",
+            ));
+        }
+        // Dividing a unit quaternion again would only perturb its last bits.
+        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON;
+        Ok(Kernel {
+            rotation: if unit {
+                self.rotation
+            } else {
+                self.rotation.map(|q| q / norm)
+            },
+            ..*self
+        })
+    }
 }
 
 /// A scene: kernels as struct-of-arrays (index `i` of every array is kernel `i`) and a
@@ -78,72 +130,25 @@ impl Scene {
     /// A scene from kernels; rotations are normalised and everything is validated.
     /// `origin` names the data in error messages.
     pub fn from_kernels(kernels: &[Kernel], background: [f64; 3], origin: &str) -> Result<Self> {
+        check_finite(origin, "scene", "background", &background)?;
         let mut scene = Scene {
             background,
             ..Scene::default()
         };
-        check_finite(origin, "scene", "background", &background)?;
         scene.means.reserve_exact(kernels.len());
         scene.scales.reserve_exact(kernels.len());
         scene.amplitudes.reserve_exact(kernels.len());
         scene.rotations.reserve_exact(kernels.len());
         scene.velocities.reserve_exact(kernels.len());
         for (index, kernel) in kernels.iter().enumerate() {
-            scene.push_checked(kernel, index, origin)?;
+            let kernel = kernel.checked(index, origin)?;
+            scene.means.push(kernel.mean);
+            scene.scales.push(kernel.scale);
+            scene.amplitudes.push(kernel.amplitude);
+            scene.rotations.push(kernel.rotation);
+            scene.velocities.push(kernel.velocity);
         }
         Ok(scene)
-    }
-
-    fn push_checked(&mut self, kernel: &Kernel, index: usize, origin: &str) -> Result<()> {
-        let all_finite = [
-            &kernel.mean[..],
-            &kernel.scale,
-            &kernel.amplitude,
-            &kernel.rotation,
-            &kernel.velocity,
-        ]
-        .iter()
-        .all(|values| values.iter().all(|v| v.is_finite()));
-        // The item's name is only formatted for a message (10⁵ kernels load in milliseconds).
-        let item = || format!("kernel {index}");
-        if !all_finite {
-            let item = item();
-            check_finite(origin, &item, "mean", &kernel.mean)?;
-            check_finite(origin, &item, "scale", &kernel.scale)?;
-            check_finite(origin, &item, "amplitude", &kernel.amplitude)?;
-            check_finite(origin, &item, "rotation", &kernel.rotation)?;
-            check_finite(origin, &item, "velocity", &kernel.velocity)?;
-        }
-        if let Some(c) = kernel.scale.iter().position(|&s| s <= 0.0) {
-            return Err(Error::invalid(
-                origin,
-                item(),
-                "scale",
-                format!("scale[{c}] = {} must be > 0", kernel.scale[c]),
-            ));
-        }
-        let norm = kernel.rotation.iter().map(|q| q * q).sum::<f64>().sqrt();
-        if !(norm > 0.0 && norm.is_finite()) {
-            return Err(Error::invalid(
-                origin,
-                item(),
-                "rotation",
-                "the quaternion is zero (or its norm overflows) and cannot be normalised",
-            ));
-        }
-        self.means.push(kernel.mean);
-        self.scales.push(kernel.scale);
-        self.amplitudes.push(kernel.amplitude);
-        // A quaternion within a few ulps of unit norm is already normalised at f64 precision;
-        // dividing again would only perturb its last bits (and break exact round trips).
-        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON;
-        self.rotations.push(if unit {
-            kernel.rotation
-        } else {
-            kernel.rotation.map(|q| q / norm)
-        });
-        self.velocities.push(kernel.velocity);
-        Ok(())
     }
 
     /// Number of kernels.

@@ -8,6 +8,7 @@ use std::path::Path;
 /// before it.
 const LAYERS: &[&[&str]] = &[
     &["model"],
+    &["parallel"],
     &["slice"],
     &["project"],
     &["tiles"],

@@ -1,0 +1,171 @@
+//! Filling arrays in parallel with results that do not depend on the thread count.
+//!
+//! Every per-kernel stage (loading, slicing, projecting, binning) writes one value per index
+//! into fresh or reused arrays. Done serially, a first large frame also pays the operating
+//! system's first touch of every new page on one thread, and compaction through `push` grows
+//! its arrays by copying. These helpers write each slot exactly once, in parallel, straight
+//! into the arrays' spare capacity: index `i`'s value is computed from `i` alone, so the
+//! output is the same for any number of threads.
+
+use rayon::prelude::*;
+
+use crate::model::error::Result;
+use crate::model::scene::{Kernel, Scene};
+
+/// Smallest number of indices a worker takes at once.
+const MIN_CHUNK: usize = 1024;
+
+/// Replaces the contents of `values` with `value(0..count)`, computed in parallel, without
+/// filling the buffer serially first.
+pub fn fill_in_parallel<T: Send>(
+    values: &mut Vec<T>,
+    count: usize,
+    value: impl Fn(usize) -> T + Sync,
+) {
+    values.clear();
+    values.reserve(count);
+    values.spare_capacity_mut()[..count]
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(MIN_CHUNK)
+        .for_each(|(k, slot)| {
+            slot.write(value(k));
+        });
+    // SAFETY: the loop above initialised every one of the first `count` slots (`reserve`
+    // made room for them), and `T` values are only read after this.
+    unsafe { values.set_len(count) };
+}
+
+/// The indices `k < count` for which `keep(k)`, ascending, into `kept` (reset first).
+/// Chunks are scanned in parallel and joined in order.
+pub fn indices_where(kept: &mut Vec<u32>, count: usize, keep: impl Fn(usize) -> bool + Sync) {
+    let chunks: Vec<Vec<u32>> = (0..count.div_ceil(MIN_CHUNK * 4))
+        .into_par_iter()
+        .map(|c| {
+            let range = c * MIN_CHUNK * 4..((c + 1) * MIN_CHUNK * 4).min(count);
+            range.filter(|&k| keep(k)).map(|k| k as u32).collect()
+        })
+        .collect();
+    kept.clear();
+    kept.reserve(chunks.iter().map(Vec::len).sum());
+    for chunk in chunks {
+        kept.extend_from_slice(&chunk);
+    }
+}
+
+/// Appends `count` kernels to `scene`: kernel `kernel(i)`, checked and normalised by
+/// [`Kernel::checked`] as kernel number `first + i` of `origin`, for `i` in `0..count`, in
+/// parallel. On an error (the one of the lowest index) the scene is left as it was.
+pub fn extend_scene(
+    scene: &mut Scene,
+    count: usize,
+    first: usize,
+    kernel: impl Fn(usize) -> Kernel + Sync,
+    origin: &str,
+) -> Result<()> {
+    let len = scene.len();
+    scene.means.reserve(count);
+    scene.scales.reserve(count);
+    scene.amplitudes.reserve(count);
+    scene.rotations.reserve(count);
+    scene.velocities.reserve(count);
+    let slots = scene.means.spare_capacity_mut()[..count]
+        .par_chunks_mut(MIN_CHUNK)
+        .zip(scene.scales.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))
+        .zip(scene.amplitudes.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))
+        .zip(scene.rotations.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))
+        .zip(scene.velocities.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK));
+    let outcomes: Vec<Result<()>> = slots
+        .enumerate()
+        .map(
+            |(c, ((((means, scales), amplitudes), rotations), velocities))| {
+                for j in 0..means.len() {
+                    let i = c * MIN_CHUNK + j;
+                    let k = kernel(i).checked(first + i, origin)?;
+                    means[j].write(k.mean);
+                    scales[j].write(k.scale);
+                    amplitudes[j].write(k.amplitude);
+                    rotations[j].write(k.rotation);
+                    velocities[j].write(k.velocity);
+                }
+                Ok(())
+            },
+        )
+        .collect();
+    outcomes.into_iter().collect::<Result<()>>()?;
+    // SAFETY: every chunk succeeded, so each of the `count` slots past `len` in the five
+    // arrays was written (the chunks cover `0..count`), and `reserve` made room for them.
+    unsafe {
+        scene.means.set_len(len + count);
+        scene.scales.set_len(len + count);
+        scene.amplitudes.set_len(len + count);
+        scene.rotations.set_len(len + count);
+        scene.velocities.set_len(len + count);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fills_and_selects_the_same_for_any_thread_count() {
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut values = vec![7_u64; 3];
+                fill_in_parallel(&mut values, 10_000, |k| (k as u64) * 3);
+                let mut kept = vec![1];
+                indices_where(&mut kept, 10_000, |k| k % 7 == 3);
+                (values, kept)
+            })
+        };
+        let (values, kept) = run(1);
+        assert_eq!(values.len(), 10_000);
+        assert!(values.iter().enumerate().all(|(k, &v)| v == 3 * k as u64));
+        let expected: Vec<u32> = (0..10_000).filter(|k| k % 7 == 3).collect();
+        assert_eq!(kept, expected);
+        assert_eq!(run(3), (values, kept));
+    }
+
+    #[test]
+    fn extending_a_scene_checks_every_kernel_and_reports_the_first_bad_one() {
+        let good = |i: usize| {
+            let mut k = Kernel::new([i as f64, 0.0, 0.0, 0.0], [1.0; 4], [1.0; 3]);
+            k.rotation = [2.0, 0.0, 0.0, 0.0];
+            k
+        };
+        let mut scene = Scene::from_kernels(&[good(0)], [0.0; 3], "<test>").unwrap();
+        extend_scene(&mut scene, 5000, 1, good, "<test>").unwrap();
+        assert_eq!(scene.len(), 5001);
+        assert_eq!(scene.means[4000][0], 3999.0);
+        assert_eq!(scene.rotations[4000], [1.0, 0.0, 0.0, 0.0]);
+        let serial: Vec<Kernel> = (0..5001)
+            .map(|i| if i == 0 { good(0) } else { good(i - 1) })
+            .collect();
+        assert_eq!(
+            scene,
+            Scene::from_kernels(&serial, [0.0; 3], "<test>").unwrap()
+        );
+        // Two bad kernels in different chunks: the lower index is named, nothing is added.
+        let bad = |i: usize| {
+            let mut k = good(i);
+            if i == 3000 || i == 1500 {
+                k.scale[2] = -1.0;
+            }
+            k
+        };
+        let message = extend_scene(&mut scene, 4000, 10, bad, "x.ply")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("kernel 1510") && message.contains("scale"),
+            "{message}"
+        );
+        assert_eq!(scene.len(), 5001);
+    }
+}
