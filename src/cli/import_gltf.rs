@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use splat4d::Result;
+use splat4d::io::gltf_motion::Spacing;
 use splat4d::tasks::scene_files::{ImportRequest, import_gltf};
 
 #[derive(Debug, clap::Args)]
@@ -12,9 +13,14 @@ pub struct ImportGltfArgs {
     /// Surface points to sample (each becomes one kernel per time sample).
     #[arg(long, default_value_t = 2000)]
     kernels: usize,
-    /// Time samples over the animation's range (1: static).
-    #[arg(long, default_value_t = 16)]
-    times: usize,
+    /// Time samples: `auto` (key times and adaptive ones until every point follows its path
+    /// within --tolerance), or N at most (t1 - t0)/(N - 1) apart (1: static).
+    #[arg(long, default_value = "auto")]
+    times: TimesArg,
+    /// Largest position error of any surface point, relative to the model's size, with
+    /// `--times auto`.
+    #[arg(long, default_value_t = 1e-3, value_parser = super::args::finite)]
+    tolerance: f64,
     /// Output scene (.json or .ply).
     #[arg(long)]
     out: PathBuf,
@@ -27,9 +33,33 @@ pub fn run(args: &ImportGltfArgs) -> Result<()> {
     super::print(import_gltf(&ImportRequest {
         model: args.model.clone(),
         kernels: args.kernels,
-        times: args.times,
+        spacing: match args.times {
+            TimesArg::Auto => Spacing::Adaptive {
+                tolerance: args.tolerance,
+            },
+            TimesArg::Count(n) => Spacing::Even(n),
+        },
         out: args.out.clone(),
         seed: args.seed,
     })?);
     Ok(())
+}
+
+/// `--times auto` or a count.
+#[derive(Clone, Copy, Debug)]
+pub enum TimesArg {
+    Auto,
+    Count(usize),
+}
+
+impl std::str::FromStr for TimesArg {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if s == "auto" {
+            return Ok(TimesArg::Auto);
+        }
+        s.parse()
+            .map(TimesArg::Count)
+            .map_err(|_| format!("`{s}` is neither `auto` nor a whole number"))
+    }
 }

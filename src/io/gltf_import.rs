@@ -26,10 +26,12 @@ use base64::Engine;
 use glam::{DMat4, DQuat, DVec3};
 use rand::RngExt;
 
+use crate::io::gltf_motion::{Animation, PosedSample, Side, Spacing, plan_samples, read_tracks};
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::{Kernel, Scene};
+use crate::scenes::time_samples::{Place, TimeSample};
 
 /// σ of a surfel, as a fraction of the mean spacing √(area/N).
 const SURFEL_SPREAD: f64 = 1.0;
@@ -513,7 +515,11 @@ pub fn load_camera(path: &Path, index: usize, size: Option<(u32, u32)>) -> Resul
 fn load_camera_unguarded(path: &Path, index: usize, size: Option<(u32, u32)>) -> Result<Camera> {
     let origin = path.display().to_string();
     let document = parse_document(path)?;
-    let world = world_matrices_at(&document, &[], 0.0);
+    let world: Vec<DMat4> = Animation::new(Vec::new(), document.nodes().count())
+        .world(&document, 0.0, Side::Right)
+        .into_iter()
+        .map(|pose| pose.0)
+        .collect();
     let nodes: Vec<gltf::Node<'_>> = document.nodes().filter(|n| n.camera().is_some()).collect();
     let node = nodes.get(index).ok_or_else(|| {
         Error::Usage(format!(
@@ -558,187 +564,6 @@ fn load_camera_unguarded(path: &Path, index: usize, size: Option<(u32, u32)>) ->
     }
     result.validate(&format!("{origin}: {item}"))?;
     Ok(result)
-}
-
-/// One animated property of one node.
-struct Track {
-    node: usize,
-    property: gltf::animation::Property,
-    interpolation: gltf::animation::Interpolation,
-    times: Vec<f64>,
-    /// Per key: 3 or 4 values (×3 for CUBICSPLINE: in-tangent, value, out-tangent).
-    values: Vec<Vec<f64>>,
-}
-
-impl Track {
-    fn sample(&self, t: f64) -> Vec<f64> {
-        use gltf::animation::Interpolation::*;
-        let cubic = self.interpolation == CubicSpline;
-        let value = |k: usize| {
-            if cubic {
-                &self.values[3 * k + 1]
-            } else {
-                &self.values[k]
-            }
-        };
-        let n = self.times.len();
-        if t <= self.times[0] || n == 1 {
-            return value(0).clone();
-        }
-        if t >= self.times[n - 1] {
-            return value(n - 1).clone();
-        }
-        let k = self.times.partition_point(|&x| x <= t) - 1;
-        let dt = self.times[k + 1] - self.times[k];
-        let s = (t - self.times[k]) / dt;
-        let rotation = self.property == gltf::animation::Property::Rotation;
-        let out = match self.interpolation {
-            Step => value(k).clone(),
-            Linear if rotation => {
-                let q = |v: &Vec<f64>| DQuat::from_xyzw(v[0], v[1], v[2], v[3]);
-                let r = q(value(k)).slerp(q(value(k + 1)), s);
-                vec![r.x, r.y, r.z, r.w]
-            }
-            Linear => value(k)
-                .iter()
-                .zip(value(k + 1))
-                .map(|(a, b)| a + s * (b - a))
-                .collect(),
-            CubicSpline => {
-                let (p0, m0) = (&self.values[3 * k + 1], &self.values[3 * k + 2]);
-                let (p1, m1) = (&self.values[3 * (k + 1) + 1], &self.values[3 * (k + 1)]);
-                let (s2, s3) = (s * s, s * s * s);
-                let (h00, h10, h01, h11) = (
-                    2.0 * s3 - 3.0 * s2 + 1.0,
-                    s3 - 2.0 * s2 + s,
-                    -2.0 * s3 + 3.0 * s2,
-                    s3 - s2,
-                );
-                (0..p0.len())
-                    .map(|c| h00 * p0[c] + h10 * dt * m0[c] + h01 * p1[c] + h11 * dt * m1[c])
-                    .collect()
-            }
-        };
-        if rotation {
-            let norm = out.iter().map(|v| v * v).sum::<f64>().sqrt();
-            out.iter().map(|v| v / norm).collect()
-        } else {
-            out
-        }
-    }
-}
-
-fn read_tracks(document: &gltf::Document, buffers: &[Vec<u8>], origin: &str) -> Result<Vec<Track>> {
-    let mut tracks = Vec::new();
-    for animation in document.animations() {
-        for channel in animation.channels() {
-            let item = format!(
-                "animation {} channel {}",
-                animation.index(),
-                channel.index()
-            );
-            let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
-            let times: Vec<f64> = reader
-                .read_inputs()
-                .ok_or_else(|| Error::invalid(origin, &item, "sampler.input", "cannot be read"))?
-                .map(f64::from)
-                .collect();
-            let outputs = reader
-                .read_outputs()
-                .ok_or_else(|| Error::invalid(origin, &item, "sampler.output", "cannot be read"))?;
-            use gltf::animation::util::ReadOutputs;
-            let values: Vec<Vec<f64>> = match outputs {
-                ReadOutputs::Translations(it) => it.map(|v| v.map(f64::from).to_vec()).collect(),
-                ReadOutputs::Scales(it) => it.map(|v| v.map(f64::from).to_vec()).collect(),
-                ReadOutputs::Rotations(it) => {
-                    it.into_f32().map(|v| v.map(f64::from).to_vec()).collect()
-                }
-                ReadOutputs::MorphTargetWeights(_) => {
-                    return Err(Error::invalid(
-                        origin,
-                        &item,
-                        "target.path",
-                        "morph target weights are not supported",
-                    ));
-                }
-            };
-            let interpolation = channel.sampler().interpolation();
-            let per_key = if interpolation == gltf::animation::Interpolation::CubicSpline {
-                3
-            } else {
-                1
-            };
-            if times.is_empty()
-                || values.len() != per_key * times.len()
-                || times.iter().any(|t| !t.is_finite())
-                || times.windows(2).any(|w| w[1] < w[0])
-            {
-                return Err(Error::invalid(
-                    origin,
-                    &item,
-                    "sampler",
-                    "keyframe times and values do not match (count, order or finiteness)",
-                ));
-            }
-            tracks.push(Track {
-                node: channel.target().node().index(),
-                property: channel.target().property(),
-                interpolation,
-                times,
-                values,
-            });
-        }
-    }
-    Ok(tracks)
-}
-
-/// World matrices of every node at time `t`, animation applied.
-fn world_matrices_at(document: &gltf::Document, tracks: &[Track], t: f64) -> Vec<DMat4> {
-    let mut world = vec![DMat4::IDENTITY; document.nodes().count()];
-    let local = |node: &gltf::Node<'_>| -> DMat4 {
-        let (mut translation, mut rotation, mut scale) = node.transform().decomposed();
-        let mut animated = false;
-        for track in tracks.iter().filter(|k| k.node == node.index()) {
-            let v: Vec<f32> = track.sample(t).iter().map(|&x| x as f32).collect();
-            animated = true;
-            match track.property {
-                gltf::animation::Property::Translation => translation = [v[0], v[1], v[2]],
-                gltf::animation::Property::Rotation => rotation = [v[0], v[1], v[2], v[3]],
-                gltf::animation::Property::Scale => scale = [v[0], v[1], v[2]],
-                gltf::animation::Property::MorphTargetWeights => {}
-            }
-        }
-        if !animated {
-            return DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
-        }
-        let [x, y, z, w] = rotation.map(f64::from);
-        DMat4::from_scale_rotation_translation(
-            DVec3::from(scale.map(f64::from)),
-            DQuat::from_xyzw(x, y, z, w).normalize(),
-            DVec3::from(translation.map(f64::from)),
-        )
-    };
-    fn visit(
-        node: gltf::Node<'_>,
-        parent: DMat4,
-        world: &mut [DMat4],
-        local: &dyn Fn(&gltf::Node<'_>) -> DMat4,
-    ) {
-        let m = parent * local(&node);
-        world[node.index()] = m;
-        for child in node.children() {
-            visit(child, m, world, local);
-        }
-    }
-    if let Some(scene) = document
-        .default_scene()
-        .or_else(|| document.scenes().next())
-    {
-        for node in scene.nodes() {
-            visit(node, DMat4::IDENTITY, &mut world, &local);
-        }
-    }
-    world
 }
 
 /// A triangle of a mesh, in its node's local space.
@@ -826,6 +651,27 @@ fn read_triangles(
     Ok(triangles)
 }
 
+/// Every node's world matrix (column-major, as glTF writes them) at time `t`, the node
+/// animation evaluated directly (the right limit at key times): what imported kernels are
+/// checked against.
+pub fn world_matrices_at(path: &Path, t: f64) -> Result<Vec<[[f64; 4]; 4]>> {
+    without_panics(path, || {
+        let origin = path.display().to_string();
+        let gltf = parse_document(path)?;
+        let buffers = load_buffers(&gltf, path)?;
+        let document = &gltf.document;
+        let animation = Animation::new(
+            read_tracks(document, &buffers, &origin)?,
+            document.nodes().count(),
+        );
+        Ok(animation
+            .world(document, t, Side::Right)
+            .into_iter()
+            .map(|pose| pose.0.to_cols_array_2d())
+            .collect())
+    })
+}
+
 /// What [`import_scene`] made.
 #[derive(Clone, Debug)]
 pub struct Imported {
@@ -835,27 +681,53 @@ pub struct Imported {
     pub time_range: [f64; 2],
     /// Surface points sampled.
     pub points: usize,
-    /// Time samples per point.
+    /// Time samples per point (kernels = points × times).
     pub times: usize,
+    /// Largest distance, over the model's size, between where the kernels put any surface
+    /// point and where the animation does, at the test times (0 when static).
+    pub max_error: f64,
+    /// Largest `|Σ temporal weights - 1|` of a point's kernels over the range.
+    pub weight_error: f64,
+    /// Key times where the pose jumps (STEP keys).
+    pub steps: usize,
 }
 
 /// Most kernels an import makes (surface points × time samples): about 1.5 GB of scene.
 pub const MAX_IMPORT_KERNELS: usize = 10_000_000;
 
 /// Samples the glTF at `path` into 4D kernels (see the module docs): `points` surface
-/// points, `times` samples over the animation.
-pub fn import_scene(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
-    without_panics(path, || import_scene_unguarded(path, points, times, seed))
+/// points, their times as `spacing` says.
+pub fn import_scene(path: &Path, points: usize, spacing: Spacing, seed: u64) -> Result<Imported> {
+    without_panics(path, || import_scene_unguarded(path, points, spacing, seed))
 }
 
-fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -> Result<Imported> {
+fn import_scene_unguarded(
+    path: &Path,
+    points: usize,
+    spacing: Spacing,
+    seed: u64,
+) -> Result<Imported> {
     let origin = path.display().to_string();
-    if points == 0 || times == 0 {
-        return Err(Error::Usage(
-            "--kernels and --times must be at least 1".into(),
-        ));
+    match spacing {
+        Spacing::Even(0) => return Err(Error::usage("--times must be at least 1")),
+        Spacing::Adaptive { tolerance } if !(tolerance > 0.0 && tolerance.is_finite()) => {
+            return Err(Error::usage(format!(
+                "--tolerance {tolerance} must be a positive number"
+            )));
+        }
+        _ => {}
     }
-    if points.saturating_mul(times) > MAX_IMPORT_KERNELS {
+    if points == 0 {
+        return Err(Error::usage("--kernels must be at least 1"));
+    }
+    if points > MAX_IMPORT_KERNELS {
+        return Err(Error::usage(format!(
+            "--kernels {points} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
+        )));
+    }
+    if let Spacing::Even(times) = spacing
+        && points.saturating_mul(times) > MAX_IMPORT_KERNELS
+    {
         return Err(Error::usage(format!(
             "--kernels {points} × --times {times} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
         )));
@@ -863,29 +735,19 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
     let gltf = parse_document(path)?;
     let buffers = load_buffers(&gltf, path)?;
     let document = &gltf.document;
-    let tracks = read_tracks(document, &buffers, &origin)?;
+    let animation = Animation::new(
+        read_tracks(document, &buffers, &origin)?,
+        document.nodes().count(),
+    );
     let triangles = read_triangles(document, &buffers, &origin)?;
-    let t0 = tracks
-        .iter()
-        .map(|k| k.times[0])
-        .fold(f64::INFINITY, f64::min);
-    let t1 = tracks
-        .iter()
-        .map(|k| *k.times.last().expect("non-empty"))
-        .fold(f64::NEG_INFINITY, f64::max);
-    let animated = !tracks.is_empty() && t1 > t0 && times > 1;
-    let time_range = if animated { [t0, t1] } else { [0.0, 0.0] };
-    let samples = if animated { times } else { 1 };
-    let sample_times = crate::scenes::paths::even_times(time_range, samples);
-    let worlds: Vec<Vec<DMat4>> = sample_times
-        .iter()
-        .map(|&t| world_matrices_at(document, &tracks, t))
-        .collect();
-    // Area-weighted triangle choice at the first sample time.
+    let range = animation.range().filter(|_| spacing != Spacing::Even(1));
+    let first = range.map_or(0.0, |r| r[0]);
+    let start = animation.world(document, first, Side::Right);
+    // Area-weighted triangle choice at the first time.
     let areas: Vec<f64> = triangles
         .iter()
         .map(|tri| {
-            let m = worlds[0][tri.node];
+            let m = start[tri.node].0;
             let [a, b, c] = tri.corners.map(|p| m.transform_point3(p));
             0.5 * (b - a).cross(c - a).length()
         })
@@ -899,6 +761,53 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
             "no triangle with a finite, positive area in the default scene",
         ));
     }
+    // The samples: every node's pose at each, and each one's temporal σ and weight.
+    let (samples, time_range, max_error, weight_error, steps) = match range {
+        Some(range) => {
+            let mut corners = vec![Vec::new(); start.len()];
+            for tri in &triangles {
+                corners[tri.node].extend_from_slice(&tri.corners);
+            }
+            let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+            for tri in &triangles {
+                for p in tri.corners {
+                    let w = start[tri.node].0.transform_point3(p);
+                    (lo, hi) = (lo.min(w), hi.max(w));
+                }
+            }
+            let size = (hi - lo).length().max(f64::MIN_POSITIVE);
+            let plan = plan_samples(
+                document, &animation, range, &corners, size, spacing, &origin,
+            )?;
+            if points.saturating_mul(plan.samples.len()) > MAX_IMPORT_KERNELS {
+                return Err(Error::usage(format!(
+                    "--kernels {points} × {} sample times is more than the {MAX_IMPORT_KERNELS} kernels an import may make; lower --kernels or raise --tolerance",
+                    plan.samples.len()
+                )));
+            }
+            (
+                plan.samples,
+                range,
+                plan.max_error,
+                plan.weight_error,
+                plan.steps,
+            )
+        }
+        // Static: one kernel per point, σt = 1000, weight 1.
+        None => {
+            let sample = TimeSample {
+                time: 0.0,
+                sigma: 1e3,
+                weight: 1.0,
+                place: Place::Inside { piece: 0 },
+            };
+            let posed = PosedSample {
+                sample,
+                poses: start,
+            };
+            (vec![posed], [0.0, 0.0], 0.0, 0.0, 0)
+        }
+    };
     let cumulative: Vec<f64> = areas
         .iter()
         .scan(0.0, |acc, a| {
@@ -908,13 +817,8 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
         .collect();
     let sigma = SURFEL_SPREAD * (total / points as f64).sqrt();
     let gain = 1.0 / (std::f64::consts::TAU * SURFEL_SPREAD * SURFEL_SPREAD);
-    let dt = if samples > 1 {
-        sample_times[1] - sample_times[0]
-    } else {
-        0.0
-    };
     let mut rng = seeded_rng(seed);
-    let mut kernels = Vec::with_capacity(points.saturating_mul(samples).min(1 << 16));
+    let mut kernels = Vec::with_capacity(points.saturating_mul(samples.len()).min(1 << 16));
     // Stratified over the cumulative area (point k in the k-th N-th of it, jittered), with
     // barycentric coordinates from the R2 low-discrepancy sequence (seeded offset): far
     // more even coverage than independent draws, whose density fluctuates by ~30% at this
@@ -943,12 +847,8 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
                 + u * (tri.colours[1][c] - tri.colours[0][c])
                 + v * (tri.colours[2][c] - tri.colours[0][c])
         });
-        let path: Vec<DVec3> = worlds
-            .iter()
-            .map(|w| w[tri.node].transform_point3(local))
-            .collect();
-        for (k, &t) in sample_times.iter().enumerate() {
-            let m = worlds[k][tri.node];
+        for PosedSample { sample, poses } in &samples {
+            let (m, rate) = poses[tri.node];
             let [a, b, c] = tri.corners.map(|p| m.transform_point3(p));
             let normal = (b - a).cross(c - a).normalize_or_zero();
             let q = if normal == DVec3::ZERO {
@@ -956,25 +856,13 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
             } else {
                 DQuat::from_rotation_arc(DVec3::Z, normal)
             };
-            let rotation = [q.w, q.x, q.y, q.z];
-            let p = path[k];
-            let (velocity, sigma_t, amplitude) = if samples > 1 {
-                let (lo, hi) = (k.saturating_sub(1), (k + 1).min(samples - 1));
-                let v = (path[hi] - path[lo]) / (sample_times[hi] - sample_times[lo]);
-                (
-                    v.into(),
-                    dt,
-                    colour.map(|c| c * gain / std::f64::consts::TAU.sqrt()),
-                )
-            } else {
-                ([0.0; 3], 1e3, colour.map(|c| c * gain))
-            };
+            let p = m.transform_point3(local);
             kernels.push(Kernel {
-                mean: [p.x, p.y, p.z, t],
-                scale: [sigma, sigma, SURFEL_THICKNESS * sigma, sigma_t],
-                amplitude,
-                rotation,
-                velocity,
+                mean: [p.x, p.y, p.z, sample.time],
+                scale: [sigma, sigma, SURFEL_THICKNESS * sigma, sample.sigma],
+                amplitude: colour.map(|c| c * gain * sample.weight),
+                rotation: [q.w, q.x, q.y, q.z],
+                velocity: rate.transform_point3(local).into(),
             });
         }
     }
@@ -983,99 +871,9 @@ fn import_scene_unguarded(path: &Path, points: usize, times: usize, seed: u64) -
         scene,
         time_range,
         points,
-        times: samples,
+        times: samples.len(),
+        max_error,
+        weight_error,
+        steps,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use gltf::animation::{Interpolation, Property};
-
-    fn track(
-        property: Property,
-        interpolation: Interpolation,
-        times: &[f64],
-        values: &[&[f64]],
-    ) -> Track {
-        Track {
-            node: 0,
-            property,
-            interpolation,
-            times: times.to_vec(),
-            values: values.iter().map(|v| v.to_vec()).collect(),
-        }
-    }
-
-    #[test]
-    fn step_linear_and_clamping() {
-        let keys: [&[f64]; 2] = [&[0.0, 0.0, 0.0], &[2.0, 4.0, -2.0]];
-        let step = track(
-            Property::Translation,
-            Interpolation::Step,
-            &[1.0, 3.0],
-            &keys,
-        );
-        assert_eq!(step.sample(2.9), vec![0.0, 0.0, 0.0]);
-        assert_eq!(step.sample(3.0), vec![2.0, 4.0, -2.0]);
-        let linear = track(
-            Property::Translation,
-            Interpolation::Linear,
-            &[1.0, 3.0],
-            &keys,
-        );
-        assert_eq!(linear.sample(2.0), vec![1.0, 2.0, -1.0]);
-        assert_eq!(
-            linear.sample(0.0),
-            vec![0.0, 0.0, 0.0],
-            "clamped before the first key"
-        );
-        assert_eq!(
-            linear.sample(9.0),
-            vec![2.0, 4.0, -2.0],
-            "clamped after the last key"
-        );
-    }
-
-    #[test]
-    fn rotations_slerp_and_stay_unit() {
-        // Identity to a half turn about z (x, y, z, w).
-        let s = std::f64::consts::FRAC_1_SQRT_2;
-        let keys: [&[f64]; 2] = [&[0.0, 0.0, 0.0, 1.0], &[0.0, 0.0, 1.0, 0.0]];
-        let r = track(
-            Property::Rotation,
-            Interpolation::Linear,
-            &[0.0, 1.0],
-            &keys,
-        )
-        .sample(0.5);
-        assert!(
-            (r[2] - s).abs() < 1e-12 && (r[3] - s).abs() < 1e-12,
-            "a quarter turn halfway: {r:?}"
-        );
-    }
-
-    #[test]
-    fn cubic_spline_is_hermite_with_tangents_scaled_by_the_interval() {
-        // Keys at t = 0 and 2: value 0 → 1, out-tangent 1 at the first, in-tangent 0 at the
-        // second. Hermite on s = t/2 with m0 = 2·1, m1 = 2·0.
-        let keys: [&[f64]; 6] = [&[9.0], &[0.0], &[1.0], &[0.0], &[1.0], &[9.0]];
-        let cubic = track(
-            Property::Scale,
-            Interpolation::CubicSpline,
-            &[0.0, 2.0],
-            &keys,
-        );
-        for t in [0.0, 0.5, 1.0, 1.5, 2.0] {
-            let s: f64 = t / 2.0;
-            let expected = (s.powi(3) - 2.0 * s * s + s) * 2.0 + (-2.0 * s.powi(3) + 3.0 * s * s);
-            assert!((cubic.sample(t)[0] - expected).abs() < 1e-12, "t = {t}");
-        }
-        assert_eq!(
-            cubic.sample(-1.0),
-            vec![0.0],
-            "the value, not a tangent, before the first key"
-        );
-        assert_eq!(cubic.sample(5.0), vec![1.0]);
-    }
 }

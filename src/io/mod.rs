@@ -11,13 +11,15 @@
 //! | [`image_file`] | PNG (8/16 bit) and EXR images (SPEC §5: linear, no sRGB curve) |
 //! | [`ply`] | 3DGS slice PLY for splat viewers, 4D scene PLY |
 //! | [`dataset`] | D-NeRF / Blender `transforms_*.json` datasets |
-//! | [`gltf_import`] | glTF 2.0 models, their cameras and node animation |
+//! | [`gltf_import`] | glTF 2.0 models and their cameras, sampled into kernels |
+//! | [`gltf_motion`] | glTF node animation: evaluation, rates, the sample times an import follows |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
 
 pub mod camera_file;
 pub mod dataset;
 pub mod gltf_import;
+pub mod gltf_motion;
 pub mod gradients_file;
 pub mod image_file;
 pub mod json;

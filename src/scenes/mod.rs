@@ -6,4 +6,5 @@ pub mod dataset;
 pub mod motion;
 pub mod paths;
 pub mod synthetic;
+pub mod time_samples;
 pub mod toy;

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use crate::io::check_output;
 use crate::io::gltf_import::import_scene;
+use crate::io::gltf_motion::Spacing;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::model::{Error, Result, Scene};
@@ -59,8 +60,8 @@ pub struct ImportRequest {
     pub model: PathBuf,
     /// Surface points to sample.
     pub kernels: usize,
-    /// Time samples over the animation's range.
-    pub times: usize,
+    /// How the animation's time is sampled.
+    pub spacing: Spacing,
     /// Output scene (`.json` or `.ply`).
     pub out: PathBuf,
     /// Seed of the surface samples.
@@ -70,18 +71,39 @@ pub struct ImportRequest {
 /// Samples a glTF model and its node animation into 4D kernels.
 pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
     check_output(&request.out, &["json", "ply"], &[&request.model])?;
-    let imported = import_scene(&request.model, request.kernels, request.times, request.seed)?;
+    let imported = import_scene(
+        &request.model,
+        request.kernels,
+        request.spacing,
+        request.seed,
+    )?;
     save_scene(&imported.scene, &request.out)?;
     let [t0, t1] = imported.time_range;
+    let mut line = format!(
+        "{} kernels ({} surface points × {} times over [{t0}, {t1}])",
+        imported.scene.len(),
+        imported.points,
+        imported.times
+    );
+    if t1 > t0 {
+        line.push_str(&format!(
+            "; path error at most {:.2e} of the model's size, temporal weights sum to 1 ± {:.1e}, {} steps",
+            imported.max_error, imported.weight_error, imported.steps
+        ));
+    }
+    let mut warnings = Vec::new();
+    if let Spacing::Adaptive { tolerance } = request.spacing
+        && imported.max_error > tolerance
+    {
+        warnings.push(format!(
+            "the path error {:.2e} is above the tolerance {tolerance:e}: the refinement reached its limits",
+            imported.max_error
+        ));
+    }
     Ok(SceneSummary {
         out: request.out.clone(),
-        line: format!(
-            "{} kernels ({} surface points × {} times over [{t0}, {t1}])",
-            imported.scene.len(),
-            imported.points,
-            imported.times
-        ),
-        warnings: Vec::new(),
+        line,
+        warnings,
     })
 }
 

@@ -94,7 +94,13 @@ fn gltf_and_glb() {
     let target = dir.path().join("m.gltf");
     fuzz("glTF", &good, 1500, 4, |b| {
         std::fs::write(&target, b).unwrap();
-        let scene = splat4d::io::gltf_import::import_scene(&target, 20, 3, 0).is_ok();
+        let scene = splat4d::io::gltf_import::import_scene(
+            &target,
+            20,
+            splat4d::io::gltf_motion::Spacing::Even(3),
+            0,
+        )
+        .is_ok();
         let camera = splat4d::io::gltf_import::load_camera(&target, 0, Some((8, 8))).is_ok();
         scene || camera
     });
@@ -256,7 +262,12 @@ fn gltf_structural_mutations() {
         std::fs::write(&target, doc.to_string()).unwrap();
         let start = std::time::Instant::now();
         let outcome = catch_unwind(AssertUnwindSafe(|| {
-            let scene = splat4d::io::gltf_import::import_scene(&target, 20, 3, 0);
+            let scene = splat4d::io::gltf_import::import_scene(
+                &target,
+                20,
+                splat4d::io::gltf_motion::Spacing::Adaptive { tolerance: 1e-3 },
+                0,
+            );
             let camera = splat4d::io::gltf_import::load_camera(&target, 0, Some((8, 8)));
             (scene.is_ok(), camera.is_ok())
         }));

@@ -20,6 +20,8 @@ mod fit;
 mod fuzz_loaders;
 /// glTF import on the Khronos samples: animation, cameras, colours.
 mod gltf;
+/// Imported animations measured from renders over time.
+mod gltf_motion;
 /// The backward pass against the f64 backward, finite differences and independent vectors.
 mod gradients;
 /// Numerically hard scenes against the f64 reference, forward and backward.
