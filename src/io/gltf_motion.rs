@@ -753,4 +753,164 @@ mod tests {
         );
         assert_eq!(cubic.sample(5.0), vec![1.0]);
     }
+
+    #[test]
+    fn rates_match_finite_differences_for_every_interpolation() {
+        let h = 1e-6;
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let cases = [
+            track(
+                Property::Translation,
+                Interpolation::Linear,
+                &[0.0, 0.7, 2.0],
+                &[&[0.0, 1.0, 2.0], &[3.0, -1.0, 0.5], &[1.0, 1.0, 1.0]],
+            ),
+            track(
+                Property::Rotation,
+                Interpolation::Linear,
+                &[0.0, 0.25, 1.0],
+                &[
+                    &[0.0, 0.0, 0.0, 1.0],
+                    &[0.3, 0.0, s, s],
+                    &[-0.2, 0.9, 0.1, -0.3],
+                ],
+            ),
+            track(
+                Property::Rotation,
+                Interpolation::CubicSpline,
+                &[0.0, 1.5],
+                &[
+                    &[0.0, 0.0, 0.0, 0.0],
+                    &[0.0, 0.0, 0.0, 1.0],
+                    &[0.5, 0.2, 0.0, 0.0],
+                    &[0.1, -0.3, 0.2, 0.0],
+                    &[0.0, s, 0.0, s],
+                    &[0.0, 0.0, 0.0, 0.0],
+                ],
+            ),
+            track(
+                Property::Scale,
+                Interpolation::CubicSpline,
+                &[0.0, 2.0],
+                &[
+                    &[9.0; 3],
+                    &[1.0, 2.0, 3.0],
+                    &[1.0, -1.0, 0.5],
+                    &[0.0, 2.0, 1.0],
+                    &[2.0, 1.0, 1.0],
+                    &[9.0; 3],
+                ],
+            ),
+        ];
+        for (c, track) in cases.iter().enumerate() {
+            for t in [0.05, 0.3, 0.69, 0.71, 1.2, 1.45, 1.9] {
+                let (_, rate) = track.evaluate(t, Side::Right);
+                let (up, down) = (
+                    track.evaluate(t + h, Side::Right).0,
+                    track.evaluate(t - h, Side::Right).0,
+                );
+                for (i, r) in rate.iter().enumerate() {
+                    let numeric = (up[i] - down[i]) / (2.0 * h);
+                    assert!(
+                        (r - numeric).abs() < 1e-6 * (1.0 + numeric.abs()),
+                        "case {c}, t = {t}, component {i}: analytic {r}, numeric {numeric}"
+                    );
+                }
+            }
+        }
+        // The two limits at a key differ only where the motion does: a LINEAR key's rate.
+        let (left, right) = (
+            cases[0].evaluate(0.7, Side::Left),
+            cases[0].evaluate(0.7, Side::Right),
+        );
+        assert_eq!(left.0, right.0);
+        assert!((left.1[0] - 3.0 / 0.7).abs() < 1e-12 && (right.1[0] + 2.0 / 1.3).abs() < 1e-12);
+        // Held outside the keys.
+        assert_eq!(cases[0].evaluate(2.0, Side::Right).1, vec![0.0; 3]);
+        assert_eq!(cases[0].evaluate(0.0, Side::Left).1, vec![0.0; 3]);
+    }
+
+    #[test]
+    fn the_rotation_rate_is_the_derivative_of_the_matrix() {
+        let q = |t: f64| {
+            let v = [
+                0.3 * t.sin(),
+                0.5 * t,
+                -0.2 + 0.1 * t * t,
+                1.0 + 0.2 * t.cos(),
+            ];
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            v.map(|x| x / n)
+        };
+        let matrix = |q: [f64; 4]| DMat3::from_quat(DQuat::from_xyzw(q[0], q[1], q[2], q[3]));
+        let h = 1e-6;
+        for t in [-0.4, 0.1, 0.9] {
+            let dq: [f64; 4] = std::array::from_fn(|i| (q(t + h)[i] - q(t - h)[i]) / (2.0 * h));
+            let numeric = (matrix(q(t + h)) - matrix(q(t - h))) * (1.0 / (2.0 * h));
+            let analytic = rotation_rate(q(t), dq);
+            let error = (analytic - numeric)
+                .to_cols_array()
+                .iter()
+                .map(|x| x.abs())
+                .fold(0.0, f64::max);
+            assert!(error < 1e-7, "t = {t}: {error}");
+        }
+    }
+
+    #[test]
+    fn world_rates_follow_the_hierarchy() {
+        // A parent translating and turning, a child offset and scaling: M' by the product
+        // rule against finite differences of M.
+        let json = r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],
+            "nodes":[{"children":[1]},{"translation":[1,0,0]}]}"#;
+        let gltf = gltf::Gltf::from_slice(json.as_bytes()).unwrap();
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let tracks = vec![
+            Track {
+                node: 0,
+                ..track(
+                    Property::Translation,
+                    Interpolation::Linear,
+                    &[0.0, 1.0],
+                    &[&[0.0, 0.0, 0.0], &[0.0, 2.0, 1.0]],
+                )
+            },
+            Track {
+                node: 0,
+                ..track(
+                    Property::Rotation,
+                    Interpolation::Linear,
+                    &[0.0, 1.0],
+                    &[&[0.0, 0.0, 0.0, 1.0], &[0.0, 0.0, s, s]],
+                )
+            },
+            Track {
+                node: 1,
+                ..track(
+                    Property::Scale,
+                    Interpolation::Linear,
+                    &[0.0, 1.0],
+                    &[&[1.0, 1.0, 1.0], &[2.0, 0.5, 1.0]],
+                )
+            },
+        ];
+        let animation = Animation::new(tracks, 2);
+        let h = 1e-6;
+        for t in [0.2, 0.5, 0.8] {
+            let world = animation.world(&gltf.document, t, Side::Right);
+            let (up, down) = (
+                animation.world(&gltf.document, t + h, Side::Right),
+                animation.world(&gltf.document, t - h, Side::Right),
+            );
+            for n in 0..2 {
+                let numeric = (up[n].0 - down[n].0) * (1.0 / (2.0 * h));
+                let error = (world[n].1 - numeric)
+                    .to_cols_array()
+                    .iter()
+                    .map(|x| x.abs())
+                    .fold(0.0, f64::max);
+                assert!(error < 1e-6, "node {n}, t = {t}: {error}");
+            }
+        }
+    }
 }
