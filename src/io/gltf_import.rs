@@ -11,13 +11,14 @@
 //! triangles of every mesh of the default scene, area-weighted at the first sample time, with their colour from
 //! `COLOR_0` (interpolated) or the material's base colour factor (textures are not read).
 //! Node animations (translation, rotation, scale; LINEAR, STEP and CUBICSPLINE samplers)
-//! through the node hierarchy are sampled at `K` times evenly over the animations' time range
-//! (all animations play together), and each point becomes one kernel per sample time `t_k`:
-//! a surfel with σ = (s, s, 0.3 s), `s = √(area/N)`, its thin axis along the triangle's
-//! normal at `t_k`, velocity the central difference of the point's path, σt = Δt, and
-//! amplitude `colour · g / √(2π)` where `g = 1/(2π)` makes surfels at that density sum to the
-//! colour face-on and `1/√(2π)` undoes the overlap of neighbouring times. Without animation
-//! (or `K = 1`) each point is one static kernel (σt = 1000, amplitude `colour · g`). Skins and
+//! through the node hierarchy (all animations play together) are followed at the sample
+//! times [`crate::io::gltf_motion`] chooses, and each point becomes one kernel
+//! per sample time `t_k`: a surfel with σ = (s, s, 0.3 s), `s = √(area/N)`, its thin axis
+//! along the triangle's normal at `t_k`, at the point's (curvature-corrected) position,
+//! moving with its analytic velocity, temporal σ `σ_k` and amplitude `colour · g · a_k`,
+//! where `g = 1/(2π)` makes surfels at that density sum to the colour face-on and the
+//! weights `a_k` make the point's temporal Gaussians sum to one. Without animation (or with
+//! `--times 1`) each point is one static kernel (σt = 1000, amplitude `colour · g`). Skins and
 //! morph targets are refused with a clear message.
 
 use std::path::{Path, PathBuf};

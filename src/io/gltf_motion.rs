@@ -32,7 +32,9 @@
 use glam::{DMat3, DMat4, DQuat, DVec3};
 
 use crate::model::error::{Error, Result};
-use crate::scenes::time_samples::{Boundary, Place, TimeSample, lay_out, normalise, reaching};
+use crate::scenes::time_samples::{
+    Boundary, Place, TimeSample, for_each_reaching, lay_out, normalise, normalise_within,
+};
 
 /// A step is resolved within this fraction of the animation's range: at `b + w` at most
 /// 1.5 % of the weight is on the old side (the ladder's first gap is `w/2`).
@@ -442,35 +444,54 @@ pub(crate) fn plan_samples(
         Spacing::Adaptive { tolerance } => tolerance,
         Spacing::Even(_) => 1e-3,
     } * size;
-    // Boundaries: the ends and every key time between them.
-    let mut times: Vec<f64> = animation
+    // Boundaries: the ends and every key time between them; keys closer together than
+    // 10⁻⁶ of the range are one boundary (its left limit taken at the first, its right limit
+    // at the last), so that no piece is shorter than the samples can resolve.
+    let resolution = 1e-6 * length;
+    let mut keys: Vec<f64> = animation
         .tracks
         .iter()
         .flat_map(|k| k.times.iter().copied())
         .filter(|&t| t > t0 && t < t1)
         .chain([t0, t1])
         .collect();
-    times.sort_by(f64::total_cmp);
-    times.dedup();
-    let mut steps = vec![false; times.len()];
-    let mut boundaries: Vec<Boundary> = times
+    keys.sort_by(f64::total_cmp);
+    let mut clusters: Vec<[f64; 2]> = Vec::new();
+    for t in keys {
+        match clusters.last_mut() {
+            Some(cluster) if t - cluster[1] <= resolution => cluster[1] = t,
+            _ => clusters.push([t, t]),
+        }
+    }
+    let last = clusters.len() - 1;
+    clusters[0][0] = t0;
+    clusters[last][1] = t1;
+    // A boundary's time: the range's ends at the ends, else its cluster's last key.
+    let times: Vec<f64> = clusters
         .iter()
         .enumerate()
-        .map(|(i, &b)| {
+        .map(|(i, c)| if i == 0 { t0 } else { c[1] })
+        .collect();
+    let mut steps = vec![false; times.len()];
+    let mut boundaries: Vec<Boundary> = clusters
+        .iter()
+        .zip(&times)
+        .enumerate()
+        .map(|(i, (&[first, last], &b))| {
             let (left, right) = (
-                animation.world(document, b, Side::Left),
-                animation.world(document, b, Side::Right),
+                animation.world(document, first, Side::Left),
+                animation.world(document, last, Side::Right),
             );
             let (mut jump, mut rate_jump) = (0.0_f64, 0.0_f64);
             for ((l, r), points) in left.iter().zip(&right).zip(corners) {
                 jump = jump.max(largest_offset(&(r.0 - l.0), points));
                 rate_jump = rate_jump.max(largest_offset(&(r.1 - l.1), points));
             }
-            let ladder = if jump > tolerance {
+            let ladder = if jump > tolerance || !(jump.is_finite() && rate_jump.is_finite()) {
                 steps[i] = true;
                 Some(0.5 * STEP_WINDOW * length)
             } else if rate_jump > 0.0 {
-                Some((8.0 * tolerance / rate_jump).max(1e-9 * length))
+                Some((8.0 * tolerance / rate_jump).max(10.0 * resolution))
             } else {
                 None
             };
@@ -528,13 +549,16 @@ pub(crate) fn plan_samples(
                 }
             })
             .collect();
-        let samples = lay_out(&graded, &spacings);
+        let mut samples = lay_out(&graded, &spacings);
         if samples.len() > MAX_SAMPLE_TIMES {
             return Err(Error::usage(format!(
                 "{origin}: following the animation within the tolerance needs more than \
                  {MAX_SAMPLE_TIMES} sample times; raise --tolerance or give --times"
             )));
         }
+        // Errors are measured as the kernels will be: with fitted weights (roughly fitted
+        // while the samples move, fully at the end).
+        normalise_within(&mut samples, range, 10);
         let posed: Vec<PosedSample> = samples
             .iter()
             .map(|s| PosedSample {
@@ -565,7 +589,7 @@ pub(crate) fn plan_samples(
                 match near {
                     Some(i) => {
                         let r = boundaries[i].ladder.expect("a ladder");
-                        if !narrowed[i] && r > 1e-9 * length {
+                        if !narrowed[i] && r > 20.0 * resolution {
                             boundaries[i].ladder = Some(0.5 * r);
                             narrowed[i] = true;
                             changed = true;
@@ -581,12 +605,12 @@ pub(crate) fn plan_samples(
             }
         }
         if !changed || round >= 30 {
-            let mut samples = samples;
             let weight_error = normalise(&mut samples, range);
-            let mut posed = posed;
-            for (p, s) in posed.iter_mut().zip(&samples) {
-                p.sample = *s;
-            }
+            let posed: Vec<PosedSample> = posed
+                .into_iter()
+                .zip(&samples)
+                .map(|(p, s)| PosedSample { sample: *s, ..p })
+                .collect();
             let errors = test_errors(document, animation, &posed, &times, &steps, corners, length);
             let max_error = errors.iter().map(|e| e.1).fold(0.0, f64::max) / size;
             return Ok(SamplePlan {
@@ -600,7 +624,8 @@ pub(crate) fn plan_samples(
 }
 
 /// Position error of the blend against the animation at the test times: every sample time
-/// and midpoint inside the range, and the boundaries (not within a step's window).
+/// and midpoint inside the range, and the boundaries — not within two step windows of a
+/// step, where the kernels of both sides blend by design.
 fn test_errors(
     document: &gltf::Document,
     animation: &Animation,
@@ -625,41 +650,43 @@ fn test_errors(
             boundaries
                 .iter()
                 .zip(steps)
-                .all(|(&b, &step)| !step || (t - b).abs() > STEP_WINDOW * length)
+                .all(|(&b, &step)| !step || (t - b).abs() > 2.0 * STEP_WINDOW * length)
         })
         .collect();
     taus.sort_by(f64::total_cmp);
     taus.dedup();
     let samples: Vec<TimeSample> = posed.iter().map(|p| p.sample).collect();
-    let widest = samples.iter().map(|s| s.sigma).fold(0.0, f64::max);
-    taus.iter()
-        .map(|&tau| {
-            let truth = animation.world(document, tau, Side::Right);
-            let mut blend = vec![DMat4::ZERO; truth.len()];
-            let mut total = 0.0;
-            for p in &posed[reaching(&samples, widest, tau)] {
-                let w = p.sample.at(tau);
-                if w == 0.0 {
-                    continue;
-                }
-                total += w;
-                let dt = tau - p.sample.time;
-                for (b, (m, rate)) in blend.iter_mut().zip(&p.poses) {
-                    *b += (*m + *rate * dt) * w;
-                }
+    let mut errors = Vec::with_capacity(taus.len());
+    for_each_reaching(&samples, &taus, |i, reaching| {
+        let tau = taus[i];
+        let truth = animation.world(document, tau, Side::Right);
+        let mut blend = vec![DMat4::ZERO; truth.len()];
+        let mut total = 0.0;
+        for &k in reaching {
+            let p = &posed[k];
+            let w = p.sample.at(tau);
+            if w == 0.0 {
+                continue;
             }
-            if total <= 0.0 {
-                return (tau, f64::INFINITY);
+            total += w;
+            let dt = tau - p.sample.time;
+            for (b, (m, rate)) in blend.iter_mut().zip(&p.poses) {
+                *b += (*m + *rate * dt) * w;
             }
-            let error = blend
+        }
+        let error = if total > 0.0 {
+            blend
                 .iter()
                 .zip(&truth)
                 .zip(corners)
                 .map(|((b, t), points)| largest_offset(&(*b * (1.0 / total) - t.0), points))
-                .fold(0.0, f64::max);
-            (tau, error)
-        })
-        .collect()
+                .fold(0.0, f64::max)
+        } else {
+            f64::INFINITY
+        };
+        errors.push((tau, error));
+    });
+    errors
 }
 
 #[cfg(test)]

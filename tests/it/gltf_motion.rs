@@ -322,8 +322,17 @@ fn a_step_leaves_no_ghost() {
     );
     let imported = import_scene(&path, 1500, DEFAULT, 0).unwrap();
     assert_eq!(imported.steps, 1);
+    eprintln!(
+        "step: {} times per point, path error {:.1e}",
+        imported.times, imported.max_error
+    );
     let camera = top_camera([0.0, 0.5]);
-    let options = RenderOptions::default();
+    assert!(imported.weight_error < 0.01, "{}", imported.weight_error);
+    // A lower cut-off than the default, as for brightness above.
+    let options = RenderOptions {
+        cutoff: 1e-4,
+        ..RenderOptions::default()
+    };
     // Weight left of x = 0.25 (the old place: x in [-1, 0]) and right of it (the new one:
     // [0.5, 1.5]).
     let sides = |tau: f64| {
