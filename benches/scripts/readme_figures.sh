@@ -11,7 +11,7 @@ cargo build --release --quiet
 bin=target/release/splat4d
 {
   echo "# machine"
-  lscpu | grep -E "Model name|^CPU\(s\)|Flags" | sed 's/\(Flags:\).*\(avx512f\|avx2\).*/\1 (see lscpu)/'
+  lscpu | grep -E "Model name|^CPU\(s\)"
   grep -o -w -E "avx2|fma|avx512f|avx512bw|avx512dq|avx512vl" /proc/cpuinfo | sort -u | tr '\n' ' '
   echo
   echo "# splat4d bench --frames 5"
