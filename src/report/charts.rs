@@ -49,6 +49,18 @@ fn colour(i: usize) -> RGBColor {
     COLOURS[i % COLOURS.len()]
 }
 
+/// The colour of a method, the same in every chart: the ground truth black, the 4D model
+/// blue, the frame baselines red and green; anything else by its index.
+fn colour_of(label: &str, i: usize) -> RGBColor {
+    match label {
+        l if l.starts_with("ground truth") => RGBColor(40, 40, 40),
+        l if l.starts_with("4D (paper)") => colour(0),
+        l if l.starts_with("frame 3D") => colour(1),
+        l if l.starts_with("interpolation") => colour(2),
+        _ => colour(3 + i),
+    }
+}
+
 /// Draws into a fresh `width × height` white buffer and writes it to `path`.
 fn draw_png(
     path: &Path,
@@ -147,28 +159,21 @@ pub fn line_chart(
             .iter()
             .flat_map(|s| finite(s).into_iter().map(|p| p.1)),
     );
-    draw_png(path, (800, 500), |root| {
-        let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
+    // The legend in its own column right of the plot, never over the data.
+    draw_png(path, (1000, 500), |root| {
+        let (plot, legend) = root.split_horizontally(790);
+        let mut chart = axes(&plot, title, (x_label, xs), (y_label, ys))?;
         for (i, s) in series.iter().enumerate() {
-            let c = colour(i);
+            let c = colour_of(&s.label, i);
             let points = finite(s);
-            chart
-                .draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))?
-                .label(s.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+            chart.draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))?;
             if s.markers {
                 chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
             }
+            let y = 60 + 26 * i as i32;
+            legend.draw(&PathElement::new(vec![(4, y), (30, y)], c.stroke_width(3)))?;
+            legend.draw(&Text::new(s.label.clone(), (36, y - 8), (FONT, 14)))?;
         }
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::LowerRight)
-            .draw()?;
         Ok(())
     })
 }
@@ -201,7 +206,7 @@ pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]
         chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
             Rectangle::new(
                 [(i as f64 + 0.15, 0.0), (i as f64 + 0.85, b.1.max(0.0))],
-                colour(i).filled(),
+                colour_of(&b.0, i).filled(),
             )
         }))?;
         // Text hangs below its anchor: the name two lines above the bar, the value one.
@@ -351,8 +356,8 @@ pub fn panels_figure(
 ) -> Result<()> {
     let scale = (256 / res.max(1)).max(1) as u32;
     let side = res as u32 * scale;
-    let (gap, top, bottom) = (16_u32, 40_u32, 34_u32);
-    let width = gap + panels.len() as u32 * (side + gap);
+    let (gap, top, bottom, bar) = (16_u32, 40_u32, 34_u32, 90_u32);
+    let width = gap + panels.len() as u32 * (side + gap) + bar;
     let height = top + side + bottom;
     draw_png(path, (width, height), |root| {
         root.draw(&Text::new(title.to_owned(), (gap as i32, 10), (FONT, 20)))?;
@@ -383,6 +388,26 @@ pub fn panels_figure(
                 (FONT, 16),
             ))?;
         }
+        // The colour bar: 0 at the bottom, vmax at the top, with its values.
+        let x0 = (gap + panels.len() as u32 * (side + gap)) as i32;
+        for k in 0..side {
+            let f = f64::from(side - 1 - k) / f64::from(side.max(2) - 1);
+            let y = (top + k) as i32;
+            root.draw(&Rectangle::new(
+                [(x0, y), (x0 + 18, y + 1)],
+                ViridisRGB::get_color(f).filled(),
+            ))?;
+        }
+        for k in 0..=4 {
+            let f = f64::from(k) / 4.0;
+            let y = top as i32 + ((1.0 - f) * f64::from(side - 1)) as i32;
+            root.draw(&PathElement::new(vec![(x0 + 18, y), (x0 + 24, y)], BLACK))?;
+            root.draw(&Text::new(
+                format!("{:.2}", f * f64::from(vmax)),
+                (x0 + 27, y - 7),
+                (FONT, 13),
+            ))?;
+        }
         Ok(())
     })
 }
@@ -401,6 +426,8 @@ pub fn volume_slices_figure(
     let at = |a: usize| g.centre(a, peak[a]);
     let [xy, xz, yz] = volume.slices_through(peak);
     let (hi, lo) = volume.range();
+    // Rows run along the second named axis, columns along the first; every axis spans the
+    // grid, in scene units.
     let panels = [
         Panel {
             label: format!("xy at z = {:.2}", at(2)),
@@ -415,7 +442,11 @@ pub fn volume_slices_figure(
             values: &yz,
         },
     ];
-    let title = format!("{name}, t = {tau}: max {hi:.3}, min {lo:.3} (colour 0 to {vmax:.3})");
+    let title = format!(
+        "{name}, t = {tau}: max {hi:.3}, min {lo:.3}; axes [{:.2}, {:.2}] scene units",
+        g.min[0].min(g.min[1]).min(g.min[2]),
+        g.max[0].max(g.max[1]).max(g.max[2])
+    );
     panels_figure(path, &title, g.res, &panels, vmax)
 }
 

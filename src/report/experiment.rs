@@ -154,6 +154,8 @@ pub struct MethodResult {
     pub render_ms: f64,
     /// `(τ, PSNR over the test cameras at τ)` along the sweep.
     pub psnr_per_time: Vec<(f64, f64)>,
+    /// Its renders from the first test camera at the sweep's times ([`ExperimentResults::gallery_times`]).
+    pub gallery: Vec<Image>,
 }
 
 /// One row of the model size comparison: parameters against held-out PSNR.
@@ -244,6 +246,10 @@ pub struct ExperimentResults {
     pub volumes: Vec<VolumeResult>,
     /// The fitted 4D scene.
     pub model: Scene,
+    /// The sweep's times, at which [`MethodResult::gallery`] and `gallery_truth` are.
+    pub gallery_times: Vec<f64>,
+    /// The ground truth from the first test camera (held out) at `gallery_times`.
+    pub gallery_truth: Vec<Image>,
     /// Seconds for the whole run.
     pub seconds: f64,
 }
@@ -311,6 +317,8 @@ struct SweepMetrics {
     roughness: f64,
     /// Milliseconds per frame.
     render_ms: f64,
+    /// The frames from the first camera.
+    first_camera: Vec<Image>,
 }
 
 fn sweep_metrics(
@@ -323,6 +331,7 @@ fn sweep_metrics(
     let mut per_time = vec![0.0; sweep.times.len()];
     let mut roughness = 0.0;
     let mut seconds = 0.0;
+    let mut first_camera = Vec::new();
     for (c, camera) in cameras.iter().enumerate() {
         let mut frames = Vec::with_capacity(sweep.times.len());
         for (k, &tau) in sweep.times.iter().enumerate() {
@@ -334,6 +343,9 @@ fn sweep_metrics(
             frames.push(image);
         }
         roughness += temporal_roughness(&frames);
+        if c == 0 {
+            first_camera = frames;
+        }
     }
     let n_cam = cameras.len() as f64;
     let frames = n_cam * sweep.times.len() as f64;
@@ -347,6 +359,7 @@ fn sweep_metrics(
         psnr_per_time: per_time,
         roughness: roughness / n_cam,
         render_ms: 1e3 * seconds / frames,
+        first_camera,
     })
 }
 
@@ -636,6 +649,7 @@ pub fn run_experiment(
             psnr_per_time,
             roughness,
             render_ms,
+            first_camera,
         } = sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?;
         methods.push(MethodResult {
             name: name.to_owned(),
@@ -646,6 +660,7 @@ pub fn run_experiment(
             roughness,
             render_ms,
             psnr_per_time,
+            gallery: first_camera,
         });
         progress.tick();
     }
@@ -762,6 +777,8 @@ pub fn run_experiment(
         model_size,
         volumes,
         model,
+        gallery_times: sweep.times.clone(),
+        gallery_truth: sweep.truth.first().cloned().unwrap_or_default(),
         seconds: start.elapsed().as_secs_f64(),
     })
 }

@@ -103,15 +103,32 @@ fn report_quick_writes_the_report_and_its_charts() {
     ] {
         assert!(report.contains(part), "report.md should contain `{part}`");
     }
-    // Every image the report links exists and decodes.
-    let mut linked = 0;
-    for line in report.lines().filter(|l| l.starts_with("![")) {
-        let name = &line[line.find("](").unwrap() + 2..line.len() - 1];
-        let image = load_image(&dir.path().join("rep").join(name), [1.0; 3]).unwrap();
-        assert!(image.width >= 200 && image.height >= 100, "{name}");
-        linked += 1;
+    // Every image the report links exists and decodes: the charts and volume figures on
+    // their own lines, the gallery's cells in a table, the animation.
+    let (mut figures, mut cells, mut animations) = (0, 0, 0);
+    for (at, _) in report.match_indices("](") {
+        let rest = &report[at + 2..];
+        let name = &rest[..rest.find(')').unwrap()];
+        let path = dir.path().join("rep").join(name);
+        if name.ends_with(".gif") {
+            let bytes = std::fs::read(&path).unwrap();
+            assert!(bytes.starts_with(b"GIF89a") && bytes.len() > 1000, "{name}");
+            animations += 1;
+            continue;
+        }
+        let image = load_image(&path, [1.0; 3]).unwrap();
+        if name.starts_with("gallery_") {
+            // Ground truth | render | error, each the dataset's size zoomed 3×.
+            assert!(image.width > 3 * 3 * 16 && image.height >= 3 * 16, "{name}");
+            cells += 1;
+        } else {
+            assert!(image.width >= 200 && image.height >= 100, "{name}");
+            figures += 1;
+        }
     }
-    assert_eq!(linked, 8 + 6, "8 charts and 6 volume figures");
+    assert_eq!(figures, 8 + 6, "8 charts and 6 volume figures");
+    assert_eq!(cells, 3 * 4, "3 methods at 4 times");
+    assert_eq!(animations, 1);
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("report: rep/report.md"), "{stdout}");
 }
