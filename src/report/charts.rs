@@ -489,7 +489,21 @@ pub fn pareto_chart(
         .collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
     draw_png(path, (900, 560), |root| {
-        let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
+        // The errors are drawn at their log10, and the axis is labelled with the values.
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(xs, ys)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .y_label_formatter(&|v| format!("{:.0e}", 10f64.powf(*v)))
+            .light_line_style(RGBColor(238, 238, 238))
+            .label_style((FONT, 14))
+            .draw()?;
         chart
             .draw_series(LineSeries::new(front.clone(), BLACK.stroke_width(1)))?
             .label("Pareto front")

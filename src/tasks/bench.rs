@@ -313,7 +313,7 @@ fn write_sweep(
             "Speed against error: {name}, {}x{}, {threads} threads",
             camera.width, camera.height
         ),
-        ("ms per frame", "log10 max |render - exact|"),
+        ("ms per frame", "max |render - exact| (log scale)"),
         &series,
         &chart_points,
     )?;
