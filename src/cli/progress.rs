@@ -1,5 +1,7 @@
-//! Progress on the terminal: an indicatif bar per phase when stderr is a terminal, and a
-//! log line per phase and about every 10 s when it is not (CI, logs, `nohup`).
+//! Progress on the terminal: an indicatif bar per phase when stderr is a terminal (its
+//! message cut to the terminal's width, so it draws at any width), and when it is not (CI,
+//! logs, `nohup`) a log line per phase and about every 5 s with the phase, the fraction done
+//! and the estimated time left.
 
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
@@ -11,13 +13,45 @@ use splat4d::model::Progress;
 use splat4d::tasks::fit::FitProgress;
 
 /// How often a piped run logs a line.
-const LOG_EVERY: Duration = Duration::from_secs(10);
+const LOG_EVERY: Duration = Duration::from_secs(5);
+
+/// A piped phase: its name, steps done and to do, when it started and when it last logged.
+struct PhaseLog {
+    phase: String,
+    done: usize,
+    total: usize,
+    started: Instant,
+    last: Instant,
+}
+
+impl PhaseLog {
+    /// `phase: done/total (p %), about N s left`.
+    fn line(&self) -> String {
+        let fraction = self.done as f64 / self.total.max(1) as f64;
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let left = if self.done > 0 {
+            format!(
+                ", about {:.0} s left",
+                elapsed * (self.total.saturating_sub(self.done)) as f64 / self.done as f64
+            )
+        } else {
+            String::new()
+        };
+        format!(
+            "{}: {}/{} ({:.0} %){left}",
+            self.phase,
+            self.done,
+            self.total,
+            100.0 * fraction
+        )
+    }
+}
 
 /// Progress of the current phase.
 pub struct Bars {
     bar: Option<ProgressBar>,
-    /// Piped output: `(phase, done, total, last line)`.
-    log: Option<(String, usize, usize, Instant)>,
+    /// Piped output: the current phase.
+    log: Option<PhaseLog>,
     terminal: bool,
 }
 
@@ -36,19 +70,25 @@ impl Bars {
         if let Some(bar) = self.bar.take() {
             bar.finish_and_clear();
         }
-        if let Some((phase, done, total, _)) = self.log.take() {
-            eprintln!("{phase}: {done}/{total} done");
+        if let Some(log) = self.log.take() {
+            eprintln!(
+                "{}: {}/{} done in {:.1} s",
+                log.phase,
+                log.done,
+                log.total,
+                log.started.elapsed().as_secs_f64()
+            );
         }
     }
 
     fn message(&mut self, text: String) {
         if let Some(bar) = &self.bar {
             bar.set_message(text);
-        } else if let Some((phase, done, total, last)) = &mut self.log
-            && last.elapsed() >= LOG_EVERY
+        } else if let Some(log) = &mut self.log
+            && log.last.elapsed() >= LOG_EVERY
         {
-            eprintln!("{phase}: {done}/{total}, {text}");
-            *last = Instant::now();
+            eprintln!("{}, {text}", log.line());
+            log.last = Instant::now();
         }
     }
 }
@@ -68,7 +108,7 @@ impl Progress for Bars {
             let bar = ProgressBar::new(total as u64);
             bar.set_style(
                 ProgressStyle::with_template(
-                    "{prefix} [{elapsed_precise}] {bar:30} {pos}/{len} ({per_sec}) {msg}",
+                    "{prefix} {bar:20} {pos}/{len} {elapsed}<{eta} {wide_msg}",
                 )
                 .expect("a valid template"),
             );
@@ -76,7 +116,13 @@ impl Progress for Bars {
             self.bar = Some(bar);
         } else {
             eprintln!("{phase}: {total} to do");
-            self.log = Some((phase.to_owned(), 0, total, Instant::now()));
+            self.log = Some(PhaseLog {
+                phase: phase.to_owned(),
+                done: 0,
+                total,
+                started: Instant::now(),
+                last: Instant::now(),
+            });
         }
     }
 
@@ -90,11 +136,11 @@ impl Progress for Bars {
     fn tick(&mut self) {
         if let Some(bar) = &self.bar {
             bar.inc(1);
-        } else if let Some((phase, done, total, last)) = &mut self.log {
-            *done += 1;
-            if last.elapsed() >= LOG_EVERY {
-                eprintln!("{phase}: {done}/{total}");
-                *last = Instant::now();
+        } else if let Some(log) = &mut self.log {
+            log.done += 1;
+            if log.last.elapsed() >= LOG_EVERY {
+                eprintln!("{}", log.line());
+                log.last = Instant::now();
             }
         }
     }
@@ -118,5 +164,26 @@ impl FitProgress for Bars {
             record.train_loss,
             psnr(record.train_loss)
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_piped_line_names_the_phase_the_fraction_and_the_time_left() {
+        let ten_seconds_ago = Instant::now() - Duration::from_secs(10);
+        let mut log = PhaseLog {
+            phase: "fit".into(),
+            done: 0,
+            total: 400,
+            started: ten_seconds_ago,
+            last: ten_seconds_ago,
+        };
+        assert_eq!(log.line(), "fit: 0/400 (0 %)");
+        log.done = 100;
+        // 100 in 10 s: 300 more take about 30 s.
+        assert_eq!(log.line(), "fit: 100/400 (25 %), about 30 s left");
     }
 }

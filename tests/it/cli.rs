@@ -86,6 +86,15 @@ fn report_quick_writes_the_report_and_its_charts() {
     let dir = tempfile::tempdir().unwrap();
     let output = splat4d(&["report", "--out", "rep", "--quick"], dir.path());
     assert!(output.status.success(), "{}", stderr(&output));
+    // Piped, progress comes as log lines: each phase announced and closed.
+    let log = stderr(&output);
+    for phase in ["dataset", "fit 4D", "evaluate", "volumes"] {
+        assert!(
+            log.contains(&format!("{phase}: ")) && log.contains(" to do"),
+            "{log}"
+        );
+    }
+    assert!(log.contains(" done in "), "{log}");
     let report = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
     for part in [
         "## Headline",
