@@ -54,7 +54,7 @@ fn colour(i: usize) -> RGBColor {
 fn colour_of(label: &str, i: usize) -> RGBColor {
     match label {
         l if l.starts_with("ground truth") => RGBColor(40, 40, 40),
-        l if l.starts_with("4D (paper)") => colour(0),
+        l if l.starts_with("4D") => colour(0),
         l if l.starts_with("frame 3D") => colour(1),
         l if l.starts_with("interpolation") => colour(2),
         _ => colour(3 + i),

@@ -163,14 +163,14 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
     line_chart(
         &chart("fit_vs_step.png"),
         "4D fit: PSNR of the loss against step",
-        "step",
+        "Adam step",
         "PSNR (dB)",
         &[train_step.clone(), held_step.clone()],
     )?;
     line_chart(
         &chart("fit_vs_seconds.png"),
         "4D fit: PSNR of the loss against time",
-        "seconds",
+        "wall-clock seconds",
         "PSNR (dB)",
         &[with_seconds(&train_step), with_seconds(&held_step)],
     )?;
@@ -186,7 +186,7 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
     line_chart(
         &chart("psnr_per_time.png"),
         "PSNR per time from the test cameras",
-        "time",
+        "scene time τ",
         "PSNR (dB)",
         &per_time,
     )?;
@@ -201,7 +201,7 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
     bar_chart(
         &chart("roughness.png"),
         "Temporal roughness (mean |consecutive difference|)",
-        "roughness",
+        "mean |consecutive difference| (linear intensity)",
         &bars,
     )?;
     let speed: Vec<(String, f64, f64)> = results
@@ -232,7 +232,7 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
     line_chart(
         &chart("ablation_psnr.png"),
         "σt ablation: PSNR",
-        "σt",
+        "σt (scene time units)",
         "PSNR (dB)",
         &ablation_psnr,
     )?;
@@ -259,8 +259,8 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
     line_chart(
         &chart("ablation_roughness.png"),
         "σt ablation: temporal roughness",
-        "σt",
-        "roughness",
+        "σt (scene time units)",
+        "mean |consecutive difference| (linear intensity)",
         &ablation_rough,
     )?;
 
