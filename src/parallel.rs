@@ -64,11 +64,7 @@ pub fn extend_scene(
     origin: &str,
 ) -> Result<()> {
     let len = scene.len();
-    scene.means.reserve(count);
-    scene.scales.reserve(count);
-    scene.amplitudes.reserve(count);
-    scene.rotations.reserve(count);
-    scene.velocities.reserve(count);
+    scene.reserve(count);
     let slots = scene.means.spare_capacity_mut()[..count]
         .par_chunks_mut(MIN_CHUNK)
         .zip(scene.scales.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))

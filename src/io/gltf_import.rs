@@ -657,20 +657,25 @@ fn read_triangles(
 /// checked against.
 pub fn world_matrices_at(path: &Path, t: f64) -> Result<Vec<[[f64; 4]; 4]>> {
     without_panics(path, || {
-        let origin = path.display().to_string();
-        let gltf = parse_document(path)?;
-        let buffers = load_buffers(&gltf, path)?;
-        let document = &gltf.document;
-        let animation = Animation::new(
-            read_tracks(document, &buffers, &origin)?,
-            document.nodes().count(),
-        );
+        let (gltf, _, animation) = load_animated(path)?;
         Ok(animation
-            .world(document, t, Side::Right)
+            .world(&gltf.document, t, Side::Right)
             .into_iter()
             .map(|pose| pose.0.to_cols_array_2d())
             .collect())
     })
+}
+
+/// The document at `path`, its buffers and its node animation.
+fn load_animated(path: &Path) -> Result<(gltf::Gltf, Vec<Vec<u8>>, Animation)> {
+    let origin = path.display().to_string();
+    let gltf = parse_document(path)?;
+    let buffers = load_buffers(&gltf, path)?;
+    let animation = Animation::new(
+        read_tracks(&gltf.document, &buffers, &origin)?,
+        gltf.document.nodes().count(),
+    );
+    Ok((gltf, buffers, animation))
 }
 
 /// What [`import_scene`] made.
@@ -733,13 +738,8 @@ fn import_scene_unguarded(
             "--kernels {points} × --times {times} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
         )));
     }
-    let gltf = parse_document(path)?;
-    let buffers = load_buffers(&gltf, path)?;
+    let (gltf, buffers, animation) = load_animated(path)?;
     let document = &gltf.document;
-    let animation = Animation::new(
-        read_tracks(document, &buffers, &origin)?,
-        document.nodes().count(),
-    );
     let triangles = read_triangles(document, &buffers, &origin)?;
     let range = animation.range().filter(|_| spacing != Spacing::Even(1));
     let first = range.map_or(0.0, |r| r[0]);

@@ -437,11 +437,7 @@ impl SceneLayout {
     fn empty_scene(&self, origin: &str) -> Result<Scene> {
         let mut scene = Scene::from_kernels(&[], self.background, origin)?;
         scene.up = self.up;
-        scene.means.reserve_exact(self.count);
-        scene.scales.reserve_exact(self.count);
-        scene.amplitudes.reserve_exact(self.count);
-        scene.rotations.reserve_exact(self.count);
-        scene.velocities.reserve_exact(self.count);
+        scene.reserve(self.count);
         Ok(scene)
     }
 

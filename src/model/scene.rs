@@ -135,11 +135,7 @@ impl Scene {
             background,
             ..Scene::default()
         };
-        scene.means.reserve_exact(kernels.len());
-        scene.scales.reserve_exact(kernels.len());
-        scene.amplitudes.reserve_exact(kernels.len());
-        scene.rotations.reserve_exact(kernels.len());
-        scene.velocities.reserve_exact(kernels.len());
+        scene.reserve(kernels.len());
         for (index, kernel) in kernels.iter().enumerate() {
             let kernel = kernel.checked(index, origin)?;
             scene.means.push(kernel.mean);
@@ -149,6 +145,15 @@ impl Scene {
             scene.velocities.push(kernel.velocity);
         }
         Ok(scene)
+    }
+
+    /// Room for `additional` more kernels in every array.
+    pub fn reserve(&mut self, additional: usize) {
+        self.means.reserve(additional);
+        self.scales.reserve(additional);
+        self.amplitudes.reserve(additional);
+        self.rotations.reserve(additional);
+        self.velocities.reserve(additional);
     }
 
     /// Number of kernels.

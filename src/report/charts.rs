@@ -98,8 +98,19 @@ type XyChart<'a, 'b> =
 fn axes<'a, 'b>(
     root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
     title: &str,
+    x: (&str, std::ops::Range<f64>),
+    y: (&str, std::ops::Range<f64>),
+) -> std::result::Result<XyChart<'a, 'b>, Box<dyn std::error::Error>> {
+    axes_labelled(root, title, x, y, None)
+}
+
+/// [`axes`] with the y tick labels written by `y_format` (for values drawn at their log10).
+fn axes_labelled<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    title: &str,
     (x_label, xs): (&str, std::ops::Range<f64>),
     (y_label, ys): (&str, std::ops::Range<f64>),
+    y_format: Option<&dyn Fn(&f64) -> String>,
 ) -> std::result::Result<XyChart<'a, 'b>, Box<dyn std::error::Error>> {
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT, 22))
@@ -107,13 +118,15 @@ fn axes<'a, 'b>(
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d(xs, ys)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc(x_label)
         .y_desc(y_label)
         .light_line_style(RGBColor(238, 238, 238))
-        .label_style((FONT, 14))
-        .draw()?;
+        .label_style((FONT, 14));
+    if let Some(format) = y_format {
+        mesh.y_label_formatter(format);
+    }
+    mesh.draw()?;
     Ok(chart)
 }
 
@@ -490,20 +503,13 @@ pub fn pareto_chart(
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
     draw_png(path, (900, 560), |root| {
         // The errors are drawn at their log10, and the axis is labelled with the values.
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 22))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(xs, ys)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .y_label_formatter(&|v| format!("{:.0e}", 10f64.powf(*v)))
-            .light_line_style(RGBColor(238, 238, 238))
-            .label_style((FONT, 14))
-            .draw()?;
+        let mut chart = axes_labelled(
+            root,
+            title,
+            (x_label, xs),
+            (y_label, ys),
+            Some(&|v| format!("{:.0e}", 10f64.powf(*v))),
+        )?;
         chart
             .draw_series(LineSeries::new(front.clone(), BLACK.stroke_width(1)))?
             .label("Pareto front")
