@@ -284,6 +284,37 @@ impl RowEntry {
     }
 }
 
+/// One half row of a tile, as the forward and the backward walk them.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HalfRow {
+    /// Its row in the tile.
+    pub(crate) row: usize,
+    /// Its index in [`TileScratch::halves`] (`2 row + half`).
+    pub(crate) index: usize,
+    /// The tile pixel of its lane 0 (0 or [`LANES`]).
+    pub(crate) first: usize,
+    /// Its lanes inside the image (the rest are past the right edge).
+    pub(crate) lanes: usize,
+}
+
+/// The half rows of the tile `[tx0, tx1, ty0, ty1]`, row by row, left half first; a half
+/// wholly past the image's right edge is left out.
+#[inline(always)]
+pub(crate) fn half_rows([tx0, tx1, ty0, ty1]: [u32; 4]) -> impl Iterator<Item = HalfRow> {
+    let tile_width = (tx1 - tx0) as usize;
+    (0..(ty1 - ty0) as usize).flat_map(move |row| {
+        (0..2)
+            .map(move |half| half * LANES)
+            .filter(move |&first| first < tile_width)
+            .map(move |first| HalfRow {
+                row,
+                index: 2 * row + first / LANES,
+                first,
+                lanes: (tile_width - first).min(LANES),
+            })
+    })
+}
+
 /// Scratch of one worker: the current tile's kernels and, per half row of the tile (row
 /// `r`, half `h` at index `2 r + h`), its entries in ascending kernel order.
 #[derive(Default)]
@@ -609,38 +640,25 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
     scratch: &TileScratch,
     band: &mut [f32],
 ) -> u64 {
-    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+    let rect = bins.tile_rect(t);
     let width = bins.width as usize;
-    let tile_width = (tx1 - tx0) as usize;
     let mut pairs = 0_u64;
-    for r in 0..(ty1 - ty0) as usize {
-        for h in 0..2 {
-            let first = h * LANES;
-            if first >= tile_width {
-                break;
-            }
-            let lanes = (tile_width - first).min(LANES);
-            let mut acc = [[0.0_f64; LANES]; 3];
-            let entries = &scratch.halves[2 * r + h];
-            let (first_lane, lanes_f) = (first as f32, lanes as f32);
-            pairs += if AVX2 {
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: AVX2 is only asked for on the AVX2 and AVX-512 paths, which
-                // `rasterize_on` checked the CPU has.
-                unsafe {
-                    avx2::sum_half_row::<FAST>(
-                        entries,
-                        &scratch.kernels,
-                        first_lane,
-                        lanes_f,
-                        background,
-                        &mut acc,
-                    )
-                }
-                #[cfg(not(target_arch = "x86_64"))]
-                unreachable!("AVX2 on x86-64 only")
-            } else {
-                sum_half_row::<FAST>(
+    for HalfRow {
+        row,
+        index,
+        first,
+        lanes,
+    } in half_rows(rect)
+    {
+        let mut acc = [[0.0_f64; LANES]; 3];
+        let entries = &scratch.halves[index];
+        let (first_lane, lanes_f) = (first as f32, lanes as f32);
+        pairs += if AVX2 {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: AVX2 is only asked for on the AVX2 and AVX-512 paths, which
+            // `rasterize_on` checked the CPU has.
+            unsafe {
+                avx2::sum_half_row::<FAST>(
                     entries,
                     &scratch.kernels,
                     first_lane,
@@ -648,12 +666,23 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
                     background,
                     &mut acc,
                 )
-            };
-            let out = &mut band[3 * (r * width + tx0 as usize + first)..][..3 * lanes];
-            for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
-                for c in 0..3 {
-                    pixel[c] = acc[c][i] as f32;
-                }
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            unreachable!("AVX2 on x86-64 only")
+        } else {
+            sum_half_row::<FAST>(
+                entries,
+                &scratch.kernels,
+                first_lane,
+                lanes_f,
+                background,
+                &mut acc,
+            )
+        };
+        let out = &mut band[3 * (row * width + rect[0] as usize + first)..][..3 * lanes];
+        for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+            for c in 0..3 {
+                pixel[c] = acc[c][i] as f32;
             }
         }
     }

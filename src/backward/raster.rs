@@ -25,7 +25,8 @@ use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
 use crate::raster::{
-    ExpMode, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, prepare_tile,
+    ExpMode, HalfRow, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
+    prepare_tile,
 };
 use crate::tiles::TileBins;
 
@@ -179,44 +180,34 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
     scratch
         .moments
         .resize(tile.kernels.len(), [[0.0; LANES]; 8]);
-    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+    let rect = bins.tile_rect(t);
+    let [tx0, _, ty0, _] = rect;
     let width = bins.width as usize;
-    let tile_width = (tx1 - tx0) as usize;
-    for r in 0..(ty1 - ty0) as usize {
-        for h in 0..2 {
-            let first = h * LANES;
-            if first >= tile_width {
-                break;
+    for HalfRow {
+        row,
+        index,
+        first,
+        lanes,
+    } in half_rows(rect)
+    {
+        // ∂L/∂C of the half row, channel by channel; zero past the image's edge.
+        let mut v = [[0.0_f32; LANES]; 3];
+        let start = 3 * ((ty0 as usize + row) * width + tx0 as usize + first);
+        for (i, pixel) in v_image[start..start + 3 * lanes]
+            .chunks_exact(3)
+            .enumerate()
+        {
+            for c in 0..3 {
+                v[c][i] = pixel[c];
             }
-            let lanes = (tile_width - first).min(LANES);
-            // ∂L/∂C of the half row, channel by channel; zero past the image's edge.
-            let mut v = [[0.0_f32; LANES]; 3];
-            let start = 3 * ((ty0 as usize + r) * width + tx0 as usize + first);
-            for (i, pixel) in v_image[start..start + 3 * lanes]
-                .chunks_exact(3)
-                .enumerate()
-            {
-                for c in 0..3 {
-                    v[c][i] = pixel[c];
-                }
-            }
-            let entries = &tile.halves[2 * r + h];
-            let (first_lane, lanes_f) = (first as f32, lanes as f32);
-            if AVX2 {
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: AVX2 is only asked for on the paths that have it.
-                unsafe {
-                    avx2::half_row::<FAST>(
-                        entries,
-                        &tile.kernels,
-                        first_lane,
-                        lanes_f,
-                        &v,
-                        &mut scratch.moments,
-                    );
-                }
-            } else {
-                half_row::<FAST>(
+        }
+        let entries = &tile.halves[index];
+        let (first_lane, lanes_f) = (first as f32, lanes as f32);
+        if AVX2 {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: AVX2 is only asked for on the paths that have it.
+            unsafe {
+                avx2::half_row::<FAST>(
                     entries,
                     &tile.kernels,
                     first_lane,
@@ -225,6 +216,15 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
                     &mut scratch.moments,
                 );
             }
+        } else {
+            half_row::<FAST>(
+                entries,
+                &tile.kernels,
+                first_lane,
+                lanes_f,
+                &v,
+                &mut scratch.moments,
+            );
         }
     }
     for (moments, &n) in scratch.moments.iter().zip(&tile.entry_of) {
