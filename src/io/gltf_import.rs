@@ -549,13 +549,12 @@ fn load_camera_unguarded(path: &Path, index: usize, size: Option<(u32, u32)>) ->
     }
     let aspect = p.aspect_ratio().map_or(1.0, f64::from);
     let (w, h) = size.unwrap_or(((512.0 * aspect).round().max(1.0) as u32, 512));
-    let fy = 0.5 * f64::from(h) / (0.5 * yfov).tan();
     let (_, rotation, translation) = world[node.index()].to_scale_rotation_translation();
     let rigid = DMat4::from_rotation_translation(rotation, translation);
     let mut result = Camera::from_opengl_camera_to_world(
         w,
         h,
-        [fy, fy, 0.5 * f64::from(w), 0.5 * f64::from(h)],
+        Camera::centred_intrinsics(w, h, yfov),
         rigid.transpose().to_cols_array_2d(),
     )
     .map_err(|e| Error::malformed(&origin, format!("{item}: {e}")))?;

@@ -127,18 +127,12 @@ fn nerfstudio_path(text: &str, origin: &str) -> Result<Vec<PathCamera>> {
                         .ok_or_else(|| bad("render_time", "a finite number is required"))?,
                 ),
             };
-            let focal = 0.5 * f64::from(height) / (0.5 * fov.to_radians()).tan();
             let matrix: [[f64; 4]; 4] =
                 std::array::from_fn(|r| std::array::from_fn(|c| numbers[4 * r + c]));
             let camera = Camera::from_opengl_camera_to_world(
                 width,
                 height,
-                [
-                    focal,
-                    focal,
-                    0.5 * f64::from(width),
-                    0.5 * f64::from(height),
-                ],
+                Camera::centred_intrinsics(width, height, fov.to_radians()),
                 matrix,
             )
             .map_err(|e| match e {

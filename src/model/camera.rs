@@ -85,6 +85,20 @@ impl Camera {
         Ok(camera)
     }
 
+    /// Intrinsics `[fx, fy, cx, cy]` of square pixels seeing a vertical field of view of
+    /// `fov_y` radians on a `width × height` image, principal point at the centre:
+    /// `fx = fy = ½ height / tan(½ fov_y)`.
+    #[must_use]
+    pub fn centred_intrinsics(width: u32, height: u32, fov_y: f64) -> [f64; 4] {
+        let focal = 0.5 * f64::from(height) / (0.5 * fov_y).tan();
+        [
+            focal,
+            focal,
+            0.5 * f64::from(width),
+            0.5 * f64::from(height),
+        ]
+    }
+
     /// A camera at `eye` looking at `target`, with `up` pointing up in the image, a vertical
     /// field of view in degrees and the principal point at the image centre.
     pub fn look_at(
@@ -122,16 +136,10 @@ impl Camera {
             m[r] = [axis.x, axis.y, axis.z, -axis.dot(eye)];
         }
         m[3] = [0.0, 0.0, 0.0, 1.0];
-        let focal = 0.5 * f64::from(height) / (0.5 * fov_y_degrees.to_radians()).tan();
         Camera::new(
             width,
             height,
-            [
-                focal,
-                focal,
-                0.5 * f64::from(width),
-                0.5 * f64::from(height),
-            ],
+            Camera::centred_intrinsics(width, height, fov_y_degrees.to_radians()),
             m,
         )
     }
