@@ -64,11 +64,17 @@ impl TimeSample {
     /// `a_k exp(-½ ((τ - t_k)/σ_k)²)`, zero beyond 6 σ.
     #[must_use]
     pub fn at(&self, tau: f64) -> f64 {
+        self.weight * self.gaussian(tau)
+    }
+
+    /// `exp(-½ ((τ - t_k)/σ_k)²)` (without the weight), zero beyond 6 σ.
+    #[must_use]
+    pub fn gaussian(&self, tau: f64) -> f64 {
         let d = (tau - self.time) / self.sigma;
         if d.abs() > REACH {
             0.0
         } else {
-            self.weight * (-0.5 * d * d).exp()
+            (-0.5 * d * d).exp()
         }
     }
 }
@@ -240,16 +246,7 @@ pub fn normalise_within(samples: &mut [TimeSample], range: [f64; 2], updates: us
         columns.push(
             reaching
                 .iter()
-                .map(|&k| {
-                    (
-                        k,
-                        TimeSample {
-                            weight: 1.0,
-                            ..samples[k]
-                        }
-                        .at(tau),
-                    )
-                })
+                .map(|&k| (k, samples[k].gaussian(tau)))
                 .collect(),
         );
     });
