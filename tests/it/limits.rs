@@ -29,8 +29,8 @@ fn run<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> O
     child.wait_with_output().unwrap()
 }
 
-/// Renders the blob as a small dataset (`views` cameras × 2 times, 8×8) into `dir/ds`.
-fn blob_dataset(dir: &Path, views: &str) {
+/// Runs `splat4d dataset` on the blob (`views` cameras × 2 times, 8×8) into `dir/out`.
+fn run_blob_dataset(dir: &Path, views: &str, out: &str) -> std::process::Output {
     let blob = data("blob.json");
     let args = [
         "dataset",
@@ -43,9 +43,14 @@ fn blob_dataset(dir: &Path, views: &str) {
         "--size",
         "8x8",
         "--out",
-        "ds",
+        out,
     ];
-    let output = run(&args, dir);
+    run(&args, dir)
+}
+
+/// Renders the blob as a small dataset (`views` cameras × 2 times, 8×8) into `dir/ds`.
+fn blob_dataset(dir: &Path, views: &str) {
+    let output = run_blob_dataset(dir, views, "ds");
     assert!(
         output.status.success(),
         "{}",
@@ -691,24 +696,7 @@ fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let blob = data("blob.json");
-    let dataset = |views: &str, out: &str| {
-        run(
-            &[
-                "dataset",
-                "--scene",
-                blob.to_str().unwrap(),
-                "--views",
-                views,
-                "--times",
-                "2",
-                "--size",
-                "8x8",
-                "--out",
-                out,
-            ],
-            d,
-        )
-    };
+    let dataset = |views: &str, out: &str| run_blob_dataset(d, views, out);
     assert!(dataset("6", "ds").status.success());
     let count = |split: &str| std::fs::read_dir(d.join("ds").join(split)).unwrap().count();
     assert_eq!(count("train"), 12);
