@@ -11,7 +11,8 @@
 //! | model | [`model`] | [`Scene`]/[`Kernel`], [`Camera`], [`Image`], views, errors, seeded randomness: data and math, no files |
 //! | | [`parallel`] | arrays filled in parallel, the same for any thread count |
 //! | stages | [`slice`](mod@slice) → [`project`] → [`tiles`] → [`raster`] | the forward render, one function per stage from plain data to plain data |
-//! | | [`backward`] | the exact gradient (SPEC §6), the stages mirrored in reverse |
+//! | | [`colour`], [`composite`] | alpha scenes (SPEC §8): SH colour and depth order per kernel; front-to-back compositing per pixel |
+//! | | [`backward`] | the exact gradient (SPEC §6, §8), the stages mirrored in reverse |
 //! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |
 //! | reference | [`reference`](mod@reference) | the f64 twin of every stage, and the dense baseline |
 //! | fit | [`fit`] | loss, Adam, initial scenes, adaptive density, the training loop, and [`fit::plan`]: every fit default |
@@ -47,6 +48,8 @@ pub mod model;
 pub mod parallel;
 
 pub mod backward;
+pub mod colour;
+pub mod composite;
 pub mod overlay;
 pub mod project;
 pub mod raster;
@@ -63,5 +66,5 @@ pub mod scenes;
 pub mod tasks;
 
 pub use backward::Gradients;
-pub use model::{Camera, Error, ErrorKind, Image, Kernel, Result, Scene};
+pub use model::{Blend, Camera, Error, ErrorKind, Image, Kernel, Result, Scene};
 pub use render::{RenderContext, RenderOptions, RenderStats, render};

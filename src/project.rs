@@ -41,8 +41,11 @@ pub struct ProjectedKernels {
     pub qmax: Vec<f64>,
     /// Half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of the ellipse `q ≤ qmax`, pixels.
     pub radii: Vec<[f64; 2]>,
-    /// Sliced amplitude `a(τ)`, f32 for the per-pixel loop.
+    /// Sliced amplitude `a(τ)`, f32 for the per-pixel loop; alpha scenes: the colour
+    /// ([`crate::colour::shade`]).
     pub amplitudes: Vec<[f32; 3]>,
+    /// Alpha scenes: the opacity at τ, `o(τ)` ([`crate::colour::shade`]; empty otherwise).
+    pub opacities: Vec<f64>,
     /// Scratch of [`project`]: every sliced kernel's projection, kept between frames.
     scratch: Vec<Option<Projection>>,
 }
@@ -70,6 +73,34 @@ impl ProjectedKernels {
         self.qmax.clear();
         self.radii.clear();
         self.amplitudes.clear();
+        self.opacities.clear();
+    }
+
+    /// Reorders every array so that entry `k` becomes the old entry `order[k]` (a
+    /// permutation of `0..len`).
+    pub fn permute(&mut self, order: &[u32]) {
+        fn apply<T: Copy + Send + Sync>(values: &mut Vec<T>, order: &[u32]) {
+            if values.is_empty() {
+                return;
+            }
+            let mut permuted = Vec::new();
+            fill_in_parallel(&mut permuted, order.len(), |k| values[order[k] as usize]);
+            *values = permuted;
+        }
+        assert_eq!(
+            order.len(),
+            self.len(),
+            "a permutation of the projected kernels"
+        );
+        apply(&mut self.slice_from_proj, order);
+        apply(&mut self.kernel_from_proj, order);
+        apply(&mut self.means, order);
+        apply(&mut self.covariances, order);
+        apply(&mut self.conics, order);
+        apply(&mut self.qmax, order);
+        apply(&mut self.radii, order);
+        apply(&mut self.amplitudes, order);
+        apply(&mut self.opacities, order);
     }
 }
 

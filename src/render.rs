@@ -1,5 +1,11 @@
 //! The forward renderer: a reusable context that owns every buffer and runs the four stages
-//! slice (SPEC §2) → project (§4) → tiles → raster (§5).
+//! slice (SPEC §2) → project (§4) → tiles → raster (§5); for alpha scenes (§8) colour and
+//! depth order come between projection and tiles, and compositing replaces the sum:
+//!
+//! ```text
+//! additive: slice → project ──────────────────────────→ tiles → raster::rasterize
+//! alpha:    slice → project → colour::shade → order_by_depth → tiles → composite::composite
+//! ```
 //!
 //! Buffers are kept between frames and only cleared, so rendering a sequence of frames
 //! allocates nothing once the largest frame has been seen. Tiles run on the current rayon
@@ -10,9 +16,11 @@ use crate::backward::project::project_backward;
 use crate::backward::raster::rasterize_backward;
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
+use crate::colour::{order_by_depth, shade};
+use crate::composite::composite;
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result};
-use crate::model::scene::Scene;
+use crate::model::scene::{Blend, Scene};
 use crate::project::{ProjectedKernels, project};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
@@ -97,6 +105,8 @@ pub struct RenderContext {
     /// Buffers of the backward pass.
     pub backward: BackwardBuffers,
     row_forms: Vec<crate::raster::RowForm>,
+    /// Scratch of the depth order (alpha scenes).
+    depth_keys: Vec<(f64, u32, u32)>,
     image: Image,
 }
 
@@ -161,9 +171,22 @@ impl RenderContext {
         options: &RenderOptions,
     ) -> RenderStats {
         project(&self.sliced, camera, options.dilation, &mut self.projected);
+        if scene.blend == Blend::Alpha {
+            shade(scene, &self.sliced, camera, &mut self.projected);
+            order_by_depth(
+                &self.sliced,
+                camera,
+                &mut self.projected,
+                &mut self.depth_keys,
+            );
+        }
         bin(&self.projected, camera.width, camera.height, &mut self.bins);
         let background = scene.background.map(|b| b as f32);
-        let pairs = rasterize(
+        let blend = match scene.blend {
+            Blend::Additive => rasterize,
+            Blend::Alpha => composite,
+        };
+        let pairs = blend(
             &self.projected,
             &self.bins,
             background,

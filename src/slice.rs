@@ -14,10 +14,14 @@
 //! ```
 //!
 //! A kernel with `qmax ≤ 0` (its largest |amplitude| at τ is ≤ ε) is dropped here, before
-//! any projection work. With `ε = 0` nothing is truncated: `qmax = +∞`, and only kernels
+//! any projection work.
+//!
+//! Alpha scenes (SPEC §8) put the temporal weight on the opacity instead: `o(τ) = o w` and
+//! `qmax = 2 (ln o - ½ d² - ln ε)`; the amplitude stays `A` (the colour's base, made
+//! view-dependent by [`crate::colour`]). With `ε = 0` nothing is truncated: `qmax = +∞`, and only kernels
 //! whose amplitude is exactly zero are dropped. Everything is f64.
 
-use crate::model::scene::Scene;
+use crate::model::scene::{Blend, Scene};
 use crate::parallel::{fill_in_parallel, indices_where};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
@@ -30,8 +34,10 @@ pub struct SlicedKernels {
     pub means: Vec<[f64; 3]>,
     /// 3D covariance `Σ3` as `[xx, xy, xz, yy, yz, zz]`, world space.
     pub covariances: Vec<[f64; 6]>,
-    /// Sliced amplitude `a(τ) = A w(τ)` per channel.
+    /// Sliced amplitude `a(τ) = A w(τ)` per channel; alpha scenes: `A` itself.
     pub amplitudes: Vec<[f64; 3]>,
+    /// Alpha scenes: the opacity at τ, `o(τ) = o w(τ)` (empty for additive scenes).
+    pub opacities: Vec<f64>,
     /// Cut-off `qmax` on the squared Mahalanobis radius (`+∞` without truncation).
     pub qmax: Vec<f64>,
     /// Scratch of [`slice`]: every visited kernel's slice, kept between frames.
@@ -46,6 +52,7 @@ struct SlicedKernel {
     mean: [f64; 3],
     covariance: [f64; 6],
     amplitude: [f64; 3],
+    opacity: f64,
     qmax: f64,
 }
 
@@ -68,7 +75,21 @@ impl SlicedKernels {
         self.means.clear();
         self.covariances.clear();
         self.amplitudes.clear();
+        self.opacities.clear();
         self.qmax.clear();
+    }
+}
+
+/// The value the cut-off of kernel `i` is decided on: its largest |amplitude| (SPEC §5), or
+/// for alpha scenes its opacity (§8).
+#[inline]
+#[must_use]
+pub fn peak(scene: &Scene, i: usize) -> f64 {
+    match scene.blend {
+        Blend::Additive => scene.amplitudes[i]
+            .iter()
+            .fold(0.0_f64, |m, a| m.max(a.abs())),
+        Blend::Alpha => scene.opacities[i],
     }
 }
 
@@ -114,11 +135,11 @@ pub fn covariance_3d(rotation: [f64; 4], scale: [f64; 4]) -> [f64; 6] {
     ]
 }
 
-/// The cut-off `qmax` of SPEC §5 for peak amplitude `amplitude` at normalised time offset
-/// `d`, or `None` when the kernel is culled (`qmax ≤ 0`). `cutoff = 0` means no truncation.
+/// The cut-off `qmax` of SPEC §5 (§8) for a kernel of peak `peak` ([`peak`]) at normalised
+/// time offset `d`, or `None` when the kernel is culled (`qmax ≤ 0`). `cutoff = 0` means no
+/// truncation.
 #[must_use]
-pub fn cutoff_radius_squared(amplitude: [f64; 3], d: f64, cutoff: f64) -> Option<f64> {
-    let peak = amplitude.iter().fold(0.0_f64, |m, a| m.max(a.abs()));
+pub fn cutoff_radius_squared(peak: f64, d: f64, cutoff: f64) -> Option<f64> {
     if peak == 0.0 {
         return None;
     }
@@ -179,6 +200,10 @@ fn slice_visiting(
     fill_in_parallel(&mut out.covariances, kept.len(), |j| live(j).covariance);
     fill_in_parallel(&mut out.amplitudes, kept.len(), |j| live(j).amplitude);
     fill_in_parallel(&mut out.qmax, kept.len(), |j| live(j).qmax);
+    match scene.blend {
+        Blend::Additive => out.opacities.clear(),
+        Blend::Alpha => fill_in_parallel(&mut out.opacities, kept.len(), |j| live(j).opacity),
+    }
     out.scratch = slices;
     out.kept = kept;
 }
@@ -189,13 +214,21 @@ fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKer
     let scale = scene.scales[i];
     let dt = tau - t;
     let d = dt / scale[3];
-    let qmax = cutoff_radius_squared(scene.amplitudes[i], d, cutoff)?;
+    let qmax = cutoff_radius_squared(peak(scene, i), d, cutoff)?;
     let w = (-0.5 * d * d).exp();
     let v = scene.velocities[i];
+    let (amplitude, opacity) = match scene.blend {
+        Blend::Additive => (scene.amplitudes[i].map(|a| a * w), 0.0),
+        Blend::Alpha => (scene.amplitudes[i], scene.opacities[i] * w),
+    };
+    if scene.blend == Blend::Alpha && opacity == 0.0 {
+        return None; // o(τ) = 0 adds nothing for any ε (SPEC §8)
+    }
     Some(SlicedKernel {
         mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
         covariance: covariance_3d(scene.rotations[i], scale),
-        amplitude: scene.amplitudes[i].map(|a| a * w),
+        amplitude,
+        opacity,
         qmax,
     })
 }
@@ -228,9 +261,7 @@ impl TemporalIndex {
         let mut intervals = Vec::with_capacity(scene.len());
         let mut always = Vec::new();
         for i in 0..scene.len() {
-            let peak = scene.amplitudes[i]
-                .iter()
-                .fold(0.0_f64, |m, a| m.max(a.abs()));
+            let peak = peak(scene, i);
             if peak == 0.0 || (cutoff > 0.0 && peak <= cutoff) {
                 continue; // never alive
             }

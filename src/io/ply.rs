@@ -22,7 +22,7 @@ use std::path::Path;
 use crate::io::write_atomically;
 use crate::model::Up;
 use crate::model::error::{Error, Result};
-use crate::model::scene::{Kernel, Scene};
+use crate::model::scene::{Blend, Kernel, Scene};
 use crate::parallel::extend_scene;
 use crate::slice::{SlicedKernels, slice};
 
@@ -136,6 +136,9 @@ pub fn write_slice_ply(
 fn scene_comments(scene: &Scene) -> Vec<String> {
     let [r, g, b] = scene.background;
     let mut comments = vec![format!("background {r:?} {g:?} {b:?}")];
+    if scene.blend == Blend::Alpha {
+        comments.push("blend alpha".to_owned());
+    }
     if let Some(up) = scene.up {
         comments.push(format!("up {up}"));
     }
@@ -211,18 +214,18 @@ pub fn write_slice_sequence(
     Ok(counts)
 }
 
-/// Writes `scene` as a 4D scene PLY.
+/// Writes `scene` as a 4D scene PLY (alpha scenes with `comment blend alpha`, `opacity`
+/// and `sh_0 …`).
 pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
+    let alpha = scene.blend == Blend::Alpha;
+    let sh_names: Vec<String> = (0..3 * scene.sh_count).map(|k| format!("sh_{k}")).collect();
+    let mut names: Vec<&str> = SCENE_PROPERTIES.to_vec();
+    if alpha {
+        names.push("opacity");
+        names.extend(sh_names.iter().map(String::as_str));
+    }
     write_atomically(path, |w| {
-        w.write_all(
-            header(
-                scene.len(),
-                "double",
-                &SCENE_PROPERTIES,
-                &scene_comments(scene),
-            )
-            .as_bytes(),
-        )?;
+        w.write_all(header(scene.len(), "double", &names, &scene_comments(scene)).as_bytes())?;
         for i in 0..scene.len() {
             let (m, s, a, q, v) = (
                 scene.means[i],
@@ -238,21 +241,30 @@ pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
             for value in values {
                 w.write_all(&value.to_le_bytes())?;
             }
+            if alpha {
+                w.write_all(&scene.opacity(i).to_le_bytes())?;
+                for value in scene.sh_of(i).iter().flatten() {
+                    w.write_all(&value.to_le_bytes())?;
+                }
+            }
         }
         Ok(())
     })
 }
 
-/// A property of the vertex element: its name and byte size (4 float, 8 double).
+/// A property of the vertex element: its name, byte size and whether it is a float type
+/// (only float and double properties are read; others are skipped).
 struct Property {
     name: String,
     size: usize,
+    float: bool,
 }
 
-/// Reads a 4D scene PLY. Every problem is an error naming the file (and the vertex and
-/// field for bad values); nothing is allocated before the header's counts are checked
-/// against the file's length. The rows are read a block at a time into one buffer and
-/// decoded in parallel straight into the scene's arrays.
+/// Reads a 4D scene PLY, or a graphdeco 3DGS PLY as an alpha scene of static kernels (SPEC
+/// §8). Every problem is an error naming the file (and the vertex and field for bad values);
+/// nothing is allocated before the header's counts are checked against the file's length.
+/// The rows are read a block at a time into one buffer and decoded in parallel straight into
+/// the scene's arrays.
 pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     use std::io::Read;
     let origin = path.display().to_string();
@@ -267,6 +279,7 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     let layout = parse_header(&start, &origin)?;
     layout.check_body_length(length.saturating_sub(layout.body_start as u64), &origin)?;
     let mut scene = layout.empty_scene(&origin)?;
+    let mut appearance = Appearance::default();
     // The rows already read, then the rest a block at a time.
     let mut pending = start.split_off(layout.body_start.min(start.len()));
     let block_rows = (BLOCK_BYTES / layout.stride.max(1)).max(1);
@@ -278,9 +291,9 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
         bytes[..carried].copy_from_slice(&pending[..carried]);
         pending.drain(..carried);
         file.read_exact(&mut bytes[carried..]).map_err(cannot)?;
-        layout.decode_into(&mut scene, bytes, &origin)?;
+        layout.decode_into(&mut scene, &mut appearance, bytes, &origin)?;
     }
-    Ok(scene)
+    layout.finish(scene, appearance, &origin)
 }
 
 /// Bytes of rows read at a time: large enough to amortise a parallel pass, small enough to
@@ -296,20 +309,65 @@ pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
     let body = &bytes[layout.body_start..];
     layout.check_body_length(body.len() as u64, origin)?;
     let mut scene = layout.empty_scene(origin)?;
-    layout.decode_into(&mut scene, body, origin)?;
-    Ok(scene)
+    let mut appearance = Appearance::default();
+    layout.decode_into(&mut scene, &mut appearance, body, origin)?;
+    layout.finish(scene, appearance, origin)
 }
 
-/// What a 4D scene PLY's header says: where the rows start, how many, and where each of
-/// [`SCENE_PROPERTIES`] sits in a row.
+/// Properties of a graphdeco 3DGS PLY that [`read_scene_ply`] needs, in order (f_rest_* and
+/// normals are optional).
+pub const GAUSSIAN_3D_PROPERTIES: [&str; 14] = [
+    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+    "rot_0", "rot_1", "rot_2", "rot_3",
+];
+
+/// The time scale of a static kernel read from a 3DGS PLY (SPEC §8: `st ≥ 1e15` is static).
+pub const STATIC_TIME_SCALE: f64 = 1e30;
+
+/// Which kind of PLY the header describes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PlyKind {
+    /// splat4d's 4D scene ([`SCENE_PROPERTIES`], alpha fields when `comment blend alpha`).
+    Scene4d,
+    /// A graphdeco 3DGS file ([`GAUSSIAN_3D_PROPERTIES`]): static alpha kernels.
+    Gaussian3d,
+}
+
+/// Opacities and SH triplets decoded so far (alpha scenes).
+#[derive(Default)]
+struct Appearance {
+    opacities: Vec<f64>,
+    sh: Vec<[f64; 3]>,
+}
+
+/// What a scene PLY's header says: where the rows start, how many, and where each property
+/// sits in a row (byte offset and size, 4 or 8).
 struct SceneLayout {
     body_start: usize,
     count: usize,
     stride: usize,
-    /// Per scene property, its byte offset in a row and its size (4 or 8).
-    fields: [(usize, usize); SCENE_PROPERTIES.len()],
+    kind: PlyKind,
+    /// The required properties of `kind`, in the order of its list.
+    fields: Vec<(usize, usize)>,
+    /// 4D alpha scenes: `opacity`.
+    opacity: Option<(usize, usize)>,
+    /// The SH coefficients, in the file's naming order (`sh_k` or `f_rest_k`).
+    sh: Vec<(usize, usize)>,
+    blend: Blend,
     background: [f64; 3],
     up: Option<Up>,
+}
+
+/// The size of a PLY scalar type, and whether it is a float type.
+fn scalar_type(kind: &str) -> Option<(usize, bool)> {
+    Some(match kind {
+        "double" | "float64" => (8, true),
+        "float" | "float32" => (4, true),
+        "char" | "uchar" | "int8" | "uint8" => (1, false),
+        "short" | "ushort" | "int16" | "uint16" => (2, false),
+        "int" | "uint" | "int32" | "uint32" => (4, false),
+        _ => return None,
+    })
 }
 
 /// The header at the start of `bytes` (which holds at least its first 64 KiB, or the whole
@@ -332,6 +390,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
     let mut properties: Vec<Property> = Vec::new();
     let mut background = [0.0; 3];
     let mut up = None;
+    let mut blend = Blend::Additive;
     let mut format_seen = false;
     for line in lines {
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -348,6 +407,9 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                     axis.parse::<Up>()
                         .map_err(|e| bad(format!("up axis: {e}")))?,
                 );
+            }
+            ["comment", "blend", name] => {
+                blend = name.parse().map_err(|e| bad(format!("blend: {e}")))?;
             }
             ["comment", "background", r, g, b] => {
                 for (slot, v) in background.iter_mut().zip([r, g, b]) {
@@ -369,18 +431,15 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                 )));
             }
             ["property", kind, name] if count.is_some() => {
-                let size = match *kind {
-                    "double" | "float64" => 8,
-                    "float" | "float32" => 4,
-                    other => {
-                        return Err(bad(format!(
-                            "property `{name}` has type `{other}` (float or double only)"
-                        )));
-                    }
-                };
+                let (size, float) = scalar_type(kind).ok_or_else(|| {
+                    bad(format!(
+                        "property `{name}` has type `{kind}` (a scalar type: float, double or an integer)"
+                    ))
+                })?;
                 properties.push(Property {
                     name: (*name).to_owned(),
                     size,
+                    float,
                 });
             }
             _ => return Err(bad(format!("unexpected header line `{line}`"))),
@@ -391,25 +450,85 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
     }
     let count = count.ok_or_else(|| bad("no `element vertex` line".into()))?;
     let stride: usize = properties.iter().map(|p| p.size).sum();
-    let mut fields = [(0, 8); SCENE_PROPERTIES.len()];
-    for (field, name) in fields.iter_mut().zip(SCENE_PROPERTIES) {
-        let index = properties
-            .iter()
-            .position(|p| p.name == name)
-            .ok_or_else(|| bad(format!("missing property `{name}`")))?;
-        *field = (
-            properties[..index].iter().map(|p| p.size).sum(),
-            properties[index].size,
-        );
+    let find = |name: &str| -> Option<Result<(usize, usize)>> {
+        let index = properties.iter().position(|p| p.name == name)?;
+        Some(if properties[index].float {
+            Ok((
+                properties[..index].iter().map(|p| p.size).sum(),
+                properties[index].size,
+            ))
+        } else {
+            Err(bad(format!("property `{name}` must be float or double")))
+        })
+    };
+    let has = |name: &str| properties.iter().any(|p| p.name == name);
+    // A file with `t` is splat4d's 4D scene; one with `f_dc_0` and no `t` a 3DGS file.
+    let kind = if !has("t") && has("f_dc_0") {
+        PlyKind::Gaussian3d
+    } else {
+        PlyKind::Scene4d
+    };
+    let required: &[&str] = match kind {
+        PlyKind::Scene4d => &SCENE_PROPERTIES,
+        PlyKind::Gaussian3d => &GAUSSIAN_3D_PROPERTIES,
+    };
+    let fields = required
+        .iter()
+        .map(|name| find(name).unwrap_or_else(|| Err(bad(format!("missing property `{name}`")))))
+        .collect::<Result<Vec<_>>>()?;
+    let sh_prefix = match kind {
+        PlyKind::Scene4d => "sh_",
+        PlyKind::Gaussian3d => "f_rest_",
+    };
+    let mut sh = Vec::new();
+    while let Some(field) = find(&format!("{sh_prefix}{}", sh.len())) {
+        sh.push(field?);
+    }
+    let opacity = match kind {
+        PlyKind::Scene4d => find("opacity").transpose()?,
+        PlyKind::Gaussian3d => None,
+    };
+    if kind == PlyKind::Gaussian3d {
+        blend = Blend::Alpha;
+    }
+    if blend == Blend::Additive && (opacity.is_some() || !sh.is_empty()) {
+        return Err(bad(
+            "properties `opacity` or `sh_*` without `comment blend alpha`".into(),
+        ));
+    }
+    if !matches!(sh.len(), 0 | 9 | 24 | 45) {
+        return Err(bad(format!(
+            "{} `{sh_prefix}*` properties: expected 9, 24 or 45 (SH degree 1, 2 or 3) or none",
+            sh.len()
+        )));
     }
     Ok(SceneLayout {
         body_start: end + END.len(),
         count,
         stride,
+        kind,
         fields,
+        opacity,
+        sh,
+        blend,
         background,
         up,
     })
+}
+
+/// Reads the value at `(offset, size)` of `row`.
+fn value_at(row: &[u8], (o, size): (usize, usize)) -> f64 {
+    match size {
+        8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
+        _ => f64::from(f32::from_le_bytes(
+            row[o..o + 4].try_into().expect("4 bytes"),
+        )),
+    }
+}
+
+/// `1 / (1 + e^-x)`.
+fn sigmoid(x: f64) -> f64 {
+    1.0 / (1.0 + (-x).exp())
 }
 
 impl SceneLayout {
@@ -441,8 +560,36 @@ impl SceneLayout {
         Ok(scene)
     }
 
-    /// Decodes whole rows `bytes` (in parallel) and appends them to `scene`, checked.
-    fn decode_into(&self, scene: &mut Scene, bytes: &[u8], origin: &str) -> Result<()> {
+    /// The kernel of one row.
+    fn kernel(&self, row: &[u8]) -> Kernel {
+        let v = |k: usize| value_at(row, self.fields[k]);
+        match self.kind {
+            PlyKind::Scene4d => Kernel {
+                mean: [v(0), v(1), v(2), v(3)],
+                scale: [v(4), v(5), v(6), v(7)],
+                amplitude: [v(8), v(9), v(10)],
+                rotation: [v(11), v(12), v(13), v(14)],
+                velocity: [v(15), v(16), v(17)],
+            },
+            PlyKind::Gaussian3d => Kernel {
+                mean: [v(0), v(1), v(2), 0.0],
+                scale: [v(7).exp(), v(8).exp(), v(9).exp(), STATIC_TIME_SCALE],
+                amplitude: [3, 4, 5].map(|k| SH_C0 * v(k) + 0.5),
+                rotation: [v(10), v(11), v(12), v(13)],
+                velocity: [0.0; 3],
+            },
+        }
+    }
+
+    /// Decodes whole rows `bytes` (in parallel) and appends them to `scene` (checked), their
+    /// opacities and SH to `appearance`.
+    fn decode_into(
+        &self,
+        scene: &mut Scene,
+        appearance: &mut Appearance,
+        bytes: &[u8],
+        origin: &str,
+    ) -> Result<()> {
         let stride = self.stride.max(1);
         let rows = bytes.len() / stride;
         let first = scene.len();
@@ -450,27 +597,43 @@ impl SceneLayout {
             scene,
             rows,
             first,
-            |i| {
-                let row = &bytes[i * stride..(i + 1) * stride];
-                let v: [f64; SCENE_PROPERTIES.len()] = std::array::from_fn(|k| {
-                    let (o, size) = self.fields[k];
-                    match size {
-                        8 => f64::from_le_bytes(row[o..o + 8].try_into().expect("8 bytes")),
-                        _ => f64::from(f32::from_le_bytes(
-                            row[o..o + 4].try_into().expect("4 bytes"),
-                        )),
-                    }
-                });
-                Kernel {
-                    mean: [v[0], v[1], v[2], v[3]],
-                    scale: [v[4], v[5], v[6], v[7]],
-                    amplitude: [v[8], v[9], v[10]],
-                    rotation: [v[11], v[12], v[13], v[14]],
-                    velocity: [v[15], v[16], v[17]],
-                }
-            },
+            |i| self.kernel(&bytes[i * stride..(i + 1) * stride]),
             origin,
-        )
+        )?;
+        if self.blend == Blend::Alpha {
+            let triplets = self.sh.len() / 3;
+            for row in bytes.chunks_exact(stride).take(rows) {
+                appearance.opacities.push(match self.kind {
+                    PlyKind::Scene4d => self.opacity.map_or(1.0, |field| value_at(row, field)),
+                    PlyKind::Gaussian3d => sigmoid(value_at(row, self.fields[6])),
+                });
+                // 4D scenes store triplet j's channel c at sh_{3j+c}; 3DGS files channel by
+                // channel, f_rest_{c·n + j}.
+                appearance.sh.extend((0..triplets).map(|j| {
+                    std::array::from_fn(|c| {
+                        let k = match self.kind {
+                            PlyKind::Scene4d => 3 * j + c,
+                            PlyKind::Gaussian3d => c * triplets + j,
+                        };
+                        value_at(row, self.sh[k])
+                    })
+                }));
+            }
+        }
+        Ok(())
+    }
+
+    /// The scene with its blend and appearance, checked.
+    fn finish(&self, scene: Scene, appearance: Appearance, origin: &str) -> Result<Scene> {
+        match self.blend {
+            Blend::Additive => Ok(scene),
+            Blend::Alpha => scene.into_alpha(
+                appearance.opacities,
+                self.sh.len() / 3,
+                appearance.sh,
+                origin,
+            ),
+        }
     }
 }
 

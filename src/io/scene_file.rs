@@ -7,6 +7,11 @@
 //! videos turn about it). Unknown
 //! keys are errors, so that a typo never silently falls back to a default. Numbers are
 //! written so that they read back exactly (serde_json's `float_roundtrip`).
+//!
+//! Alpha scenes (SPEC §8) add `"blend": "alpha"` at the top and per kernel `"opacity": o`
+//! (0–1, default 1) and `"sh": [[r, g, b], …]` (3, 8 or 15 triplets, the same count for
+//! every kernel, or absent). Additive scenes write neither (`"blend": "additive"` is
+//! accepted and is the default).
 
 use std::path::Path;
 
@@ -14,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::io::json::parse_json;
 use crate::io::write_bytes_atomically;
-use crate::model::{Error, Kernel, Result, Scene, Up};
+use crate::model::{Blend, Error, Kernel, Result, Scene, Up};
 
 #[derive(Serialize, Deserialize)]
 #[serde(
@@ -22,26 +27,130 @@ use crate::model::{Error, Kernel, Result, Scene, Up};
     expecting = "a scene object {\"kernels\": [...], \"background\": [r, g, b]}"
 )]
 struct SceneFile {
-    kernels: Vec<Kernel>,
+    #[serde(default, skip_serializing_if = "is_additive")]
+    blend: Blend,
+    kernels: Vec<KernelRecord>,
     #[serde(default)]
     background: [f64; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
     up: Option<Up>,
 }
 
+fn is_additive(blend: &Blend) -> bool {
+    *blend == Blend::Additive
+}
+
+/// One kernel as the file has it: [`Kernel`]'s fields, then the alpha blend's.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KernelRecord {
+    mean: [f64; 4],
+    scale: [f64; 4],
+    amplitude: [f64; 3],
+    #[serde(default = "identity_rotation")]
+    rotation: [f64; 4],
+    #[serde(default)]
+    velocity: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    opacity: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sh: Option<Vec<[f64; 3]>>,
+}
+
+fn identity_rotation() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
 /// Parses and validates a scene JSON document. `origin` names it in error messages.
 pub fn scene_from_json(text: &str, origin: &str) -> Result<Scene> {
     let file: SceneFile = parse_json(text, origin, "scene")?;
-    let mut scene = Scene::from_kernels(&file.kernels, file.background, origin)?;
+    let kernels: Vec<Kernel> = file
+        .kernels
+        .iter()
+        .map(|k| Kernel {
+            mean: k.mean,
+            scale: k.scale,
+            amplitude: k.amplitude,
+            rotation: k.rotation,
+            velocity: k.velocity,
+        })
+        .collect();
+    let mut scene = Scene::from_kernels(&kernels, file.background, origin)?;
     scene.up = file.up;
-    Ok(scene)
+    match file.blend {
+        Blend::Additive => {
+            if let Some(i) = file
+                .kernels
+                .iter()
+                .position(|k| k.opacity.is_some() || k.sh.is_some())
+            {
+                let field = if file.kernels[i].opacity.is_some() {
+                    "opacity"
+                } else {
+                    "sh"
+                };
+                return Err(Error::invalid(
+                    origin,
+                    format!("kernel {i}"),
+                    field,
+                    "a field of the alpha blend in an additive scene: add \"blend\": \"alpha\" to the scene",
+                ));
+            }
+            Ok(scene)
+        }
+        Blend::Alpha => {
+            let sh_count = file
+                .kernels
+                .first()
+                .and_then(|k| k.sh.as_ref())
+                .map_or(0, Vec::len);
+            let mut sh = Vec::with_capacity(sh_count * file.kernels.len());
+            for (i, k) in file.kernels.iter().enumerate() {
+                let triplets = k.sh.as_deref().unwrap_or(&[]);
+                if triplets.len() != sh_count {
+                    return Err(Error::invalid(
+                        origin,
+                        format!("kernel {i}"),
+                        "sh",
+                        format!(
+                            "{} triplets where kernel 0 has {sh_count}: every kernel has the same number",
+                            triplets.len()
+                        ),
+                    ));
+                }
+                sh.extend_from_slice(triplets);
+            }
+            let opacities = file
+                .kernels
+                .iter()
+                .map(|k| k.opacity.unwrap_or(1.0))
+                .collect();
+            scene.into_alpha(opacities, sh_count, sh, origin)
+        }
+    }
 }
 
 /// The scene as a JSON document (the format of [`scene_from_json`]).
 #[must_use]
 pub fn scene_to_json(scene: &Scene) -> String {
+    let alpha = scene.blend == Blend::Alpha;
+    let kernels = (0..scene.len())
+        .map(|i| {
+            let k = scene.kernel(i);
+            KernelRecord {
+                mean: k.mean,
+                scale: k.scale,
+                amplitude: k.amplitude,
+                rotation: k.rotation,
+                velocity: k.velocity,
+                opacity: alpha.then(|| scene.opacity(i)),
+                sh: (alpha && scene.sh_count > 0).then(|| scene.sh_of(i).to_vec()),
+            }
+        })
+        .collect();
     let file = SceneFile {
-        kernels: scene.kernels(),
+        blend: scene.blend,
+        kernels,
         background: scene.background,
         up: scene.up,
     };

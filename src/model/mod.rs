@@ -24,5 +24,5 @@ pub use camera::Camera;
 pub use error::{Error, ErrorKind, Result, check_finite};
 pub use image::Image;
 pub use progress::{Progress, Silent};
-pub use scene::{Kernel, Scene};
+pub use scene::{Blend, Kernel, SH_COUNTS, Scene};
 pub use view::{Dataset, View};

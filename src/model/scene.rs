@@ -8,6 +8,12 @@
 //! time unit (not rotated). Parameters are stored in f64: the per-kernel stage of the
 //! renderer works in f64 (SPEC §5, precision).
 //!
+//! A scene also declares its [`Blend`] (SPEC §8): `additive` (§5, the default) sums the
+//! kernels; `alpha` composites them front to back, and each kernel then also has a peak
+//! opacity `o ∈ [0, 1]` and a view-dependent colour: `sh` triplets (3, 8 or 15 per kernel, or
+//! none) of real spherical harmonics of degree 1–3 added to the amplitude. These live beside
+//! the kernels ([`Scene::opacities`], [`Scene::sh`]), empty for additive scenes.
+//!
 //! Files (JSON and 4D PLY) are read and written by [`crate::io::scene_file`]; this module
 //! knows nothing of them. `Kernel` carries serde derives so that the file layer can read it.
 
@@ -105,6 +111,40 @@ impl Kernel {
     }
 }
 
+/// How a scene's kernels make a pixel (SPEC §5 and §8).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Blend {
+    /// The sum of SPEC §5 (the seed paper's Eq. 2): no order, no occlusion.
+    #[default]
+    Additive,
+    /// Front-to-back compositing of SPEC §8: opacity, SH colour, depth order.
+    Alpha,
+}
+
+impl std::fmt::Display for Blend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Blend::Additive => "additive",
+            Blend::Alpha => "alpha",
+        })
+    }
+}
+
+impl std::str::FromStr for Blend {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "additive" => Ok(Blend::Additive),
+            "alpha" => Ok(Blend::Alpha),
+            _ => Err(format!("unknown blend {s:?} (expected additive or alpha)")),
+        }
+    }
+}
+
+/// The numbers of SH triplets per kernel a scene may have (none, degree 1, 1–2, 1–3).
+pub const SH_COUNTS: [usize; 4] = [0, 3, 8, 15];
+
 /// A scene: kernels as struct-of-arrays (index `i` of every array is kernel `i`) and a
 /// background colour added to every pixel.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -124,6 +164,15 @@ pub struct Scene {
     /// The world's up axis when known (a scene fitted from a dataset carries its cameras'
     /// up); videos turn about it unless told otherwise, +y when `None`.
     pub up: Option<Up>,
+    /// How kernels make a pixel.
+    pub blend: Blend,
+    /// Alpha scenes: the peak opacity `o ∈ [0, 1]` per kernel (empty for additive scenes).
+    pub opacities: Vec<f64>,
+    /// Alpha scenes: SH triplets per kernel, one of [`SH_COUNTS`].
+    pub sh_count: usize,
+    /// Alpha scenes: `sh_count` `[r, g, b]` triplets per kernel, kernel `i`'s at
+    /// `i·sh_count ..`, in the order of SPEC §8.
+    pub sh: Vec<[f64; 3]>,
 }
 
 impl Scene {
@@ -186,8 +235,107 @@ impl Scene {
         (0..self.len()).map(|i| self.kernel(i)).collect()
     }
 
-    /// Checks every value (finite, scales > 0, unit quaternions): for scenes changed in code.
+    /// Checks every value (finite, scales > 0, unit quaternions; for alpha scenes the
+    /// opacities and SH too): for scenes changed in code.
     pub fn validate(&self, origin: &str) -> Result<()> {
-        Scene::from_kernels(&self.kernels(), self.background, origin).map(|_| ())
+        Scene::from_kernels(&self.kernels(), self.background, origin)?;
+        self.check_appearance(origin)
+    }
+
+    /// Makes this an alpha scene (SPEC §8) with `opacities` (one per kernel) and `sh`
+    /// (`sh_count` triplets per kernel), checking them: opacities finite in `[0, 1]`, SH
+    /// finite, `sh_count` one of [`SH_COUNTS`], the lengths matching the kernels.
+    pub fn into_alpha(
+        mut self,
+        opacities: Vec<f64>,
+        sh_count: usize,
+        sh: Vec<[f64; 3]>,
+        origin: &str,
+    ) -> Result<Scene> {
+        self.blend = Blend::Alpha;
+        self.opacities = opacities;
+        self.sh_count = sh_count;
+        self.sh = sh;
+        self.check_appearance(origin)?;
+        Ok(self)
+    }
+
+    /// Kernel `i`'s SH triplets (empty for additive scenes or without SH).
+    #[must_use]
+    pub fn sh_of(&self, i: usize) -> &[[f64; 3]] {
+        &self.sh[i * self.sh_count..(i + 1) * self.sh_count]
+    }
+
+    /// The opacity of kernel `i` (1 for additive scenes).
+    #[must_use]
+    pub fn opacity(&self, i: usize) -> f64 {
+        self.opacities.get(i).copied().unwrap_or(1.0)
+    }
+
+    /// The checks of SPEC §8 on the alpha fields; additive scenes must have none.
+    fn check_appearance(&self, origin: &str) -> Result<()> {
+        let n = self.len();
+        match self.blend {
+            Blend::Additive => {
+                if !self.opacities.is_empty() || !self.sh.is_empty() || self.sh_count != 0 {
+                    return Err(Error::invalid(
+                        origin,
+                        "scene",
+                        "blend",
+                        "opacity and sh are fields of the alpha blend: declare \"blend\": \"alpha\"",
+                    ));
+                }
+                return Ok(());
+            }
+            Blend::Alpha => {}
+        }
+        if !SH_COUNTS.contains(&self.sh_count) {
+            return Err(Error::invalid(
+                origin,
+                "scene",
+                "sh",
+                format!(
+                    "{} triplets per kernel: expected 3, 8 or 15 (degree 1, 2 or 3) or none",
+                    self.sh_count
+                ),
+            ));
+        }
+        if self.opacities.len() != n || self.sh.len() != n * self.sh_count {
+            return Err(Error::invalid(
+                origin,
+                "scene",
+                "opacity",
+                format!(
+                    "{} opacities and {} SH triplets for {n} kernels of {} triplets",
+                    self.opacities.len(),
+                    self.sh.len(),
+                    self.sh_count
+                ),
+            ));
+        }
+        for (i, &o) in self.opacities.iter().enumerate() {
+            if !(o.is_finite() && (0.0..=1.0).contains(&o)) {
+                return Err(Error::invalid(
+                    origin,
+                    format!("kernel {i}"),
+                    "opacity",
+                    format!("{o} must be finite and within [0, 1]"),
+                ));
+            }
+        }
+        if let Some(k) = self
+            .sh
+            .iter()
+            .position(|t| !t.iter().all(|v| v.is_finite()))
+        {
+            let (i, j) = (k / self.sh_count, k % self.sh_count);
+            return Err(Error::invalid(
+                origin,
+                format!("kernel {i}"),
+                "sh",
+                format!("triplet {j} = {:?} is not finite", self.sh[k]),
+            ));
+        }
+        Ok(())
     }
 }

@@ -12,6 +12,7 @@
 //! [`dense`] is the seed-style baseline the benches time against the tiles (every kernel at
 //! every pixel, but the fast f32 arithmetic): a speed reference, not an accuracy one.
 
+pub mod alpha;
 pub mod dense;
 pub mod gradients;
 pub mod pixels;

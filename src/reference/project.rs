@@ -17,8 +17,10 @@ pub struct ReferenceKernel {
     pub conic: [[f64; 2]; 2],
     /// `qmax` (`+∞` without truncation).
     pub qmax: f64,
-    /// `a(τ)`.
+    /// `a(τ)`; alpha scenes: `A`.
     pub amplitude: [f64; 3],
+    /// Alpha scenes: `o(τ)`.
+    pub opacity: f64,
     /// Camera-space slice centre `(x, y, z)`.
     pub camera_mean: [f64; 3],
     /// Which of x/z, y/z lie strictly outside the clamp limits (SPEC §4).
@@ -84,6 +86,7 @@ pub fn reference_project(
         conic,
         qmax: slice.qmax,
         amplitude: slice.amplitude,
+        opacity: slice.opacity,
         camera_mean: p.into(),
         clamped: [
             p.x / p.z < -lim_x_neg || p.x / p.z > lim_x_pos,

@@ -4,6 +4,8 @@
 /// reference cases in `tests/data/reference`.
 mod common;
 
+/// The alpha blend of SPEC §8 against its f64 twin; alpha files.
+mod alpha;
 /// Malformed and invalid inputs are refused with messages naming file, item and field.
 mod bad_input;
 /// The `splat4d` binary, run as a user runs it: every subcommand, its outputs and errors.

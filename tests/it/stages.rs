@@ -115,6 +115,7 @@ fn project_matches_its_twin_on_the_same_slice() {
                         mean: DVec3::from(sliced.means[s]),
                         covariance: matrix(sliced.covariances[s]),
                         amplitude: sliced.amplitudes[s],
+                        opacity: 0.0,
                         qmax: sliced.qmax[s],
                         weight: 1.0,
                         d: 0.0,

@@ -1,0 +1,289 @@
+//! Stage 4 of alpha scenes: front-to-back compositing per pixel (SPEC §8), tile-parallel.
+//!
+//! Per pixel, over its pairs (`q ≤ qmax`, the same test as the additive raster) in the
+//! tile's list order, which is depth order ([`crate::colour::order_by_depth`]), with `T = 1`,
+//! `C = 0`:
+//!
+//! ```text
+//! α̂  = min(0.99, o(τ) exp(-½ q))
+//! T' = T (1 - α̂);  if T' < T_stop: stop        T_stop = 1e-4 (1 + 1e-5)
+//! C += colour α̂ T;  T = T'
+//! pixel = C + T b
+//! ```
+//!
+//! The layout is the additive raster's ([`crate::raster`]): the same per-tile set-up
+//! ([`crate::raster::prepare_tile`]) gives per half row (8 pixels) the entries of the
+//! kernels reaching it, in list order, with the same `q` and `G = exp(-½ q)` in f32
+//! ([`crate::raster::RowEntry::lane`]). `α̂`, `T` and `C` are f64 per lane, so the
+//! transmittance's product keeps its precision over long lists and the stop decision
+//! follows the f64 model; a half row ends when all its lanes have stopped. The loop is one
+//! portable function compiled for each [`SimdPath`] (no fused operation can form: Rust never
+//! contracts), so the image is the same bit for bit on every path and thread count.
+
+use rayon::prelude::*;
+
+use crate::model::Image;
+use crate::project::ProjectedKernels;
+use crate::raster::{
+    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
+    prepare_tile, row_forms,
+};
+use crate::tiles::TileBins;
+
+/// The largest `α̂` (SPEC §8).
+pub const MAX_ALPHA: f64 = 0.99;
+
+/// A pixel stops when its transmittance would fall below this (SPEC §8).
+pub const T_STOP: f64 = 1e-4 * (1.0 + 1e-5);
+
+/// Per-worker scratch: the tile's row entries and each tile kernel's opacity.
+#[derive(Default)]
+pub(crate) struct CompositeScratch {
+    pub(crate) tile: TileScratch,
+    pub(crate) opacities: Vec<f64>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<CompositeScratch> =
+        std::cell::RefCell::new(CompositeScratch::default());
+}
+
+/// Fills `scratch` for tile `t`: [`prepare_tile`], then the opacity of each tile kernel.
+#[inline(always)]
+pub(crate) fn prepare_alpha_tile(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    forms: &[RowForm],
+    t: usize,
+    scratch: &mut CompositeScratch,
+) {
+    prepare_tile(bins, forms, t, &mut scratch.tile);
+    let entries = bins.tile_entries(t);
+    scratch.opacities.clear();
+    scratch.opacities.extend(
+        scratch
+            .tile
+            .entry_of
+            .iter()
+            .map(|&n| proj.opacities[entries[n as usize] as usize]),
+    );
+}
+
+/// `α̂ = min(0.99, o G)`, `G` the lane's Gaussian (zero when the lane is not a pair).
+#[inline(always)]
+pub(crate) fn clamped_alpha(opacity: f64, g: f32) -> f64 {
+    let alpha = opacity * f64::from(g);
+    if alpha < MAX_ALPHA { alpha } else { MAX_ALPHA }
+}
+
+/// Composites the binned kernels (binned in depth order) into `image` (resized to the bins'
+/// size) over `background`, on the widest [`SimdPath`] the CPU has. `forms` is scratch for
+/// [`row_forms`]. Returns the number of (pixel, kernel) pairs composited (before each
+/// pixel's stop).
+pub fn composite(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    image: &mut Image,
+) -> u64 {
+    composite_on(
+        SimdPath::detect(),
+        proj,
+        bins,
+        background,
+        exp,
+        forms,
+        image,
+    )
+}
+
+/// [`composite`] on a chosen path (which the CPU must have: see [`SimdPath::available`]).
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+pub fn composite_on(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    image: &mut Image,
+) -> u64 {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+    assert_eq!(
+        proj.opacities.len(),
+        proj.len(),
+        "opacities of an alpha frame"
+    );
+    row_forms(proj, bins, forms);
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    image.width = bins.width;
+    image.height = bins.height;
+    if image.pixels.capacity() < 3 * w * h {
+        image.pixels = vec![0.0; 3 * w * h];
+    } else {
+        image.pixels.resize(3 * w * h, 0.0);
+    }
+    if w == 0 || h == 0 {
+        return 0;
+    }
+    let background = background.map(f64::from);
+    let forms: &[RowForm] = forms;
+    image
+        .pixels
+        .par_chunks_mut(3 * w * ROW)
+        .enumerate()
+        .map(|(ty, band)| {
+            SCRATCH.with(|cell| {
+                let scratch = &mut *cell.borrow_mut();
+                let mut pairs = 0;
+                for tx in 0..bins.tiles_x as usize {
+                    let t = ty * bins.tiles_x as usize + tx;
+                    prepare_alpha_tile(proj, bins, forms, t, scratch);
+                    pairs += tile_on(path, exp, bins, t, background, scratch, band);
+                }
+                pairs
+            })
+        })
+        .sum()
+}
+
+/// [`composite_tile`] compiled for `path`.
+fn tile_on(
+    path: SimdPath,
+    exp: ExpMode,
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    scratch: &CompositeScratch,
+    band: &mut [f32],
+) -> u64 {
+    match (path, exp) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `composite_on` checked that the CPU has the path's features.
+        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            composite_tile_avx2::<true>(bins, t, background, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+            composite_tile_avx2::<false>(bins, t, background, scratch, band)
+        },
+        (_, ExpMode::Poly) => composite_tile::<true>(bins, t, background, scratch, band),
+        (_, ExpMode::Std) => composite_tile::<false>(bins, t, background, scratch, band),
+    }
+}
+
+/// [`composite_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn composite_tile_avx2<const FAST: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    scratch: &CompositeScratch,
+    band: &mut [f32],
+) -> u64 {
+    composite_tile::<FAST>(bins, t, background, scratch, band)
+}
+
+/// The state of one half row after compositing: per lane the colour, the transmittance,
+/// and the number of the half row's entries consumed (the entries after it add nothing).
+pub(crate) struct HalfRowState {
+    pub(crate) colour: [[f64; LANES]; 3],
+    pub(crate) transmittance: [f64; LANES],
+    pub(crate) pairs: u64,
+}
+
+/// Composites one half row's entries (lane `i` is tile pixel `first + i`; lanes at or past
+/// `lanes` are outside the image and take nothing). `visit(n, i, α̂, T)` is called for every
+/// pair that contributes, with `T` the transmittance in front of it.
+#[inline(always)]
+pub(crate) fn composite_half_row<const FAST: bool>(
+    entries: &[RowEntry],
+    kernels: &[TileKernel],
+    opacities: &[f64],
+    first: f32,
+    lanes: f32,
+    mut visit: impl FnMut(usize, usize, f64, f64),
+) -> HalfRowState {
+    let mut state = HalfRowState {
+        colour: [[0.0; LANES]; 3],
+        transmittance: [1.0; LANES],
+        pairs: 0,
+    };
+    let mut alive: [bool; LANES] = std::array::from_fn(|i| (i as f32) < lanes);
+    for (n, entry) in entries.iter().enumerate() {
+        let kernel = &kernels[entry.kernel as usize];
+        let opacity = opacities[entry.kernel as usize];
+        for (i, lane_alive) in alive.iter_mut().enumerate() {
+            let (_, g, hit) = entry.lane::<FAST>(kernel, first, lanes, i);
+            if !(hit && *lane_alive) {
+                continue;
+            }
+            state.pairs += 1;
+            let alpha = clamped_alpha(opacity, g);
+            let t = state.transmittance[i];
+            let next = t * (1.0 - alpha);
+            if next < T_STOP {
+                *lane_alive = false;
+                continue;
+            }
+            visit(n, i, alpha, t);
+            let weight = alpha * t;
+            for c in 0..3 {
+                state.colour[c][i] += kernel.amplitude[c] * weight;
+            }
+            state.transmittance[i] = next;
+        }
+        if !alive.iter().any(|&a| a) {
+            break;
+        }
+    }
+    state
+}
+
+/// Composites the prepared tile `t` half row by half row into `band` (the image rows of its
+/// tile row). Returns the pairs.
+#[inline(always)]
+fn composite_tile<const FAST: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    scratch: &CompositeScratch,
+    band: &mut [f32],
+) -> u64 {
+    let rect = bins.tile_rect(t);
+    let width = bins.width as usize;
+    let mut pairs = 0;
+    for HalfRow {
+        row,
+        index,
+        first,
+        lanes,
+    } in half_rows(rect)
+    {
+        let state = composite_half_row::<FAST>(
+            &scratch.tile.halves[index],
+            &scratch.tile.kernels,
+            &scratch.opacities,
+            first as f32,
+            lanes as f32,
+            |_, _, _, _| {},
+        );
+        pairs += state.pairs;
+        let out = &mut band[3 * (row * width + rect[0] as usize + first)..][..3 * lanes];
+        for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+            for c in 0..3 {
+                pixel[c] = (state.colour[c][i] + state.transmittance[i] * background[c]) as f32;
+            }
+        }
+    }
+    pairs
+}

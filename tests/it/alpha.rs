@@ -1,0 +1,326 @@
+//! The alpha blend (SPEC §8): the fast forward against its f64 twin on random and hard
+//! scenes, the same bits on every path and thread count, files that round-trip.
+
+use rand::RngExt;
+use splat4d::model::random::seeded_rng;
+use splat4d::reference::alpha::{ReferenceAlphaImage, render_reference_alpha};
+use splat4d::render::{RenderContext, RenderOptions};
+use splat4d::{Blend, Camera, Image, Kernel, Scene};
+
+use crate::common::{hard_random_scene, test_camera};
+
+/// `scene` made an alpha scene: seeded opacities in (0, 1] (some at 1, so that the 0.99
+/// clamp binds), amplitudes as colours, `sh_count` SH triplets of either sign.
+pub fn alpha_scene(scene: Scene, seed: u64, sh_count: usize) -> Scene {
+    let mut rng = seeded_rng(seed);
+    let n = scene.len();
+    let opacities = (0..n)
+        .map(|_| {
+            if rng.random_range(0.0..1.0) < 0.2 {
+                1.0
+            } else {
+                rng.random_range(0.02..1.0)
+            }
+        })
+        .collect();
+    let sh = (0..n * sh_count)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5)))
+        .collect();
+    scene
+        .into_alpha(opacities, sh_count, sh, "<alpha scene>")
+        .unwrap()
+}
+
+/// Pixels where the fast image and the twin may differ by SPEC §8's allowances: a pair on
+/// the cut-off's edge, or a transmittance within `STOP_BAND` of the stop. The fast loop
+/// forms `q` and `G` in f32 (relative error of `α` up to ~1e-6), which moves `T'` by up to
+/// `α/(1 - α) · 1e-6 ≤ 1e-4` relative: the band the fast loop is held to.
+const STOP_BAND: f64 = 2e-4;
+
+/// Largest `|fast - ref|` over the pixels outside the allowances, and how many were
+/// excluded.
+pub fn alpha_error(fast: &Image, reference: &ReferenceAlphaImage) -> (f64, usize) {
+    let mut worst = 0.0_f64;
+    let mut excluded = 0;
+    for p in 0..reference.borderline.len() {
+        if reference.borderline[p] || reference.stop_margin[p] <= STOP_BAND {
+            excluded += 1;
+            continue;
+        }
+        for c in 0..3 {
+            let d = (f64::from(fast.pixels[3 * p + c]) - reference.pixels[3 * p + c]).abs();
+            worst = worst.max(d);
+        }
+    }
+    (worst, excluded)
+}
+
+/// Absolute tolerance on an alpha pixel (colours and backgrounds of order 1): f32 `q`, `G`
+/// and colour, f64 compositing (measured: at most 1.9e-7 on these scenes).
+const ALPHA_TOLERANCE: f64 = 1e-6;
+
+fn render(scene: &Scene, camera: &Camera, tau: f64, options: &RenderOptions) -> Image {
+    let mut context = RenderContext::new();
+    context.render(scene, camera, tau, options).unwrap();
+    context.image().clone()
+}
+
+fn check_against_twin(scene: &Scene, camera: &Camera, tau: f64, what: &str) {
+    for cutoff in [1.0 / 255.0, 0.0] {
+        let options = RenderOptions {
+            cutoff,
+            ..RenderOptions::default()
+        };
+        let fast = render(scene, camera, tau, &options);
+        let reference = render_reference_alpha(scene, camera, tau, &options);
+        let (worst, excluded) = alpha_error(&fast, &reference);
+        let pixels = reference.borderline.len();
+        eprintln!(
+            "{what}, cut-off {cutoff}: max error {worst:.2e}, {excluded} of {pixels} pixels on an edge"
+        );
+        assert!(
+            worst <= ALPHA_TOLERANCE,
+            "{what}, cut-off {cutoff}: max error {worst:.3e}"
+        );
+        assert!(
+            excluded * 50 <= pixels,
+            "{what}, cut-off {cutoff}: {excluded} of {pixels} pixels on an edge"
+        );
+        assert!(reference.pairs > 0, "{what}: the scene reaches the image");
+    }
+}
+
+#[test]
+fn random_hard_alpha_scenes_match_the_f64_twin() {
+    let camera = test_camera(67, 45);
+    for (seed, sh_count) in [(1, 0), (2, 3), (3, 8), (4, 15)] {
+        let scene = alpha_scene(hard_random_scene(&camera, seed, 150), seed, sh_count);
+        for tau in [0.2, 0.5] {
+            check_against_twin(&scene, &camera, tau, &format!("seed {seed}, τ {tau}"));
+        }
+    }
+}
+
+/// A stack of `layers` opaque kernels facing the camera, one behind the other, plus a
+/// kernel crossing them in depth over time.
+fn stack_scene(layers: usize, opacity: f64) -> Scene {
+    let mut kernels: Vec<Kernel> = (0..layers)
+        .map(|k| {
+            let z = 0.5 * k as f64;
+            let mut kernel = Kernel::new(
+                [0.05 * k as f64, 0.0, z, 0.5],
+                [0.6, 0.5, 0.05, 1e30],
+                [0.2 + 0.1 * (k % 5) as f64, 0.9 - 0.1 * (k % 7) as f64, 0.5],
+            );
+            kernel.rotation = [0.96, 0.1, 0.2, 0.1];
+            kernel
+        })
+        .collect();
+    let mut crossing = Kernel::new([0.2, 0.1, -1.0, 0.0], [0.3, 0.3, 0.3, 2.0], [1.0, 0.2, 0.1]);
+    crossing.velocity = [0.0, 0.0, 3.0];
+    kernels.push(crossing);
+    let n = kernels.len();
+    Scene::from_kernels(&kernels, [0.3, 0.2, 0.1], "<stack>")
+        .unwrap()
+        .into_alpha(vec![opacity; n], 0, Vec::new(), "<stack>")
+        .unwrap()
+}
+
+#[test]
+fn stacks_that_stop_pixels_and_kernels_crossing_in_depth_match_the_twin() {
+    let camera =
+        Camera::look_at([0.0, 0.0, -4.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 48, 40).unwrap();
+    // Opacity 1: the 0.99 clamp binds and two layers stop a pixel (T' = 1e-4 < T_stop).
+    for (opacity, tau) in [(1.0, 0.0), (1.0, 0.7), (0.6, 0.3), (0.97, 1.0)] {
+        let scene = stack_scene(12, opacity);
+        let reference = render_reference_alpha(&scene, &camera, tau, &RenderOptions::default());
+        let stopped = reference
+            .traces
+            .iter()
+            .filter(|t| t.stopped_by.is_some())
+            .count();
+        if opacity == 1.0 {
+            assert!(stopped > 50, "pixels stop under opaque layers ({stopped})");
+        }
+        check_against_twin(
+            &scene,
+            &camera,
+            tau,
+            &format!("stack o = {opacity}, τ {tau}"),
+        );
+    }
+}
+
+#[test]
+fn equal_depths_composite_in_kernel_order() {
+    let camera =
+        Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 32, 32).unwrap();
+    let red = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.4, 0.4, 0.4, 1.0], [1.0, 0.0, 0.0]);
+    let green = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.4, 0.4, 0.4, 1.0], [0.0, 1.0, 0.0]);
+    let scene = |kernels: &[Kernel]| {
+        Scene::from_kernels(kernels, [0.0; 3], "<equal depths>")
+            .unwrap()
+            .into_alpha(vec![0.9; 2], 0, Vec::new(), "<equal depths>")
+            .unwrap()
+    };
+    let options = RenderOptions::default();
+    let red_first = render(&scene(&[red, green]), &camera, 0.0, &options);
+    let green_first = render(&scene(&[green, red]), &camera, 0.0, &options);
+    let centre = red_first.pixel(16, 16);
+    // The first kernel takes 0.9 of the light, the second 0.9 of the rest.
+    assert!(
+        (f64::from(centre[0]) - 0.9 * 0.99).abs() < 0.02,
+        "{centre:?}"
+    );
+    assert!(centre[0] > 5.0 * centre[1], "{centre:?}");
+    let swapped = green_first.pixel(16, 16);
+    assert!(swapped[1] > 5.0 * swapped[0], "{swapped:?}");
+    check_against_twin(&scene(&[red, green]), &camera, 0.0, "equal depths");
+}
+
+#[test]
+fn negative_sh_colours_clamp_at_zero_and_static_kernels_hold_over_time() {
+    let camera = test_camera(40, 30);
+    let mut kernels = Vec::new();
+    for k in 0..30 {
+        let x = -1.0 + 0.07 * k as f64;
+        kernels.push(Kernel::new(
+            [x, 0.1 * (k % 3) as f64, 0.2 * (k % 4) as f64, 0.0],
+            [0.2, 0.15, 0.1, 1e30],
+            [0.1, -0.3, 0.5],
+        ));
+    }
+    let n = kernels.len();
+    let sh: Vec<[f64; 3]> = (0..3 * n)
+        .map(|k| [0.8 * ((k % 3) as f64 - 1.0), -0.6, 0.4])
+        .collect();
+    let scene = Scene::from_kernels(&kernels, [0.0, 0.0, 0.2], "<static>")
+        .unwrap()
+        .into_alpha(vec![0.7; n], 3, sh, "<static>")
+        .unwrap();
+    let options = RenderOptions::default();
+    let early = render(&scene, &camera, -1e6, &options);
+    let late = render(&scene, &camera, 1e6, &options);
+    assert_eq!(
+        early.pixels, late.pixels,
+        "static kernels are the same at any time"
+    );
+    // Green is clamped to zero for every kernel (−0.3 − 0.6 Σ Y): only the background's
+    // green (none) remains.
+    assert!(early.pixels.chunks(3).all(|p| p[1] == 0.0));
+    check_against_twin(&scene, &camera, 0.5, "static kernels with negative SH");
+}
+
+#[test]
+fn far_from_the_origin_the_blend_keeps_its_precision() {
+    let offset = [1e5, -2e5, 5e4];
+    let camera = Camera::look_at(
+        [offset[0], offset[1], offset[2] - 4.0],
+        offset,
+        [0.0, 1.0, 0.0],
+        40.0,
+        40,
+        32,
+    )
+    .unwrap();
+    let mut scene = stack_scene(6, 0.8);
+    for mean in &mut scene.means {
+        for c in 0..3 {
+            mean[c] += offset[c];
+        }
+    }
+    check_against_twin(&scene, &camera, 0.4, "far from the origin");
+}
+
+#[test]
+fn every_thread_count_and_simd_path_composites_the_same_bits() {
+    let camera = test_camera(83, 61);
+    let scene = alpha_scene(hard_random_scene(&camera, 7, 400), 7, 8);
+    let options = RenderOptions::default();
+    let mut images = Vec::new();
+    for threads in [1, 2, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        images.push(pool.install(|| render(&scene, &camera, 0.5, &options)));
+    }
+    let mut context = RenderContext::new();
+    context.render(&scene, &camera, 0.5, &options).unwrap();
+    for &path in splat4d::raster::SimdPath::available() {
+        let mut forms = Vec::new();
+        let mut image = Image::default();
+        splat4d::composite::composite_on(
+            path,
+            &context.projected,
+            &context.bins,
+            scene.background.map(|b| b as f32),
+            options.exp,
+            &mut forms,
+            &mut image,
+        );
+        images.push(image);
+    }
+    for image in &images[1..] {
+        assert!(
+            image
+                .pixels
+                .iter()
+                .zip(&images[0].pixels)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+    }
+}
+
+#[test]
+fn alpha_scenes_round_trip_through_json_and_ply() {
+    let camera = test_camera(20, 20);
+    let dir = tempfile::tempdir().unwrap();
+    for sh_count in [0, 3, 8, 15] {
+        let scene = alpha_scene(hard_random_scene(&camera, 11, 20), 11, sh_count);
+        for name in ["s.json", "s.ply"] {
+            let path = dir.path().join(name);
+            splat4d::io::scene_file::save_scene(&scene, &path).unwrap();
+            let back = splat4d::io::scene_file::load_scene(&path).unwrap();
+            assert_eq!(back, scene, "{name}, {sh_count} SH triplets");
+            assert_eq!(back.blend, Blend::Alpha);
+        }
+    }
+}
+
+#[test]
+fn bad_alpha_fields_are_refused_with_kernel_and_field_named() {
+    let base = r#"{"blend": "alpha", "kernels": [
+        {"mean": [0,0,0,0], "scale": [1,1,1,1], "amplitude": [1,1,1]},
+        {"mean": [0,0,0,0], "scale": [1,1,1,1], "amplitude": [1,1,1], KERNEL1}]}"#;
+    let cases = [
+        (r#""opacity": 1.5"#, "opacity"),
+        (r#""opacity": -0.1"#, "opacity"),
+        (r#""sh": [[0,0,0],[0,0,0],[0,0,0]]"#, "sh"),
+    ];
+    for (field, named) in cases {
+        let text = base.replace("KERNEL1", field);
+        let error = splat4d::io::scene_file::scene_from_json(&text, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("s.json") && error.contains("kernel 1") && error.contains(named),
+            "{field}: {error}"
+        );
+    }
+    let two = r#"{"blend": "alpha", "kernels": [{"mean": [0,0,0,0], "scale": [1,1,1,1],
+        "amplitude": [1,1,1], "sh": [[0,0,0],[0,0,0]]}]}"#;
+    let error = splat4d::io::scene_file::scene_from_json(two, "s.json")
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("sh") && error.contains('2'), "{error}");
+    let additive = r#"{"kernels": [{"mean": [0,0,0,0], "scale": [1,1,1,1],
+        "amplitude": [1,1,1], "opacity": 0.5}]}"#;
+    let error = splat4d::io::scene_file::scene_from_json(additive, "s.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("opacity") && error.contains("alpha"),
+        "{error}"
+    );
+}
