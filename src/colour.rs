@@ -69,6 +69,43 @@ pub fn sh_basis([x, y, z]: [f64; 3]) -> [f64; 15] {
     ]
 }
 
+/// `∂Y_j/∂(x, y, z)` of the 15 basis polynomials of [`sh_basis`] (as functions of three
+/// free coordinates; the direction's normalisation is applied by the caller).
+#[must_use]
+pub fn sh_basis_gradient([x, y, z]: [f64; 3]) -> [[f64; 3]; 15] {
+    let (c1, c2, c3) = (SH_C1, SH_C2, SH_C3);
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    [
+        [0.0, -c1, 0.0],
+        [0.0, 0.0, c1],
+        [-c1, 0.0, 0.0],
+        [c2[0] * y, c2[0] * x, 0.0],
+        [0.0, c2[1] * z, c2[1] * y],
+        [-2.0 * c2[2] * x, -2.0 * c2[2] * y, 4.0 * c2[2] * z],
+        [c2[3] * z, 0.0, c2[3] * x],
+        [2.0 * c2[4] * x, -2.0 * c2[4] * y, 0.0],
+        [6.0 * c3[0] * x * y, c3[0] * (3.0 * xx - 3.0 * yy), 0.0],
+        [c3[1] * y * z, c3[1] * x * z, c3[1] * x * y],
+        [
+            -2.0 * c3[2] * x * y,
+            c3[2] * (4.0 * zz - xx - 3.0 * yy),
+            8.0 * c3[2] * y * z,
+        ],
+        [
+            -6.0 * c3[3] * x * z,
+            -6.0 * c3[3] * y * z,
+            c3[3] * (6.0 * zz - 3.0 * xx - 3.0 * yy),
+        ],
+        [
+            c3[4] * (4.0 * zz - 3.0 * xx - yy),
+            -2.0 * c3[4] * x * y,
+            8.0 * c3[4] * x * z,
+        ],
+        [2.0 * c3[5] * x * z, -2.0 * c3[5] * y * z, c3[5] * (xx - yy)],
+        [c3[6] * (3.0 * xx - 3.0 * yy), -6.0 * c3[6] * x * y, 0.0],
+    ]
+}
+
 /// The camera centre `c = -Rc⁻¹ tc` in world space (`Rc` need not be orthonormal).
 #[must_use]
 pub fn camera_centre(camera: &Camera) -> [f64; 3] {

@@ -12,6 +12,7 @@
 //! thread pool (install a pool to choose the thread count); the image is identical bit for
 //! bit whatever the number of threads.
 
+use crate::backward::composite::composite_backward;
 use crate::backward::project::project_backward;
 use crate::backward::raster::rasterize_backward;
 use crate::backward::slice::slice_backward;
@@ -205,7 +206,7 @@ impl RenderContext {
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
     /// rendered (RGB, row-major, like the image). Call it right after [`Self::render`] with the
     /// same scene, camera, time and options: it reuses that frame's slices, ellipses and bins.
-    /// `grads` must be sized for the scene ([`Gradients::zeros`]).
+    /// `grads` must be sized for the scene ([`Gradients::for_scene`]).
     pub fn backward(
         &mut self,
         scene: &Scene,
@@ -216,16 +217,38 @@ impl RenderContext {
         grads: &mut Gradients,
     ) {
         let buffers = &mut self.backward;
-        rasterize_backward(
-            &self.projected,
-            &self.bins,
-            &self.row_forms,
-            v_image,
-            options.exp,
-            &mut buffers.entry_partials,
-            &mut buffers.kernel_sums,
-            &mut buffers.screen,
-        );
+        let v_background = match scene.blend {
+            Blend::Additive => {
+                rasterize_backward(
+                    &self.projected,
+                    &self.bins,
+                    &self.row_forms,
+                    v_image,
+                    options.exp,
+                    &mut buffers.entry_partials,
+                    &mut buffers.kernel_sums,
+                    &mut buffers.screen,
+                );
+                // The background is added to every pixel: its gradient is the sum of ∂L/∂C.
+                let mut v_background = [0.0_f64; 3];
+                for pixel in v_image.chunks_exact(3) {
+                    for (sum, &v) in v_background.iter_mut().zip(pixel) {
+                        *sum += f64::from(v);
+                    }
+                }
+                v_background
+            }
+            Blend::Alpha => composite_backward(
+                &self.projected,
+                &self.bins,
+                &self.row_forms,
+                scene.background.map(|b| b as f32),
+                v_image,
+                options.exp,
+                &mut buffers.alpha_partials,
+                &mut buffers.screen,
+            ),
+        };
         project_backward(
             &self.sliced,
             &self.projected,
@@ -234,14 +257,7 @@ impl RenderContext {
             &buffers.screen,
             &mut buffers.sliced,
         );
-        slice_backward(scene, tau, &self.sliced, &buffers.sliced, grads);
-        // The background is added to every pixel: its gradient is the sum of ∂L/∂C.
-        let mut v_background = [0.0_f64; 3];
-        for pixel in v_image.chunks_exact(3) {
-            for (sum, &v) in v_background.iter_mut().zip(pixel) {
-                *sum += f64::from(v);
-            }
-        }
+        slice_backward(scene, camera, tau, &self.sliced, &buffers.sliced, grads);
         for (total, sum) in grads.v_background.iter_mut().zip(v_background) {
             *total += sum;
         }

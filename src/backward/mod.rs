@@ -2,14 +2,18 @@
 //! in reverse, with the indicator `[q ≤ qmax]` held constant:
 //!
 //! 1. [`raster`]: `∂L/∂C` per pixel → per projected kernel `∂L/∂a(τ)`, `∂L/∂m2`, `∂L/∂Q`
-//!    (tile-parallel, over exactly the forward's pairs, deterministic reduction);
+//!    (tile-parallel, over exactly the forward's pairs, deterministic reduction); for alpha
+//!    frames [`composite`] (SPEC §8), which also gives `∂L/∂o(τ)` and `∂L/∂colour`;
 //! 2. [`project`]: → `∂L/∂m(τ)`, the world-space slice centre, through `Q = Σ2⁻¹`, the EWA
 //!    Jacobian (including its clamp) and the 2D mean;
-//! 3. [`slice`](mod@slice): → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v` of each scene kernel.
+//! 3. [`slice`](mod@slice): → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v`, scales and rotation of
+//!    each scene kernel; alpha scenes also the opacity and, through the colour's view
+//!    direction, SH and `m(τ)`.
 //!
 //! Names follow the `v_x = ∂L/∂x` convention. Gradients are f64 and accumulate (`+=`), so a
 //! batch of views sums into one [`Gradients`].
 
+pub mod composite;
 pub mod project;
 pub mod raster;
 pub mod slice;
@@ -23,8 +27,15 @@ pub struct Gradients {
     pub v_amplitudes: Vec<[f64; 3]>,
     /// `∂L/∂(vx, vy, vz)`.
     pub v_velocities: Vec<[f64; 3]>,
-    /// `∂L/∂(sx, sy, sz, st)`, the standard deviations (not in the `splat4d grad` file).
+    /// `∂L/∂(sx, sy, sz, st)`, the standard deviations (in the `splat4d grad` file of alpha
+    /// scenes).
     pub v_scales: Vec<[f64; 4]>,
+    /// `∂L/∂(w, x, y, z)` of the stored quaternion, through its normalisation.
+    pub v_rotations: Vec<[f64; 4]>,
+    /// Alpha scenes: `∂L/∂o`, the peak opacity (empty for additive scenes).
+    pub v_opacities: Vec<f64>,
+    /// Alpha scenes: `∂L/∂sh`, laid out as [`crate::model::Scene::sh`].
+    pub v_sh: Vec<[f64; 3]>,
     /// `∂L/∂b`, the scene's background colour (SPEC §5: `b` is added to every pixel, so
     /// this is `Σ_pixels ∂L/∂C`; not in the `splat4d grad` file).
     pub v_background: [f64; 3],
@@ -39,8 +50,22 @@ impl Gradients {
         grads
     }
 
-    /// Sets every gradient to zero, for `n` kernels.
+    /// Zero gradients for every field of `scene` (alpha scenes: opacity and SH too).
+    #[must_use]
+    pub fn for_scene(scene: &crate::model::Scene) -> Self {
+        let mut grads = Gradients::zeros(scene.len());
+        grads.v_opacities.resize(scene.opacities.len(), 0.0);
+        grads.v_sh.resize(scene.sh.len(), [0.0; 3]);
+        grads
+    }
+
+    /// Sets every gradient to zero, for `n` kernels (alpha fields emptied: see
+    /// [`Self::for_scene`]).
     pub fn reset(&mut self, n: usize) {
+        self.v_rotations.clear();
+        self.v_rotations.resize(n, [0.0; 4]);
+        self.v_opacities.clear();
+        self.v_sh.clear();
         self.v_means.clear();
         self.v_means.resize(n, [0.0; 4]);
         self.v_amplitudes.clear();
@@ -70,6 +95,8 @@ impl Gradients {
 pub struct BackwardBuffers {
     /// Per (tile, kernel) entry: partial sums of one tile.
     pub(crate) entry_partials: Vec<[f32; 8]>,
+    /// The same for alpha frames.
+    pub(crate) alpha_partials: Vec<composite::AlphaPartial>,
     /// Per projected kernel: the entries' partial sums reduced in f64.
     pub(crate) kernel_sums: Vec<[f64; 8]>,
     /// Stage 1 output.

@@ -23,6 +23,8 @@ use crate::project::{ProjectedKernels, Projection, project_one};
 use crate::slice::SlicedKernels;
 
 /// Per sliced kernel: gradients at the slice (zero for kernels culled by the projection).
+/// For alpha frames `v_amplitudes` is `∂L/∂colour`, carried back by
+/// [`crate::backward::slice`].
 #[derive(Clone, Debug, Default)]
 pub struct SliceGradients {
     /// `∂L/∂m(τ)`, world space.
@@ -31,6 +33,8 @@ pub struct SliceGradients {
     pub v_amplitudes: Vec<[f64; 3]>,
     /// `∂L/∂Σ3` (3×3, symmetric), world space.
     pub v_covariances: Vec<[[f64; 3]; 3]>,
+    /// Alpha frames: `∂L/∂o(τ)` (empty for additive frames).
+    pub v_opacities: Vec<f64>,
 }
 
 /// `∂L/∂Σ3 = Rcᵀ Jᵀ V J Rc` for `V = ∂L/∂Σ2` (`[xx, xy, yy]`), `rc` row-major.
@@ -114,6 +118,10 @@ pub fn project_backward(
     out.v_amplitudes.resize(sliced.len(), [0.0; 3]);
     out.v_covariances.clear();
     out.v_covariances.resize(sliced.len(), [[0.0; 3]; 3]);
+    out.v_opacities.clear();
+    if !screen.v_opacities.is_empty() {
+        out.v_opacities.resize(sliced.len(), 0.0);
+    }
     let rc = camera.rotation();
     for p in 0..proj.len() {
         let s = proj.slice_from_proj[p] as usize;
@@ -128,6 +136,9 @@ pub fn project_backward(
         // p_cam = Rc m + tc  →  ∂L/∂m = Rcᵀ ∂L/∂p_cam
         out.v_means[s] = std::array::from_fn(|c| (0..3).map(|r| rc[r][c] * v_p[r]).sum());
         out.v_amplitudes[s] = screen.v_amplitudes[p];
+        if let Some(&v_opacity) = screen.v_opacities.get(p) {
+            out.v_opacities[s] = v_opacity;
+        }
         out.v_covariances[s] =
             world_covariance_gradient(&rc, &projection.jacobian, screen.v_covariances[p]);
     }

@@ -39,6 +39,8 @@ pub struct ScreenGradients {
     pub v_means: Vec<[f64; 2]>,
     /// `∂L/∂Σ2` as `[xx, xy, yy]` of the full symmetric matrix gradient.
     pub v_covariances: Vec<[f64; 3]>,
+    /// Alpha frames: `∂L/∂o(τ)` (empty for additive frames).
+    pub v_opacities: Vec<f64>,
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major, `width` pixels per row) into `out`, one
@@ -348,6 +350,7 @@ fn reduce(
     out.v_amplitudes.clear();
     out.v_means.clear();
     out.v_covariances.clear();
+    out.v_opacities.clear();
     for (p, s) in sums.iter().enumerate() {
         let [a, b, _] = proj.conics[p];
         let e = 1.0 / proj.covariances[p][2];

@@ -1,5 +1,5 @@
-//! Backward of stage 1, the slice at τ (SPEC §2, §6): from `∂L/∂m(τ)` and `∂L/∂a(τ)` to the
-//! kernel's parameters, with `w = exp(-½ d²)`, `d = (τ - t)/st`:
+//! Backward of stage 1, the slice at τ (SPEC §2, §6, §8): from `∂L/∂m(τ)`, `∂L/∂a(τ)` and
+//! `∂L/∂Σ3` to the kernel's parameters, with `w = exp(-½ d²)`, `d = (τ - t)/st`:
 //!
 //! ```text
 //! ∂L/∂(x, y, z) = ∂L/∂m
@@ -8,27 +8,48 @@
 //! ∂L/∂v         = (τ - t) ∂L/∂m
 //! ∂L/∂s_k       = 2 s_k (Rᵀ ∂L/∂Σ3 R)_kk       (Σ3 = R diag(s²) Rᵀ, k = x, y, z)
 //! ∂L/∂st        = Σ_c A_c w (d²/st) ∂L/∂a_c
+//! ∂L/∂R         = 2 ∂L/∂Σ3 R diag(s²)          then through R(q̂) and q̂ = q/|q|
+//! ```
+//!
+//! Alpha scenes (SPEC §8) carry the weight on the opacity, `o(τ) = o w`, and a colour
+//! `max(0, A + Σ_j Y_j(ω) sh_j)` with `ω = (m - c)/|m - c|`:
+//!
+//! ```text
+//! ∂L/∂o   = w ∂L/∂o(τ)
+//! ∂L/∂t  += o w (d/st) ∂L/∂o(τ),   ∂L/∂st = o w (d²/st) ∂L/∂o(τ)
+//! g_c     = ∂L/∂colour_c where A_c + Σ Y sh_c > 0, else 0
+//! ∂L/∂A_c = g_c,  ∂L/∂sh_jc = Y_j g_c
+//! ∂L/∂m  += (I - ω ωᵀ)/|m - c| Σ_jc g_c sh_jc ∇Y_j
 //! ```
 //!
 //! Results are added to the scene-order [`Gradients`]; culled kernels receive nothing.
 
 use crate::backward::Gradients;
 use crate::backward::project::SliceGradients;
-use crate::model::scene::Scene;
+use crate::colour::{camera_centre, raw_colour, sh_basis, sh_basis_gradient, view_direction};
+use crate::model::camera::Camera;
+use crate::model::scene::{Blend, Scene};
 use crate::slice::{SlicedKernels, rotation_matrix};
 
-/// Adds the kernel gradients of one view to `grads`.
+/// Adds the kernel gradients of one view to `grads` (sized for the scene:
+/// [`Gradients::for_scene`]).
 pub fn slice_backward(
     scene: &Scene,
+    camera: &Camera,
     tau: f64,
     sliced: &SlicedKernels,
     from_slice: &SliceGradients,
     grads: &mut Gradients,
 ) {
     assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
+    let alpha = scene.blend == Blend::Alpha;
+    if alpha {
+        assert_eq!(grads.v_opacities.len(), scene.len(), "alpha gradients");
+    }
+    let centre = camera_centre(camera);
     for s in 0..sliced.len() {
         let i = sliced.kernel_from_slice[s] as usize;
-        let v_m = from_slice.v_means[s];
+        let mut v_m = from_slice.v_means[s];
         let v_a = from_slice.v_amplitudes[s];
         let t = scene.means[i][3];
         let st = scene.scales[i][3];
@@ -37,14 +58,25 @@ pub fn slice_backward(
         let w = (-0.5 * d * d).exp();
         let amplitude = scene.amplitudes[i];
         let velocity = scene.velocities[i];
-        let v_t = (0..3)
-            .map(|c| amplitude[c] * w * (d / st) * v_a[c])
-            .sum::<f64>()
-            - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
+        // What the temporal weight multiplies, and its gradient: a(τ) = A w, or o(τ) = o w.
+        let v_weighted = if alpha {
+            let v_opacity = from_slice.v_opacities[s];
+            grads.v_opacities[i] += w * v_opacity;
+            let v_mean_colour = colour_backward(scene, i, centre, sliced.means[s], v_a, grads);
+            for c in 0..3 {
+                v_m[c] += v_mean_colour[c];
+            }
+            scene.opacities[i] * w * v_opacity
+        } else {
+            for (total, v) in grads.v_amplitudes[i].iter_mut().zip(v_a) {
+                *total += w * v;
+            }
+            (0..3).map(|c| amplitude[c] * w * v_a[c]).sum::<f64>()
+        };
+        let v_t = v_weighted * (d / st) - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
         let mean = &mut grads.v_means[i];
         for c in 0..3 {
             mean[c] += v_m[c];
-            grads.v_amplitudes[i][c] += w * v_a[c];
             grads.v_velocities[i][c] += dt * v_m[c];
         }
         mean[3] += v_t;
@@ -64,8 +96,92 @@ pub fn slice_backward(
                 .sum();
             v_scale[k] += 2.0 * scale[k] * diagonal;
         }
-        v_scale[3] += (0..3)
-            .map(|c| amplitude[c] * w * (d * d / st) * v_a[c])
-            .sum::<f64>();
+        v_scale[3] += v_weighted * (d * d / st);
+        let v_rotation = rotation_gradient(scene.rotations[i], scale, &r, &v_sigma);
+        for (total, v) in grads.v_rotations[i].iter_mut().zip(v_rotation) {
+            *total += v;
+        }
     }
+}
+
+/// The colour's backward for kernel `i` seen from `centre` at slice centre `mean`: adds
+/// `∂L/∂A` and `∂L/∂sh` to `grads` and returns the part of `∂L/∂m(τ)` that comes through the
+/// view direction.
+fn colour_backward(
+    scene: &Scene,
+    i: usize,
+    centre: [f64; 3],
+    mean: [f64; 3],
+    v_colour: [f64; 3],
+    grads: &mut Gradients,
+) -> [f64; 3] {
+    let (direction, distance) = view_direction(centre, mean);
+    let raw = raw_colour(scene, i, direction);
+    let g: [f64; 3] = std::array::from_fn(|c| if raw[c] > 0.0 { v_colour[c] } else { 0.0 });
+    for (total, v) in grads.v_amplitudes[i].iter_mut().zip(g) {
+        *total += v;
+    }
+    let count = scene.sh_count;
+    if count == 0 || distance == 0.0 {
+        return [0.0; 3];
+    }
+    let basis = sh_basis(direction);
+    let basis_gradient = sh_basis_gradient(direction);
+    let sh = scene.sh_of(i);
+    let mut v_direction = [0.0; 3];
+    for j in 0..count {
+        let v_sh = &mut grads.v_sh[i * count + j];
+        let mut along = 0.0;
+        for c in 0..3 {
+            v_sh[c] += basis[j] * g[c];
+            along += sh[j][c] * g[c];
+        }
+        for k in 0..3 {
+            v_direction[k] += along * basis_gradient[j][k];
+        }
+    }
+    // ω = (m - c)/|m - c|:  ∂L/∂m = (I - ω ωᵀ) ∂L/∂ω / |m - c|.
+    let radial: f64 = (0..3).map(|k| direction[k] * v_direction[k]).sum();
+    std::array::from_fn(|k| (v_direction[k] - direction[k] * radial) / distance)
+}
+
+/// `∂L/∂q` of the stored quaternion `q` (unit up to rounding) from `V = ∂L/∂Σ3`, with
+/// `Σ3 = R diag(s²) Rᵀ`: `∂L/∂R = 2 V R diag(s²)`, then through the entries of `R(q̂)`
+/// (SPEC §1) and the normalisation `q̂ = q/|q|`.
+#[must_use]
+pub fn rotation_gradient(
+    q: [f64; 4],
+    scale: [f64; 4],
+    r: &[[f64; 3]; 3],
+    v_sigma: &[[f64; 3]; 3],
+) -> [f64; 4] {
+    let var = [
+        scale[0] * scale[0],
+        scale[1] * scale[1],
+        scale[2] * scale[2],
+    ];
+    let g: [[f64; 3]; 3] = std::array::from_fn(|a| {
+        std::array::from_fn(|b| 2.0 * (0..3).map(|k| v_sigma[a][k] * r[k][b]).sum::<f64>() * var[b])
+    });
+    let [w, x, y, z] = q;
+    let v_unit = [
+        2.0 * (-g[0][1] * z + g[0][2] * y + g[1][0] * z - g[1][2] * x - g[2][0] * y + g[2][1] * x),
+        2.0 * (g[0][1] * y + g[0][2] * z + g[1][0] * y - 2.0 * g[1][1] * x - g[1][2] * w
+            + g[2][0] * z
+            + g[2][1] * w
+            - 2.0 * g[2][2] * x),
+        2.0 * (-2.0 * g[0][0] * y + g[0][1] * x + g[0][2] * w + g[1][0] * x + g[1][2] * z
+            - g[2][0] * w
+            + g[2][1] * z
+            - 2.0 * g[2][2] * y),
+        2.0 * (-2.0 * g[0][0] * z - g[0][1] * w + g[0][2] * x + g[1][0] * w - 2.0 * g[1][1] * z
+            + g[1][2] * y
+            + g[2][0] * x
+            + g[2][1] * y),
+    ];
+    // q̂ = q/|q| with |q| = 1: ∂L/∂q = (I - q̂ q̂ᵀ) ∂L/∂q̂.
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let unit = q.map(|v| v / norm);
+    let radial: f64 = (0..4).map(|k| unit[k] * v_unit[k]).sum();
+    std::array::from_fn(|k| (v_unit[k] - unit[k] * radial) / norm)
 }

@@ -1,5 +1,7 @@
 //! The `splat4d grad` file: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3],
-//! "velocity": [3]}]}`, kernels in scene order; numbers read back exactly.
+//! "velocity": [3]}]}`, kernels in scene order; numbers read back exactly. Alpha scenes
+//! (SPEC §8) add every other field per kernel: `"scale": [4]`, `"rotation": [4]` (of the
+//! stored quaternion), `"opacity": o` and, with SH, `"sh": [[r, g, b], …]`.
 
 use serde::{Deserialize, Serialize};
 
@@ -13,6 +15,14 @@ struct KernelGradientEntry {
     mean: [f64; 4],
     amplitude: [f64; 3],
     velocity: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scale: Option<[f64; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    rotation: Option<[f64; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    opacity: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sh: Option<Vec<[f64; 3]>>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -22,9 +32,16 @@ struct GradientFile {
     kernels: Vec<KernelGradientEntry>,
 }
 
-/// The gradient file of `grads` and `loss`.
+/// The gradient file of `grads` and `loss` (every field when `grads` are an alpha scene's:
+/// [`Gradients::for_scene`]).
 #[must_use]
 pub fn gradients_to_json(grads: &Gradients, loss: f64) -> String {
+    let alpha = grads.v_opacities.len() == grads.len() && !grads.is_empty();
+    let sh_count = if alpha {
+        grads.v_sh.len() / grads.len()
+    } else {
+        0
+    };
     let file = GradientFile {
         loss,
         kernels: (0..grads.len())
@@ -32,6 +49,10 @@ pub fn gradients_to_json(grads: &Gradients, loss: f64) -> String {
                 mean: grads.v_means[i],
                 amplitude: grads.v_amplitudes[i],
                 velocity: grads.v_velocities[i],
+                scale: alpha.then(|| grads.v_scales[i]),
+                rotation: alpha.then(|| grads.v_rotations[i]),
+                opacity: alpha.then(|| grads.v_opacities[i]),
+                sh: (sh_count > 0).then(|| grads.v_sh[i * sh_count..(i + 1) * sh_count].to_vec()),
             })
             .collect(),
     };
@@ -46,6 +67,13 @@ pub fn gradients_from_json(text: &str, origin: &str) -> Result<(f64, Gradients)>
         grads.v_means[i] = k.mean;
         grads.v_amplitudes[i] = k.amplitude;
         grads.v_velocities[i] = k.velocity;
+        grads.v_scales[i] = k.scale.unwrap_or_default();
+        grads.v_rotations[i] = k.rotation.unwrap_or_default();
+        if let Some(opacity) = k.opacity {
+            grads.v_opacities.resize(file.kernels.len(), 0.0);
+            grads.v_opacities[i] = opacity;
+        }
+        grads.v_sh.extend(k.sh.iter().flatten());
     }
     Ok((file.loss, grads))
 }

@@ -204,7 +204,7 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
     }
     let target = load_image(&request.target, background)?;
     let mut context = RenderContext::new();
-    let mut grads = Gradients::zeros(scene.len());
+    let mut grads = Gradients::for_scene(&scene);
     let loss = with_threads(view.threads, || {
         view_loss_and_gradients(
             &mut context,

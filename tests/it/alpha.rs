@@ -324,3 +324,247 @@ fn bad_alpha_fields_are_refused_with_kernel_and_field_named() {
         "{error}"
     );
 }
+
+/// The fields of an alpha kernel, one differentiable number each: mean (4), velocity (3),
+/// scale (4), rotation (4), opacity, amplitude (3), then `3 sh_count` SH numbers.
+fn field_count(scene: &Scene) -> usize {
+    19 + 3 * scene.sh_count
+}
+
+fn field_name(p: usize) -> String {
+    const NAMES: [&str; 19] = [
+        "x", "y", "z", "t", "vx", "vy", "vz", "sx", "sy", "sz", "st", "qw", "qx", "qy", "qz",
+        "opacity", "r", "g", "b",
+    ];
+    NAMES.get(p).map_or_else(
+        || format!("sh[{}][{}]", (p - 19) / 3, (p - 19) % 3),
+        |n| (*n).to_owned(),
+    )
+}
+
+fn field(scene: &Scene, i: usize, p: usize) -> f64 {
+    match p {
+        0..4 => scene.means[i][p],
+        4..7 => scene.velocities[i][p - 4],
+        7..11 => scene.scales[i][p - 7],
+        11..15 => scene.rotations[i][p - 11],
+        15 => scene.opacities[i],
+        16..19 => scene.amplitudes[i][p - 16],
+        _ => scene.sh[i * scene.sh_count + (p - 19) / 3][(p - 19) % 3],
+    }
+}
+
+fn field_mut(scene: &mut Scene, i: usize, p: usize) -> &mut f64 {
+    let count = scene.sh_count;
+    match p {
+        0..4 => &mut scene.means[i][p],
+        4..7 => &mut scene.velocities[i][p - 4],
+        7..11 => &mut scene.scales[i][p - 7],
+        11..15 => &mut scene.rotations[i][p - 11],
+        15 => &mut scene.opacities[i],
+        16..19 => &mut scene.amplitudes[i][p - 16],
+        _ => &mut scene.sh[i * count + (p - 19) / 3][(p - 19) % 3],
+    }
+}
+
+fn gradient_field(grads: &splat4d::Gradients, sh_count: usize, i: usize, p: usize) -> f64 {
+    match p {
+        0..4 => grads.v_means[i][p],
+        4..7 => grads.v_velocities[i][p - 4],
+        7..11 => grads.v_scales[i][p - 7],
+        11..15 => grads.v_rotations[i][p - 11],
+        15 => grads.v_opacities[i],
+        16..19 => grads.v_amplitudes[i][p - 16],
+        _ => grads.v_sh[i * sh_count + (p - 19) / 3][(p - 19) % 3],
+    }
+}
+
+/// Moderate random alpha kernels in front of the camera: rotations, velocities, SH, some
+/// opaque (the clamp binds), some nearly transparent.
+fn random_alpha_scene(seed: u64, n: usize, sh_count: usize) -> Scene {
+    let mut rng = seeded_rng(seed);
+    let kernels: Vec<Kernel> = (0..n)
+        .map(|_| {
+            let velocity = std::array::from_fn(|_| rng.random_range(-0.5..0.5));
+            let mut kernel = Kernel::new(
+                [
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.6..0.6),
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(0.2..0.8),
+                ],
+                [
+                    rng.random_range(0.08..0.35),
+                    rng.random_range(0.08..0.35),
+                    rng.random_range(0.08..0.35),
+                    rng.random_range(0.2..1.0),
+                ],
+                std::array::from_fn(|_| rng.random_range(0.0..1.0)),
+            );
+            kernel.velocity = velocity;
+            kernel.rotation = splat4d::model::random::random_rotation(&mut rng);
+            kernel
+        })
+        .collect();
+    let scene = Scene::from_kernels(&kernels, [0.2, 0.1, 0.3], "<random alpha>").unwrap();
+    alpha_scene(scene, seed + 100, sh_count)
+}
+
+/// Bound on `|fast - finite difference|` per field: relative to the field's largest gradient
+/// and to the value (f32 `q`, `G` and colour in the fast loops; measured worst 2e-6
+/// relative).
+const ALPHA_ATOL_FD: f64 = 2e-5;
+const ALPHA_RTOL_FD: f64 = 2e-5;
+
+/// Checks every field's fast gradient against central differences of the f64 twin with
+/// pairs, order and stops held constant. Returns the worst ratio to the bound.
+fn check_alpha_gradients(what: &str, scene: &Scene, camera: &Camera, tau: f64) -> f64 {
+    use splat4d::reference::alpha::composite_traced;
+    let options = RenderOptions::default();
+    let traced = render_reference_alpha(scene, camera, tau, &options);
+    let kernels = splat4d::reference::alpha::reference_alpha_kernels(scene, camera, tau, &options);
+    let order: Vec<usize> = kernels.iter().map(|k| k.kernel.index).collect();
+    // The target: the twin's render of a jittered scene.
+    let mut moved = scene.clone();
+    let mut rng = seeded_rng(5);
+    for i in 0..moved.len() {
+        for c in 0..3 {
+            moved.means[i][c] += rng.random_range(-0.05..0.05);
+            moved.amplitudes[i][c] *= rng.random_range(0.6..1.2);
+        }
+    }
+    let target: Vec<f32> = render_reference_alpha(&moved, camera, tau, &options)
+        .pixels
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let target_image = Image {
+        width: camera.width,
+        height: camera.height,
+        pixels: target.clone(),
+    };
+    let mut grads = splat4d::Gradients::for_scene(scene);
+    splat4d::fit::loss::view_loss_and_gradients(
+        &mut RenderContext::new(),
+        scene,
+        camera,
+        tau,
+        &options,
+        &target_image,
+        &mut grads,
+    )
+    .unwrap();
+    let loss = |scene: &Scene| {
+        let pixels = composite_traced(scene, camera, tau, &options, &order, &traced.traces);
+        splat4d::reference::mse(&pixels, &target)
+    };
+    let fields = field_count(scene);
+    let mut fd = vec![vec![0.0; fields]; scene.len()];
+    for (i, row) in fd.iter_mut().enumerate() {
+        for (p, value) in row.iter_mut().enumerate() {
+            let theta = field(scene, i, p);
+            let h = match p {
+                7..11 => 1e-4 * theta,
+                _ => 1e-6 * theta.abs().max(0.1),
+            };
+            let mut plus = scene.clone();
+            *field_mut(&mut plus, i, p) = theta + h;
+            let mut minus = scene.clone();
+            *field_mut(&mut minus, i, p) = theta - h;
+            *value = (loss(&plus) - loss(&minus)) / (2.0 * h);
+        }
+    }
+    let scale: Vec<f64> = (0..fields)
+        .map(|p| fd.iter().map(|r| r[p].abs()).fold(0.0, f64::max))
+        .collect();
+    for (p, s) in scale.iter().enumerate() {
+        assert!(
+            *s > 0.0,
+            "{what}: {} has a gradient somewhere",
+            field_name(p)
+        );
+    }
+    let mut worst = 0.0_f64;
+    for (i, row) in fd.iter().enumerate() {
+        for (p, &f) in row.iter().enumerate() {
+            let a = gradient_field(&grads, scene.sh_count, i, p);
+            let bound = ALPHA_ATOL_FD * scale[p] + ALPHA_RTOL_FD * f.abs() + 1e-12;
+            let delta = (a - f).abs();
+            worst = worst.max(delta / bound);
+            assert!(
+                delta <= bound,
+                "{what}: kernel {i} {}: fast {a} vs finite difference {f} (|Δ| = {delta:e}, bound {bound:e})",
+                field_name(p)
+            );
+        }
+    }
+    // The background: ∂L/∂b = Σ v T_final.
+    for c in 0..3 {
+        let h = 1e-6;
+        let mut plus = scene.clone();
+        plus.background[c] += h;
+        let mut minus = scene.clone();
+        minus.background[c] -= h;
+        let f = (loss(&plus) - loss(&minus)) / (2.0 * h);
+        let a = grads.v_background[c];
+        assert!(
+            (a - f).abs() <= 1e-4 * f.abs() + 1e-9,
+            "{what}: background {c}: {a} vs {f}"
+        );
+    }
+    eprintln!("{what}: worst gradient at {worst:.3} of the bound");
+    worst
+}
+
+#[test]
+fn gradients_of_every_field_match_finite_differences_of_the_twin() {
+    let camera =
+        Camera::look_at([0.2, -0.3, -3.5], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 36, 28).unwrap();
+    for (seed, sh_count) in [(1, 0), (2, 3), (3, 8), (4, 15)] {
+        let scene = random_alpha_scene(seed, 24, sh_count);
+        check_alpha_gradients(&format!("seed {seed}"), &scene, &camera, 0.45);
+    }
+    let stack_camera =
+        Camera::look_at([0.3, 0.2, -4.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 32, 28).unwrap();
+    for (opacity, tau) in [(1.0, 0.3), (0.7, 0.6)] {
+        let scene = stack_scene(8, opacity);
+        check_alpha_gradients(&format!("stack o = {opacity}"), &scene, &stack_camera, tau);
+    }
+}
+
+#[test]
+fn alpha_gradients_are_the_same_bits_for_any_thread_count() {
+    let camera = test_camera(70, 52);
+    let scene = alpha_scene(hard_random_scene(&camera, 12, 300), 12, 3);
+    let target = Image {
+        width: camera.width,
+        height: camera.height,
+        pixels: vec![0.25; 3 * camera.pixel_count()],
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut grads = splat4d::Gradients::for_scene(&scene);
+            splat4d::fit::loss::view_loss_and_gradients(
+                &mut RenderContext::new(),
+                &scene,
+                &camera,
+                0.5,
+                &RenderOptions::default(),
+                &target,
+                &mut grads,
+            )
+            .unwrap();
+            grads
+        })
+    };
+    let one = run(1);
+    assert!(one.v_opacities.iter().any(|&v| v != 0.0));
+    assert!(one.v_rotations.iter().flatten().any(|&v| v != 0.0));
+    for threads in [2, 3] {
+        assert_eq!(run(threads), one, "{threads} threads");
+    }
+}

@@ -1,0 +1,300 @@
+//! Backward of the alpha compositing stage (SPEC §8): from `∂L/∂C` per pixel to per
+//! projected kernel `∂L/∂colour`, `∂L/∂o(τ)`, `∂L/∂m2` and `∂L/∂Σ2`.
+//!
+//! A pixel is `Σ_i colour_i α̂_i T_i + T_final b` over the kernels it composited (pairs, order
+//! and stop held constant), `T_i = Π_{j<i} (1 - α̂_j)`. With `v = ∂L/∂C` and the light
+//! behind kernel `i`, `S_i = Σ_{j>i} colour_j α̂_j T_j + T_final b`:
+//!
+//! ```text
+//! ∂L/∂colour_i += v α̂_i T_i
+//! ∂L/∂α̂_i      = v · (colour_i T_i - S_i / (1 - α̂_i))
+//! α̂ = o(τ) G unclamped:  ∂L/∂o(τ) += ∂L/∂α̂ G,   w = ∂L/∂α̂ α̂,  ∂L/∂q = -½ w
+//! α̂ = 0.99 (clamped):    nothing through α̂
+//! ∂L/∂b        += v T_final
+//! ```
+//!
+//! and `w` goes to `m2` and `Σ2` through the additive raster's moments of `(t, Δv)` (see
+//! [`crate::backward::raster`]). Each half row is composited again exactly as the forward
+//! did ([`crate::composite`]: the same entries, `G`, `α̂` and `T`, bit for bit), recording
+//! each contributing pair; then the records are walked back to front, so `S_i` is a sum
+//! built from the back and no transmittance is ever recovered by division. Per kernel of a
+//! tile the nine sums are f64; the tiles' partials are reduced in entry order (tile-major):
+//! no atomics, the same bits for any thread count or SIMD path.
+
+use rayon::prelude::*;
+
+use crate::backward::raster::ScreenGradients;
+use crate::composite::{CompositeScratch, MAX_ALPHA, composite_half_row, prepare_alpha_tile};
+use crate::project::ProjectedKernels;
+use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
+use crate::tiles::TileBins;
+
+/// Per (tile, kernel) entry: `Σ ∂L/∂colour` (3), `Σ w t`, `Σ w t²`, `Σ w Δv`, `Σ w t Δv`,
+/// `Σ w Δv²`, `Σ ∂L/∂α̂ G`.
+pub(crate) type AlphaPartial = [f64; 9];
+
+/// One contributing pair of a half row, as the forward composited it.
+#[derive(Clone, Copy, Debug)]
+struct Record {
+    entry: u32,
+    lane: u32,
+    alpha: f64,
+    transmittance: f64,
+}
+
+/// Scratch of one worker.
+#[derive(Default)]
+struct Scratch {
+    composite: CompositeScratch,
+    records: Vec<Record>,
+    sums: Vec<AlphaPartial>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// Accumulates `∂L/∂C` (`v_image`, RGB row-major) of the alpha frame last composited
+/// (`proj` in depth order, `bins`, `forms` of that frame) into `out` (one entry per projected
+/// kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
+#[allow(clippy::too_many_arguments)]
+pub fn composite_backward(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    forms: &[RowForm],
+    background: [f32; 3],
+    v_image: &[f32],
+    exp: ExpMode,
+    partials: &mut Vec<AlphaPartial>,
+    out: &mut ScreenGradients,
+) -> [f64; 3] {
+    composite_backward_on(
+        SimdPath::detect(),
+        proj,
+        bins,
+        forms,
+        background,
+        v_image,
+        exp,
+        partials,
+        out,
+    )
+}
+
+/// [`composite_backward`] on `path` (which the CPU must have).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn composite_backward_on(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    forms: &[RowForm],
+    background: [f32; 3],
+    v_image: &[f32],
+    exp: ExpMode,
+    partials: &mut Vec<AlphaPartial>,
+    out: &mut ScreenGradients,
+) -> [f64; 3] {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run {path}"
+    );
+    let width = bins.width as usize;
+    assert_eq!(
+        v_image.len(),
+        3 * width * bins.height as usize,
+        "∂L/∂C has the image's size"
+    );
+    assert_eq!(forms.len(), proj.len(), "the forward's row forms");
+    let background = background.map(f64::from);
+    partials.clear();
+    partials.resize(bins.proj_from_entry.len(), [0.0; 9]);
+    let mut runs = Vec::with_capacity(bins.tile_count());
+    let mut rest = partials.as_mut_slice();
+    for t in 0..bins.tile_count() {
+        let (run, tail) = rest.split_at_mut(bins.tile_entries(t).len());
+        runs.push((t, run));
+        rest = tail;
+    }
+    let v_backgrounds: Vec<[f64; 3]> = runs
+        .into_par_iter()
+        .map(|(t, run)| {
+            SCRATCH.with(|cell| {
+                let scratch = &mut *cell.borrow_mut();
+                prepare_alpha_tile(proj, bins, forms, t, &mut scratch.composite);
+                match (path, exp) {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: checked above that the CPU has the path's features.
+                    (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+                        backward_tile_avx2::<true>(bins, t, background, v_image, run, scratch)
+                    },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+                        backward_tile_avx2::<false>(bins, t, background, v_image, run, scratch)
+                    },
+                    (_, ExpMode::Poly) => {
+                        backward_tile::<true>(bins, t, background, v_image, run, scratch)
+                    }
+                    (_, ExpMode::Std) => {
+                        backward_tile::<false>(bins, t, background, v_image, run, scratch)
+                    }
+                }
+            })
+        })
+        .collect();
+    reduce(proj, bins, partials, out);
+    let mut v_background = [0.0; 3];
+    for tile in v_backgrounds {
+        for (sum, v) in v_background.iter_mut().zip(tile) {
+            *sum += v;
+        }
+    }
+    v_background
+}
+
+/// [`backward_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_tile_avx2<const FAST: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    v_image: &[f32],
+    run: &mut [AlphaPartial],
+    scratch: &mut Scratch,
+) -> [f64; 3] {
+    backward_tile::<FAST>(bins, t, background, v_image, run, scratch)
+}
+
+/// Tile `t` (prepared in `scratch.composite`) into `run`, one partial per tile entry;
+/// returns the tile's `Σ v T_final`.
+#[inline(always)]
+fn backward_tile<const FAST: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    v_image: &[f32],
+    run: &mut [AlphaPartial],
+    scratch: &mut Scratch,
+) -> [f64; 3] {
+    let Scratch {
+        composite,
+        records,
+        sums,
+    } = scratch;
+    let tile = &composite.tile;
+    sums.clear();
+    sums.resize(tile.kernels.len(), [0.0; 9]);
+    let rect = bins.tile_rect(t);
+    let [tx0, _, ty0, _] = rect;
+    let width = bins.width as usize;
+    let mut v_background = [0.0; 3];
+    for HalfRow {
+        row,
+        index,
+        first,
+        lanes,
+    } in half_rows(rect)
+    {
+        let entries = &tile.halves[index];
+        let (first_lane, lanes_f) = (first as f32, lanes as f32);
+        records.clear();
+        let state = composite_half_row::<FAST>(
+            entries,
+            &tile.kernels,
+            &composite.opacities,
+            first_lane,
+            lanes_f,
+            |entry, lane, alpha, transmittance| {
+                records.push(Record {
+                    entry: entry as u32,
+                    lane: lane as u32,
+                    alpha,
+                    transmittance,
+                });
+            },
+        );
+        // ∂L/∂C of the half row; zero past the image's edge.
+        let mut v = [[0.0_f64; LANES]; 3];
+        let start = 3 * ((ty0 as usize + row) * width + tx0 as usize + first);
+        for (i, pixel) in v_image[start..start + 3 * lanes]
+            .chunks_exact(3)
+            .enumerate()
+        {
+            for c in 0..3 {
+                v[c][i] = f64::from(pixel[c]);
+            }
+        }
+        // The light behind each pair, built from the back: first the background's share.
+        let mut behind = [[0.0_f64; LANES]; 3];
+        for i in 0..lanes {
+            for c in 0..3 {
+                behind[c][i] = state.transmittance[i] * background[c];
+                v_background[c] += v[c][i] * state.transmittance[i];
+            }
+        }
+        for record in records.iter().rev() {
+            let entry = &entries[record.entry as usize];
+            let k = entry.kernel as usize;
+            let kernel = &tile.kernels[k];
+            let i = record.lane as usize;
+            let (alpha, transmittance) = (record.alpha, record.transmittance);
+            let weight = alpha * transmittance;
+            let mut v_alpha = 0.0;
+            let sum = &mut sums[k];
+            for c in 0..3 {
+                let colour = kernel.amplitude[c];
+                v_alpha += v[c][i] * (colour * transmittance - behind[c][i] / (1.0 - alpha));
+                behind[c][i] += colour * weight;
+                sum[c] += v[c][i] * weight;
+            }
+            if alpha < MAX_ALPHA {
+                let (t, g, _) = entry.lane::<FAST>(kernel, first_lane, lanes_f, i);
+                let (t, dv) = (f64::from(t), f64::from(entry.dv));
+                let w = v_alpha * alpha;
+                sum[3] += w * t;
+                sum[4] += w * t * t;
+                sum[5] += w * dv;
+                sum[6] += w * t * dv;
+                sum[7] += w * dv * dv;
+                sum[8] += v_alpha * f64::from(g);
+            }
+        }
+    }
+    for (sum, &n) in sums.iter().zip(&tile.entry_of) {
+        run[n as usize] = *sum;
+    }
+    v_background
+}
+
+/// Reduces the per-entry partials into per-kernel gradients in entry order (tile-major).
+fn reduce(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    partials: &[AlphaPartial],
+    out: &mut ScreenGradients,
+) {
+    let mut sums = vec![[0.0_f64; 9]; proj.len()];
+    for (partial, &p) in partials.iter().zip(&bins.proj_from_entry) {
+        for (s, v) in sums[p as usize].iter_mut().zip(partial) {
+            *s += v;
+        }
+    }
+    out.v_amplitudes.clear();
+    out.v_means.clear();
+    out.v_covariances.clear();
+    out.v_opacities.clear();
+    for (p, s) in sums.iter().enumerate() {
+        let [a, b, _] = proj.conics[p];
+        let e = 1.0 / proj.covariances[p][2];
+        let [s_t, s_tt, s_v, s_tv, s_vv] = [s[3], s[4], s[5], s[6], s[7]];
+        out.v_amplitudes.push([s[0], s[1], s[2]]);
+        out.v_means.push([a * s_t, b * s_t + e * s_v]);
+        out.v_covariances.push([
+            0.5 * a * a * s_tt,
+            0.5 * a * (b * s_tt + e * s_tv),
+            0.5 * (b * b * s_tt + 2.0 * b * e * s_tv + e * e * s_vv),
+        ]);
+        out.v_opacities.push(s[8]);
+    }
+}
