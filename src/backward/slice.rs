@@ -58,22 +58,31 @@ pub fn slice_backward(
         let w = (-0.5 * d * d).exp();
         let amplitude = scene.amplitudes[i];
         let velocity = scene.velocities[i];
-        // What the temporal weight multiplies, and its gradient: a(τ) = A w, or o(τ) = o w.
-        let v_weighted = if alpha {
+        // ∂L/∂t and ∂L/∂st through the temporal weight, on a(τ) = A w or on o(τ) = o w
+        // (the additive sums keep their order of operations, so their bits).
+        let (v_t_weight, v_st_weight) = if alpha {
             let v_opacity = from_slice.v_opacities[s];
             grads.v_opacities[i] += w * v_opacity;
             let v_mean_colour = colour_backward(scene, i, centre, sliced.means[s], v_a, grads);
             for c in 0..3 {
                 v_m[c] += v_mean_colour[c];
             }
-            scene.opacities[i] * w * v_opacity
+            let v_weighted = scene.opacities[i] * w * v_opacity;
+            (v_weighted * (d / st), v_weighted * (d * d / st))
         } else {
             for (total, v) in grads.v_amplitudes[i].iter_mut().zip(v_a) {
                 *total += w * v;
             }
-            (0..3).map(|c| amplitude[c] * w * v_a[c]).sum::<f64>()
+            (
+                (0..3)
+                    .map(|c| amplitude[c] * w * (d / st) * v_a[c])
+                    .sum::<f64>(),
+                (0..3)
+                    .map(|c| amplitude[c] * w * (d * d / st) * v_a[c])
+                    .sum::<f64>(),
+            )
         };
-        let v_t = v_weighted * (d / st) - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
+        let v_t = v_t_weight - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
         let mean = &mut grads.v_means[i];
         for c in 0..3 {
             mean[c] += v_m[c];
@@ -96,7 +105,7 @@ pub fn slice_backward(
                 .sum();
             v_scale[k] += 2.0 * scale[k] * diagonal;
         }
-        v_scale[3] += v_weighted * (d * d / st);
+        v_scale[3] += v_st_weight;
         let v_rotation = rotation_gradient(scene.rotations[i], scale, &r, &v_sigma);
         for (total, v) in grads.v_rotations[i].iter_mut().zip(v_rotation) {
             *total += v;

@@ -8,7 +8,14 @@
 //! colour with opacity while splat4d adds amplitudes, so the mapping is approximate: with
 //! `p = max_c |a_c(τ)|`, opacity `α = clamp(p, 0.01, 0.99)` stored as `logit(α)`, colour
 //! `c = a(τ)/α` stored as the SH DC term `f_dc = (c - ½)/C0`, `C0 = 0.28209479177387814`. For
-//! sparse kernels with `|a| ≤ 1` this reproduces `α c = a`.
+//! sparse kernels with `|a| ≤ 1` this reproduces `α c = a`. Alpha scenes (SPEC §8) map
+//! exactly: `f_dc = (A - ½)/C0`, `f_rest` the SH channel by channel, opacity the logit of
+//! `o(τ)`; a 3DGS rasterizer draws them as splat4d does, up to its own 3σ cut.
+//!
+//! **3DGS files read** ([`read_scene_ply`]): a graphdeco PLY (`x y z f_dc_* [f_rest_*]
+//! opacity scale_* rot_*`, from gsplat, nerfstudio, brush or the Inria code) is an alpha scene
+//! of static kernels: `t = 0`, `st = 1e30`, `o = sigmoid(opacity)`, `σ = exp(scale)`,
+//! amplitude `C0 f_dc + ½`, SH from `f_rest`.
 //!
 //! **4D scene** ([`write_scene_ply`], [`read_scene_ply`]): binary little endian, `element
 //! vertex N` with double properties `x y z t sigma_x sigma_y sigma_z sigma_t amp_0 amp_1 amp_2
@@ -63,9 +70,19 @@ pub fn splat_colour(amplitude: [f64; 3]) -> (f64, [f64; 3]) {
     (logit, amplitude.map(|a| (a / alpha - 0.5) / SH_C0))
 }
 
-/// Writes the 3DGS slice of `scene` at `tau` (kernels alive under `cutoff`). With
-/// `sh_rest`, 45 zero `f_rest_0..44` properties (spherical harmonics of degree 3, as the
-/// reference 3DGS loader expects) follow `f_dc_2`. Returns the number of splats.
+/// The 3DGS record of an alpha kernel (SPEC §8): the opacity logit of `o(τ)` (clamped to
+/// `[1e-6, 1 - 1e-6]`), `f_dc` from the amplitude.
+#[must_use]
+pub fn alpha_splat_colour(amplitude: [f64; 3], opacity: f64) -> (f64, [f64; 3]) {
+    let o = opacity.clamp(1e-6, 1.0 - 1e-6);
+    ((o / (1.0 - o)).ln(), amplitude.map(|a| (a - 0.5) / SH_C0))
+}
+
+/// Writes the 3DGS slice of `scene` at `tau` (kernels alive under `cutoff`). Additive
+/// scenes map as the module doc says; alpha scenes exactly (SPEC §8: `f_dc`, `f_rest` from the
+/// amplitude and SH, the logit of `o(τ)`), with their SH as `f_rest_*` (stored channel by
+/// channel). With `sh_rest`, `f_rest_*` are padded with zeros to degree 3 (45, as the
+/// reference 3DGS loader expects). Returns the number of splats.
 pub fn write_slice_ply(
     scene: &Scene,
     tau: f64,
@@ -76,15 +93,12 @@ pub fn write_slice_ply(
     let mut sliced = SlicedKernels::default();
     slice(scene, tau, cutoff, &mut sliced);
     let n = sliced.len();
-    let rest: Vec<String> = if sh_rest {
-        (0..45).map(|k| format!("f_rest_{k}")).collect()
-    } else {
-        Vec::new()
-    };
+    let alpha = scene.blend == Blend::Alpha;
+    let triplets = if sh_rest { 15 } else { scene.sh_count };
+    let rest: Vec<String> = (0..3 * triplets).map(|k| format!("f_rest_{k}")).collect();
     let mut names: Vec<&str> = SLICE_PROPERTIES[..9].to_vec();
     names.extend(rest.iter().map(String::as_str));
     names.extend(&SLICE_PROPERTIES[9..]);
-    let zeros = vec![0_u8; 4 * rest.len()];
     write_atomically(path, |w| {
         w.write_all(
             header(
@@ -98,32 +112,24 @@ pub fn write_slice_ply(
         for s in 0..n {
             let i = sliced.kernel_from_slice[s] as usize;
             let [m0, m1, m2] = sliced.means[s];
-            let (opacity, dc) = splat_colour(sliced.amplitudes[s]);
+            let (opacity, dc) = if alpha {
+                alpha_splat_colour(sliced.amplitudes[s], sliced.opacities[s])
+            } else {
+                splat_colour(sliced.amplitudes[s])
+            };
+            // f_rest_{c·triplets + j} = sh_j,c, zero past the scene's own SH.
+            let sh = scene.sh_of(i);
+            let f_rest = (0..3 * triplets).map(|k| {
+                let (c, j) = (k / triplets, k % triplets);
+                sh.get(j).map_or(0.0, |t| t[c])
+            });
             let [sx, sy, sz, _] = scene.scales[i];
             let q = scene.rotations[i];
-            let values = [
-                m0,
-                m1,
-                m2,
-                0.0,
-                0.0,
-                0.0,
-                dc[0],
-                dc[1],
-                dc[2],
-                opacity,
-                sx.ln(),
-                sy.ln(),
-                sz.ln(),
-                q[0],
-                q[1],
-                q[2],
-                q[3],
-            ];
-            for (k, v) in values.into_iter().enumerate() {
-                if k == 9 {
-                    w.write_all(&zeros)?;
-                }
+            let values = [m0, m1, m2, 0.0, 0.0, 0.0, dc[0], dc[1], dc[2]]
+                .into_iter()
+                .chain(f_rest)
+                .chain([opacity, sx.ln(), sy.ln(), sz.ln(), q[0], q[1], q[2], q[3]]);
+            for v in values {
                 w.write_all(&(v as f32).to_le_bytes())?;
             }
         }
@@ -256,6 +262,7 @@ pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
 /// (only float and double properties are read; others are skipped).
 struct Property {
     name: String,
+    kind: String,
     size: usize,
     float: bool,
 }
@@ -438,6 +445,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                 })?;
                 properties.push(Property {
                     name: (*name).to_owned(),
+                    kind: (*kind).to_owned(),
                     size,
                     float,
                 });
@@ -458,7 +466,10 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                 properties[index].size,
             ))
         } else {
-            Err(bad(format!("property `{name}` must be float or double")))
+            Err(bad(format!(
+                "property `{name}` has type `{}`: it must be float or double",
+                properties[index].kind
+            )))
         })
     };
     let has = |name: &str| properties.iter().any(|p| p.name == name);

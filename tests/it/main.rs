@@ -20,6 +20,8 @@ mod determinism;
 mod fit;
 /// Seeded byte-level fuzzing of every loader: errors, never panics.
 mod fuzz_loaders;
+/// 3DGS PLYs both ways: graphdeco files read, exports drawn by a minimal 3DGS compositor.
+mod gaussians_3d;
 /// glTF import on the Khronos samples: animation, cameras, colours.
 mod gltf;
 /// Imported animations measured from renders over time.
