@@ -62,6 +62,10 @@ pub struct BenchArgs {
     /// Output folder of --sweep.
     #[arg(long, default_value = "out/bench")]
     out: PathBuf,
+    /// Blend of the built-in scenes: `additive` (SPEC §5) or `alpha` (§8: every kernel at
+    /// opacity 0.5, colour its amplitude). Scene files keep their own.
+    #[arg(long, default_value = "additive")]
+    blend: splat4d::Blend,
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
@@ -88,6 +92,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         sweep: args.sweep,
         ceiling: args.ceiling,
         out: args.out.clone(),
+        blend: args.blend,
     };
     super::with_progress(|bars| bench(&request, bars))
 }

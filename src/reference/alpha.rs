@@ -162,6 +162,56 @@ pub struct ReferenceAlphaImage {
     pub pairs: u64,
 }
 
+/// One pixel composited in f64: its colour, whether a pair sits on the cut-off's edge, its
+/// stop margin, its trace and its pairs.
+struct PixelResult {
+    colour: [f64; 3],
+    borderline: bool,
+    margin: f64,
+    trace: PixelTrace,
+    pairs: u64,
+}
+
+fn composite_pixel(kernels: &[AlphaKernel], background: [f64; 3], i: u32, j: u32) -> PixelResult {
+    let mut colour = [0.0; 3];
+    let mut transmittance = 1.0;
+    let mut trace = PixelTrace::default();
+    let mut borderline = false;
+    let mut margin = f64::INFINITY;
+    let mut pairs = 0;
+    for (k, alpha_kernel) in kernels.iter().enumerate() {
+        let kernel = &alpha_kernel.kernel;
+        let q = quadratic_form(kernel, i, j);
+        borderline |= is_borderline(q, kernel.qmax);
+        if q > kernel.qmax {
+            continue;
+        }
+        pairs += 1;
+        let alpha = (kernel.opacity * (-0.5 * q).exp()).min(MAX_ALPHA);
+        let next = transmittance * (1.0 - alpha);
+        margin = margin.min((next - T_STOP).abs() / next);
+        if next < T_STOP {
+            trace.stopped_by = Some(k as u32);
+            break;
+        }
+        for (sum, c) in colour.iter_mut().zip(alpha_kernel.colour) {
+            *sum += c * alpha * transmittance;
+        }
+        transmittance = next;
+        trace.composited.push(k as u32);
+    }
+    for (sum, b) in colour.iter_mut().zip(background) {
+        *sum += transmittance * b;
+    }
+    PixelResult {
+        colour,
+        borderline,
+        margin,
+        trace,
+        pairs,
+    }
+}
+
 /// Composites every kernel against every pixel in f64 (SPEC §8).
 #[must_use]
 pub fn render_reference_alpha(
@@ -183,42 +233,32 @@ pub fn render_reference_alpha(
     };
     for j in 0..camera.height {
         for i in 0..camera.width {
-            let mut colour = [0.0; 3];
-            let mut transmittance = 1.0;
-            let mut trace = PixelTrace::default();
-            let mut borderline = false;
-            let mut margin = f64::INFINITY;
-            for (k, alpha_kernel) in kernels.iter().enumerate() {
-                let kernel = &alpha_kernel.kernel;
-                let q = quadratic_form(kernel, i, j);
-                borderline |= is_borderline(q, kernel.qmax);
-                if q > kernel.qmax {
-                    continue;
-                }
-                out.pairs += 1;
-                let alpha = (kernel.opacity * (-0.5 * q).exp()).min(MAX_ALPHA);
-                let next = transmittance * (1.0 - alpha);
-                margin = margin.min((next - T_STOP).abs() / next);
-                if next < T_STOP {
-                    trace.stopped_by = Some(k as u32);
-                    break;
-                }
-                for (sum, c) in colour.iter_mut().zip(alpha_kernel.colour) {
-                    *sum += c * alpha * transmittance;
-                }
-                transmittance = next;
-                trace.composited.push(k as u32);
-            }
-            for (sum, b) in colour.iter_mut().zip(scene.background) {
-                *sum += transmittance * b;
-            }
-            out.pixels.extend_from_slice(&colour);
-            out.borderline.push(borderline);
-            out.stop_margin.push(margin);
-            out.traces.push(trace);
+            let pixel = composite_pixel(&kernels, scene.background, i, j);
+            out.pixels.extend_from_slice(&pixel.colour);
+            out.borderline.push(pixel.borderline);
+            out.stop_margin.push(pixel.margin);
+            out.traces.push(pixel.trace);
+            out.pairs += pixel.pairs;
         }
     }
     out
+}
+
+/// The f64 composite at chosen pixels only (for error estimates on frames too large for
+/// [`render_reference_alpha`]).
+#[must_use]
+pub fn reference_alpha_at_pixels(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    pixels: &[(u32, u32)],
+) -> Vec<[f64; 3]> {
+    let kernels = reference_alpha_kernels(scene, camera, tau, options);
+    pixels
+        .iter()
+        .map(|&(i, j)| composite_pixel(&kernels, scene.background, i, j).colour)
+        .collect()
 }
 
 /// The image of `scene` (perturbed from the one traced) composited with each pixel's

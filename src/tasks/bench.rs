@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::io::camera_file::load_camera;
 use crate::io::scene_file::load_scene;
 use crate::io::write_bytes_atomically;
-use crate::model::{Camera, Error, Progress, Result, Scene};
+use crate::model::{Blend, Camera, Error, Progress, Result, Scene};
 use crate::raster::SimdPath;
 use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use crate::report::bench::{
@@ -49,7 +49,12 @@ pub struct BenchRequest {
     pub ceiling: bool,
     /// Output folder of the sweep.
     pub out: PathBuf,
+    /// Blend of the built-in scenes (alpha: every kernel at opacity 0.5).
+    pub blend: Blend,
 }
+
+/// Opacity of the built-in scenes' kernels with the alpha blend.
+pub const BENCH_OPACITY: f64 = 0.5;
 
 /// What [`bench`] measured: a table, or the sweep's table and files.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,9 +97,18 @@ fn bench_scenes(request: &BenchRequest) -> Result<Vec<(String, Scene, Camera)>> 
     for name in &names {
         let path = Path::new(name);
         if let (false, Some(n)) = (path.exists(), builtin_scene_size(name)) {
+            let scene = match request.blend {
+                Blend::Additive => bench_scene(n, 42),
+                Blend::Alpha => {
+                    bench_scene(n, 42).into_alpha(vec![BENCH_OPACITY; n], 0, Vec::new(), name)?
+                }
+            };
             scenes.push((
-                format!("bench-{}", name.to_ascii_lowercase()),
-                bench_scene(n, 42),
+                match request.blend {
+                    Blend::Additive => format!("bench-{}", name.to_ascii_lowercase()),
+                    Blend::Alpha => format!("bench-{}-alpha", name.to_ascii_lowercase()),
+                },
+                scene,
                 bench_camera(w, h),
             ));
             continue;
@@ -193,10 +207,12 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
         let text = write_sweep(request, name, camera, settings.threads, &grid, &points)?;
         return Ok(BenchSummary { text });
     }
+    // The dense baseline sums (SPEC §5): it has no alpha counterpart.
     let dense_for = |scene: &Scene, camera: &Camera| {
-        request.dense.unwrap_or_else(|| {
-            scene.len() as f64 * f64::from(camera.width) * f64::from(camera.height) <= 3e9
-        })
+        scene.blend == Blend::Additive
+            && request.dense.unwrap_or_else(|| {
+                scene.len() as f64 * f64::from(camera.width) * f64::from(camera.height) <= 3e9
+            })
     };
     let jobs: usize = scenes
         .iter()
