@@ -10,11 +10,14 @@
 //! axis-aligned bound of its ellipsoid `q ≤ qmax`, `|Δx_a| ≤ √(qmax Σ3_aa)`; z-slabs run in
 //! parallel and each cell sums its kernels in ascending order, so the result does not depend
 //! on the thread count. Per-kernel work in f64, per-cell sums in f32.
+//!
+//! For alpha scenes (SPEC §8) the grid holds the opacity density `Σ_i [q ≤ qmax] o_i(τ)
+//! exp(-½ q_i(p))` instead (`ā` replaced by `o(τ) = o w(τ)`, the cut-off on `o(τ)`).
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use crate::model::scene::Scene;
+use crate::model::scene::{Blend, Scene};
 use crate::slice::{SlicedKernels, slice};
 
 /// A cubic grid of `res³` cells over an axis-aligned box.
@@ -148,7 +151,10 @@ pub fn evaluate_volume(scene: &Scene, tau: f64, grid: &Grid, cutoff: f64) -> Vol
                 mean: DVec3::from(sliced.means[s]),
                 precision,
                 qmax,
-                amplitude: (sliced.amplitudes[s].iter().sum::<f64>() / 3.0) as f32,
+                amplitude: match scene.blend {
+                    Blend::Additive => (sliced.amplitudes[s].iter().sum::<f64>() / 3.0) as f32,
+                    Blend::Alpha => sliced.opacities[s] as f32,
+                },
                 reach: [(qmax * xx).sqrt(), (qmax * yy).sqrt(), (qmax * zz).sqrt()],
             })
         })

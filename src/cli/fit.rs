@@ -3,10 +3,12 @@
 
 use std::path::PathBuf;
 
+use splat4d::Blend;
 use splat4d::Result;
 use splat4d::fit::adam::LearningRates;
 use splat4d::fit::adaptive::AdaptiveOptions;
-use splat4d::fit::plan::FitPlan;
+use splat4d::fit::alpha::AlphaFitOptions;
+use splat4d::fit::plan::{DEFAULT_ALPHA, FitPlan};
 use splat4d::fit::train::FitMode;
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
@@ -24,14 +26,16 @@ pub struct FitArgs {
     init: String,
     /// Kernels `auto` starts from: 1 is one kernel at the centre of the box (space and
     /// time); more are spread at random in the box.
-    #[arg(long, default_value_t = FitPlan::default().start_kernels)]
-    start_kernels: usize,
+    /// (Default: 4 additive; 2000 kernels at random in the box for the alpha blend.)
+    #[arg(long)]
+    start_kernels: Option<usize>,
     /// Densify and prune during the fit (always on with `--init auto`).
     #[arg(long)]
     adaptive: bool,
     /// Budget of the adaptive fit: never more kernels than this.
-    #[arg(long, default_value_t = FitPlan::default().rounds.max_kernels)]
-    max_kernels: usize,
+    /// (Default: 100000 additive, 200000 alpha.)
+    #[arg(long)]
+    max_kernels: Option<usize>,
     /// Steps between densify/prune rounds.
     #[arg(long, default_value_t = FitPlan::default().rounds.every)]
     densify_every: usize,
@@ -64,9 +68,9 @@ pub struct FitArgs {
     /// initial scale; otherwise never split: the fit sizes the kernels).
     #[arg(long, value_parser = super::args::finite)]
     min_scale: Option<f64>,
-    /// Adam steps.
-    #[arg(long, default_value_t = FitPlan::default().steps)]
-    steps: usize,
+    /// Adam steps (default: 4000 additive, 3000 alpha).
+    #[arg(long)]
+    steps: Option<usize>,
     /// Output scene JSON.
     #[arg(long)]
     out: PathBuf,
@@ -137,9 +141,9 @@ pub struct FitArgs {
     /// `images_N`); the intrinsics are divided by N.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=i64::from(splat4d::io::dataset::MAX_DOWNSCALE)))]
     downscale: u32,
-    /// Views per step.
-    #[arg(long, default_value_t = FitPlan::default().batch_size)]
-    batch: usize,
+    /// Views per step (default: 8 additive, 4 alpha).
+    #[arg(long)]
+    batch: Option<usize>,
     /// Held-out evaluation period, steps (0: only at the end).
     #[arg(long, default_value_t = FitPlan::default().eval_every)]
     eval_every: usize,
@@ -151,15 +155,38 @@ pub struct FitArgs {
     /// border pixels). The background is fitted unless --freeze-background.
     #[arg(long, value_parser = parse_list::<3>)]
     background: Option<[f64; 3]>,
+    /// The blend to fit (SPEC §5 or §8): `additive`, `alpha`, or `auto`: the start scene's
+    /// blend, else the one a splat4d dataset records (`splat4d_blend`), else `alpha`
+    /// (occlusion and view-dependent colour, what real captures need).
+    #[arg(long, default_value = "auto")]
+    blend: String,
+    /// SH triplets per kernel of an alpha fit: 0, 3, 8 or 15 (degree 0–3).
+    #[arg(long, default_value_t = DEFAULT_ALPHA.sh_count)]
+    sh: usize,
     #[command(flatten)]
     render: RenderFlags,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
     let defaults = FitPlan::default();
+    let blend = match args.blend.as_str() {
+        "auto" => None,
+        other => Some(other.parse::<Blend>().map_err(splat4d::Error::Usage)?),
+    };
+    let alpha = AlphaFitOptions {
+        steps: args.steps.unwrap_or(DEFAULT_ALPHA.steps),
+        batch_size: args.batch.unwrap_or(DEFAULT_ALPHA.batch_size),
+        start_kernels: args.start_kernels.unwrap_or(DEFAULT_ALPHA.start_kernels),
+        max_kernels: args.max_kernels.unwrap_or(DEFAULT_ALPHA.max_kernels),
+        sh_count: args.sh,
+        eval_every: args.eval_every,
+        seed: args.seed,
+        render: args.render.options(),
+        ..DEFAULT_ALPHA
+    };
     let plan = FitPlan {
-        steps: args.steps,
-        start_kernels: args.start_kernels,
+        steps: args.steps.unwrap_or(defaults.steps),
+        start_kernels: args.start_kernels.unwrap_or(defaults.start_kernels),
         adaptive: args.adaptive,
         rounds: AdaptiveOptions {
             every: args.densify_every,
@@ -170,7 +197,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             max_growth: args.max_growth,
             min_improvement: args.min_improvement,
             merge_tolerance: args.merge_tolerance,
-            max_kernels: args.max_kernels,
+            max_kernels: args.max_kernels.unwrap_or(defaults.rounds.max_kernels),
             ..defaults.rounds
         },
         min_scale: args.min_scale,
@@ -194,7 +221,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         freeze_time: args.freeze_time,
         freeze_amplitude: args.freeze_amplitude,
         freeze_background: args.freeze_background,
-        batch_size: args.batch,
+        batch_size: args.batch.unwrap_or(defaults.batch_size),
         eval_every: args.eval_every,
         seed: args.seed,
         background: args.background,
@@ -205,6 +232,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
         downscale: args.downscale,
         init: args.init.clone(),
         plan,
+        blend,
+        alpha,
         out: args.out.clone(),
         log: args.log.clone(),
         threads: args.render.threads(),

@@ -2,6 +2,7 @@
 
 pub mod adam;
 pub mod adaptive;
+pub mod alpha;
 pub mod init;
 pub mod loss;
 pub mod plan;

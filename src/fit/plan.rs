@@ -24,6 +24,7 @@
 
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::train::{FitMode, FitOptions};
 use crate::model::{Camera, Error, Result, Scene, View};
@@ -481,6 +482,50 @@ pub fn start_amplitude(views: &[View], background: [f64; 3]) -> [f64; 3] {
         return [DEFAULT_INIT_AMPLITUDE; 3];
     }
     sum.map(|s| s / count as f64)
+}
+
+/// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
+/// papers' rates and density rules, scaled to runs of a few thousand steps.
+pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
+    steps: 3000,
+    batch_size: 4,
+    rates: AlphaRates {
+        mean: 1.6e-4,
+        time: 1.6e-4,
+        velocity: 1.6e-4,
+        scale: 5e-3,
+        rotation: 1e-3,
+        opacity: 5e-2,
+        colour: 2.5e-3,
+        sh: 5e-4,
+    },
+    final_rate_factor: 0.01,
+    eval_every: DEFAULT_EVAL_EVERY,
+    seed: 0,
+    render: RenderOptions {
+        dilation: crate::render::DEFAULT_DILATION,
+        cutoff: crate::render::DEFAULT_CUTOFF,
+        exp: crate::raster::ExpMode::Poly,
+    },
+    start_kernels: 2000,
+    start_opacity: 0.1,
+    start_time_scale: 0.25,
+    sh_count: 3,
+    sh_raise_every: 1000,
+    max_kernels: 200_000,
+    densify_every: 100,
+    densify_from: 0.05,
+    densify_until: 0.6,
+    densify_fraction: 0.05,
+    densify_threshold: 0.0,
+    percent_dense: 0.01,
+    prune_opacity: 0.005,
+};
+
+impl Default for AlphaFitOptions {
+    fn default() -> Self {
+        DEFAULT_ALPHA
+    }
 }
 
 #[cfg(test)]

@@ -35,7 +35,7 @@ use crate::io::json::parse_json;
 use crate::io::write_bytes_atomically;
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result};
-use crate::model::{Dataset, Image, View};
+use crate::model::{Blend, Dataset, Image, View};
 
 /// The three splits, in file order.
 pub const SPLITS: [&str; 3] = ["train", "val", "test"];
@@ -75,6 +75,8 @@ struct WrittenTransforms {
     w: u32,
     h: u32,
     frames: Vec<WrittenFrame>,
+    /// The blend the images were rendered with (SPEC §8), so that `fit` fits the same one.
+    splat4d_blend: Blend,
 }
 
 #[derive(Serialize)]
@@ -109,6 +111,7 @@ struct TransformsFile {
     #[serde(flatten)]
     intrinsics: Intrinsics,
     frames: Vec<FrameEntry>,
+    splat4d_blend: Option<Blend>,
     #[serde(flatten)]
     other: BTreeMap<String, serde_json::Value>,
 }
@@ -278,6 +281,7 @@ pub fn downscale(image: &Image, n: u32) -> Image {
 /// What [`read_transforms`] found in one file.
 struct FileViews {
     views: Vec<View>,
+    blend: Option<Blend>,
     transparent: bool,
     notes: Vec<String>,
 }
@@ -357,6 +361,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
     };
     Ok(FileViews {
         views,
+        blend: file.splat4d_blend,
         transparent,
         notes,
     })
@@ -387,6 +392,7 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
         }
         dataset.transparent = read.transparent;
         dataset.notes = read.notes;
+        dataset.blend = read.blend;
     } else {
         for split in SPLITS {
             let path = dir.join(format!("transforms_{split}.json"));
@@ -396,6 +402,7 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
             let read = read_transforms(dir, &path, options)?;
             dataset.transparent |= read.transparent;
             dataset.notes.extend(read.notes);
+            dataset.blend = dataset.blend.or(read.blend);
             match split {
                 "train" => dataset.train = read.views,
                 "val" => dataset.val = read.views,
@@ -444,7 +451,13 @@ fn save_frame(
 }
 
 /// Writes `dir/transforms_{split}.json` for `frames` taken with intrinsics `c`.
-fn write_transforms(dir: &Path, split: &str, c: &Camera, frames: Vec<WrittenFrame>) -> Result<()> {
+fn write_transforms(
+    dir: &Path,
+    split: &str,
+    c: &Camera,
+    frames: Vec<WrittenFrame>,
+    blend: Blend,
+) -> Result<()> {
     let file = WrittenTransforms {
         camera_angle_x: 2.0 * (0.5 * f64::from(c.width) / c.fx).atan(),
         fl_x: c.fx,
@@ -454,6 +467,7 @@ fn write_transforms(dir: &Path, split: &str, c: &Camera, frames: Vec<WrittenFram
         w: c.width,
         h: c.height,
         frames,
+        splat4d_blend: blend,
     };
     let text = serde_json::to_string_pretty(&file).expect("finite numbers serialise");
     write_bytes_atomically(
@@ -470,6 +484,7 @@ pub struct DatasetWriter {
     out: PathBuf,
     temp: tempfile::TempDir,
     exr: bool,
+    blend: Blend,
     /// Per split: the first camera (all must share its intrinsics) and the frames.
     splits: [(Option<Camera>, Vec<WrittenFrame>); 3],
 }
@@ -500,8 +515,16 @@ impl DatasetWriter {
             out: out.to_path_buf(),
             temp,
             exr,
+            blend: Blend::Additive,
             splits: Default::default(),
         })
+    }
+
+    /// Records that the images are rendered with `blend` (additive unless said).
+    #[must_use]
+    pub fn with_blend(mut self, blend: Blend) -> Self {
+        self.blend = blend;
+        self
     }
 
     /// Writes the images of one view of `split` (`train`, `val` or `test`).
@@ -522,7 +545,7 @@ impl DatasetWriter {
     pub fn finish(self) -> Result<()> {
         for (split, (first, frames)) in SPLITS.iter().zip(self.splits) {
             if let Some(c) = first {
-                write_transforms(self.temp.path(), split, &c, frames)?;
+                write_transforms(self.temp.path(), split, &c, frames, self.blend)?;
             }
         }
         let out = &self.out;
@@ -572,5 +595,5 @@ pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result
         .enumerate()
         .map(|(index, view)| save_frame(dir, split, index, view, &first.camera, exr))
         .collect::<Result<Vec<_>>>()?;
-    write_transforms(dir, split, &first.camera, frames)
+    write_transforms(dir, split, &first.camera, frames, Blend::Additive)
 }

@@ -30,4 +30,6 @@ pub struct Dataset {
     pub transparent: bool,
     /// What the reader noticed and skipped (keys it does not read), for the user to see.
     pub notes: Vec<String>,
+    /// The blend a dataset written by splat4d says its images were rendered with.
+    pub blend: Option<super::Blend>,
 }

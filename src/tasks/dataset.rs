@@ -57,7 +57,7 @@ pub fn write_dataset(
     request.spec.validate()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
-    let mut writer = DatasetWriter::new(&request.out, request.exr)?;
+    let mut writer = DatasetWriter::new(&request.out, request.exr)?.with_blend(scene.blend);
     progress.start("render", frame_count(spec));
     let mut frames = [0_usize; 3];
     with_threads(request.threads, || {

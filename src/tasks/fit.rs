@@ -3,13 +3,14 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::fit::alpha::{AlphaFitOptions, alpha_bounds, fit_alpha, random_alpha_scene};
 use crate::fit::loss::psnr;
-use crate::fit::plan::{FitPlan, Init};
+use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
-use crate::model::{Result, Silent, Up};
+use crate::model::{Blend, Result, Silent, Up};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
 
@@ -24,6 +25,10 @@ pub struct FitRequest {
     pub init: String,
     /// Everything else about the fit.
     pub plan: FitPlan,
+    /// The blend to fit; `None`: the start scene's, else the dataset's, else alpha.
+    pub blend: Option<Blend>,
+    /// The alpha fit's options (used when the blend is alpha).
+    pub alpha: AlphaFitOptions,
     /// Output scene.
     pub out: PathBuf,
     /// Log file: one JSON object per step.
@@ -134,6 +139,22 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
     };
+    let blend = request.blend.unwrap_or(match &init {
+        Init::Scene(scene) => scene.blend,
+        _ => dataset.blend.unwrap_or(Blend::Alpha),
+    });
+    if let Init::Scene(scene) = &init
+        && scene.blend != blend
+    {
+        return Err(crate::model::Error::usage(format!(
+            "{}: the start scene's blend is {}, the fit's {blend}",
+            request.init, scene.blend
+        )));
+    }
+    if blend == Blend::Alpha {
+        progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
+        return fit_alpha_dataset(request, &dataset, init, up, progress);
+    }
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
     let up = up.or(scene.up);
@@ -166,10 +187,29 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         )
     })??;
     scene.up = up;
-    save_scene(&scene, &request.out)?;
+    finish_fit(
+        request,
+        &dataset,
+        &scene,
+        &records,
+        &plan.render,
+        plan.steps,
+    )
+}
+
+/// Writes the fitted scene and the log, and evaluates every split.
+fn finish_fit(
+    request: &FitRequest,
+    dataset: &crate::model::Dataset,
+    scene: &crate::model::Scene,
+    records: &[StepRecord],
+    render: &crate::render::RenderOptions,
+    steps: usize,
+) -> Result<FitSummary> {
+    save_scene(scene, &request.out)?;
     if let Some(log) = &request.log {
         let mut lines = String::new();
-        for record in &records {
+        for record in records {
             lines.push_str(&serde_json::to_string(record).expect("a record serialises"));
             lines.push('\n');
         }
@@ -184,7 +224,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     ] {
         if !views.is_empty() {
             let mse = with_threads(request.threads, || {
-                evaluate(&scene, views, &plan.render, &mut context)
+                evaluate(scene, views, render, &mut context)
             })??;
             splits.push((split, views.len(), mse));
         }
@@ -192,11 +232,75 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     Ok(FitSummary {
         out: request.out.clone(),
         kernels: scene.len(),
-        steps: plan.steps,
+        steps,
         seconds: records.last().map_or(0.0, |r| r.seconds),
         background: scene.background,
         splits,
     })
+}
+
+/// The alpha fit of SPEC §8 ([`crate::fit::alpha`]): a random start in the cameras' box (or
+/// the given alpha scene), over the given background or the median of the training images'
+/// border pixels.
+fn fit_alpha_dataset(
+    request: &FitRequest,
+    dataset: &crate::model::Dataset,
+    init: Init,
+    up: Option<Up>,
+    progress: &mut dyn FitProgress,
+) -> Result<FitSummary> {
+    let options = &request.alpha;
+    let bounds = alpha_bounds(&dataset.train)?;
+    let background = request
+        .plan
+        .background
+        .unwrap_or_else(|| border_median(&dataset.train));
+    let colour =
+        start_amplitude(&dataset.train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
+    let mut scene = match init {
+        Init::Scene(scene) => scene,
+        Init::Auto => random_alpha_scene(&bounds, background, colour, options)?,
+        Init::Random(n) => random_alpha_scene(
+            &bounds,
+            background,
+            colour,
+            &AlphaFitOptions {
+                start_kernels: n,
+                ..*options
+            },
+        )?,
+    };
+    let heldout = if dataset.val.is_empty() {
+        &dataset.test
+    } else {
+        &dataset.val
+    };
+    progress.start(options.steps);
+    let mut last_heldout = None;
+    let records = with_threads(request.threads, || {
+        fit_alpha(
+            &mut scene,
+            &bounds,
+            &dataset.train,
+            heldout,
+            options,
+            |record| {
+                if record.heldout_psnr.is_some() {
+                    last_heldout = record.heldout_psnr;
+                }
+                progress.step(record, last_heldout);
+            },
+        )
+    })??;
+    scene.up = up.or(scene.up);
+    finish_fit(
+        request,
+        dataset,
+        &scene,
+        &records,
+        &options.render,
+        options.steps,
+    )
 }
 
 /// The world axis nearest the training cameras' mean up direction (image up, the camera's

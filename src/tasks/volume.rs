@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::io::scene_file::load_scene;
+use crate::model::Blend;
 use crate::model::{Error, Result};
 use crate::report::charts::volume_slices_figure;
 use crate::tasks::with_threads;
@@ -32,6 +33,8 @@ pub struct VolumeRequest {
 pub struct VolumeSummary {
     name: String,
     grid: Grid,
+    /// What the grid holds: Eq. 1's intensity, or an alpha scene's opacity density.
+    quantity: &'static str,
     /// `(τ, max, min, seconds)` per time.
     pub rows: Vec<(f64, f32, f32, f64)>,
 }
@@ -41,8 +44,8 @@ impl fmt::Display for VolumeSummary {
         let (min, max) = (self.grid.min, self.grid.max);
         writeln!(
             f,
-            "{}: {}³ grid over [{:.3}, {:.3}] × [{:.3}, {:.3}] × [{:.3}, {:.3}]",
-            self.name, self.grid.res, min[0], max[0], min[1], max[1], min[2], max[2]
+            "{}: {} on a {}³ grid over [{:.3}, {:.3}] × [{:.3}, {:.3}] × [{:.3}, {:.3}]",
+            self.name, self.quantity, self.grid.res, min[0], max[0], min[1], max[1], min[2], max[2]
         )?;
         write!(f, "{:>8} {:>10} {:>10} {:>10}", "t", "max", "min", "ms")?;
         for (tau, hi, lo, seconds) in &self.rows {
@@ -105,5 +108,14 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
         let (hi, lo) = volume.range();
         rows.push((*tau, hi, lo, *seconds));
     }
-    Ok(VolumeSummary { name, grid, rows })
+    let quantity = match scene.blend {
+        Blend::Additive => "intensity (Eq. 1, mean of the channels)",
+        Blend::Alpha => "opacity density Σ o(τ) G (alpha blend)",
+    };
+    Ok(VolumeSummary {
+        name,
+        grid,
+        quantity,
+        rows,
+    })
 }

@@ -18,6 +18,8 @@ mod dataset_variants;
 mod determinism;
 /// Fitting recovers known scenes; adaptive fits find the kernels they need.
 mod fit;
+/// The alpha fit recovers occluding scenes.
+mod fit_alpha;
 /// Seeded byte-level fuzzing of every loader: errors, never panics.
 mod fuzz_loaders;
 /// 3DGS PLYs both ways: graphdeco files read, exports drawn by a minimal 3DGS compositor.

@@ -1,0 +1,535 @@
+//! Fitting alpha scenes (SPEC §8): every field, each in the space it is best optimised in,
+//! with 3DGS-style density control.
+//!
+//! **Parameters.** Per kernel, in optimisation space: the spatial mean, the time mean and the
+//! velocity as they are; the scales as `ln s` (gradient `s ∂L/∂s`); the quaternion as
+//! stored (renormalised after each step); the opacity as `logit o` (gradient
+//! `o (1 - o) ∂L/∂o`); the amplitude (the colour's base) and the SH as they are. Adam (SPEC
+//! §6) with one learning rate per group; the spatial rates are relative to the cameras' box
+//! and decay exponentially to [`AlphaFitOptions::final_rate_factor`] of their start, the
+//! others stay constant (as the 3DGS and 4DGS papers schedule them).
+//!
+//! **SH degree** rises during the run: degree `d` of the scene's SH is fitted from step
+//! `d · sh_raise_every` (its coefficients start at zero and stay there until then).
+//!
+//! **Density control** (deterministic, bounded by `max_kernels`): every `densify_every`
+//! steps between `densify_from` and `densify_until` of the run, the kernels whose mean
+//! screen-space positional gradient `|∂L/∂m2|` over the views that saw them is among the
+//! largest `densify_fraction` (and above `densify_threshold`) are cloned when small (largest
+//! spatial σ below `percent_dense` of the box) or split in two along their largest axis when
+//! large (σ / 1.6 each, the children one σ apart); kernels whose opacity fell below
+//! `prune_opacity` are removed.
+
+use std::time::Instant;
+
+use rand::RngExt;
+use rand::seq::SliceRandom;
+
+use crate::backward::Gradients;
+use crate::fit::init::{SpaceTimeBox, box_from_cameras};
+use crate::fit::loss::{mse_with_gradient, psnr};
+use crate::fit::train::{StepRecord, check_views, evaluate};
+use crate::model::error::{Error, Result};
+use crate::model::random::{random_rotation, seeded_rng};
+use crate::model::scene::{Kernel, Scene};
+use crate::model::{Camera, View};
+use crate::render::{RenderContext, RenderOptions};
+
+/// Learning rates of the alpha fit, per group.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlphaRates {
+    /// Spatial mean, as a fraction of the box's diagonal per step.
+    pub mean: f64,
+    /// Time mean, as a fraction of the time range per step.
+    pub time: f64,
+    /// Velocity, box diagonals per time range per step.
+    pub velocity: f64,
+    /// `ln s`.
+    pub scale: f64,
+    /// Quaternion components.
+    pub rotation: f64,
+    /// `logit o`.
+    pub opacity: f64,
+    /// Amplitude (the colour's base).
+    pub colour: f64,
+    /// SH coefficients.
+    pub sh: f64,
+}
+
+/// How to fit an alpha scene. Defaults in [`crate::fit::plan`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlphaFitOptions {
+    /// Adam steps.
+    pub steps: usize,
+    /// Views per step.
+    pub batch_size: usize,
+    /// Initial learning rates.
+    pub rates: AlphaRates,
+    /// The spatial rates at the last step as a fraction of the first.
+    pub final_rate_factor: f64,
+    /// Held-out evaluation period, steps (0: only at the end).
+    pub eval_every: usize,
+    /// Seed of the start and the batch order.
+    pub seed: u64,
+    /// Rendering options.
+    pub render: RenderOptions,
+    /// Kernels of a random start.
+    pub start_kernels: usize,
+    /// Opacity of a random start's kernels.
+    pub start_opacity: f64,
+    /// σt of a random start's kernels, as a fraction of the time range.
+    pub start_time_scale: f64,
+    /// SH triplets of the fitted scene (0, 3, 8 or 15).
+    pub sh_count: usize,
+    /// Steps between SH degree raises.
+    pub sh_raise_every: usize,
+    /// Upper bound on the kernel count.
+    pub max_kernels: usize,
+    /// Steps between density rounds.
+    pub densify_every: usize,
+    /// Density rounds from this fraction of the run …
+    pub densify_from: f64,
+    /// … until this one.
+    pub densify_until: f64,
+    /// Fraction of the visible kernels densified per round, at most.
+    pub densify_fraction: f64,
+    /// Smallest mean `|∂L/∂m2|` (per pixel) that densifies.
+    pub densify_threshold: f64,
+    /// A kernel is split rather than cloned when its largest σ exceeds this fraction of the
+    /// box's diagonal.
+    pub percent_dense: f64,
+    /// Kernels below this opacity are pruned.
+    pub prune_opacity: f64,
+}
+
+/// Per-kernel numbers in Adam's layout: mean 3, t, velocity 3, ln s 4, quaternion 4,
+/// logit o, amplitude 3, then the SH.
+fn stride(sh_count: usize) -> usize {
+    19 + 3 * sh_count
+}
+
+/// Adam's moments over every kernel's numbers, in [`stride`] layout.
+struct Moments {
+    first: Vec<f64>,
+    second: Vec<f64>,
+    steps: i32,
+}
+
+/// A random start in the cameras' box: `options.start_kernels` kernels, seeded.
+pub fn random_alpha_scene(
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    colour: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<Scene> {
+    let mut rng = seeded_rng(options.seed);
+    let n = options.start_kernels.max(1);
+    let extent: [f64; 3] = std::array::from_fn(|a| bounds.max[a] - bounds.min[a]);
+    // Spread so that neighbours overlap: the side of a cell of the box shared among n.
+    let spacing = (extent[0] * extent[1] * extent[2] / n as f64).cbrt();
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let kernels: Vec<Kernel> = (0..n)
+        .map(|_| {
+            let mut kernel = Kernel::new(
+                [
+                    rng.random_range(bounds.min[0]..=bounds.max[0]),
+                    rng.random_range(bounds.min[1]..=bounds.max[1]),
+                    rng.random_range(bounds.min[2]..=bounds.max[2]),
+                    rng.random_range(bounds.time[0]..=bounds.time[1]),
+                ],
+                [
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    options.start_time_scale * time_range,
+                ],
+                colour,
+            );
+            kernel.rotation = random_rotation(&mut rng);
+            kernel
+        })
+        .collect();
+    Scene::from_kernels(&kernels, background, "<random alpha start>")?.into_alpha(
+        vec![options.start_opacity; n],
+        options.sh_count,
+        vec![[0.0; 3]; n * options.sh_count],
+        "<random alpha start>",
+    )
+}
+
+/// The length scales the rates are relative to: the box's diagonal and the time range.
+fn extents(bounds: &SpaceTimeBox) -> (f64, f64) {
+    let diagonal = (0..3)
+        .map(|a| (bounds.max[a] - bounds.min[a]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    (diagonal, (bounds.time[1] - bounds.time[0]).max(1e-9))
+}
+
+/// Fits the alpha scene `scene` in place to `train`, evaluating on `heldout`; `bounds` is
+/// the space-time box the rates and density rules are relative to. Calls `on_step` after
+/// each step and returns every step's record.
+pub fn fit_alpha(
+    scene: &mut Scene,
+    bounds: &SpaceTimeBox,
+    train: &[View],
+    heldout: &[View],
+    options: &AlphaFitOptions,
+    mut on_step: impl FnMut(&StepRecord),
+) -> Result<Vec<StepRecord>> {
+    if train.is_empty() {
+        return Err(Error::Usage("no training views".into()));
+    }
+    check_views(train)?;
+    check_views(heldout)?;
+    options.render.validate()?;
+    scene.validate("<alpha fit start>")?;
+    let start = Instant::now();
+    let (diagonal, time_range) = extents(bounds);
+    let mut context = RenderContext::new();
+    let width = stride(scene.sh_count);
+    let mut moments = Moments {
+        first: vec![0.0; width * scene.len()],
+        second: vec![0.0; width * scene.len()],
+        steps: 0,
+    };
+
+    let mut screen_gradient = vec![0.0_f64; scene.len()];
+    let mut seen = vec![0_u32; scene.len()];
+    let mut v_image = Vec::new();
+    let mut rng = seeded_rng(options.seed ^ 0x5eed);
+    let mut order: Vec<usize> = (0..train.len()).collect();
+    let mut cursor = order.len();
+    let mut records = Vec::with_capacity(options.steps);
+    let batch = options.batch_size.clamp(1, train.len());
+    for step in 1..=options.steps {
+        let mut grads = Gradients::for_scene(scene);
+        let weight = 1.0 / batch as f64;
+        let mut train_loss = 0.0;
+        for _ in 0..batch {
+            if cursor == order.len() {
+                order.shuffle(&mut rng);
+                cursor = 0;
+            }
+            let view = &train[order[cursor]];
+            cursor += 1;
+            context.render(scene, &view.camera, view.time, &options.render)?;
+            train_loss +=
+                weight * mse_with_gradient(context.image(), &view.image, weight, &mut v_image);
+            context.backward(
+                scene,
+                &view.camera,
+                view.time,
+                &options.render,
+                &v_image,
+                &mut grads,
+            );
+            let screen = &context.backward.screen;
+            for (p, &k) in context.projected.kernel_from_proj.iter().enumerate() {
+                let [gx, gy] = screen.v_means[p];
+                screen_gradient[k as usize] += (gx * gx + gy * gy).sqrt() / weight;
+                seen[k as usize] += 1;
+            }
+        }
+        if !train_loss.is_finite() {
+            return Err(Error::Numeric(format!(
+                "fitting diverged at step {step} (training loss {train_loss}): lower the learning rates"
+            )));
+        }
+        let progress = (step - 1) as f64 / (options.steps.max(2) - 1) as f64;
+        let decay = options.final_rate_factor.powf(progress);
+        adam_step(
+            scene,
+            &grads,
+            &mut moments,
+            options,
+            step,
+            [
+                diagonal * decay,
+                time_range * decay,
+                diagonal / time_range * decay,
+            ],
+        );
+        check_parameters(scene, step)?;
+        let round = options.densify_every > 0
+            && step % options.densify_every == 0
+            && progress >= options.densify_from
+            && progress <= options.densify_until;
+        if round {
+            let sources = densify_and_prune(scene, &screen_gradient, &seen, diagonal, options);
+            moments.remap(&sources, width);
+            screen_gradient = vec![0.0; scene.len()];
+            seen = vec![0; scene.len()];
+        }
+        let evaluate_now =
+            step == options.steps || (options.eval_every > 0 && step % options.eval_every == 0);
+        let heldout_psnr = if evaluate_now && !heldout.is_empty() {
+            Some(psnr(evaluate(
+                scene,
+                heldout,
+                &options.render,
+                &mut context,
+            )?))
+        } else {
+            None
+        };
+        let record = StepRecord {
+            step,
+            seconds: start.elapsed().as_secs_f64(),
+            train_loss,
+            heldout_psnr,
+            kernels: scene.len(),
+        };
+        on_step(&record);
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// One Adam step on every field, in optimisation space. `spatial` are the mean, time and
+/// velocity rates' units (box diagonal, time range, diagonal per time range) times the
+/// schedule's decay.
+fn adam_step(
+    scene: &mut Scene,
+    grads: &Gradients,
+    moments: &mut Moments,
+    options: &AlphaFitOptions,
+    step: usize,
+    spatial: [f64; 3],
+) {
+    moments.steps += 1;
+    let (beta1, beta2, epsilon): (f64, f64, f64) = (0.9, 0.999, 1e-15);
+    let correction1 = 1.0 - beta1.powi(moments.steps);
+    let correction2 = 1.0 - beta2.powi(moments.steps);
+    let rates = &options.rates;
+    let count = scene.sh_count;
+    let width = stride(count);
+    // SH triplets fitted so far: degree d (triplets d² - 1 .. (d + 1)² - 1) from step
+    // d · sh_raise_every.
+    let degree = step
+        .checked_div(options.sh_raise_every)
+        .map_or(3, |d| d.min(3));
+    let active_sh = ((degree + 1) * (degree + 1) - 1).min(count);
+    let lrs: Vec<f64> = (0..width)
+        .map(|k| match k {
+            0..3 => rates.mean * spatial[0],
+            3 => rates.time * spatial[1],
+            4..7 => rates.velocity * spatial[2],
+            7..11 => rates.scale,
+            11..15 => rates.rotation,
+            15 => rates.opacity,
+            16..19 => rates.colour,
+            _ if (k - 19) / 3 < active_sh => rates.sh,
+            _ => 0.0,
+        })
+        .collect();
+    for i in 0..scene.len() {
+        let scale = scene.scales[i];
+        let opacity = scene.opacities[i];
+        let o = opacity.clamp(1e-6, 1.0 - 1e-6);
+        let mut gradient = Vec::with_capacity(width);
+        gradient.extend_from_slice(&grads.v_means[i][..3]);
+        gradient.push(grads.v_means[i][3]);
+        gradient.extend_from_slice(&grads.v_velocities[i]);
+        gradient.extend((0..4).map(|a| scale[a] * grads.v_scales[i][a]));
+        gradient.extend_from_slice(&grads.v_rotations[i]);
+        gradient.push(o * (1.0 - o) * grads.v_opacities[i]);
+        gradient.extend_from_slice(&grads.v_amplitudes[i]);
+        gradient.extend(grads.v_sh[i * count..(i + 1) * count].iter().flatten());
+        let mut delta = vec![0.0; width];
+        for (k, (&g, &lr)) in gradient.iter().zip(&lrs).enumerate() {
+            if lr == 0.0 {
+                continue;
+            }
+            let slot = i * width + k;
+            let m = &mut moments.first[slot];
+            let v = &mut moments.second[slot];
+            *m = beta1 * *m + (1.0 - beta1) * g;
+            *v = beta2 * *v + (1.0 - beta2) * g * g;
+            delta[k] = lr * (*m / correction1) / ((*v / correction2).sqrt() + epsilon);
+        }
+        for a in 0..3 {
+            scene.means[i][a] -= delta[a];
+            scene.velocities[i][a] -= delta[4 + a];
+        }
+        scene.means[i][3] -= delta[3];
+        for a in 0..4 {
+            scene.scales[i][a] *= (-delta[7 + a]).exp();
+        }
+        let mut q = scene.rotations[i];
+        for a in 0..4 {
+            q[a] -= delta[11 + a];
+        }
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if norm > 0.0 && norm.is_finite() {
+            scene.rotations[i] = q.map(|v| v / norm);
+        }
+        let logit = (o / (1.0 - o)).ln() - delta[15];
+        scene.opacities[i] = 1.0 / (1.0 + (-logit).exp());
+        for c in 0..3 {
+            scene.amplitudes[i][c] -= delta[16 + c];
+        }
+        for (j, triplet) in scene.sh[i * count..(i + 1) * count].iter_mut().enumerate() {
+            for c in 0..3 {
+                triplet[c] -= delta[19 + 3 * j + c];
+            }
+        }
+    }
+}
+
+/// Every parameter finite after a step, else the numeric error naming the group.
+fn check_parameters(scene: &Scene, step: usize) -> Result<()> {
+    let groups: [(&str, bool); 6] = [
+        ("mean", scene.means.iter().flatten().all(|v| v.is_finite())),
+        (
+            "scale",
+            scene
+                .scales
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite() && *v > 0.0),
+        ),
+        (
+            "velocity",
+            scene.velocities.iter().flatten().all(|v| v.is_finite()),
+        ),
+        ("opacity", scene.opacities.iter().all(|v| v.is_finite())),
+        (
+            "amplitude",
+            scene.amplitudes.iter().flatten().all(|v| v.is_finite()),
+        ),
+        ("sh", scene.sh.iter().flatten().all(|v| v.is_finite())),
+    ];
+    match groups.iter().find(|(_, ok)| !ok) {
+        Some((group, _)) => Err(Error::Numeric(format!(
+            "fitting diverged at step {step}: the {group} parameters left the finite numbers (lower that group's learning rate)"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// One density round: prune transparent kernels, then clone or split the ones with the
+/// largest mean screen-space gradient. Returns, per kernel of the new scene, the old kernel
+/// whose Adam moments it keeps (`None`: fresh).
+fn densify_and_prune(
+    scene: &mut Scene,
+    screen_gradient: &[f64],
+    seen: &[u32],
+    diagonal: f64,
+    options: &AlphaFitOptions,
+) -> Vec<Option<usize>> {
+    let n = scene.len();
+    let mean_gradient: Vec<f64> = (0..n)
+        .map(|i| {
+            if seen[i] == 0 {
+                0.0
+            } else {
+                screen_gradient[i] / f64::from(seen[i])
+            }
+        })
+        .collect();
+    let keep: Vec<usize> = (0..n)
+        .filter(|&i| scene.opacities[i] >= options.prune_opacity)
+        .collect();
+    // Candidates: the largest mean gradients, ties by index, within the growth budget.
+    let mut candidates: Vec<usize> = keep
+        .iter()
+        .copied()
+        .filter(|&i| mean_gradient[i] >= options.densify_threshold)
+        .collect();
+    candidates.sort_by(|&a, &b| {
+        mean_gradient[b]
+            .total_cmp(&mean_gradient[a])
+            .then(a.cmp(&b))
+    });
+    let visible = keep.iter().filter(|&&i| seen[i] > 0).count();
+    let budget = ((options.densify_fraction * visible as f64) as usize)
+        .min(options.max_kernels.saturating_sub(keep.len()));
+    candidates.truncate(budget);
+    let mut grow = vec![false; n];
+    for &i in &candidates {
+        grow[i] = true;
+    }
+    let count = scene.sh_count;
+    let mut next = Scene {
+        background: scene.background,
+        up: scene.up,
+        ..Scene::default()
+    };
+    let (mut opacities, mut sh, mut sources) = (Vec::new(), Vec::new(), Vec::new());
+    let mut push = |kernel: Kernel, i: usize, source: Option<usize>, next: &mut Scene| {
+        next.means.push(kernel.mean);
+        next.scales.push(kernel.scale);
+        next.amplitudes.push(kernel.amplitude);
+        next.rotations.push(kernel.rotation);
+        next.velocities.push(kernel.velocity);
+        opacities.push(scene.opacities[i]);
+        sh.extend_from_slice(scene.sh_of(i));
+        sources.push(source);
+    };
+    for &i in &keep {
+        let kernel = scene.kernel(i);
+        if !grow[i] {
+            push(kernel, i, Some(i), &mut next);
+            continue;
+        }
+        let largest = (0..3)
+            .max_by(|&a, &b| kernel.scale[a].total_cmp(&kernel.scale[b]))
+            .expect("three axes");
+        if kernel.scale[largest] > options.percent_dense * diagonal {
+            // Split along the largest axis: the children one σ apart, σ / 1.6 each.
+            let r = crate::slice::rotation_matrix(kernel.rotation);
+            let sigma = kernel.scale[largest];
+            let mut child = kernel;
+            for a in 0..3 {
+                child.scale[a] /= 1.6;
+            }
+            for sign in [-0.5, 0.5] {
+                let mut placed = child;
+                for (mean, row) in placed.mean.iter_mut().zip(&r) {
+                    *mean += sign * sigma * row[largest];
+                }
+                push(placed, i, None, &mut next);
+            }
+        } else {
+            push(kernel, i, Some(i), &mut next);
+            push(kernel, i, None, &mut next);
+        }
+    }
+    next.blend = scene.blend;
+    next.opacities = opacities;
+    next.sh_count = count;
+    next.sh = sh;
+    *scene = next;
+    sources
+}
+
+impl Moments {
+    /// Kernel `i` of the new scene takes the moments of old kernel `sources[i]`, or zeros.
+    fn remap(&mut self, sources: &[Option<usize>], width: usize) {
+        let mut first = vec![0.0; width * sources.len()];
+        let mut second = vec![0.0; width * sources.len()];
+        for (i, source) in sources.iter().enumerate() {
+            if let Some(old) = *source {
+                first[width * i..width * (i + 1)]
+                    .copy_from_slice(&self.first[width * old..width * (old + 1)]);
+                second[width * i..width * (i + 1)]
+                    .copy_from_slice(&self.second[width * old..width * (old + 1)]);
+            }
+        }
+        self.first = first;
+        self.second = second;
+    }
+}
+
+/// The space-time box of the training cameras and times (the random start's box, and the
+/// unit of the spatial rates).
+pub fn alpha_bounds(train: &[View]) -> Result<SpaceTimeBox> {
+    let cameras: Vec<Camera> = train.iter().map(|v| v.camera).collect();
+    let (lo, hi) = train
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v.time), hi.max(v.time))
+        });
+    box_from_cameras(&cameras, [lo, hi])
+}
