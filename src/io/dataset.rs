@@ -556,15 +556,21 @@ fn load_mask(path: &Path, (w, h): (u32, u32), origin: &str, item: &str) -> Resul
         .collect())
 }
 
-/// The note (or, when `strict`, the error) about frames without an image.
-fn missing_frames(origin: &str, missing: &[String], strict: bool) -> Result<Option<String>> {
-    if missing.is_empty() {
+/// The note about frames without an image, `missing` as `(item, name)`; an error naming
+/// the first frame when `strict` or when no frame has an image (`loaded` is 0).
+fn missing_frames(
+    origin: &str,
+    missing: &[(String, String)],
+    loaded: usize,
+    strict: bool,
+) -> Result<Option<String>> {
+    let Some((first, _)) = missing.first() else {
         return Ok(None);
-    }
+    };
     let mut names = missing
         .iter()
         .take(NAMED_MISSING)
-        .cloned()
+        .map(|(_, name)| name.as_str())
         .collect::<Vec<_>>()
         .join(", ");
     if missing.len() > NAMED_MISSING {
@@ -572,13 +578,18 @@ fn missing_frames(origin: &str, missing: &[String], strict: bool) -> Result<Opti
     }
     let count = missing.len();
     let frames = if count == 1 { "frame" } else { "frames" };
-    if strict {
+    if strict || loaded == 0 {
+        let why = if strict {
+            "--strict refuses them"
+        } else {
+            "no frame has one"
+        };
         return Err(Error::invalid(
             origin,
-            "frames",
+            first,
             "file_path",
             format!(
-                "{count} {frames} without an image file (.exr, .png, .jpg or .jpeg): {names} (--strict refuses them)"
+                "{count} {frames} without an image file (.exr, .png, .jpg or .jpeg): {names} ({why})"
             ),
         ));
     }
@@ -621,7 +632,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         let item = format!("frame {index}");
         unread.extend(frame.other.keys().map(String::as_str));
         let Some(image_path) = resolve_image(dir, &frame.file_path) else {
-            missing.push(frame.file_path.clone());
+            missing.push((item, frame.file_path.clone()));
             continue;
         };
         let lens = distortion(&file, frame, &origin, &item)?;
@@ -676,7 +687,12 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         let keys: Vec<&str> = unread.into_iter().collect();
         notes.push(format!("{origin}: ignored keys {}", keys.join(", ")));
     }
-    notes.extend(missing_frames(&origin, &missing, options.strict)?);
+    notes.extend(missing_frames(
+        &origin,
+        &missing,
+        views.len(),
+        options.strict,
+    )?);
     let points = match &file.ply_file_path {
         Some(ply) => {
             let path = inside_dataset(dir, ply, &origin, "transforms", "ply_file_path")?;
@@ -719,7 +735,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
         let name = format!("images/{}", entry.name);
         let path = dir.join(&name);
         if !path.is_file() {
-            missing.push(name);
+            missing.push((item, name));
             continue;
         }
         let (image, alpha) = load_image_with_alpha(&path, options.background)?;
@@ -762,7 +778,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
             weights,
         });
     }
-    let notes = missing_frames(&origin, &missing, options.strict)?
+    let notes = missing_frames(&origin, &missing, views.len(), options.strict)?
         .into_iter()
         .collect();
     let points = (!model.points.is_empty()).then(|| {
