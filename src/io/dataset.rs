@@ -362,7 +362,7 @@ pub fn downscale(image: &Image, n: u32) -> Image {
 }
 
 /// The weighted box filter: per `n × n` block, the mean weight and the weighted mean colour
-/// (0 where every weight is 0).
+/// (the plain mean where every weight is 0).
 #[must_use]
 pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec<f32>) {
     let (w, h) = (image.width / n, image.height / n);
@@ -373,6 +373,7 @@ pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec
     for j in 0..h {
         for i in 0..w {
             let mut sum = [0.0_f64; 3];
+            let mut plain = [0.0_f64; 3];
             let mut total = 0.0_f64;
             for dj in 0..n {
                 for di in 0..n {
@@ -382,11 +383,15 @@ pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec
                     total += weight;
                     for c in 0..3 {
                         sum[c] += weight * f64::from(p[c]);
+                        plain[c] += f64::from(p[c]);
                     }
                 }
             }
-            let scale = if total > 0.0 { 1.0 / total } else { 0.0 };
-            pixels.extend(sum.map(|s| (s * scale) as f32));
+            pixels.extend(if total > 0.0 {
+                sum.map(|s| (s / total) as f32)
+            } else {
+                plain.map(|s| (s * inv) as f32)
+            });
             out_weights.push((total * inv) as f32);
         }
     }
@@ -468,7 +473,7 @@ fn prepare_photo(
         let table = undistorter.table(size, intrinsics, &distortion);
         image = table.undistort_image(&image);
         mask = Some(match mask {
-            Some(m) => table.undistort_plane(&m),
+            Some(m) => table.undistort_weights(&m),
             None => table.validity(),
         });
     }
@@ -738,6 +743,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
             missing.push((item, name));
             continue;
         }
+        let path = inside_dataset(dir, &name, &origin, &item, "name")?;
         let (image, alpha) = load_image_with_alpha(&path, options.background)?;
         transparent |= alpha;
         if (image.width, image.height) != (camera.width, camera.height) {

@@ -24,7 +24,10 @@
 //! not fold there: `r² < s_fold`, the first zero of `d(r · radial)/dr`, i.e. of
 //! `1 + 3 k1 s + 5 k2 s² + 7 k3 s³` (`s = r²`), beyond which the polynomial sends rays back
 //! towards the centre; and the Jacobian of `(x, y) → (x_d, y_d)` is positive. Invalid pixels
-//! are black and weigh 0 in the loss ([`crate::model::View::weights`]).
+//! weigh 0 in the loss ([`crate::model::View::weights`]); their colour is the photo's at the
+//! nearest point of the photo (the source position clamped to it), so that what reads images
+//! without weights (a background estimated from border pixels, a mean colour) sees photo
+//! colours rather than black.
 //!
 //! The table is plain data, built once per distinct camera and applied to every photo (and
 //! mask) taken with it.
@@ -110,8 +113,7 @@ impl Distortion {
 
 /// One pinhole pixel's source in the photo: the top-left `(i0, j0)` of the four photo
 /// pixels blended and the weights `(tx, ty)` of the next column and row (the next column or
-/// row is the same one at the photo's last column or row); `i0 = u32::MAX` marks an invalid
-/// pixel. 16 bytes a pixel.
+/// row is the same one at the photo's last column or row). 16 bytes a pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Tap {
     i0: u32,
@@ -120,13 +122,6 @@ struct Tap {
     ty: f32,
 }
 
-const INVALID: Tap = Tap {
-    i0: u32::MAX,
-    j0: 0,
-    tx: 0.0,
-    ty: 0.0,
-};
-
 /// The resampling of photos of one camera (size, intrinsics, distortion) into its pinhole
 /// twin: one entry per output pixel, computed once (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
@@ -134,6 +129,8 @@ pub struct RemapTable {
     width: u32,
     height: u32,
     taps: Vec<Tap>,
+    /// Whether each pixel's source lies in the photo.
+    valid: Vec<bool>,
 }
 
 impl RemapTable {
@@ -160,6 +157,7 @@ impl RemapTable {
             (k, (q - f64::from(k)) as f32)
         };
         let mut taps = Vec::with_capacity(width as usize * height as usize);
+        let mut valids = Vec::with_capacity(width as usize * height as usize);
         for j in 0..height {
             let y = (f64::from(j) + 0.5 - cy) / fy;
             for i in 0..width {
@@ -170,19 +168,23 @@ impl RemapTable {
                     && (0.0..=h).contains(&v)
                     && x * x + y * y < s_fold
                     && distortion.jacobian_determinant([x, y]) > 0.0;
-                taps.push(if valid {
-                    let (i0, tx) = axis(u, width);
-                    let (j0, ty) = axis(v, height);
-                    Tap { i0, j0, tx, ty }
+                // Non-finite positions (a lens far past its fold) clamp to the corner.
+                let (u, v) = if u.is_finite() && v.is_finite() {
+                    (u, v)
                 } else {
-                    INVALID
-                });
+                    (0.0, 0.0)
+                };
+                let (i0, tx) = axis(u, width);
+                let (j0, ty) = axis(v, height);
+                taps.push(Tap { i0, j0, tx, ty });
+                valids.push(valid);
             }
         }
         RemapTable {
             width,
             height,
             taps,
+            valid: valids,
         }
     }
 
@@ -195,22 +197,15 @@ impl RemapTable {
     /// The per-pixel validity: 1 where the pixel's source lies in the photo, 0 elsewhere.
     #[must_use]
     pub fn validity(&self) -> Vec<f32> {
-        self.taps
-            .iter()
-            .map(|t| f32::from(u8::from(t.i0 != u32::MAX)))
-            .collect()
+        self.valid.iter().map(|&v| f32::from(u8::from(v))).collect()
     }
 
     /// Bilinear samples of `n` channels stored interleaved in `values` (one group per photo
-    /// pixel), 0 for invalid pixels.
+    /// pixel).
     fn resample(&self, values: &[f32], n: usize) -> Vec<f32> {
         let w = self.width as usize;
         let mut out = Vec::with_capacity(n * self.taps.len());
         for t in &self.taps {
-            if t.i0 == u32::MAX {
-                out.extend(std::iter::repeat_n(0.0, n));
-                continue;
-            }
             let (i0, j0) = (t.i0 as usize, t.j0 as usize);
             let i1 = if t.i0 + 1 < self.width { i0 + 1 } else { i0 };
             let j1 = if t.j0 + 1 < self.height { j0 + 1 } else { j0 };
@@ -225,7 +220,8 @@ impl RemapTable {
     }
 
     /// `photo` (of this table's size) resampled into the pinhole camera; invalid pixels
-    /// are 0. Panics if the sizes differ (the caller checks them).
+    /// take the photo's colour at the nearest point of the photo. Panics if the sizes differ
+    /// (the caller checks them).
     #[must_use]
     pub fn undistort_image(&self, photo: &Image) -> Image {
         assert_eq!((photo.width, photo.height), self.size(), "photo size");
@@ -236,12 +232,18 @@ impl RemapTable {
         }
     }
 
-    /// A per-pixel plane (one value per photo pixel, row-major) resampled the same way;
-    /// invalid pixels are 0.
+    /// Pixel weights (one per photo pixel, row-major, such as a mask) resampled the same
+    /// way, times the validity: 0 at invalid pixels.
     #[must_use]
-    pub fn undistort_plane(&self, plane: &[f32]) -> Vec<f32> {
+    pub fn undistort_weights(&self, plane: &[f32]) -> Vec<f32> {
         assert_eq!(plane.len(), self.taps.len(), "plane size");
-        self.resample(plane, 1)
+        let mut out = self.resample(plane, 1);
+        for (w, &valid) in out.iter_mut().zip(&self.valid) {
+            if !valid {
+                *w = 0.0;
+            }
+        }
+        out
     }
 }
 

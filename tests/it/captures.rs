@@ -241,7 +241,11 @@ fn an_opencv_distorted_photo_loads_as_the_pinhole_render() {
             if margin < 0.0 {
                 invalid += 1;
                 assert_eq!(weight, 0.0, "pixel ({i}, {j}) samples outside the photo");
-                assert_eq!(view.image.pixel(i, j), [0.0; 3]);
+                // Its colour is the photo's nearest: never black here (the background is 0.05).
+                assert!(
+                    view.image.pixel(i, j).iter().all(|&c| c >= 0.04),
+                    "({i}, {j})"
+                );
                 continue;
             }
             valid += 1;
