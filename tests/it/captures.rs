@@ -656,6 +656,49 @@ fn colmap_text_and_binary_load_as_the_equivalent_transforms_json() {
     assert!(plain.weights.is_none());
     // The held-out view is the first by name, as nerfstudio splits.
     assert_eq!(binary.test[0].name, "images/frame_00000.png");
+    // The same views fit to the same scene (poses equal to 1e-15 through the quaternions:
+    // the fitted numbers agree to 1e-9).
+    let fitted = |name: &str| -> Vec<f64> {
+        let args = [
+            "fit",
+            "--views",
+            ".",
+            "--out",
+            "f.json",
+            "--steps",
+            "5",
+            "--eval-every",
+            "0",
+        ];
+        let output = splat4d(&args, &tmp.path().join(name));
+        assert!(output.status.success(), "{}", stderr(&output));
+        let text = std::fs::read_to_string(tmp.path().join(name).join("f.json")).unwrap();
+        let mut numbers = Vec::new();
+        numbers_in(&serde_json::from_str(&text).unwrap(), &mut numbers);
+        numbers
+    };
+    let from_json = fitted("json");
+    assert!(from_json.len() > 10, "{from_json:?}");
+    for name in ["text", "binary"] {
+        let other = fitted(name);
+        assert_eq!(other.len(), from_json.len(), "{name}");
+        for (a, b) in from_json.iter().zip(&other) {
+            assert!(
+                (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                "{name}: {a} vs {b}"
+            );
+        }
+    }
+}
+
+/// Every number in a JSON document, in document order.
+fn numbers_in(value: &Value, out: &mut Vec<f64>) {
+    match value {
+        Value::Number(n) => out.push(n.as_f64().unwrap()),
+        Value::Array(items) => items.iter().for_each(|v| numbers_in(v, out)),
+        Value::Object(map) => map.values().for_each(|v| numbers_in(v, out)),
+        _ => {}
+    }
 }
 
 /// The same point cloud as a binary little-endian PLY with float coordinates and extra
