@@ -515,10 +515,14 @@ pub fn parse_cameras_txt(text: &str, origin: &str) -> Result<SparseModel> {
 }
 
 /// Parses `images.txt`: each image line is followed by its points line (which may be
-/// empty), as COLMAP writes and reads it.
+/// empty), as COLMAP writes it; a missing points line is tolerated.
 pub fn parse_images_txt(text: &str, origin: &str) -> Result<SparseModel> {
     let mut model = SparseModel::default();
-    let mut lines = text.lines().enumerate().map(|(n, l)| (n + 1, l.trim()));
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(n, l)| (n + 1, l.trim()))
+        .peekable();
     while let Some((n, line)) = lines.next() {
         if line.is_empty() || line.starts_with('#') {
             continue;
@@ -540,8 +544,12 @@ pub fn parse_images_txt(text: &str, origin: &str) -> Result<SparseModel> {
         model
             .images
             .push(image(origin, &item, id, q, t, camera_id, name)?);
-        // The points line: read and ignored.
-        lines.next();
+        // The points line (numbers only, or empty): read and ignored. A file written
+        // without points lines goes straight on to the next image line (it has a name).
+        let is_points = |l: &str| l.split_whitespace().all(|w| w.parse::<f64>().is_ok());
+        if lines.peek().is_some_and(|(_, l)| is_points(l)) {
+            lines.next();
+        }
     }
     Ok(model)
 }
@@ -595,4 +603,26 @@ pub fn world_to_camera(rotation: [f64; 4], translation: [f64; 3]) -> [[f64; 4]; 
         ],
         [0.0, 0.0, 0.0, 1.0],
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn images_txt_with_and_without_points_lines() {
+        let with =
+            "# comment\n1 1 0 0 0 0.5 0 2 1 a.png\n1.0 2.0 -1 3 4 7\n2 0 1 0 0 0 0 1 1 b c.png\n\n";
+        let without = "1 1 0 0 0 0.5 0 2 1 a.png\n2 0 1 0 0 0 0 1 1 b c.png\n";
+        let a = parse_images_txt(with, "with").unwrap();
+        let b = parse_images_txt(without, "without").unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.images.len(), 2);
+        assert_eq!(a.images[1].name, "b c.png");
+        assert_eq!(a.images[0].translation, [0.5, 0.0, 2.0]);
+        // R(q) of a quarter turn about x: y → z.
+        let m = world_to_camera([0.5_f64.sqrt(), 0.5_f64.sqrt(), 0.0, 0.0], [0.0; 3]);
+        let y = [m[0][1], m[1][1], m[2][1]];
+        assert!((y[0]).abs() < 1e-15 && y[1].abs() < 1e-15 && (y[2] - 1.0).abs() < 1e-15);
+    }
 }
