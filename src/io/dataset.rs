@@ -410,6 +410,8 @@ pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec
 #[derive(Default)]
 struct Undistorter {
     tables: Vec<([u64; 11], RemapTable)>,
+    /// Photos undistorted so far.
+    undistorted: usize,
 }
 
 /// Tables kept at once.
@@ -470,6 +472,7 @@ fn prepare_photo(
     } = photo;
     let size = (image.width, image.height);
     if !distortion.is_pinhole() {
+        undistorter.undistorted += 1;
         let table = undistorter.table(size, intrinsics, &distortion);
         image = table.undistort_image(&image);
         mask = Some(match mask {
@@ -603,6 +606,31 @@ fn missing_frames(
     )))
 }
 
+/// The note on what undistortion and masks did, when they did anything: photos
+/// undistorted, and the share of pixel weight left out of the loss.
+fn weights_note(origin: &str, views: &[View], undistorted: usize) -> Option<String> {
+    let weighted: Vec<&Vec<f32>> = views.iter().filter_map(|v| v.weights.as_ref()).collect();
+    if weighted.is_empty() && undistorted == 0 {
+        return None;
+    }
+    let pixels: usize = weighted.iter().map(|w| w.len()).sum();
+    let kept: f64 = weighted
+        .iter()
+        .flat_map(|w| w.iter())
+        .map(|&w| f64::from(w))
+        .sum();
+    let left_out = if pixels > 0 {
+        100.0 * (1.0 - kept / pixels as f64)
+    } else {
+        0.0
+    };
+    Some(format!(
+        "{origin}: {undistorted} of {} photos undistorted into pinhole cameras with the same fx fy cx cy; {} views have pixel weights, {left_out:.1}% of their pixels' weight left out of the loss (outside the photo or masked)",
+        views.len(),
+        weighted.len()
+    ))
+}
+
 /// What [`read_transforms`] found in one file.
 struct FileViews {
     views: Vec<View>,
@@ -698,6 +726,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         views.len(),
         options.strict,
     )?);
+    notes.extend(weights_note(&origin, &views, undistorter.undistorted));
     let points = match &file.ply_file_path {
         Some(ply) => {
             let path = inside_dataset(dir, ply, &origin, "transforms", "ply_file_path")?;
@@ -786,6 +815,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
     }
     let notes = missing_frames(&origin, &missing, views.len(), options.strict)?
         .into_iter()
+        .chain(weights_note(&origin, &views, undistorter.undistorted))
         .collect();
     let points = (!model.points.is_empty()).then(|| {
         model

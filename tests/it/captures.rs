@@ -310,9 +310,16 @@ fn masks_become_pixel_weights() {
         "frames": [frame]});
     write_json(&dir.join("transforms.json"), &file);
     let dataset = load_dataset(dir, &DatasetOptions::default()).unwrap();
+    assert_eq!(
+        dataset.notes.len(),
+        1,
+        "mask_path is read, not ignored: {:?}",
+        dataset.notes
+    );
     assert!(
-        dataset.notes.is_empty(),
-        "mask_path is read: {:?}",
+        dataset.notes[0].contains("0 of 1 photos undistorted")
+            && dataset.notes[0].contains("1 views have pixel weights"),
+        "{:?}",
         dataset.notes
     );
     let weights = dataset.train[0].weights.as_ref().unwrap();
@@ -614,7 +621,12 @@ fn colmap_text_and_binary_load_as_the_equivalent_transforms_json() {
         assert_eq!(points, expected_points, "{what}");
     }
     for (what, dataset) in [("text", &text), ("binary", &binary)] {
-        assert!(dataset.notes.is_empty(), "{what}: {:?}", dataset.notes);
+        assert_eq!(dataset.notes.len(), 1, "{what}: {:?}", dataset.notes);
+        assert!(
+            dataset.notes[0].contains("1 of 9 photos undistorted"),
+            "{what}: {:?}",
+            dataset.notes
+        );
         for (a_split, b_split) in [(&json.train, &dataset.train), (&json.test, &dataset.test)] {
             assert_eq!(a_split.len(), b_split.len(), "{what}");
             for (a, b) in a_split.iter().zip(b_split) {
