@@ -105,6 +105,11 @@ fn exact() -> RenderOptions {
 /// that the lens bends onto its centre, sampled (bilinearly) from a render at 4× the
 /// resolution.
 fn distorted_photo(scene: &Scene, camera: &Camera, c: [f64; 5]) -> Image {
+    distorted_photo_at(scene, camera, 0.0, c)
+}
+
+/// [`distorted_photo`] at scene time `time`.
+fn distorted_photo_at(scene: &Scene, camera: &Camera, time: f64, c: [f64; 5]) -> Image {
     let (w, h) = (camera.width, camera.height);
     let fine = Camera::new(
         4 * w,
@@ -118,7 +123,7 @@ fn distorted_photo(scene: &Scene, camera: &Camera, c: [f64; 5]) -> Image {
         camera.world_to_camera,
     )
     .unwrap();
-    let big = splat4d::render(scene, &fine, 0.0, &exact()).unwrap();
+    let big = splat4d::render(scene, &fine, time, &exact()).unwrap();
     let mut photo = Image::filled(w, h, [0.0; 3]);
     for j in 0..h {
         for i in 0..w {
@@ -937,4 +942,80 @@ fn truncated_and_garbage_colmap_binaries_are_refused_without_panic() {
         reached >= 40,
         "{reached} of 60 refusals came from the COLMAP readers"
     );
+}
+
+/// The seed blob's D-NeRF dataset (8 cameras × 5 times, 32×32) photographed through an
+/// OPENCV lens and fitted (1000 steps, to stay fast): the held-out views, compared with the
+/// photos undistorted into the pinhole cameras over their valid pixels, reach the level the
+/// pinhole photos reach with the same command, within 1 dB. Measured: 32.3 dB against
+/// 28.9 dB at 1000 steps; with the default steps 53.7 dB against 54.6 dB.
+#[test]
+fn a_distorted_dataset_fits_as_well_as_the_pinhole_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let blob = json!({"kernels": [{"mean": [0.5, 0.5, 0.5, 0.5], "scale": [0.1, 0.1, 0.1, 100],
+        "amplitude": [1, 1, 1], "velocity": [1, 1, 1]}]});
+    std::fs::write(d.join("blob.json"), blob.to_string()).unwrap();
+    let args = [
+        "dataset",
+        "--scene",
+        "blob.json",
+        "--views",
+        "8",
+        "--times",
+        "5",
+        "--size",
+        "32x32",
+        "--out",
+        "ds",
+    ];
+    let output = splat4d(&args, d);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let scene = splat4d::io::scene_file::load_scene(&d.join("blob.json")).unwrap();
+    let dir = d.join("ds");
+    let pinhole = load_dataset(&dir, &DatasetOptions::default()).unwrap();
+    let coefficients = [0.15, 0.03, 0.002, -0.002, 0.0];
+    let [k1, k2, p1, p2, _] = coefficients;
+    for (split, views) in [
+        ("train", &pinhole.train),
+        ("val", &pinhole.val),
+        ("test", &pinhole.test),
+    ] {
+        let path = dir.join(format!("transforms_{split}.json"));
+        let mut file: Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        for (key, v) in [("k1", k1), ("k2", k2), ("p1", p1), ("p2", p2)] {
+            file[key] = json!(v);
+        }
+        write_json(&path, &file);
+        for view in views.iter() {
+            let photo = distorted_photo_at(&scene, &view.camera, view.time, coefficients);
+            // `./train/r_000` is looked up as .exr before .png.
+            save_image(
+                &photo,
+                &dir.join(format!("{}.exr", view.name)),
+                BitDepth::Sixteen,
+            )
+            .unwrap();
+        }
+    }
+    let output = splat4d(
+        &["fit", "--views", ".", "--out", "f.json", "--steps", "1000"],
+        &dir,
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    let psnr: f64 = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("test:"))
+        .and_then(|l| l.split("PSNR ").nth(1))
+        .and_then(|p| p.trim_end_matches(" dB").parse().ok())
+        .unwrap_or_else(|| panic!("no test PSNR in {stdout}"));
+    println!("distorted blob dataset: {stdout}");
+    let notes = stderr(&output);
+    assert!(
+        notes.contains("transforms_test.json: 8 of 8 photos undistorted"),
+        "{notes}"
+    );
+    assert!(psnr >= 28.9 - 1.0, "{psnr} dB");
 }
