@@ -745,6 +745,30 @@ fn a_binary_point_cloud_reads_like_the_ascii_one() {
         message.contains("element vertex") && message.contains("count"),
         "{message}"
     );
+    // Mutated and truncated clouds (binary and ascii): read or refused, never a panic.
+    let ascii = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nproperty uint8 red\nproperty uint8 green\nproperty uint8 blue\nend_header\n0.5 -1.25 2 255 0 51\n1 2 3 1 2 3\n".to_vec();
+    let ascii_points = splat4d::io::point_cloud::parse_point_cloud(&ascii, "a.ply").unwrap();
+    assert_eq!(ascii_points, points);
+    let mut rng = seeded_rng(11);
+    let mut refused = 0;
+    for good in [&bytes, &ascii] {
+        for run in 0..3000 {
+            let mut m = good.clone();
+            if run % 10 == 0 {
+                m.truncate(rng.random_range(0..m.len()));
+            } else {
+                let at = rng.random_range(0..m.len());
+                m[at] = rng.random();
+            }
+            let parsed = catch_unwind(|| splat4d::io::point_cloud::parse_point_cloud(&m, "m.ply"))
+                .unwrap_or_else(|_| panic!("panicked on {:?}", String::from_utf8_lossy(&m)));
+            if let Err(e) = parsed {
+                assert_eq!(e.kind(), ErrorKind::Input, "{e}");
+                refused += 1;
+            }
+        }
+    }
+    assert!(refused > 600, "{refused} of 6000 refused");
 }
 
 /// Frames without an image are skipped with one note naming them (the fit runs on the
