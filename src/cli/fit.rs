@@ -16,9 +16,15 @@ use super::args::{RenderFlags, parse_list};
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
-    /// Dataset folder (D-NeRF layout: transforms_train.json, and val/test for held-out views).
+    /// Dataset folder: D-NeRF layout (transforms_train.json, and val/test for held-out
+    /// views), one nerfstudio/instant-ngp transforms.json, or a COLMAP model (sparse/0 and
+    /// images/).
     #[arg(long)]
     views: PathBuf,
+    /// Refuse a dataset with frames whose image file is missing (by default they are
+    /// skipped with one warning naming them).
+    #[arg(long)]
+    strict: bool,
     /// Initial scene: `auto` (one kernel at the centre of the box, then densify, prune and
     /// merge so the count follows the data), `random:N` for N kernels in the box (a fixed count unless
     /// --adaptive), or a scene file.
@@ -230,6 +236,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let request = FitRequest {
         views: args.views.clone(),
         downscale: args.downscale,
+        strict: args.strict,
         init: args.init.clone(),
         plan,
         blend,

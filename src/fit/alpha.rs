@@ -27,12 +27,12 @@ use rand::seq::SliceRandom;
 
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::loss::{mse_with_gradient, psnr};
+use crate::fit::loss::{psnr, view_mse_with_gradient};
 use crate::fit::train::{StepRecord, check_views, evaluate};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
-use crate::model::{Camera, View};
+use crate::model::{Camera, DatasetPoint, View};
 use crate::render::{RenderContext, RenderOptions};
 
 /// Learning rates of the alpha fit, per group.
@@ -157,6 +157,51 @@ pub fn random_alpha_scene(
     )
 }
 
+/// A start from a dataset's point cloud (SPEC §8 kernels at the points, coloured by them):
+/// at most `options.max_kernels` points, taken evenly through the list; spatial σ half the
+/// spacing the points would have spread through the box, σt `start_time_scale` of the time
+/// range, centred in time.
+pub fn point_cloud_alpha_scene(
+    points: &[DatasetPoint],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<Scene> {
+    let stride = points.len().div_ceil(options.max_kernels.max(1)).max(1);
+    let chosen: Vec<&DatasetPoint> = points.iter().step_by(stride).collect();
+    let n = chosen.len().max(1);
+    let extent: [f64; 3] = std::array::from_fn(|a| bounds.max[a] - bounds.min[a]);
+    let spacing = (extent[0] * extent[1] * extent[2] / n as f64).cbrt();
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
+    let mut rng = seeded_rng(options.seed);
+    let kernels: Vec<Kernel> = chosen
+        .iter()
+        .map(|p| {
+            let [x, y, z] = p.position;
+            let mut kernel = Kernel::new(
+                [x, y, z, centre_time],
+                [
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    options.start_time_scale.max(1.0) * time_range,
+                ],
+                p.colour.map(f64::from),
+            );
+            kernel.rotation = random_rotation(&mut rng);
+            kernel
+        })
+        .collect();
+    let n = kernels.len();
+    Scene::from_kernels(&kernels, background, "<point cloud start>")?.into_alpha(
+        vec![options.start_opacity; n],
+        options.sh_count,
+        vec![[0.0; 3]; n * options.sh_count],
+        "<point cloud start>",
+    )
+}
+
 /// The length scales the rates are relative to: the box's diagonal and the time range.
 fn extents(bounds: &SpaceTimeBox) -> (f64, f64) {
     let diagonal = (0..3)
@@ -215,7 +260,7 @@ pub fn fit_alpha(
             cursor += 1;
             context.render(scene, &view.camera, view.time, &options.render)?;
             train_loss +=
-                weight * mse_with_gradient(context.image(), &view.image, weight, &mut v_image);
+                weight * view_mse_with_gradient(context.image(), view, weight, &mut v_image);
             context.backward(
                 scene,
                 &view.camera,

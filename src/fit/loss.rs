@@ -1,7 +1,11 @@
 //! The loss of SPEC §6: per view, the mean over pixels and channels of `(C - C_gt)²` on raw
 //! linear values (no clamp); over views, the mean of those. `PSNR = 10 log10(1 / MSE)`.
+//!
+//! A view with per-pixel weights `w_p` ([`View::weights`]: undistortion borders, dataset
+//! masks) uses the weighted mean `Σ_p w_p Σ_c (C - C_gt)² / (3 Σ_p w_p)` (0 when every weight
+//! is 0); without weights the plain mean above, computed exactly as before.
 
-use crate::model::Image;
+use crate::model::{Image, View};
 
 /// MSE of `image` against `target` (same size), accumulated in f64.
 #[must_use]
@@ -38,6 +42,81 @@ pub fn mse_with_gradient(
             .map(|(&c, &t)| scale * (c - t)),
     );
     mse(image, target)
+}
+
+/// The weighted MSE of `image` against `target` with one weight per pixel (see the module
+/// doc), accumulated in f64.
+#[must_use]
+pub fn weighted_mse(image: &Image, target: &Image, weights: &[f32]) -> f64 {
+    assert_eq!(
+        (image.width, image.height),
+        (target.width, target.height),
+        "image and target sizes differ"
+    );
+    assert_eq!(
+        weights.len(),
+        image.pixels.len() / 3,
+        "one weight per pixel"
+    );
+    let mut sum = 0.0;
+    let mut total = 0.0;
+    for ((c, t), &w) in image
+        .pixels
+        .chunks_exact(3)
+        .zip(target.pixels.chunks_exact(3))
+        .zip(weights)
+    {
+        let w = f64::from(w);
+        total += w;
+        sum += w
+            * (0..3)
+                .map(|k| (f64::from(c[k]) - f64::from(t[k])).powi(2))
+                .sum::<f64>();
+    }
+    if total > 0.0 {
+        sum / (3.0 * total)
+    } else {
+        0.0
+    }
+}
+
+/// The loss of `image` against `view`: [`weighted_mse`] with the view's weights, else
+/// [`mse`].
+#[must_use]
+pub fn view_mse(image: &Image, view: &View) -> f64 {
+    match &view.weights {
+        Some(weights) => weighted_mse(image, &view.image, weights),
+        None => mse(image, &view.image),
+    }
+}
+
+/// [`view_mse`] and its gradient `weight ∂loss/∂C` into `v_image` (resized), as
+/// [`mse_with_gradient`]; with pixel weights `w_p`, `∂loss/∂C = 2 w_p (C - C_gt) / (3 Σ w)`.
+pub fn view_mse_with_gradient(
+    image: &Image,
+    view: &View,
+    weight: f64,
+    v_image: &mut Vec<f32>,
+) -> f64 {
+    let Some(weights) = &view.weights else {
+        return mse_with_gradient(image, &view.image, weight, v_image);
+    };
+    let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
+    let scale = if total > 0.0 {
+        (weight * 2.0 / (3.0 * total)) as f32
+    } else {
+        0.0
+    };
+    v_image.clear();
+    v_image.extend(
+        image
+            .pixels
+            .iter()
+            .zip(&view.image.pixels)
+            .enumerate()
+            .map(|(k, (&c, &t))| scale * weights[k / 3] * (c - t)),
+    );
+    weighted_mse(image, &view.image, weights)
 }
 
 /// `10 log10(1 / mse)`, dB.
@@ -156,6 +235,49 @@ pub fn ssim(image: &Image, target: &Image) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn weighted_mse_is_the_weighted_mean_and_its_gradient_matches() {
+        let target = Image {
+            width: 2,
+            height: 1,
+            pixels: vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+        };
+        let image = Image {
+            width: 2,
+            height: 1,
+            pixels: vec![0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
+        };
+        let mut view = View {
+            camera: crate::model::Camera::look_at(
+                [0.0, 0.0, -1.0],
+                [0.0; 3],
+                [0.0, 1.0, 0.0],
+                40.0,
+                2,
+                1,
+            )
+            .unwrap(),
+            time: 0.0,
+            image: target,
+            name: "v".into(),
+            weights: None,
+        };
+        let mut v = Vec::new();
+        // Unweighted: (3·0.25 + 3·1)/6; weights (1, 1) give the same number.
+        assert_eq!(view_mse(&image, &view), 0.625);
+        assert_eq!(view_mse_with_gradient(&image, &view, 1.0, &mut v), 0.625);
+        view.weights = Some(vec![1.0, 1.0]);
+        assert_eq!(view_mse(&image, &view), 0.625);
+        // The second pixel left out: the first pixel's 0.25 alone.
+        view.weights = Some(vec![1.0, 0.0]);
+        assert_eq!(view_mse_with_gradient(&image, &view, 0.5, &mut v), 0.25);
+        // ∂/∂C of Σ w (C - T)² / (3 Σ w), times 0.5: 0.5 · 2 · 0.5 / 3 on the first pixel.
+        assert!((v[0] - 0.5 * 2.0 * 0.5 / 3.0).abs() < 1e-7, "{v:?}");
+        assert_eq!(&v[3..], &[0.0; 3]);
+        view.weights = Some(vec![0.0, 0.0]);
+        assert_eq!(view_mse(&image, &view), 0.0);
+    }
 
     /// The pattern of the independent reference value below, as f32 pixels.
     fn pattern(w: u32, h: u32, f: impl Fn(f64, f64, f64) -> f64) -> Image {

@@ -548,6 +548,7 @@ mod tests {
             time: (k % 2) as f64,
             image: Image::filled(8, 8, [0.0; 3]),
             name: format!("view {k}"),
+            weights: None,
         })
         .collect()
     }

@@ -13,7 +13,7 @@ use rand::seq::SliceRandom;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
 use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
-use crate::fit::loss::{mse, mse_with_gradient, psnr};
+use crate::fit::loss::{psnr, view_mse, view_mse_with_gradient};
 use crate::fit::plan;
 use crate::model::View;
 use crate::model::error::{Error, Result};
@@ -156,6 +156,16 @@ pub fn check_views(views: &[View]) -> Result<()> {
                 ),
             ));
         }
+        if let Some(weights) = &view.weights
+            && weights.len() != c.pixel_count()
+        {
+            return Err(Error::invalid(
+                &view.name,
+                "view",
+                "weights",
+                format!("{} weights for {} pixels", weights.len(), c.pixel_count()),
+            ));
+        }
     }
     Ok(())
 }
@@ -170,7 +180,7 @@ pub fn evaluate(
     let mut total = 0.0;
     for view in views {
         context.render(scene, &view.camera, view.time, options)?;
-        total += mse(context.image(), &view.image);
+        total += view_mse(context.image(), view);
     }
     Ok(total / views.len().max(1) as f64)
 }
@@ -216,7 +226,7 @@ pub fn fit(
             context.render(scene, &view.camera, view.time, &options.render)?;
             let weight = 1.0 / batch_size as f64;
             batch_loss +=
-                weight * mse_with_gradient(context.image(), &view.image, weight, &mut v_image);
+                weight * view_mse_with_gradient(context.image(), view, weight, &mut v_image);
             context.backward(
                 scene,
                 &view.camera,

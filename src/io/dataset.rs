@@ -13,29 +13,57 @@
 //! others train (a file of fewer than 8 frames trains on all); there is no `val`.
 //!
 //! Intrinsics, per frame or for the whole file (a frame's own win): `fl_x`, `fl_y`, `cx`,
-//! `cy` in pixels, `w`, `h` (checked against the image); else `camera_angle_x` (horizontal
-//! field of view, radians: `fx = ½ W / tan(½ camera_angle_x)`, `fy = fx`) or
-//! `camera_angle_y`; the principal point defaults to the image centre. `camera_model` may be
-//! a pinhole or an OpenCV model whose distortion coefficients (`k1`–`k4`, `p1`, `p2`) are all
-//! zero; distortion is refused (undistort the images first). Keys not read are reported once
-//! per file in [`Dataset::notes`], and ignored.
+//! `cy` in pixels, `w`, `h` (checked against the image; written as `1080` or `1080.0`, a
+//! number that is not a whole one is refused); else `camera_angle_x` (horizontal field of
+//! view, radians: `fx = ½ W / tan(½ camera_angle_x)`, `fy = fx`) or `camera_angle_y`; the
+//! principal point defaults to the image centre.
+//!
+//! Lens distortion (`k1 k2 k3 p1 p2`, OpenCV's model; `camera_model` PINHOLE,
+//! SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV or none: the coefficients given are used
+//! whatever the name, since those models are all the OpenCV formula with some coefficients
+//! zero) is removed at load: each photo is resampled into the pinhole camera with the same
+//! `fx fy cx cy` ([`crate::model::distortion`]), one remap table per distinct camera, and the
+//! pixels whose source lies outside the photo weigh 0 in the loss ([`View::weights`]).
+//! Fisheye, equirectangular and other projections (`OPENCV_FISHEYE`, `FISHEYE`,
+//! `EQUIRECTANGULAR`, ..., a nonzero `k4`) are refused.
+//!
+//! A frame's `mask_path` (nerfstudio: a greyscale image the size of the photo, 0 = ignore)
+//! multiplies the pixel weights: weight = the mask's grey value (RGB masks: the mean of the
+//! channels, alpha composited over black), undistorted with the photo. A top-level
+//! `ply_file_path` (nerfstudio: a PLY point cloud in the cameras' world) is read into
+//! [`Dataset::points`]. Both must lie inside the dataset folder.
+//!
+//! Frames whose image file is missing are skipped, with one note naming them; under
+//! [`DatasetOptions::strict`] they are refused. Keys not read are reported once per file in
+//! [`Dataset::notes`], and ignored.
+//!
+//! **COLMAP** ([`crate::io::colmap`]): without a transforms file, `DIR/sparse/0` (or
+//! `DIR/sparse`) with `cameras`, `images` and `points3D` (`.bin` or `.txt`) is read, the photos
+//! from `DIR/images/NAME`. The poses are used as they are (world→camera, OpenCV axes, SPEC
+//! §3); the views are sorted by name and every 8th (0, 8, 16, ...) is held out as `test`, as
+//! nerfstudio does (fewer than 8 images: all train). COLMAP models are static: every time is
+//! 0. `points3D` becomes [`Dataset::points`].
 //!
 //! Integer images are read as `value / (2^bits - 1)` (SPEC §5: linear, no sRGB curve, JPEG
 //! included); RGBA images are composited over [`DatasetOptions::background`] (black by
 //! default: the additive model's "nothing"). `downscale` N averages N×N blocks (a box
-//! filter, like nerfstudio's `images_N` folders) and divides the intrinsics by N.
+//! filter, like nerfstudio's `images_N` folders; with pixel weights, the weighted mean of the
+//! block and the mean weight) and divides the intrinsics by N, after undistortion.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::io::colmap;
 use crate::io::image_file::{BitDepth, load_image_with_alpha, save_image};
 use crate::io::json::parse_json;
+use crate::io::point_cloud::read_point_cloud;
 use crate::io::write_bytes_atomically;
 use crate::model::camera::Camera;
-use crate::model::error::{Error, Result};
-use crate::model::{Blend, Dataset, Image, View};
+use crate::model::distortion::{Distortion, RemapTable};
+use crate::model::error::{Error, Result, check_finite};
+use crate::model::{Blend, Dataset, DatasetPoint, Image, View};
 
 /// The three splits, in file order.
 pub const SPLITS: [&str; 3] = ["train", "val", "test"];
@@ -53,6 +81,8 @@ pub struct DatasetOptions {
     pub background: [f32; 3],
     /// Average N×N blocks of pixels (1: the images as they are).
     pub downscale: u32,
+    /// Refuse frames whose image file is missing (otherwise they are skipped with a note).
+    pub strict: bool,
 }
 
 impl Default for DatasetOptions {
@@ -60,6 +90,7 @@ impl Default for DatasetOptions {
         DatasetOptions {
             background: [0.0; 3],
             downscale: 1,
+            strict: false,
         }
     }
 }
@@ -93,8 +124,9 @@ struct Intrinsics {
     fl_y: Option<f64>,
     cx: Option<f64>,
     cy: Option<f64>,
-    w: Option<u32>,
-    h: Option<u32>,
+    // Floats: nerfstudio writes `"w": 1080.0`; whole numbers are checked in `intrinsics`.
+    w: Option<f64>,
+    h: Option<f64>,
     camera_model: Option<String>,
     k1: Option<f64>,
     k2: Option<f64>,
@@ -110,6 +142,7 @@ struct TransformsFile {
     camera_angle_y: Option<f64>,
     #[serde(flatten)]
     intrinsics: Intrinsics,
+    ply_file_path: Option<String>,
     frames: Vec<FrameEntry>,
     splat4d_blend: Option<Blend>,
     #[serde(flatten)]
@@ -121,6 +154,7 @@ struct FrameEntry {
     file_path: String,
     time: Option<f64>,
     transform_matrix: [[f64; 4]; 4],
+    mask_path: Option<String>,
     #[serde(flatten)]
     intrinsics: Intrinsics,
     #[serde(flatten)]
@@ -128,19 +162,18 @@ struct FrameEntry {
 }
 
 /// Keys other tools write that carry nothing splat4d needs: skipped without a note.
-const QUIETLY_IGNORED: [&str; 9] = [
+const QUIETLY_IGNORED: [&str; 8] = [
     "aabb_scale",
     "scale",
     "offset",
     "applied_transform",
     "applied_scale",
-    "ply_file_path",
     "rotation",
     "colmap_im_id",
     "sharpness",
 ];
 
-/// Camera models that are pinholes once their distortion coefficients are zero.
+/// Camera models read: pinholes, with OpenCV-formula distortion removed at load.
 const PINHOLE_MODELS: [&str; 5] = [
     "PINHOLE",
     "SIMPLE_PINHOLE",
@@ -148,6 +181,9 @@ const PINHOLE_MODELS: [&str; 5] = [
     "SIMPLE_RADIAL",
     "RADIAL",
 ];
+
+/// Frames named in the note (or error) about missing images.
+const NAMED_MISSING: usize = 5;
 
 /// The image file a `file_path` entry refers to: a regular file.
 fn resolve_image(dir: &Path, file_path: &str) -> Option<PathBuf> {
@@ -161,6 +197,82 @@ fn resolve_image(dir: &Path, file_path: &str) -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+/// A whole number of pixels given as a JSON number (`1080` or `1080.0`).
+fn whole_pixels(value: f64, origin: &str, item: &str, field: &str, top: bool) -> Result<u32> {
+    let place = if top { " (top level)" } else { "" };
+    if value.is_finite() && value.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&value) {
+        Ok(value as u32)
+    } else {
+        Err(Error::invalid(
+            origin,
+            item,
+            field,
+            format!("{value}{place} is not a whole number of pixels"),
+        ))
+    }
+}
+
+/// The lens distortion of a frame: its own coefficients, then the file's.
+fn distortion(
+    file: &TransformsFile,
+    frame: &FrameEntry,
+    origin: &str,
+    item: &str,
+) -> Result<Distortion> {
+    let (own, top) = (&frame.intrinsics, &file.intrinsics);
+    if let Some(model) = own.camera_model.as_ref().or(top.camera_model.as_ref())
+        && !PINHOLE_MODELS.contains(&model.as_str())
+    {
+        let upper = model.to_ascii_uppercase();
+        let kind = if ["FISHEYE", "EQUIRECTANGULAR", "OMNIDIRECTIONAL", "VR180"]
+            .iter()
+            .any(|k| upper.contains(k))
+        {
+            "fisheye, equirectangular and omnidirectional projections are not supported"
+        } else {
+            "not a camera model splat4d reads"
+        };
+        return Err(Error::invalid(
+            origin,
+            item,
+            "camera_model",
+            format!("{model}: {kind} (read: {})", PINHOLE_MODELS.join(", ")),
+        ));
+    }
+    let mut coefficients = [0.0; 6];
+    for (k, (field, value)) in [
+        ("k1", own.k1.or(top.k1)),
+        ("k2", own.k2.or(top.k2)),
+        ("k3", own.k3.or(top.k3)),
+        ("p1", own.p1.or(top.p1)),
+        ("p2", own.p2.or(top.p2)),
+        ("k4", own.k4.or(top.k4)),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let v = value.unwrap_or(0.0);
+        check_finite(origin, item, field, &[v])?;
+        coefficients[k] = v;
+    }
+    if coefficients[5] != 0.0 {
+        return Err(Error::invalid(
+            origin,
+            item,
+            "k4",
+            format!(
+                "k4 = {}: a fisheye (or rational) lens coefficient; only k1 k2 k3 p1 p2 are read",
+                coefficients[5]
+            ),
+        ));
+    }
+    let [k1, k2, k3, p1, p2, _] = coefficients;
+    Ok(Distortion {
+        radial: [k1, k2, k3],
+        tangential: [p1, p2],
+    })
+}
+
 /// The intrinsics `[fx, fy, cx, cy]` of a `w × h` image (before downscaling) from the
 /// frame's own keys, then the file's, then the fields of view.
 fn intrinsics(
@@ -171,39 +283,13 @@ fn intrinsics(
     item: &str,
 ) -> Result<[f64; 4]> {
     let (own, top) = (&frame.intrinsics, &file.intrinsics);
-    for (field, value) in [
-        ("k1", own.k1.or(top.k1)),
-        ("k2", own.k2.or(top.k2)),
-        ("k3", own.k3.or(top.k3)),
-        ("k4", own.k4.or(top.k4)),
-        ("p1", own.p1.or(top.p1)),
-        ("p2", own.p2.or(top.p2)),
-    ] {
-        if let Some(v) = value
-            && v != 0.0
-        {
-            return Err(Error::invalid(
-                origin,
-                item,
-                field,
-                format!(
-                    "distortion coefficient {field} = {v}: only undistorted (pinhole) images are supported; undistort them first"
-                ),
-            ));
-        }
-    }
-    if let Some(model) = own.camera_model.as_ref().or(top.camera_model.as_ref())
-        && !PINHOLE_MODELS.contains(&model.as_str())
-    {
-        return Err(Error::invalid(
-            origin,
-            item,
-            "camera_model",
-            format!("{model} is not a pinhole model (expected one of {PINHOLE_MODELS:?})"),
-        ));
-    }
-    for (field, value, actual) in [("w", own.w.or(top.w), w), ("h", own.h.or(top.h), h)] {
-        if let Some(v) = value
+    for (field, value, fallback, actual) in [("w", own.w, top.w, w), ("h", own.h, top.h, h)] {
+        let given = match (value, fallback) {
+            (Some(v), _) => Some(whole_pixels(v, origin, item, field, false)?),
+            (None, Some(v)) => Some(whole_pixels(v, origin, item, field, true)?),
+            (None, None) => None,
+        };
+        if let Some(v) = given
             && v != actual
         {
             return Err(Error::invalid(
@@ -278,12 +364,293 @@ pub fn downscale(image: &Image, n: u32) -> Image {
     }
 }
 
+/// The weighted box filter: per `n × n` block, the mean weight and the weighted mean colour
+/// (the plain mean where every weight is 0).
+#[must_use]
+pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec<f32>) {
+    let (w, h) = (image.width / n, image.height / n);
+    let mut pixels = Vec::with_capacity(3 * w as usize * h as usize);
+    let mut out_weights = Vec::with_capacity(w as usize * h as usize);
+    let inv = 1.0 / f64::from(n * n);
+    let width = image.width as usize;
+    for j in 0..h {
+        for i in 0..w {
+            let mut sum = [0.0_f64; 3];
+            let mut plain = [0.0_f64; 3];
+            let mut total = 0.0_f64;
+            for dj in 0..n {
+                for di in 0..n {
+                    let (x, y) = (n * i + di, n * j + dj);
+                    let weight = f64::from(weights[y as usize * width + x as usize]);
+                    let p = image.pixel(x, y);
+                    total += weight;
+                    for c in 0..3 {
+                        sum[c] += weight * f64::from(p[c]);
+                        plain[c] += f64::from(p[c]);
+                    }
+                }
+            }
+            pixels.extend(if total > 0.0 {
+                sum.map(|s| (s / total) as f32)
+            } else {
+                plain.map(|s| (s * inv) as f32)
+            });
+            out_weights.push((total * inv) as f32);
+        }
+    }
+    (
+        Image {
+            width: w,
+            height: h,
+            pixels,
+        },
+        out_weights,
+    )
+}
+
+/// Remap tables kept while a dataset loads, by camera (size, intrinsics, distortion): each
+/// is computed once. Only the last few are kept (a table takes 16 bytes a pixel).
+#[derive(Default)]
+struct Undistorter {
+    tables: Vec<([u64; 11], RemapTable)>,
+    /// Photos undistorted so far.
+    undistorted: usize,
+}
+
+/// Tables kept at once.
+const KEPT_TABLES: usize = 4;
+
+impl Undistorter {
+    fn table(&mut self, (w, h): (u32, u32), k: [f64; 4], d: &Distortion) -> &RemapTable {
+        let key = [
+            u64::from(w),
+            u64::from(h),
+            k[0].to_bits(),
+            k[1].to_bits(),
+            k[2].to_bits(),
+            k[3].to_bits(),
+            d.radial[0].to_bits(),
+            d.radial[1].to_bits(),
+            d.radial[2].to_bits(),
+            d.tangential[0].to_bits(),
+            d.tangential[1].to_bits(),
+        ];
+        let index = match self.tables.iter().position(|(k, _)| *k == key) {
+            Some(index) => index,
+            None => {
+                if self.tables.len() == KEPT_TABLES {
+                    self.tables.remove(0);
+                }
+                self.tables.push((key, RemapTable::new(w, h, k, d)));
+                self.tables.len() - 1
+            }
+        };
+        &self.tables[index].1
+    }
+}
+
+/// One photo as read, before it becomes a [`View`].
+struct Photo {
+    image: Image,
+    /// The mask's weights, one per photo pixel.
+    mask: Option<Vec<f32>>,
+    /// `[fx, fy, cx, cy]` of the photo, pixels.
+    intrinsics: [f64; 4],
+    distortion: Distortion,
+}
+
+/// The photo undistorted, masked and downscaled: the image, its pixel weights (`None` when
+/// every pixel counts fully) and the pinhole intrinsics of the result.
+fn prepare_photo(
+    photo: Photo,
+    undistorter: &mut Undistorter,
+    n: u32,
+    (origin, item): (&str, &str),
+) -> Result<(Image, Option<Vec<f32>>, [f64; 4])> {
+    let Photo {
+        mut image,
+        mut mask,
+        intrinsics,
+        distortion,
+    } = photo;
+    let size = (image.width, image.height);
+    if !distortion.is_pinhole() {
+        undistorter.undistorted += 1;
+        let table = undistorter.table(size, intrinsics, &distortion);
+        image = table.undistort_image(&image);
+        mask = Some(match mask {
+            Some(m) => table.undistort_weights(&m),
+            None => table.validity(),
+        });
+    }
+    if size.0 < n || size.1 < n {
+        return Err(Error::usage(format!(
+            "{origin}: {item}: {}×{} is smaller than --downscale {n}",
+            size.0, size.1
+        )));
+    }
+    let (image, weights) = match mask {
+        None => (downscale(&image, n), None),
+        Some(m) => {
+            let (image, weights) = if n == 1 {
+                (image, m)
+            } else {
+                downscale_weighted(&image, &m, n)
+            };
+            if weights.iter().all(|&w| w == 0.0) {
+                return Err(Error::invalid(
+                    origin,
+                    item,
+                    "mask_path",
+                    "no pixel is left to fit: the mask (and the undistortion) leave every pixel out",
+                ));
+            }
+            let all_ones = weights.iter().all(|&w| w == 1.0);
+            (image, (!all_ones).then_some(weights))
+        }
+    };
+    let scale = f64::from(n);
+    Ok((image, weights, intrinsics.map(|v| v / scale)))
+}
+
+/// `relative` under the dataset folder `dir`, checked to lie inside it (after resolving
+/// links and `..`).
+fn inside_dataset(
+    dir: &Path,
+    relative: &str,
+    origin: &str,
+    item: &str,
+    field: &str,
+) -> Result<PathBuf> {
+    let path = dir.join(relative);
+    let canonical = path
+        .canonicalize()
+        .map_err(|e| Error::read(&path, &format!("{item}: field `{field}`: cannot open"), e))?;
+    let root = dir
+        .canonicalize()
+        .map_err(|e| Error::read(dir, "cannot open the dataset folder", e))?;
+    if !canonical.starts_with(&root) {
+        return Err(Error::invalid(
+            origin,
+            item,
+            field,
+            format!(
+                "{relative} lies outside the dataset folder {}",
+                dir.display()
+            ),
+        ));
+    }
+    Ok(canonical)
+}
+
+/// A mask image as pixel weights: the mean of its channels (alpha composited over black),
+/// clamped to `[0, 1]`; it must have the photo's size.
+fn load_mask(path: &Path, (w, h): (u32, u32), origin: &str, item: &str) -> Result<Vec<f32>> {
+    let (mask, _) = load_image_with_alpha(path, [0.0; 3])?;
+    if (mask.width, mask.height) != (w, h) {
+        return Err(Error::invalid(
+            origin,
+            item,
+            "mask_path",
+            format!(
+                "{}: {}×{} but the photo is {w}×{h}",
+                path.display(),
+                mask.width,
+                mask.height
+            ),
+        ));
+    }
+    Ok(mask
+        .pixels
+        .chunks_exact(3)
+        .map(|p| ((p[0] + p[1] + p[2]) / 3.0).clamp(0.0, 1.0))
+        .collect())
+}
+
+/// The note about frames without an image, `missing` as `(item, name)`; an error naming
+/// the first frame when `strict` or when no frame has an image (`loaded` is 0).
+fn missing_frames(
+    origin: &str,
+    missing: &[(String, String)],
+    loaded: usize,
+    strict: bool,
+) -> Result<Option<String>> {
+    let Some((first, _)) = missing.first() else {
+        return Ok(None);
+    };
+    let mut names = missing
+        .iter()
+        .take(NAMED_MISSING)
+        .map(|(_, name)| name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ");
+    if missing.len() > NAMED_MISSING {
+        names.push_str(", …");
+    }
+    let count = missing.len();
+    let frames = if count == 1 { "frame" } else { "frames" };
+    if strict || loaded == 0 {
+        let why = if strict {
+            "--strict refuses them"
+        } else {
+            "no frame has one"
+        };
+        return Err(Error::invalid(
+            origin,
+            first,
+            "file_path",
+            format!(
+                "{count} {frames} without an image file (.exr, .png, .jpg or .jpeg): {names} ({why})"
+            ),
+        ));
+    }
+    Ok(Some(format!(
+        "{origin}: skipped {count} {frames} whose image is missing: {names}"
+    )))
+}
+
+/// The note on what undistortion and masks did, when they did anything: photos
+/// undistorted, and the share of pixel weight left out of the loss.
+fn weights_note(origin: &str, views: &[View], undistorted: usize) -> Option<String> {
+    let weighted: Vec<&Vec<f32>> = views.iter().filter_map(|v| v.weights.as_ref()).collect();
+    if weighted.is_empty() && undistorted == 0 {
+        return None;
+    }
+    let pixels: usize = weighted.iter().map(|w| w.len()).sum();
+    let kept: f64 = weighted
+        .iter()
+        .flat_map(|w| w.iter())
+        .map(|&w| f64::from(w))
+        .sum();
+    let left_out = if pixels > 0 {
+        100.0 * (1.0 - kept / pixels as f64)
+    } else {
+        0.0
+    };
+    Some(format!(
+        "{origin}: {undistorted} of {} photos undistorted into pinhole cameras with the same fx fy cx cy; {} views have pixel weights, {left_out:.1}% of their pixels' weight left out of the loss (outside the photo or masked)",
+        views.len(),
+        weighted.len()
+    ))
+}
+
 /// What [`read_transforms`] found in one file.
 struct FileViews {
     views: Vec<View>,
     blend: Option<Blend>,
     transparent: bool,
     notes: Vec<String>,
+    points: Option<Vec<DatasetPoint>>,
+}
+
+/// Checks the `downscale` option.
+fn check_downscale(n: u32) -> Result<()> {
+    if !(1..=MAX_DOWNSCALE).contains(&n) {
+        return Err(Error::usage(format!(
+            "--downscale {n} must be between 1 and {MAX_DOWNSCALE}"
+        )));
+    }
+    Ok(())
 }
 
 /// Reads one transforms file and its images.
@@ -292,40 +659,38 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
     let text = std::fs::read_to_string(path).map_err(|e| Error::read(path, "cannot read", e))?;
     let file: TransformsFile = parse_json(&text, &origin, "transforms")?;
     let n = options.downscale;
-    if !(1..=MAX_DOWNSCALE).contains(&n) {
-        return Err(Error::usage(format!(
-            "--downscale {n} must be between 1 and {MAX_DOWNSCALE}"
-        )));
-    }
+    check_downscale(n)?;
     let mut unread: BTreeSet<&str> = file.other.keys().map(String::as_str).collect();
     let mut views = Vec::with_capacity(file.frames.len().min(1 << 16));
     let mut transparent = false;
+    let mut missing = Vec::new();
+    let mut undistorter = Undistorter::default();
     for (index, frame) in file.frames.iter().enumerate() {
         let item = format!("frame {index}");
         unread.extend(frame.other.keys().map(String::as_str));
-        let image_path = resolve_image(dir, &frame.file_path).ok_or_else(|| {
-            Error::invalid(
-                &origin,
-                &item,
-                "file_path",
-                format!(
-                    "no image file at {} (.exr, .png, .jpg or .jpeg)",
-                    frame.file_path
-                ),
-            )
-        })?;
+        let Some(image_path) = resolve_image(dir, &frame.file_path) else {
+            missing.push((item, frame.file_path.clone()));
+            continue;
+        };
+        let lens = distortion(&file, frame, &origin, &item)?;
         let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
         transparent |= alpha;
         let (w, h) = (image.width, image.height);
-        let [fx, fy, cx, cy] = intrinsics(&file, frame, (w, h), &origin, &item)?;
-        if w < n || h < n {
-            return Err(Error::usage(format!(
-                "{}: {w}×{h} is smaller than --downscale {n}",
-                image_path.display()
-            )));
-        }
-        let image = downscale(&image, n);
-        let scale = f64::from(n);
+        let k = intrinsics(&file, frame, (w, h), &origin, &item)?;
+        let mask = match &frame.mask_path {
+            Some(mask_path) => {
+                let path = inside_dataset(dir, mask_path, &origin, &item, "mask_path")?;
+                Some(load_mask(&path, (w, h), &origin, &item)?)
+            }
+            None => None,
+        };
+        let photo = Photo {
+            image,
+            mask,
+            intrinsics: k,
+            distortion: lens,
+        };
+        let (image, weights, k) = prepare_photo(photo, &mut undistorter, n, (&origin, &item))?;
         let time = frame.time.unwrap_or(0.0);
         if !time.is_finite() {
             return Err(Error::invalid(&origin, &item, "time", "not finite"));
@@ -333,7 +698,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         let camera = Camera::from_opengl_camera_to_world(
             image.width,
             image.height,
-            [fx / scale, fy / scale, cx / scale, cy / scale],
+            k,
             frame.transform_matrix,
         )
         .map_err(|e| match e {
@@ -350,37 +715,151 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
             time,
             image,
             name: frame.file_path.clone(),
+            weights,
         });
     }
     unread.retain(|key| !QUIETLY_IGNORED.contains(key));
-    let notes = if unread.is_empty() {
-        Vec::new()
-    } else {
+    let mut notes = Vec::new();
+    if !unread.is_empty() {
         let keys: Vec<&str> = unread.into_iter().collect();
-        vec![format!("{origin}: ignored keys {}", keys.join(", "))]
+        notes.push(format!("{origin}: ignored keys {}", keys.join(", ")));
+    }
+    notes.extend(missing_frames(
+        &origin,
+        &missing,
+        views.len(),
+        options.strict,
+    )?);
+    notes.extend(weights_note(&origin, &views, undistorter.undistorted));
+    let points = match &file.ply_file_path {
+        Some(ply) => {
+            let path = inside_dataset(dir, ply, &origin, "transforms", "ply_file_path")?;
+            Some(read_point_cloud(&path)?)
+        }
+        None => None,
     };
     Ok(FileViews {
         views,
         blend: file.splat4d_blend,
         transparent,
         notes,
+        points,
+    })
+}
+
+/// Reads the COLMAP model in `sparse` with its photos in `dir/images`.
+fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<FileViews> {
+    let n = options.downscale;
+    check_downscale(n)?;
+    let model = colmap::read_sparse_model(sparse)?;
+    let [_, images_file, _] = colmap::model_files(sparse);
+    let origin =
+        images_file.map_or_else(|| sparse.display().to_string(), |p| p.display().to_string());
+    let mut images = model.images;
+    images.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut views = Vec::with_capacity(images.len().min(1 << 16));
+    let mut transparent = false;
+    let mut missing = Vec::new();
+    let mut undistorter = Undistorter::default();
+    for entry in &images {
+        let item = format!("image {} ({})", entry.id, entry.name);
+        let camera = model.cameras.get(&entry.camera_id).ok_or_else(|| {
+            Error::invalid(
+                &origin,
+                &item,
+                "camera_id",
+                format!("camera {} is not in the cameras file", entry.camera_id),
+            )
+        })?;
+        let name = format!("images/{}", entry.name);
+        let path = dir.join(&name);
+        if !path.is_file() {
+            missing.push((item, name));
+            continue;
+        }
+        let path = inside_dataset(dir, &name, &origin, &item, "name")?;
+        let (image, alpha) = load_image_with_alpha(&path, options.background)?;
+        transparent |= alpha;
+        if (image.width, image.height) != (camera.width, camera.height) {
+            return Err(Error::invalid(
+                &origin,
+                &item,
+                "camera_id",
+                format!(
+                    "{} is {}×{} but camera {} is {}×{}",
+                    path.display(),
+                    image.width,
+                    image.height,
+                    entry.camera_id,
+                    camera.width,
+                    camera.height
+                ),
+            ));
+        }
+        let photo = Photo {
+            image,
+            mask: None,
+            intrinsics: camera.intrinsics,
+            distortion: camera.distortion,
+        };
+        let (image, weights, k) = prepare_photo(photo, &mut undistorter, n, (&origin, &item))?;
+        let w2c = colmap::world_to_camera(entry.rotation, entry.translation);
+        let camera = Camera::new(image.width, image.height, k, w2c).map_err(|e| match e {
+            Error::Invalid { field, message, .. } => {
+                Error::invalid(&origin, &item, &field, message)
+            }
+            other => other,
+        })?;
+        views.push(View {
+            camera,
+            time: 0.0,
+            image,
+            name,
+            weights,
+        });
+    }
+    let notes = missing_frames(&origin, &missing, views.len(), options.strict)?
+        .into_iter()
+        .chain(weights_note(&origin, &views, undistorter.undistorted))
+        .collect();
+    let points = (!model.points.is_empty()).then(|| {
+        model
+            .points
+            .iter()
+            .map(|p| DatasetPoint {
+                position: p.position,
+                colour: p.colour.map(|c| (f64::from(c) / 255.0) as f32),
+            })
+            .collect()
+    });
+    Ok(FileViews {
+        views,
+        blend: None,
+        transparent,
+        notes,
+        points,
     })
 }
 
 /// Reads every split of the dataset in `dir`: `transforms_{train,val,test}.json`, or one
-/// `transforms.json` split every [`HOLDOUT`]-th frame.
+/// `transforms.json` split every [`HOLDOUT`]-th frame, or a COLMAP model (`sparse/0`) split
+/// the same way.
 pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
     if !dir.is_dir() {
         return Err(Error::malformed(
             &dir.display().to_string(),
-            "not a folder with transforms_train.json or transforms.json",
+            "not a folder with transforms_train.json, transforms.json or a COLMAP sparse/0",
         ));
     }
     let mut dataset = Dataset::default();
     let train_file = dir.join("transforms_train.json");
     let single = dir.join("transforms.json");
-    if !train_file.is_file() && single.is_file() {
-        let read = read_transforms(dir, &single, options)?;
+    let sparse = colmap::find_sparse_model(dir);
+    if !train_file.is_file() && (single.is_file() || sparse.is_some()) {
+        let read = match &sparse {
+            Some(sparse) if !single.is_file() => read_colmap(dir, sparse, options)?,
+            _ => read_transforms(dir, &single, options)?,
+        };
         // Fewer frames than the hold-out period: every frame trains.
         let hold_out = read.views.len() >= HOLDOUT;
         for (index, view) in read.views.into_iter().enumerate() {
@@ -393,6 +872,7 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
         dataset.transparent = read.transparent;
         dataset.notes = read.notes;
         dataset.blend = read.blend;
+        dataset.points = read.points;
     } else {
         for split in SPLITS {
             let path = dir.join(format!("transforms_{split}.json"));
@@ -403,6 +883,9 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
             dataset.transparent |= read.transparent;
             dataset.notes.extend(read.notes);
             dataset.blend = dataset.blend.or(read.blend);
+            if read.points.is_some() {
+                dataset.points = read.points;
+            }
             match split {
                 "train" => dataset.train = read.views,
                 "val" => dataset.val = read.views,
@@ -415,10 +898,29 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
             &train_file.display().to_string(),
             "dataset",
             "frames",
-            "no training frames: transforms_train.json (or transforms.json) is missing or empty",
+            "no training frames: transforms_train.json (or transforms.json, or a COLMAP model) is missing, empty, or has no frame with an image",
         ));
     }
     Ok(dataset)
+}
+
+/// The files a dataset in `dir` is read from (that an output must not replace): the
+/// transforms files and the COLMAP model files that exist.
+#[must_use]
+pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "transforms.json",
+    ]
+    .iter()
+    .map(|name| dir.join(name))
+    .collect();
+    if let Some(sparse) = colmap::find_sparse_model(dir) {
+        files.extend(colmap::model_files(&sparse).into_iter().flatten());
+    }
+    files
 }
 
 /// Saves the images of frame `index` of `split` under `dir` and returns its entry; `first`

@@ -10,13 +10,16 @@
 //! | [`gradients_file`] | the `splat4d grad` JSON |
 //! | [`image_file`] | PNG (8/16 bit) and EXR images (SPEC §5: linear, no sRGB curve) |
 //! | [`ply`] | 3DGS slice PLY for splat viewers, 4D scene PLY |
-//! | [`dataset`] | D-NeRF / Blender `transforms_*.json` datasets |
+//! | [`dataset`] | D-NeRF / Blender `transforms_*.json`, nerfstudio `transforms.json` and COLMAP datasets |
+//! | [`colmap`] | COLMAP sparse models, text and binary |
+//! | [`point_cloud`] | PLY point clouds shipped with datasets |
 //! | [`gltf_import`] | glTF 2.0 models and their cameras, sampled into kernels |
 //! | [`gltf_motion`] | glTF node animation: evaluation, rates, the sample times an import follows |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
 
 pub mod camera_file;
+pub mod colmap;
 pub mod dataset;
 pub mod gltf_import;
 pub mod gltf_motion;
@@ -25,6 +28,7 @@ pub mod image_file;
 pub mod json;
 pub mod path_file;
 pub mod ply;
+pub mod point_cloud;
 pub mod scene_file;
 pub mod video;
 

@@ -2,6 +2,7 @@
 //!
 //! - [`Scene`] / [`Kernel`]: 4D Gaussian kernels as struct-of-arrays (SPEC §1);
 //! - [`Camera`]: a pinhole camera, OpenCV axes (SPEC §3); [`Up`]: the world's up axis;
+//! - [`distortion`]: lens distortion models and the remap that undistorts photos;
 //! - [`Image`]: linear RGB, row-major (SPEC §5);
 //! - [`View`] / [`Dataset`]: images with their camera and time, in splits, to fit;
 //! - [`Error`] / [`ErrorKind`]: what went wrong, by kind, naming file, item and field;
@@ -12,6 +13,7 @@
 
 pub mod axis;
 pub mod camera;
+pub mod distortion;
 pub mod error;
 pub mod image;
 pub mod progress;
@@ -25,4 +27,4 @@ pub use error::{Error, ErrorKind, Result, check_finite};
 pub use image::Image;
 pub use progress::{Progress, Silent};
 pub use scene::{Blend, Kernel, SH_COUNTS, Scene};
-pub use view::{Dataset, View};
+pub use view::{Dataset, DatasetPoint, View};

@@ -15,6 +15,21 @@ pub struct View {
     pub image: Image,
     /// Where it came from (`./train/r_000`), for messages and reports.
     pub name: String,
+    /// Per-pixel loss weights in `[0, 1]`, row-major, one per pixel of `image`: 0 leaves a
+    /// pixel out of the loss (outside an undistorted photo, masked out by the dataset), 1
+    /// counts it fully. The loss is then the weighted mean (SPEC §6 with weights;
+    /// [`crate::fit::loss`]). `None`: every pixel counts fully (the plain mean).
+    pub weights: Option<Vec<f32>>,
+}
+
+/// A point of the cloud a dataset ships (COLMAP `points3D`, nerfstudio `ply_file_path`), in
+/// the world of the dataset's cameras.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DatasetPoint {
+    /// World position.
+    pub position: [f64; 3],
+    /// Colour as the dataset stores it, read like its images: 8-bit `v / 255`, no sRGB curve.
+    pub colour: [f32; 3],
 }
 
 /// A dataset's splits.
@@ -28,8 +43,12 @@ pub struct Dataset {
     pub test: Vec<View>,
     /// True when some pixel had alpha below 1 (and was composited over a background).
     pub transparent: bool,
-    /// What the reader noticed and skipped (keys it does not read), for the user to see.
+    /// What the reader noticed and skipped (keys it does not read, frames without an
+    /// image), for the user to see.
     pub notes: Vec<String>,
     /// The blend a dataset written by splat4d says its images were rendered with.
     pub blend: Option<super::Blend>,
+    /// The point cloud the dataset gives (COLMAP `points3D`, nerfstudio `ply_file_path`), to
+    /// start kernels from; `None` when it gives none.
+    pub points: Option<Vec<DatasetPoint>>,
 }

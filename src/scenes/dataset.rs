@@ -183,6 +183,7 @@ pub fn render_views(
                     time,
                     image: context.image().clone(),
                     name,
+                    weights: None,
                 },
             )
         };

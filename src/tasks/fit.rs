@@ -3,11 +3,13 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::fit::alpha::{AlphaFitOptions, alpha_bounds, fit_alpha, random_alpha_scene};
+use crate::fit::alpha::{
+    AlphaFitOptions, alpha_bounds, fit_alpha, point_cloud_alpha_scene, random_alpha_scene,
+};
 use crate::fit::loss::psnr;
 use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
 use crate::fit::train::{StepRecord, evaluate, fit};
-use crate::io::dataset::{DatasetOptions, load_dataset};
+use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Result, Silent, Up};
@@ -17,10 +19,12 @@ use crate::tasks::with_threads;
 /// `splat4d fit`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitRequest {
-    /// Dataset folder (D-NeRF layout, or one `transforms.json`).
+    /// Dataset folder (D-NeRF layout, one `transforms.json`, or a COLMAP model).
     pub views: PathBuf,
     /// Average N×N pixel blocks of every image (1: as they are).
     pub downscale: u32,
+    /// Refuse frames whose image is missing (otherwise skipped with a note).
+    pub strict: bool,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
     /// Everything else about the fit.
@@ -95,15 +99,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     plan.validate()?;
     // Outputs are checked before the work: a fit is never lost to an unwritable path, and
     // never replaces its dataset or its start.
-    let mut inputs: Vec<PathBuf> = [
-        "transforms_train.json",
-        "transforms_val.json",
-        "transforms_test.json",
-        "transforms.json",
-    ]
-    .iter()
-    .map(|name| request.views.join(name))
-    .collect();
+    let mut inputs = dataset_files(&request.views);
     inputs.push(PathBuf::from(&request.init));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     check_output(&request.out, &["json", "ply"], &inputs)?;
@@ -119,6 +115,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
+        strict: request.strict,
     };
     let dataset = load_dataset(&request.views, &options)?;
     for note in &dataset.notes {
@@ -259,7 +256,16 @@ fn fit_alpha_dataset(
         start_amplitude(&dataset.train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
     let mut scene = match init {
         Init::Scene(scene) => scene,
-        Init::Auto => random_alpha_scene(&bounds, background, colour, options)?,
+        Init::Auto => match &dataset.points {
+            Some(points) if !points.is_empty() => {
+                progress.note(&format!(
+                    "starting from the dataset's point cloud ({} points)",
+                    points.len()
+                ));
+                point_cloud_alpha_scene(points, &bounds, background, options)?
+            }
+            _ => random_alpha_scene(&bounds, background, colour, options)?,
+        },
         Init::Random(n) => random_alpha_scene(
             &bounds,
             background,

@@ -171,14 +171,14 @@ fn a_nerfstudio_transforms_json() {
     let (psnr, notes) = fit(&dir, &["--blend", "additive"], "test");
     assert!(psnr >= 45.0, "{psnr} dB");
     assert!(notes.contains("ignored keys unknown_tool_key"), "{notes}");
-    // Distortion is refused, naming the field.
-    let mut distorted = file.clone();
-    distorted["k1"] = json!(0.1);
-    write_json(&dir.join("transforms.json"), &distorted);
+    // A fisheye lens is refused, naming the field.
+    let mut fisheye = file.clone();
+    fisheye["camera_model"] = json!("OPENCV_FISHEYE");
+    write_json(&dir.join("transforms.json"), &fisheye);
     let output = splat4d(&["fit", "--views", ".", "--out", "f.json"], &dir);
     assert_eq!(output.status.code(), Some(2));
     assert!(
-        stderr(&output).contains("field `k1`"),
+        stderr(&output).contains("field `camera_model`") && stderr(&output).contains("fisheye"),
         "{}",
         stderr(&output)
     );

@@ -8,6 +8,9 @@ mod common;
 mod alpha;
 /// Malformed and invalid inputs are refused with messages naming file, item and field.
 mod bad_input;
+/// Captures as shipped: float sizes, lens distortion, COLMAP text and binary, point clouds,
+/// masks, missing frames.
+mod captures;
 /// The `splat4d` binary, run as a user runs it: every subcommand, its outputs and errors.
 mod cli;
 /// Synthetic datasets: splits, cameras, times, and D-NeRF files read back.
