@@ -27,6 +27,10 @@ pub struct ImportGltfArgs {
     /// Seed of the surface samples.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// `additive` (glowing surfels whose intensities add) or `alpha` (opaque surfaces that
+    /// hide what is behind them, SPEC §8).
+    #[arg(long, default_value = "additive")]
+    blend: splat4d::Blend,
 }
 
 pub fn run(args: &ImportGltfArgs) -> Result<()> {
@@ -41,6 +45,7 @@ pub fn run(args: &ImportGltfArgs) -> Result<()> {
         },
         out: args.out.clone(),
         seed: args.seed,
+        blend: args.blend,
     })?);
     Ok(())
 }

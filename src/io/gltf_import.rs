@@ -695,6 +695,32 @@ pub struct Imported {
     pub weight_error: f64,
     /// Key times where the pose jumps (STEP keys).
     pub steps: usize,
+    /// Per kernel, the temporal weight of its time sample (the partition of unity).
+    pub sample_weights: Vec<f64>,
+}
+
+/// Peak opacity of an opaque surfel of the alpha blend: with neighbours one σ apart, a
+/// point of the surface is covered by several surfels, so the surface closes (T < 1e-3
+/// behind it, tested).
+pub const SURFEL_OPACITY: f64 = 0.9;
+
+impl Imported {
+    /// The import as opaque surfaces (SPEC §8): each kernel's colour is its point's colour
+    /// and its opacity [`SURFEL_OPACITY`] times its temporal weight, so that surfaces hide
+    /// what is behind them.
+    pub fn into_alpha(mut self, origin: &str) -> Result<Imported> {
+        let gain = 1.0 / (std::f64::consts::TAU * SURFEL_SPREAD * SURFEL_SPREAD);
+        let mut opacities = Vec::with_capacity(self.scene.len());
+        for (amplitude, &weight) in self.scene.amplitudes.iter_mut().zip(&self.sample_weights) {
+            let scale = gain * weight;
+            if scale > 0.0 {
+                *amplitude = amplitude.map(|a| a / scale);
+            }
+            opacities.push((SURFEL_OPACITY * weight).clamp(0.0, 1.0));
+        }
+        self.scene = self.scene.into_alpha(opacities, 0, Vec::new(), origin)?;
+        Ok(self)
+    }
 }
 
 /// Most kernels an import makes (surface points × time samples): about 1.5 GB of scene.
@@ -819,6 +845,7 @@ fn import_scene_unguarded(
     let gain = 1.0 / (std::f64::consts::TAU * SURFEL_SPREAD * SURFEL_SPREAD);
     let mut rng = seeded_rng(seed);
     let mut kernels = Vec::with_capacity(points.saturating_mul(samples.len()).min(1 << 16));
+    let mut sample_weights = Vec::with_capacity(kernels.capacity());
     // Stratified over the cumulative area (point k in the k-th N-th of it, jittered), with
     // barycentric coordinates from the R2 low-discrepancy sequence (seeded offset): far
     // more even coverage than independent draws, whose density fluctuates by ~30% at this
@@ -864,6 +891,7 @@ fn import_scene_unguarded(
                 rotation: [q.w, q.x, q.y, q.z],
                 velocity: rate.transform_point3(local).into(),
             });
+            sample_weights.push(sample.weight);
         }
     }
     let scene = Scene::from_kernels(&kernels, [0.0; 3], &origin)?;
@@ -875,5 +903,6 @@ fn import_scene_unguarded(
         max_error,
         weight_error,
         steps,
+        sample_weights,
     })
 }

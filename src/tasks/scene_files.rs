@@ -8,7 +8,7 @@ use crate::io::gltf_import::import_scene;
 use crate::io::gltf_motion::Spacing;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
-use crate::model::{Error, Result, Scene};
+use crate::model::{Blend, Error, Result, Scene};
 use crate::scenes::motion::three_blobs_scene;
 use crate::scenes::toy::{blob_scene, points_scene};
 
@@ -66,6 +66,9 @@ pub struct ImportRequest {
     pub out: PathBuf,
     /// Seed of the surface samples.
     pub seed: u64,
+    /// `alpha`: opaque surfaces that hide what is behind them (SPEC §8); `additive`:
+    /// glowing surfels whose intensities add.
+    pub blend: Blend,
 }
 
 /// Samples a glTF model and its node animation into 4D kernels.
@@ -77,6 +80,10 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
         request.spacing,
         request.seed,
     )?;
+    let imported = match request.blend {
+        Blend::Additive => imported,
+        Blend::Alpha => imported.into_alpha(&request.model.display().to_string())?,
+    };
     save_scene(&imported.scene, &request.out)?;
     let [t0, t1] = imported.time_range;
     let mut line = format!(

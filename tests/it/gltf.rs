@@ -354,3 +354,53 @@ fn a_glb_imports_like_its_gltf() {
     let from_gltf = import_scene(&sample("Box.gltf"), 300, Spacing::Even(1), 4).unwrap();
     assert_eq!(from_glb.scene, from_gltf.scene);
 }
+
+/// `import-gltf --blend alpha` makes opaque surfaces: the animated box's outer box hides
+/// what is behind its front faces (the inner box, the back faces, the background), where the
+/// additive import shows them through.
+#[test]
+fn an_alpha_import_closes_its_surfaces() {
+    use splat4d::io::gltf_import::import_scene;
+    use splat4d::io::gltf_motion::Spacing;
+    let path = sample("BoxAnimated.gltf");
+    let imported = import_scene(&path, 3000, Spacing::Even(3), 0).unwrap();
+    let additive = imported.scene.clone();
+    let alpha = imported.into_alpha("<test>").unwrap().scene;
+    assert_eq!(alpha.blend, splat4d::Blend::Alpha);
+    let camera = splat4d::Camera::look_at(
+        [2.2, 1.6, 2.8],
+        [0.0, 0.3, 0.0],
+        [0.0, 1.0, 0.0],
+        40.0,
+        96,
+        72,
+    )
+    .unwrap();
+    // The light that passes a surface is what a background change shows through it.
+    let through = |scene: &splat4d::Scene| {
+        let render = |background: f64| {
+            let mut lit = scene.clone();
+            lit.background = [background; 3];
+            splat4d::render(&lit, &camera, 1.2, &splat4d::RenderOptions::default()).unwrap()
+        };
+        let (dark, bright) = (render(0.0), render(1.0));
+        // The box's middle, 5×5 pixels around the image centre.
+        let mut worst = 0.0_f32;
+        for j in 34..39 {
+            for i in 46..51 {
+                worst = worst.max(bright.pixel(i, j)[0] - dark.pixel(i, j)[0]);
+            }
+        }
+        worst
+    };
+    let alpha_through = through(&alpha);
+    let additive_through = through(&additive);
+    assert!(
+        alpha_through < 1e-3,
+        "alpha surfaces let {alpha_through} through"
+    );
+    assert!(
+        additive_through > 0.99,
+        "additive surfels add: {additive_through}"
+    );
+}
