@@ -201,9 +201,25 @@ pub(crate) struct HalfRowState {
     pub(crate) pairs: u64,
 }
 
+/// A pair that contributed to a pixel, as [`composite_half_row`] reports it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Contribution {
+    /// The entry's position in the half row's list.
+    pub(crate) entry: u32,
+    /// Its lane.
+    pub(crate) lane: u32,
+    /// `α̂`.
+    pub(crate) alpha: f64,
+    /// The transmittance in front of it.
+    pub(crate) transmittance: f64,
+    /// The lane's `t` and `G` (the raster's, f32).
+    pub(crate) t: f32,
+    pub(crate) g: f32,
+}
+
 /// Composites one half row's entries (lane `i` is tile pixel `first + i`; lanes at or past
-/// `lanes` are outside the image and take nothing). `visit(n, i, α̂, T)` is called for every
-/// pair that contributes, with `T` the transmittance in front of it.
+/// `lanes` are outside the image and take nothing), calling `visit` for every pair that
+/// contributes, front to back.
 #[inline(always)]
 pub(crate) fn composite_half_row<const FAST: bool>(
     entries: &[RowEntry],
@@ -211,7 +227,7 @@ pub(crate) fn composite_half_row<const FAST: bool>(
     opacities: &[f64],
     first: f32,
     lanes: f32,
-    mut visit: impl FnMut(usize, usize, f64, f64),
+    mut visit: impl FnMut(Contribution),
 ) -> HalfRowState {
     let mut state = HalfRowState {
         colour: [[0.0; LANES]; 3],
@@ -222,21 +238,33 @@ pub(crate) fn composite_half_row<const FAST: bool>(
     for (n, entry) in entries.iter().enumerate() {
         let kernel = &kernels[entry.kernel as usize];
         let opacity = opacities[entry.kernel as usize];
+        let mut t = [0.0_f32; LANES];
+        let mut g = [0.0_f32; LANES];
+        let mut hit = [false; LANES];
+        for i in 0..LANES {
+            (t[i], g[i], hit[i]) = entry.lane::<FAST>(kernel, first, lanes, i);
+        }
         for (i, lane_alive) in alive.iter_mut().enumerate() {
-            let (_, g, hit) = entry.lane::<FAST>(kernel, first, lanes, i);
-            if !(hit && *lane_alive) {
+            if !(hit[i] && *lane_alive) {
                 continue;
             }
             state.pairs += 1;
-            let alpha = clamped_alpha(opacity, g);
-            let t = state.transmittance[i];
-            let next = t * (1.0 - alpha);
+            let alpha = clamped_alpha(opacity, g[i]);
+            let transmittance = state.transmittance[i];
+            let next = transmittance * (1.0 - alpha);
             if next < T_STOP {
                 *lane_alive = false;
                 continue;
             }
-            visit(n, i, alpha, t);
-            let weight = alpha * t;
+            visit(Contribution {
+                entry: n as u32,
+                lane: i as u32,
+                alpha,
+                transmittance,
+                t: t[i],
+                g: g[i],
+            });
+            let weight = alpha * transmittance;
             for c in 0..3 {
                 state.colour[c][i] += kernel.amplitude[c] * weight;
             }
@@ -373,14 +401,10 @@ mod tests {
                 let (first, lanes) = (half.first as f32, half.lanes as f32);
                 let (kernels, opacities) = (&scratch.tile.kernels, &scratch.opacities);
                 let mut recorded = 0;
-                let slow = composite_half_row::<true>(
-                    entries,
-                    kernels,
-                    opacities,
-                    first,
-                    lanes,
-                    |_, _, _, _| recorded += 1,
-                );
+                let slow =
+                    composite_half_row::<true>(entries, kernels, opacities, first, lanes, |_| {
+                        recorded += 1
+                    });
                 let fast =
                     composite_half_row_fast::<true>(entries, kernels, opacities, first, lanes);
                 assert_eq!(slow.pairs, fast.pairs);

@@ -24,7 +24,9 @@
 use rayon::prelude::*;
 
 use crate::backward::raster::ScreenGradients;
-use crate::composite::{CompositeScratch, MAX_ALPHA, composite_half_row, prepare_alpha_tile};
+use crate::composite::{
+    CompositeScratch, Contribution, MAX_ALPHA, composite_half_row, prepare_alpha_tile,
+};
 use crate::project::ProjectedKernels;
 use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
 use crate::tiles::TileBins;
@@ -33,20 +35,11 @@ use crate::tiles::TileBins;
 /// `Σ w Δv²`, `Σ ∂L/∂α̂ G`.
 pub(crate) type AlphaPartial = [f64; 9];
 
-/// One contributing pair of a half row, as the forward composited it.
-#[derive(Clone, Copy, Debug)]
-struct Record {
-    entry: u32,
-    lane: u32,
-    alpha: f64,
-    transmittance: f64,
-}
-
 /// Scratch of one worker.
 #[derive(Default)]
 struct Scratch {
     composite: CompositeScratch,
-    records: Vec<Record>,
+    records: Vec<Contribution>,
     sums: Vec<AlphaPartial>,
 }
 
@@ -205,14 +198,7 @@ fn backward_tile<const FAST: bool>(
             &composite.opacities,
             first_lane,
             lanes_f,
-            |entry, lane, alpha, transmittance| {
-                records.push(Record {
-                    entry: entry as u32,
-                    lane: lane as u32,
-                    alpha,
-                    transmittance,
-                });
-            },
+            |contribution| records.push(contribution),
         );
         // ∂L/∂C of the half row; zero past the image's edge.
         let mut v = [[0.0_f64; LANES]; 3];
@@ -240,17 +226,20 @@ fn backward_tile<const FAST: bool>(
             let i = record.lane as usize;
             let (alpha, transmittance) = (record.alpha, record.transmittance);
             let weight = alpha * transmittance;
-            let mut v_alpha = 0.0;
+            // ∂L/∂α̂ = T Σ_c v_c colour_c - (Σ_c v_c S_c) / (1 - α̂)
+            let (mut in_front, mut light_behind) = (0.0, 0.0);
             let sum = &mut sums[k];
             for c in 0..3 {
                 let colour = kernel.amplitude[c];
-                v_alpha += v[c][i] * (colour * transmittance - behind[c][i] / (1.0 - alpha));
+                in_front += v[c][i] * colour;
+                light_behind += v[c][i] * behind[c][i];
                 behind[c][i] += colour * weight;
                 sum[c] += v[c][i] * weight;
             }
+            let v_alpha = transmittance * in_front - light_behind / (1.0 - alpha);
             if alpha < MAX_ALPHA {
-                let (t, g, _) = entry.lane::<FAST>(kernel, first_lane, lanes_f, i);
-                let (t, dv) = (f64::from(t), f64::from(entry.dv));
+                let (t, g) = (f64::from(record.t), record.g);
+                let dv = f64::from(entry.dv);
                 let w = v_alpha * alpha;
                 sum[3] += w * t;
                 sum[4] += w * t * t;
