@@ -568,3 +568,107 @@ fn alpha_gradients_are_the_same_bits_for_any_thread_count() {
         assert_eq!(run(threads), one, "{threads} threads");
     }
 }
+
+/// Every command honours the blend the scene declares: `render`, `grad` (every field),
+/// `export-ply` (SPEC §8's mapping), `volume` (the opacity density, said), `bench`.
+#[test]
+fn commands_honour_an_alpha_scene() {
+    use crate::common::{splat4d, stderr};
+    let dir = tempfile::tempdir().unwrap();
+    let camera = test_camera(40, 30);
+    let scene = alpha_scene(hard_random_scene(&camera, 31, 60), 31, 3);
+    splat4d::io::scene_file::save_scene(&scene, &dir.path().join("s.json")).unwrap();
+    splat4d::io::camera_file::save_camera(&camera, &dir.path().join("c.json")).unwrap();
+    let run = |args: &[&str]| {
+        let output = splat4d(args, dir.path());
+        assert!(output.status.success(), "{args:?}: {}", stderr(&output));
+        String::from_utf8_lossy(&output.stdout).into_owned()
+    };
+    run(&[
+        "render", "--scene", "s.json", "--camera", "c.json", "--time", "0.5", "--out", "r.exr",
+    ]);
+    let image = splat4d::io::image_file::load_image(&dir.path().join("r.exr"), [0.0; 3]).unwrap();
+    let expected = render(&scene, &camera, 0.5, &RenderOptions::default());
+    assert_eq!(
+        image.pixels, expected.pixels,
+        "render writes the alpha composite"
+    );
+    run(&[
+        "grad", "--scene", "s.json", "--camera", "c.json", "--time", "0.5", "--target", "r.exr",
+        "--out", "g.json",
+    ]);
+    let text = std::fs::read_to_string(dir.path().join("g.json")).unwrap();
+    let (_, grads) = splat4d::io::gradients_file::gradients_from_json(&text, "g.json").unwrap();
+    assert_eq!(grads.v_opacities.len(), scene.len());
+    assert_eq!(grads.v_sh.len(), scene.sh.len());
+    for key in ["\"opacity\"", "\"sh\"", "\"rotation\"", "\"scale\""] {
+        assert!(text.contains(key), "{key} in the gradient file");
+    }
+    run(&[
+        "export-ply",
+        "--scene",
+        "s.json",
+        "--time",
+        "0.5",
+        "--out",
+        "e.ply",
+    ]);
+    let exported = splat4d::io::scene_file::load_scene(&dir.path().join("e.ply")).unwrap();
+    assert_eq!((exported.blend, exported.sh_count), (Blend::Alpha, 3));
+    let volume = run(&[
+        "volume", "--scene", "s.json", "--res", "8", "--times", "0.5", "--out", "v",
+    ]);
+    assert!(volume.contains("opacity density"), "{volume}");
+    let bench = run(&[
+        "bench",
+        "--scene",
+        "2000",
+        "--size",
+        "64x48",
+        "--frames",
+        "1",
+        "--threads",
+        "1",
+        "--blend",
+        "alpha",
+    ]);
+    assert!(bench.contains("bench-2000-alpha"), "{bench}");
+}
+
+/// Mutated alpha and 3DGS PLYs are read or refused as input errors, never a panic.
+#[test]
+fn mutated_alpha_plys_never_panic() {
+    let camera = test_camera(20, 20);
+    let scene = alpha_scene(hard_random_scene(&camera, 41, 10), 41, 3);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.ply");
+    splat4d::io::scene_file::save_scene(&scene, &path).unwrap();
+    let scene_bytes = std::fs::read(&path).unwrap();
+    splat4d::io::ply::write_slice_ply(&scene, 0.5, 1.0 / 255.0, true, &path).unwrap();
+    let splat_bytes = std::fs::read(&path).unwrap();
+    let mut rng = seeded_rng(9);
+    let (mut loaded, mut refused) = (0, 0);
+    for bytes in [&scene_bytes, &splat_bytes] {
+        for _ in 0..400 {
+            let mut mutated = bytes.clone();
+            for _ in 0..rng.random_range(1..4) {
+                let k = rng.random_range(0..mutated.len());
+                mutated[k] = rng.random();
+            }
+            if rng.random_range(0..4) == 0 {
+                mutated.truncate(rng.random_range(0..mutated.len()));
+            }
+            match splat4d::io::ply::parse_scene_ply(&mutated, "m.ply") {
+                Ok(_) => loaded += 1,
+                Err(e) => {
+                    assert_eq!(e.kind(), splat4d::ErrorKind::Input, "{e}");
+                    refused += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        loaded > 50 && refused > 50,
+        "{loaded} loaded, {refused} refused"
+    );
+}
