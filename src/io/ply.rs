@@ -145,6 +145,9 @@ fn scene_comments(scene: &Scene) -> Vec<String> {
     if scene.blend == Blend::Alpha {
         comments.push("blend alpha".to_owned());
     }
+    if let Some([t0, t1]) = scene.time_range {
+        comments.push(format!("time_range {t0:?} {t1:?}"));
+    }
     if let Some(up) = scene.up {
         comments.push(format!("up {up}"));
     }
@@ -363,6 +366,7 @@ struct SceneLayout {
     blend: Blend,
     background: [f64; 3],
     up: Option<Up>,
+    time_range: Option<[f64; 2]>,
 }
 
 /// The size of a PLY scalar type, and whether it is a float type.
@@ -398,6 +402,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
     let mut background = [0.0; 3];
     let mut up = None;
     let mut blend = Blend::Additive;
+    let mut time_range = None;
     let mut format_seen = false;
     for line in lines {
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -414,6 +419,13 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                     axis.parse::<Up>()
                         .map_err(|e| bad(format!("up axis: {e}")))?,
                 );
+            }
+            ["comment", "time_range", t0, t1] => {
+                let parse = |v: &str| {
+                    v.parse::<f64>()
+                        .map_err(|_| bad(format!("time range value `{v}` is not a number")))
+                };
+                time_range = Some([parse(t0)?, parse(t1)?]);
             }
             ["comment", "blend", name] => {
                 blend = name.parse().map_err(|e| bad(format!("blend: {e}")))?;
@@ -524,6 +536,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
         blend,
         background,
         up,
+        time_range,
     })
 }
 
@@ -567,6 +580,8 @@ impl SceneLayout {
     fn empty_scene(&self, origin: &str) -> Result<Scene> {
         let mut scene = Scene::from_kernels(&[], self.background, origin)?;
         scene.up = self.up;
+        scene.time_range = self.time_range;
+        scene.check_time_range(origin)?;
         scene.reserve(self.count);
         Ok(scene)
     }

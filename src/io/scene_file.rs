@@ -8,6 +8,9 @@
 //! keys are errors, so that a typo never silently falls back to a default. Numbers are
 //! written so that they read back exactly (serde_json's `float_roundtrip`).
 //!
+//! A fitted scene records `"time_range": [t0, t1]`, the times of the data it came from
+//! (videos and sequences span it by default).
+//!
 //! Alpha scenes (SPEC §8) add `"blend": "alpha"` at the top and per kernel `"opacity": o`
 //! (0–1, default 1) and `"sh": [[r, g, b], …]` (3, 8 or 15 triplets, the same count for
 //! every kernel, or absent). Additive scenes write neither (`"blend": "additive"` is
@@ -34,6 +37,8 @@ struct SceneFile {
     background: [f64; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
     up: Option<Up>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    time_range: Option<[f64; 2]>,
 }
 
 fn is_additive(blend: &Blend) -> bool {
@@ -77,6 +82,8 @@ pub fn scene_from_json(text: &str, origin: &str) -> Result<Scene> {
         .collect();
     let mut scene = Scene::from_kernels(&kernels, file.background, origin)?;
     scene.up = file.up;
+    scene.time_range = file.time_range;
+    scene.check_time_range(origin)?;
     match file.blend {
         Blend::Additive => {
             if let Some(i) = file
@@ -153,6 +160,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         kernels,
         background: scene.background,
         up: scene.up,
+        time_range: scene.time_range,
     };
     serde_json::to_string_pretty(&file).expect("a scene of finite numbers serialises")
 }

@@ -164,6 +164,9 @@ pub struct Scene {
     /// The world's up axis when known (a scene fitted from a dataset carries its cameras'
     /// up); videos turn about it unless told otherwise, +y when `None`.
     pub up: Option<Up>,
+    /// The time range `[t0, t1]` of the data a fitted scene came from: videos and sequences
+    /// span it by default (else the range of the kernels' time means).
+    pub time_range: Option<[f64; 2]>,
     /// How kernels make a pixel.
     pub blend: Blend,
     /// Alpha scenes: the peak opacity `o ∈ [0, 1]` per kernel (empty for additive scenes).
@@ -239,7 +242,23 @@ impl Scene {
     /// opacities and SH too): for scenes changed in code.
     pub fn validate(&self, origin: &str) -> Result<()> {
         Scene::from_kernels(&self.kernels(), self.background, origin)?;
+        self.check_time_range(origin)?;
         self.check_appearance(origin)
+    }
+
+    /// A recorded time range must be finite and ordered.
+    pub fn check_time_range(&self, origin: &str) -> Result<()> {
+        match self.time_range {
+            Some([t0, t1]) if !(t0.is_finite() && t1.is_finite() && t0 <= t1) => {
+                Err(Error::invalid(
+                    origin,
+                    "scene",
+                    "time_range",
+                    format!("[{t0}, {t1}] is not a finite, ordered pair"),
+                ))
+            }
+            _ => Ok(()),
+        }
     }
 
     /// Makes this an alpha scene (SPEC §8) with `opacities` (one per kernel) and `sh`

@@ -92,10 +92,14 @@ pub fn framing_circle(scene: &Scene, times: &[f64], cutoff: f64, lens: &Lens, up
     }
 }
 
-/// The range `[t0, t1]` of the scene's kernel time means: the times a video of it shows by
-/// default. `[0, 0]` for an empty scene.
+/// The times a video of the scene shows by default: the time range of the data it was
+/// fitted to when it records one, else the range `[t0, t1]` of its kernels' time means
+/// (`[0, 0]` for an empty scene).
 #[must_use]
 pub fn time_range(scene: &Scene) -> [f64; 2] {
+    if let Some(range) = scene.time_range {
+        return range;
+    }
     if scene.is_empty() {
         return [0.0; 2];
     }

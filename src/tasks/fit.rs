@@ -184,6 +184,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         )
     })??;
     scene.up = up;
+    scene.time_range = data_time_range(&dataset);
     finish_fit(
         request,
         &dataset,
@@ -299,6 +300,7 @@ fn fit_alpha_dataset(
         )
     })??;
     scene.up = up.or(scene.up);
+    scene.time_range = data_time_range(dataset);
     finish_fit(
         request,
         dataset,
@@ -307,6 +309,19 @@ fn fit_alpha_dataset(
         &options.render,
         options.steps,
     )
+}
+
+/// The range of every view's time (train, val and test): what the data shows.
+fn data_time_range(dataset: &crate::model::Dataset) -> Option<[f64; 2]> {
+    let times = dataset
+        .train
+        .iter()
+        .chain(&dataset.val)
+        .chain(&dataset.test)
+        .map(|v| v.time);
+    times.fold(None, |range, t| {
+        Some(range.map_or([t, t], |[lo, hi]: [f64; 2]| [lo.min(t), hi.max(t)]))
+    })
 }
 
 /// The world axis nearest the training cameras' mean up direction (image up, the camera's

@@ -277,7 +277,10 @@ fn alpha_scenes_round_trip_through_json_and_ply() {
     let camera = test_camera(20, 20);
     let dir = tempfile::tempdir().unwrap();
     for sh_count in [0, 3, 8, 15] {
-        let scene = alpha_scene(hard_random_scene(&camera, 11, 20), 11, sh_count);
+        let mut scene = alpha_scene(hard_random_scene(&camera, 11, 20), 11, sh_count);
+        // A fitted scene records the time range of its data; videos span it by default.
+        scene.time_range = Some([0.25, 0.75]);
+        assert_eq!(splat4d::scenes::paths::time_range(&scene), [0.25, 0.75]);
         for name in ["s.json", "s.ply"] {
             let path = dir.path().join(name);
             splat4d::io::scene_file::save_scene(&scene, &path).unwrap();
