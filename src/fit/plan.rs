@@ -78,6 +78,7 @@ pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
 
 /// Where a fit starts.
 #[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::large_enum_variant)] // one value per fit: boxing would buy nothing
 pub enum Init {
     /// From [`FitPlan::start_kernels`] kernels (one at the box's centre by default), with
     /// densify, prune and merge rounds.
