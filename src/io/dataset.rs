@@ -465,10 +465,10 @@ fn write_transforms(dir: &Path, split: &str, c: &Camera, frames: Vec<WrittenFram
 /// Writes a dataset frame by frame into a temporary folder beside `out`, renamed into
 /// place by [`DatasetWriter::finish`]: memory does not grow with the dataset, and a run that
 /// fails (a full disk, a kill) leaves no partial dataset at `out` for `fit` to accept. An
-/// existing `out` is replaced only when it is empty or a dataset (has a `transforms_*.json`).
+/// existing `out` is replaced only when it is empty or an earlier `splat4d dataset` output
+/// ([`crate::io::output`]).
 pub struct DatasetWriter {
-    out: PathBuf,
-    temp: tempfile::TempDir,
+    folder: crate::io::output::FolderWriter,
     exr: bool,
     /// Per split: the first camera (all must share its intrinsics) and the frames.
     splits: [(Option<Camera>, Vec<WrittenFrame>); 3],
@@ -477,28 +477,8 @@ pub struct DatasetWriter {
 impl DatasetWriter {
     /// A writer for `out`; checks before any work that `out` may be written.
     pub fn new(out: &Path, exr: bool) -> Result<Self> {
-        if out.exists() && !replaceable(out) {
-            return Err(Error::usage(format!(
-                "{}: exists and is not a dataset; choose a new folder",
-                out.display()
-            )));
-        }
-        let parent = crate::io::folder_of(out);
-        std::fs::create_dir_all(parent).map_err(|e| {
-            Error::write(
-                out,
-                &format!("cannot create its folder {}", parent.display()),
-                e,
-            )
-        })?;
-        crate::io::remove_stale_temps(parent);
-        let temp = tempfile::Builder::new()
-            .prefix(&format!("{}dataset-", crate::io::temp_prefix()))
-            .tempdir_in(parent)
-            .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
         Ok(DatasetWriter {
-            out: out.to_path_buf(),
-            temp,
+            folder: crate::io::output::FolderWriter::new(out, "dataset")?,
             exr,
             splits: Default::default(),
         })
@@ -512,7 +492,7 @@ impl DatasetWriter {
             .ok_or_else(|| Error::usage(format!("unknown split {split}")))?;
         let (first, frames) = &mut self.splits[k];
         let c = *first.get_or_insert(view.camera);
-        let frame = save_frame(self.temp.path(), split, frames.len(), view, &c, self.exr)?;
+        let frame = save_frame(self.folder.path(), split, frames.len(), view, &c, self.exr)?;
         frames.push(frame);
         Ok(())
     }
@@ -522,42 +502,11 @@ impl DatasetWriter {
     pub fn finish(self) -> Result<()> {
         for (split, (first, frames)) in SPLITS.iter().zip(self.splits) {
             if let Some(c) = first {
-                write_transforms(self.temp.path(), split, &c, frames)?;
+                write_transforms(self.folder.path(), split, &c, frames)?;
             }
         }
-        let out = &self.out;
-        let temp = self.temp.keep();
-        if out.exists() {
-            // Move the old dataset aside, the new one in, then drop the old.
-            let old = temp.with_extension("old");
-            std::fs::rename(out, &old)
-                .map_err(|e| Error::write(out, "cannot move the previous dataset aside", e))?;
-            std::fs::rename(&temp, out)
-                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
-            std::fs::remove_dir_all(&old)
-                .map_err(|e| Error::write(&old, "cannot remove the previous dataset", e))?;
-        } else {
-            std::fs::rename(&temp, out)
-                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
-        }
-        Ok(())
+        self.folder.commit()
     }
-}
-
-/// Whether `dir` may be replaced by a new dataset: an empty folder or a dataset.
-fn replaceable(dir: &Path) -> bool {
-    dir.is_dir()
-        && std::fs::read_dir(dir).is_ok_and(|mut entries| {
-            let names: Vec<String> = entries
-                .by_ref()
-                .filter_map(|e| e.ok())
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .collect();
-            names.is_empty()
-                || names
-                    .iter()
-                    .any(|n| n.starts_with("transforms") && n.ends_with(".json"))
-        })
 }
 
 /// Writes one split: its images (16-bit PNG, and float EXR when `exr`) and its
@@ -573,4 +522,38 @@ pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result
         .map(|(index, view)| save_frame(dir, split, index, view, &first.camera, exr))
         .collect::<Result<Vec<_>>>()?;
     write_transforms(dir, split, &first.camera, frames)
+}
+
+/// The files a dataset in `dir` is read from: its transforms files and the images their
+/// frames name (as far as they can be read; the loader reports what cannot). Outputs are
+/// checked against these before any work ([`crate::io::output`]).
+#[must_use]
+pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for name in [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "transforms.json",
+    ] {
+        let path = dir.join(name);
+        files.push(path.clone());
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) else {
+            continue;
+        };
+        let frames = value.get("frames").and_then(|f| f.as_array());
+        for frame in frames.into_iter().flatten() {
+            if let Some(image) = frame
+                .get("file_path")
+                .and_then(|p| p.as_str())
+                .and_then(|p| resolve_image(dir, p))
+            {
+                files.push(image);
+            }
+        }
+    }
+    files
 }

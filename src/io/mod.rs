@@ -15,6 +15,9 @@
 //! | [`gltf_motion`] | glTF node animation: evaluation, rates, the sample times an import follows |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
+//!
+//! [`output`] holds the one rule every output follows (what may be replaced, temporary
+//! folders renamed into place, inputs never overwritten).
 
 pub mod camera_file;
 pub mod dataset;
@@ -23,6 +26,7 @@ pub mod gltf_motion;
 pub mod gradients_file;
 pub mod image_file;
 pub mod json;
+pub mod output;
 pub mod path_file;
 pub mod ply;
 pub mod scene_file;
@@ -137,10 +141,10 @@ pub fn folder_of(path: &Path) -> &Path {
     }
 }
 
-/// Whether two paths name one file: the same as written, or the same once both exist.
+/// Whether two paths name one file once resolved ([`output::resolve`]: `..` and symlinks).
 #[must_use]
 pub fn same_file(a: &Path, b: &Path) -> bool {
-    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+    a == b || output::resolve(a) == output::resolve(b)
 }
 
 /// A usage error when `path`, where a file is to be written, is a folder.
@@ -179,13 +183,12 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         )));
     }
     refuse_folder(out)?;
-    if let Some(input) = inputs.iter().find(|input| same_file(out, input)) {
-        return Err(Error::usage(format!(
-            "{}: is an input of this command ({}); write the output elsewhere",
-            out.display(),
-            input.display()
-        )));
+    let mut outputs = output::Outputs::new();
+    outputs.file(out);
+    for input in inputs {
+        outputs.input(input);
     }
+    outputs.check()?;
     let parent = folder_of(out);
     std::fs::create_dir_all(parent).map_err(|e| {
         let message = format!("cannot create its folder {}", parent.display());

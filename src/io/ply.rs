@@ -150,8 +150,8 @@ pub const SEQUENCE_INDEX: &str = "frames.json";
 /// `{"frames": [{"file": "frame_0000.ply", "time": t0}, ...]}`, that sequence players read.
 /// The sequence is written into a temporary folder beside `dir` and renamed into place, so a
 /// failed run leaves no partial sequence; an existing `dir` is replaced only when it is empty
-/// or holds an earlier sequence (only `frame_*.ply` and `frames.json`). Returns the splat
-/// count of each frame.
+/// or an earlier `export-ply` sequence ([`super::output`]). Returns the splat count of each
+/// frame.
 pub fn write_slice_sequence(
     scene: &Scene,
     times: &[f64],
@@ -159,32 +159,7 @@ pub fn write_slice_sequence(
     sh_rest: bool,
     dir: &Path,
 ) -> Result<Vec<usize>> {
-    if dir.exists() {
-        let entries = std::fs::read_dir(dir)
-            .map_err(|e| Error::read(dir, "cannot list the output folder", e))?;
-        for entry in entries {
-            let name = entry
-                .map_err(|e| Error::read(dir, "cannot list the output folder", e))?
-                .file_name();
-            let name = name.to_string_lossy();
-            let ours =
-                name == SEQUENCE_INDEX || (name.starts_with("frame_") && name.ends_with(".ply"));
-            if !ours {
-                return Err(Error::usage(format!(
-                    "{}: exists and holds `{name}`, not only a slice sequence; choose another --out",
-                    dir.display()
-                )));
-            }
-        }
-    }
-    let parent = super::folder_of(dir);
-    std::fs::create_dir_all(parent)
-        .map_err(|e| Error::write(dir, "cannot create the output folder's parent", e))?;
-    super::remove_stale_temps(parent);
-    let temp = tempfile::Builder::new()
-        .prefix(&format!("{}sequence-", super::temp_prefix()))
-        .tempdir_in(parent)
-        .map_err(|e| Error::write(dir, "cannot create a temporary folder", e))?;
+    let folder = super::output::FolderWriter::new(dir, "export-ply")?;
     let mut counts = Vec::with_capacity(times.len());
     let mut index = Vec::with_capacity(times.len());
     for (k, &tau) in times.iter().enumerate() {
@@ -194,20 +169,14 @@ pub fn write_slice_sequence(
             tau,
             cutoff,
             sh_rest,
-            &temp.path().join(&file),
+            &folder.path().join(&file),
         )?);
         index.push(serde_json::json!({"file": file, "time": tau}));
     }
     let text = serde_json::to_string_pretty(&serde_json::json!({ "frames": index }))
         .expect("an index of finite times serialises");
-    super::write_bytes_atomically(&temp.path().join(SEQUENCE_INDEX), text.as_bytes())?;
-    if dir.exists() {
-        std::fs::remove_dir_all(dir)
-            .map_err(|e| Error::write(dir, "cannot remove the earlier sequence", e))?;
-    }
-    let temp = temp.keep();
-    std::fs::rename(&temp, dir)
-        .map_err(|e| Error::write(dir, "cannot move the sequence into place", e))?;
+    super::write_bytes_atomically(&folder.path().join(SEQUENCE_INDEX), text.as_bytes())?;
+    folder.commit()?;
     Ok(counts)
 }
 

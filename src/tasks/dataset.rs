@@ -55,6 +55,10 @@ pub fn write_dataset(
 ) -> Result<DatasetSummary> {
     request.options.validate()?;
     request.spec.validate()?;
+    // Before any work: the output folder holds no input and may be replaced.
+    let mut outputs = crate::io::output::Outputs::new();
+    outputs.input(&request.scene).folder(&request.out);
+    outputs.check()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
     let mut writer = DatasetWriter::new(&request.out, request.exr)?;

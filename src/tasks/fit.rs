@@ -90,15 +90,8 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     plan.validate()?;
     // Outputs are checked before the work: a fit is never lost to an unwritable path, and
     // never replaces its dataset or its start.
-    let mut inputs: Vec<PathBuf> = [
-        "transforms_train.json",
-        "transforms_val.json",
-        "transforms_test.json",
-        "transforms.json",
-    ]
-    .iter()
-    .map(|name| request.views.join(name))
-    .collect();
+    // Every file the fit reads: the transforms files, the images they name, the start.
+    let mut inputs = crate::io::dataset::dataset_files(&request.views);
     inputs.push(PathBuf::from(&request.init));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     check_output(&request.out, &["json", "ply"], &inputs)?;

@@ -46,6 +46,16 @@ impl CameraSource {
         }
     }
 
+    /// The file it is read from.
+    #[must_use]
+    pub fn file(&self) -> PathBuf {
+        match self {
+            CameraSource::File(path) => path.clone(),
+            CameraSource::Gltf { spec, .. } => split_camera_spec(spec)
+                .map_or_else(|_| PathBuf::from(spec), |(path, _)| path.to_path_buf()),
+        }
+    }
+
     /// Its name, for messages.
     #[must_use]
     pub fn name(&self) -> String {
@@ -130,6 +140,11 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         )));
     }
     let view = &request.view;
+    check_output(
+        &request.out,
+        &["png", "exr"],
+        &[&view.scene, &view.camera.file()],
+    )?;
     let (scene, camera) = view.load()?;
     let mut context = RenderContext::new();
     let stats = with_threads(view.threads, || {
@@ -186,7 +201,11 @@ impl fmt::Display for GradSummary {
 /// The MSE of a render against a target image and its gradient per kernel, as JSON.
 pub fn grad(request: &GradRequest) -> Result<GradSummary> {
     let view = &request.view;
-    check_output(&request.out, &["json"], &[&view.scene, &request.target])?;
+    check_output(
+        &request.out,
+        &["json"],
+        &[&view.scene, &request.target, &view.camera.file()],
+    )?;
     let (scene, camera) = view.load()?;
     let background = scene.background.map(|b| b as f32);
     // The header first: a target of the wrong size is refused before it is decoded.

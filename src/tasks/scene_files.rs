@@ -181,6 +181,11 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             request.out.display()
         )));
     }
+    // Before any work: the folder holds no input and may be replaced.
+    let mut outputs = crate::io::output::Outputs::new();
+    outputs.input(&request.scene).folder(&request.out);
+    outputs.check()?;
+    crate::io::output::check_replaceable(&request.out, "export-ply")?;
     let scene = load_scene(&request.scene)?;
     let times = match &request.times {
         ExportTimes::List(times) => times.clone(),

@@ -351,6 +351,7 @@ fn dataset_then_fit_as_a_new_user_would() {
     assert_eq!(
         files_in(&d.join("set")),
         [
+            ".splat4d-output",
             "test",
             "train",
             "transforms_test.json",

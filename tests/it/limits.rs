@@ -728,7 +728,7 @@ fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
         ],
         d,
         2,
-        "not a dataset",
+        "was not written by `splat4d dataset`",
     );
     assert_eq!(
         std::fs::read_to_string(d.join("photos/keep.txt")).unwrap(),
@@ -763,7 +763,10 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert!(video("0.5,0.5,0.5,3,20,6", "16x12").status.success());
     assert!(video("0.5,0.5,0.5,3,20,3", "16x12").status.success());
     let frames = std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count();
-    assert_eq!(frames, 3, "no stale frames from the longer video");
+    assert_eq!(
+        frames, 4,
+        "no stale frames from the longer video (3 and the marker)"
+    );
     let names: Vec<String> = std::fs::read_dir(d.join("v"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -783,7 +786,7 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert!(String::from_utf8_lossy(&output.stderr).contains("--no-gif"));
     assert_eq!(
         std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count(),
-        3,
+        4,
         "the old video is intact"
     );
     // A folder of other files is never replaced.

@@ -32,6 +32,8 @@ mod layers;
 mod limits;
 /// Each fast stage against its f64 twin, and whole renders against independent vectors.
 mod matches_reference;
+/// The output rule: only a command's own earlier output is replaced, never an input.
+mod outputs;
 /// PLY: 3DGS slices read by an independent parser, 4D scenes round-tripped.
 mod ply;
 /// Property tests (proptest, fixed seed) on random cameras and scenes.
