@@ -320,7 +320,8 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 image_path.display()
             )));
         }
-        let image = downscale(&image, n);
+        // No second whole-image copy when nothing is downscaled.
+        let image = if n == 1 { image } else { downscale(&image, n) };
         let scale = f64::from(n);
         let time = frame.time.unwrap_or(0.0);
         if !time.is_finite() {
@@ -333,12 +334,16 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
             frame.transform_matrix,
         )
         .map_err(|e| match e {
-            Error::Invalid { field, message, .. } => Error::invalid(
-                &origin,
-                &item,
-                &format!("transform_matrix ({field})"),
-                message,
-            ),
+            Error::Invalid { field, message, .. } => {
+                // Intrinsics are named by the file's own keys, the rest is the matrix.
+                let named = match field.as_str() {
+                    "fx" => "fl_x".to_string(),
+                    "fy" => "fl_y".to_string(),
+                    "cx" | "cy" => field,
+                    _ => format!("transform_matrix ({field})"),
+                };
+                Error::invalid(&origin, &item, &named, message)
+            }
             other => other,
         })?;
         views.push(View {

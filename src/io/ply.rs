@@ -85,6 +85,44 @@ pub fn write_slice_ply(
     names.extend(rest.iter().map(String::as_str));
     names.extend(&SLICE_PROPERTIES[9..]);
     let zeros = vec![0_u8; 4 * rest.len()];
+    let values_of = |s: usize| {
+        let i = sliced.kernel_from_slice[s] as usize;
+        let [m0, m1, m2] = sliced.means[s];
+        let (opacity, dc) = splat_colour(sliced.amplitudes[s]);
+        let [sx, sy, sz, _] = scene.scales[i];
+        let q = scene.rotations[i];
+        [
+            m0,
+            m1,
+            m2,
+            0.0,
+            0.0,
+            0.0,
+            dc[0],
+            dc[1],
+            dc[2],
+            opacity,
+            sx.ln(),
+            sy.ln(),
+            sz.ln(),
+            q[0],
+            q[1],
+            q[2],
+            q[3],
+        ]
+    };
+    // A float PLY holds what f32 holds: a kernel at x = 1e300 is refused, not written as inf.
+    for s in 0..n {
+        if let Some(k) = values_of(s).iter().position(|&v| !(v as f32).is_finite()) {
+            return Err(Error::Numeric(format!(
+                "{}: not written: kernel {}'s `{}` at t = {tau} is {:e}, beyond what a float PLY holds",
+                path.display(),
+                sliced.kernel_from_slice[s],
+                SLICE_PROPERTIES[k],
+                values_of(s)[k]
+            )));
+        }
+    }
     write_atomically(path, |w| {
         w.write_all(
             header(
@@ -96,31 +134,7 @@ pub fn write_slice_ply(
             .as_bytes(),
         )?;
         for s in 0..n {
-            let i = sliced.kernel_from_slice[s] as usize;
-            let [m0, m1, m2] = sliced.means[s];
-            let (opacity, dc) = splat_colour(sliced.amplitudes[s]);
-            let [sx, sy, sz, _] = scene.scales[i];
-            let q = scene.rotations[i];
-            let values = [
-                m0,
-                m1,
-                m2,
-                0.0,
-                0.0,
-                0.0,
-                dc[0],
-                dc[1],
-                dc[2],
-                opacity,
-                sx.ln(),
-                sy.ln(),
-                sz.ln(),
-                q[0],
-                q[1],
-                q[2],
-                q[3],
-            ];
-            for (k, v) in values.into_iter().enumerate() {
+            for (k, v) in values_of(s).into_iter().enumerate() {
                 if k == 9 {
                     w.write_all(&zeros)?;
                 }

@@ -235,6 +235,24 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
             &mut grads,
         )
     })??;
+    // Nothing non-finite leaves (JSON would hold `null`).
+    let bad_kernel = (0..grads.len()).find(|&i| {
+        grads.v_means[i]
+            .iter()
+            .chain(&grads.v_amplitudes[i])
+            .chain(&grads.v_velocities[i])
+            .any(|v| !v.is_finite())
+    });
+    if !loss.is_finite() || bad_kernel.is_some() {
+        let what = bad_kernel.map_or_else(
+            || format!("the loss is {loss}"),
+            |i| format!("kernel {i}'s gradient is not finite"),
+        );
+        return Err(Error::Numeric(format!(
+            "{}: not written: {what} (the scene's amplitudes, background or the target's values are too large for f32)",
+            request.out.display()
+        )));
+    }
     write_bytes_atomically(&request.out, gradients_to_json(&grads, loss).as_bytes())?;
     Ok(GradSummary {
         out: request.out.clone(),

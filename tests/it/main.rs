@@ -14,6 +14,8 @@ mod dataset;
 mod dataset_variants;
 /// The same bits for every thread count.
 mod determinism;
+/// Nothing non-finite leaves with exit 0; absurd inputs are refused naming their field.
+mod finite_outputs;
 /// Fitting recovers known scenes; adaptive fits find the kernels they need.
 mod fit;
 /// Seeded byte-level fuzzing of every loader: errors, never panics.
