@@ -137,6 +137,10 @@ pub struct FitArgs {
     /// `images_N`); the intrinsics are divided by N.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=i64::from(splat4d::io::dataset::MAX_DOWNSCALE)))]
     downscale: u32,
+    /// Read dataset images whose real path (symlinks followed) lies outside the dataset's
+    /// folder (refused by default, naming the frame).
+    #[arg(long)]
+    allow_outside_images: bool,
     /// Views per step.
     #[arg(long, default_value_t = FitPlan::default().batch_size)]
     batch: usize,
@@ -203,6 +207,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let request = FitRequest {
         views: args.views.clone(),
         downscale: args.downscale,
+        allow_outside_images: args.allow_outside_images,
         init: args.init.clone(),
         plan,
         out: args.out.clone(),

@@ -53,6 +53,8 @@ pub struct DatasetOptions {
     pub background: [f32; 3],
     /// Average N×N blocks of pixels (1: the images as they are).
     pub downscale: u32,
+    /// Read images whose real path (symlinks followed) lies outside the dataset's folder.
+    pub allow_outside_images: bool,
 }
 
 impl Default for DatasetOptions {
@@ -60,6 +62,7 @@ impl Default for DatasetOptions {
         DatasetOptions {
             background: [0.0; 3],
             downscale: 1,
+            allow_outside_images: false,
         }
     }
 }
@@ -310,6 +313,17 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 ),
             )
         })?;
+        if !options.allow_outside_images && !crate::io::output::inside(&image_path, dir) {
+            return Err(Error::invalid(
+                &origin,
+                &item,
+                "file_path",
+                format!(
+                    "{} lies outside the dataset's folder (by its real path, links followed); pass --allow-outside-images to read it",
+                    frame.file_path
+                ),
+            ));
+        }
         let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
         transparent |= alpha;
         let (w, h) = (image.width, image.height);

@@ -68,6 +68,21 @@ pub fn resolve(path: &Path) -> PathBuf {
     }
 }
 
+/// Whether the existing file `file` lies, by its real path (symlinks followed), inside the
+/// real folder `dir`: the confinement of files a model or dataset names.
+#[must_use]
+pub fn inside(file: &Path, dir: &Path) -> bool {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    match (file.canonicalize(), dir.canonicalize()) {
+        (Ok(file), Ok(dir)) => file.starts_with(dir),
+        _ => false,
+    }
+}
+
 /// Whether `inner` is `outer` or lies inside it (both resolved).
 fn within(inner: &Path, outer: &Path) -> bool {
     inner.starts_with(outer)

@@ -20,6 +20,8 @@ pub struct FitRequest {
     pub views: PathBuf,
     /// Average N×N pixel blocks of every image (1: as they are).
     pub downscale: u32,
+    /// Read dataset images that lie outside the dataset's folder.
+    pub allow_outside_images: bool,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
     /// Everything else about the fit.
@@ -107,6 +109,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
+        allow_outside_images: request.allow_outside_images,
     };
     let dataset = load_dataset(&request.views, &options)?;
     for note in &dataset.notes {

@@ -615,6 +615,10 @@ fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
             .unwrap()
             .success()
     );
+    // A symlink beside the model to a file outside it (a real path check, not a lexical one).
+    std::fs::write(d.join("secret.bin"), &payload).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(d.join("secret.bin"), d.join("models/link.bin")).unwrap();
     for (uri, needle) in [
         ("/etc/passwd", "absolute"),
         ("../../../../etc/passwd", "leaves the model's folder"),
@@ -623,6 +627,7 @@ fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
         ("sub/../../x.bin", "leaves the model's folder"),
         ("pipe", "not a regular file"),
         (".", "not a regular file"),
+        ("link.bin", "outside the model's folder"),
     ] {
         let output = with_uri(uri);
         let stderr = String::from_utf8_lossy(&output.stderr);

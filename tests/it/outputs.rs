@@ -363,3 +363,36 @@ fn a_failing_ffmpeg_leaves_no_earlier_mp4_and_foreign_files_are_kept() {
     refused(&output, "orbit_t0.50.gif");
     assert_eq!(names(&d.join("w")), ["orbit_t0.50.gif"]);
 }
+
+/// Dataset images are read only from inside the dataset's folder, by their real path;
+/// `--allow-outside-images` reads them where the user means it.
+#[cfg(unix)]
+#[test]
+fn dataset_images_outside_the_folder_need_a_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    ok(&dataset(d, "s.json", "ds"));
+    // One training image replaced by a link to a copy outside the dataset.
+    std::fs::copy(d.join("ds/train/r_000.png"), d.join("outside.png")).unwrap();
+    std::fs::remove_file(d.join("ds/train/r_000.png")).unwrap();
+    std::os::unix::fs::symlink(d.join("outside.png"), d.join("ds/train/r_000.png")).unwrap();
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit", "--views", "ds", "--steps", "1", "--init", "random:2", "--out", "f.json",
+        ];
+        args.extend_from_slice(extra);
+        run(&args, d, None)
+    };
+    refused(&fit(&[]), "--allow-outside-images");
+    let stderr = String::from_utf8_lossy(&fit(&[]).stderr).into_owned();
+    assert!(
+        stderr.contains("transforms_train.json")
+            && stderr.contains("frame 0")
+            && stderr.contains("file_path"),
+        "{stderr}"
+    );
+    assert!(!d.join("f.json").exists());
+    ok(&fit(&["--allow-outside-images"]));
+    assert!(d.join("f.json").is_file());
+}
