@@ -423,12 +423,20 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
         }
     }
     if dataset.train.is_empty() {
-        return Err(Error::invalid(
-            &train_file.display().to_string(),
-            "dataset",
-            "frames",
-            "no training frames: transforms_train.json (or transforms.json) is missing or empty",
-        ));
+        // The file that was read (and had no frames), or the folder when there is none.
+        let read = [&train_file, &single].into_iter().find(|p| p.is_file());
+        return Err(match read {
+            Some(file) => Error::invalid(
+                &file.display().to_string(),
+                "dataset",
+                "frames",
+                "no training frames: the `frames` list is empty",
+            ),
+            None => Error::malformed(
+                &dir.display().to_string(),
+                "no transforms_train.json or transforms.json: not a dataset folder",
+            ),
+        });
     }
     Ok(dataset)
 }

@@ -98,7 +98,7 @@ pub fn write_video(
         next_frame(k, &mut image)?;
         if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
             return Err(Error::usage(format!(
-                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): use --no-gif",
+                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller --size (splat4d video also takes --no-gif)",
                 image.width, image.height
             )));
         }

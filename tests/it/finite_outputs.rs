@@ -194,3 +194,14 @@ fn a_truncated_jpeg_is_refused_like_a_truncated_png() {
         "{error}"
     );
 }
+
+#[test]
+fn an_empty_frames_list_names_the_file_that_has_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("cap")).unwrap();
+    std::fs::write(d.join("cap/transforms.json"), r#"{"frames": []}"#).unwrap();
+    let output = run(&["fit", "--views", "cap", "--out", "f.json"], d);
+    let message = refused(&output, 2, &["transforms.json", "frames", "empty"]);
+    assert!(!message.contains("transforms_train.json"), "{message}");
+}
