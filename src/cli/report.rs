@@ -50,6 +50,16 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         command.push_str(" --quick");
     }
     if let Some(n) = args.kernels {
+        let most = splat4d::fit::plan::MAX_START_KERNELS;
+        if !(1..=most).contains(&n) {
+            return Err(splat4d::Error::usage(format!(
+                "--kernels {n} must be from 1 to {most} (as fit's --init random:N)"
+            )));
+        }
+        splat4d::io::memory::check(
+            (n as u64).saturating_mul(splat4d::io::memory::FIT_BYTES_PER_KERNEL),
+            &format!("fitting {n} kernels"),
+        )?;
         config.model_kernels = n;
         command.push_str(&format!(" --kernels {n}"));
     }

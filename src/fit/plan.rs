@@ -118,7 +118,7 @@ impl Init {
 
 /// Most kernels a fit may start from (`random:N`, `--start-kernels`): a bound checked before
 /// anything is allocated for them.
-pub const MAX_START_KERNELS: usize = 10_000_000;
+pub const MAX_START_KERNELS: usize = 1_000_000;
 
 /// Everything a user can choose about a fit, with its defaults.
 #[derive(Clone, Debug, PartialEq)]

@@ -16,7 +16,8 @@
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
 //!
-//! [`output`] holds the one rule every output follows (what may be replaced, temporary
+//! [`memory`] holds the memory rule (estimates checked against what the machine has), and
+//! [`output`] the one rule every output follows (what may be replaced, temporary
 //! folders renamed into place, inputs never overwritten).
 
 pub mod camera_file;
@@ -26,6 +27,7 @@ pub mod gltf_motion;
 pub mod gradients_file;
 pub mod image_file;
 pub mod json;
+pub mod memory;
 pub mod output;
 pub mod path_file;
 pub mod ply;

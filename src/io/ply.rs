@@ -420,7 +420,15 @@ impl SceneLayout {
     fn empty_scene(&self, origin: &str) -> Result<Scene> {
         let mut scene = Scene::from_kernels(&[], self.background, origin)?;
         scene.up = self.up;
-        scene.reserve(self.count);
+        // The length check says what the file can hold, not what it holds (a sparse file's
+        // hole reads as zeros): the scene must fit in memory, and it grows as rows arrive
+        // beyond a first reservation.
+        let per_kernel = std::mem::size_of::<[f64; 18]>() as u64;
+        super::memory::check(
+            (self.count as u64).saturating_mul(per_kernel),
+            &format!("{origin}: {} kernels", self.count),
+        )?;
+        scene.reserve(self.count.min(1 << 20));
         Ok(scene)
     }
 

@@ -61,6 +61,11 @@ pub fn write_dataset(
     outputs.check()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
+    let pixels = u64::from(spec.width) * u64::from(spec.height);
+    crate::io::memory::check(
+        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        &format!("{}×{} views", spec.width, spec.height),
+    )?;
     let mut writer = DatasetWriter::new(&request.out, request.exr)?;
     progress.start("render", frame_count(spec));
     let mut frames = [0_usize; 3];

@@ -129,6 +129,23 @@ impl fmt::Display for RenderSummary {
     }
 }
 
+/// Refuses a render whose image and kernels would not fit in memory
+/// ([`crate::io::memory`]).
+pub fn check_render_memory(camera: &Camera, scene: &Scene) -> Result<()> {
+    use crate::io::memory::{FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, check};
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    check(
+        pixels.saturating_mul(RENDER_BYTES_PER_PIXEL)
+            + (scene.len() as u64).saturating_mul(FIT_BYTES_PER_KERNEL / 4),
+        &format!(
+            "a {}×{} render of {} kernels",
+            camera.width,
+            camera.height,
+            scene.len()
+        ),
+    )
+}
+
 /// Renders a scene through a camera at one time into a PNG or EXR image.
 pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     // Check the output's extension before any work, so a typo costs nothing.
@@ -146,6 +163,7 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         &[&view.scene, &view.camera.file()],
     )?;
     let (scene, camera) = view.load()?;
+    check_render_memory(&camera, &scene)?;
     let mut context = RenderContext::new();
     let stats = with_threads(view.threads, || {
         context.render(&scene, &camera, view.time, &view.options)
@@ -207,6 +225,7 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
         &[&view.scene, &request.target, &view.camera.file()],
     )?;
     let (scene, camera) = view.load()?;
+    check_render_memory(&camera, &scene)?;
     let background = scene.background.map(|b| b as f32);
     // The header first: a target of the wrong size is refused before it is decoded.
     let size = image_size(&request.target)?;

@@ -189,6 +189,11 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         )));
     }
     let scene = load_scene(&request.scene)?;
+    let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);
+    crate::io::memory::check(
+        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        &format!("{}×{} frames", request.lens.width, request.lens.height),
+    )?;
     let videos = paths(request, &scene)?;
     let names: Vec<&str> = videos.iter().map(|(name, _)| name.as_str()).collect();
     check_outputs(request, &names)?;

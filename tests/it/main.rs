@@ -34,6 +34,8 @@ mod layers;
 mod limits;
 /// Each fast stage against its f64 twin, and whole renders against independent vectors.
 mod matches_reference;
+/// The memory rule: estimates above the available memory or --max-memory are refused first.
+mod memory;
 /// The output rule: only a command's own earlier output is replaced, never an input.
 mod outputs;
 /// PLY: 3DGS slices read by an independent parser, 4D scenes round-tripped.
