@@ -542,7 +542,7 @@ mod tests {
         .map(|(k, &eye)| View {
             camera: Camera::look_at(eye, [0.0; 3], [0.0, 1.0, 0.0], 40.0, 8, 8).unwrap(),
             time: (k % 2) as f64,
-            image: Image::filled(8, 8, [0.0; 3]),
+            image: Image::filled(8, 8, [0.0; 3]).into(),
             name: format!("view {k}"),
         })
         .collect()
@@ -626,11 +626,12 @@ mod tests {
         // 0.7 below it.
         let mut views = views();
         for view in &mut views {
-            view.image = Image::filled(8, 8, [0.9, 0.8, 0.9]);
+            view.image = Image::filled(8, 8, [0.9, 0.8, 0.9]).into();
             for j in 3..5 {
                 for i in 3..5 {
                     let k = 3 * (j * 8 + i);
-                    view.image.pixels[k..k + 3].copy_from_slice(&[0.2, 0.1, 0.2]);
+                    std::sync::Arc::make_mut(&mut view.image).pixels[k..k + 3]
+                        .copy_from_slice(&[0.2, 0.1, 0.2]);
                 }
             }
         }

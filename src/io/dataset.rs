@@ -285,6 +285,10 @@ struct FileViews {
     notes: Vec<String>,
 }
 
+/// A decoded image file: the (downscaled) image, whether some pixel was transparent, and
+/// the size before downscaling.
+type Decoded = (std::sync::Arc<Image>, bool, (u32, u32));
+
 /// Reads one transforms file and its images.
 fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<FileViews> {
     let origin = path.display().to_string();
@@ -299,6 +303,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
     let mut unread: BTreeSet<&str> = file.other.keys().map(String::as_str).collect();
     let mut views = Vec::with_capacity(file.frames.len().min(1 << 16));
     let mut transparent = false;
+    let mut decoded: std::collections::HashMap<PathBuf, Decoded> = std::collections::HashMap::new();
     for (index, frame) in file.frames.iter().enumerate() {
         let item = format!("frame {index}");
         unread.extend(frame.other.keys().map(String::as_str));
@@ -324,18 +329,30 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 ),
             ));
         }
-        let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
+        // Each distinct file is decoded once; frames that name it share the image.
+        let key = image_path
+            .canonicalize()
+            .unwrap_or_else(|_| image_path.clone());
+        let (image, alpha, (w, h)) = match decoded.get(&key) {
+            Some(hit) => hit.clone(),
+            None => {
+                let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
+                let (w, h) = (image.width, image.height);
+                if w < n || h < n {
+                    return Err(Error::usage(format!(
+                        "{}: {w}×{h} is smaller than --downscale {n}",
+                        image_path.display()
+                    )));
+                }
+                // No second whole-image copy when nothing is downscaled.
+                let image = if n == 1 { image } else { downscale(&image, n) };
+                let hit = (std::sync::Arc::new(image), alpha, (w, h));
+                decoded.insert(key, hit.clone());
+                hit
+            }
+        };
         transparent |= alpha;
-        let (w, h) = (image.width, image.height);
         let [fx, fy, cx, cy] = intrinsics(&file, frame, (w, h), &origin, &item)?;
-        if w < n || h < n {
-            return Err(Error::usage(format!(
-                "{}: {w}×{h} is smaller than --downscale {n}",
-                image_path.display()
-            )));
-        }
-        // No second whole-image copy when nothing is downscaled.
-        let image = if n == 1 { image } else { downscale(&image, n) };
         let scale = f64::from(n);
         let time = frame.time.unwrap_or(0.0);
         if !time.is_finite() {

@@ -87,15 +87,18 @@ impl FitProgress for Silent {
 }
 
 /// Refuses, before the dataset is decoded, a fit whose images and start kernels would not
-/// fit in memory ([`crate::io::memory`]): every frame keeps its own linear copy, and the
-/// largest file is decoded once more while it is converted.
+/// fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
+/// RGB, and the largest is decoded once more while it is converted.
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
     use crate::io::memory::{FIT_BYTES_PER_KERNEL, check};
     let (mut kept, mut largest, mut frames) = (0_u64, 0_u64, 0_usize);
+    // Frames that name one file share its decoded image.
+    let mut seen = std::collections::HashSet::new();
     for file in crate::io::dataset::dataset_files(&request.views) {
         if file
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+            || !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone()))
         {
             continue;
         }

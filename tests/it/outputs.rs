@@ -396,3 +396,38 @@ fn dataset_images_outside_the_folder_need_a_flag() {
     ok(&fit(&["--allow-outside-images"]));
     assert!(d.join("f.json").is_file());
 }
+
+/// Frames naming one image share one decode (25 frames, one 16×16 file: one image in memory).
+#[test]
+fn frames_naming_one_file_share_one_decoded_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let image = splat4d::Image::filled(16, 16, [0.25, 0.5, 0.75]);
+    splat4d::io::image_file::save_image(
+        &image,
+        &d.join("one.png"),
+        splat4d::io::image_file::BitDepth::Sixteen,
+    )
+    .unwrap();
+    let frames: Vec<serde_json::Value> = (0..25)
+        .map(|k| {
+            serde_json::json!({"file_path": "one.png", "time": f64::from(k) / 24.0,
+                "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]})
+        })
+        .collect();
+    let file = serde_json::json!({"camera_angle_x": 0.7, "frames": frames});
+    std::fs::write(d.join("transforms_train.json"), file.to_string()).unwrap();
+    let dataset =
+        splat4d::io::dataset::load_dataset(d, &splat4d::io::dataset::DatasetOptions::default())
+            .unwrap();
+    assert_eq!(dataset.train.len(), 25);
+    let first = &dataset.train[0].image;
+    assert!(
+        dataset
+            .train
+            .iter()
+            .all(|v| std::sync::Arc::ptr_eq(&v.image, first))
+    );
+    assert_eq!(std::sync::Arc::strong_count(first), 25);
+    assert!((first.pixels[1] - 0.5).abs() < 1e-4);
+}
