@@ -122,3 +122,29 @@ fn a_sparse_ply_does_not_reserve_what_it_claims() {
     );
     refused(&output, &["big.ply", "500000000 kernels", "--max-memory"]);
 }
+
+/// `report --size` is checked before the experiment, with advice `report` can follow.
+#[test]
+fn report_sizes_are_checked_first_with_advice_it_can_follow() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let output = run(&["report", "--size", "16384x1", "--out", "r"], d);
+    refused(&output, &["--size 16384x1", "smaller --size"]);
+    assert!(!String::from_utf8_lossy(&output.stderr).contains("--no-gif"));
+    refused(
+        &run(
+            &[
+                "report",
+                "--size",
+                "8192x8192",
+                "--max-memory",
+                "1G",
+                "--out",
+                "r",
+            ],
+            d,
+        ),
+        &["--max-memory"],
+    );
+    assert!(!d.join("r").exists());
+}
