@@ -431,3 +431,48 @@ fn frames_naming_one_file_share_one_decoded_image() {
     assert_eq!(std::sync::Arc::strong_count(first), 25);
     assert!((first.pixels[1] - 0.5).abs() < 1e-4);
 }
+
+/// import-gltf never writes over a buffer file its model reads.
+#[test]
+fn import_gltf_never_writes_over_its_buffer() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    let mut gltf: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    let uri = gltf["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let payload = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',').unwrap().1)
+        .unwrap();
+    // A buffer file with a name an output could have.
+    std::fs::write(d.join("data.ply"), &payload).unwrap();
+    gltf["buffers"][0]["uri"] = serde_json::json!("data.ply");
+    std::fs::write(d.join("m.gltf"), gltf.to_string()).unwrap();
+    let output = run(
+        &[
+            "import-gltf",
+            "m.gltf",
+            "--kernels",
+            "20",
+            "--out",
+            "data.ply",
+        ],
+        d,
+        None,
+    );
+    refused(&output, "is an input");
+    assert_eq!(std::fs::read(d.join("data.ply")).unwrap(), payload);
+    ok(&run(
+        &[
+            "import-gltf",
+            "m.gltf",
+            "--kernels",
+            "20",
+            "--out",
+            "m.json",
+        ],
+        d,
+        None,
+    ));
+}
