@@ -68,6 +68,19 @@ pub fn remove_stale_temps(dir: &Path) {
         };
         if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
             let path = entry.path();
+            // An earlier output moved aside by a run killed before its successor took its
+            // place: it goes back rather than away.
+            let original = name
+                .strip_prefix(".splat4d-")
+                .and_then(|rest| rest.split_once('-'))
+                .and_then(|(_, rest)| rest.strip_prefix("old-"))
+                .map(|original| dir.join(original));
+            if let Some(original) = original
+                && std::fs::symlink_metadata(&original).is_err()
+                && std::fs::rename(&path, &original).is_ok()
+            {
+                continue;
+            }
             let _ = if path.is_dir() {
                 std::fs::remove_dir_all(&path)
             } else {

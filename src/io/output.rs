@@ -384,7 +384,10 @@ impl FolderWriter {
         let temp = self.temp.keep();
         let target = &self.target;
         if std::fs::symlink_metadata(target).is_ok() {
-            let old = temp.with_extension("old");
+            // Named after the target: a run killed between the two renames leaves it, and the
+            // next run's clean-up ([`super::remove_stale_temps`]) moves it back.
+            let name = target.file_name().unwrap_or_default().to_string_lossy();
+            let old = super::folder_of(target).join(format!("{}old-{name}", super::temp_prefix()));
             std::fs::rename(target, &old)
                 .map_err(|e| Error::write(out, "cannot move the previous output aside", e))?;
             if let Err(e) = std::fs::rename(&temp, target) {
@@ -440,6 +443,25 @@ mod tests {
         let mut outputs = Outputs::new();
         outputs.file(&d.join("a.gif")).file(&d.join("ds/../a.gif"));
         assert!(outputs.check().is_err());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn an_output_moved_aside_by_a_killed_run_comes_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        // No process has this id (above any pid_max).
+        let aside = d.join(".splat4d-4294967295-old-ds");
+        std::fs::create_dir(&aside).unwrap();
+        std::fs::write(aside.join("a.txt"), "kept").unwrap();
+        super::super::remove_stale_temps(d);
+        assert_eq!(std::fs::read_to_string(d.join("ds/a.txt")).unwrap(), "kept");
+        assert!(!aside.exists());
+        // With its successor in place, it goes.
+        std::fs::create_dir(&aside).unwrap();
+        super::super::remove_stale_temps(d);
+        assert!(!aside.exists());
+        assert!(d.join("ds/a.txt").exists());
     }
 
     #[test]
