@@ -147,6 +147,10 @@ pub struct FitArgs {
     /// `images_N`); the intrinsics are divided by N.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=i64::from(splat4d::io::dataset::MAX_DOWNSCALE)))]
     downscale: u32,
+    /// Read dataset images whose real path (symlinks followed) lies outside the dataset's
+    /// folder (refused by default, naming the frame).
+    #[arg(long)]
+    allow_outside_images: bool,
     /// Views per step (default: 8 additive, 4 alpha).
     #[arg(long)]
     batch: Option<usize>,
@@ -237,6 +241,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         views: args.views.clone(),
         downscale: args.downscale,
         strict: args.strict,
+        allow_outside_images: args.allow_outside_images,
         init: args.init.clone(),
         plan,
         blend,

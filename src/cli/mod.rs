@@ -44,6 +44,10 @@ fn with_progress<S: std::fmt::Display>(
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// Refuse work estimated to need more memory than this (e.g. 8G, 512MiB); the machine's
+    /// available memory is always a bound.
+    #[arg(long, global = true, value_parser = splat4d::io::memory::parse_bytes)]
+    max_memory: Option<u64>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -75,6 +79,9 @@ enum Command {
 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> splat4d::Result<()> {
+    if let Some(bytes) = cli.max_memory {
+        splat4d::io::memory::set_limit(bytes);
+    }
     match cli.command {
         None => report::run(&report::ReportArgs::default()),
         Some(Command::Render(args)) => render::run(&args),

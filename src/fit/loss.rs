@@ -259,7 +259,7 @@ mod tests {
             )
             .unwrap(),
             time: 0.0,
-            image: target,
+            image: target.into(),
             name: "v".into(),
             weights: None,
         };

@@ -89,6 +89,12 @@ pub enum Init {
     Scene(Scene),
 }
 
+/// Largest learning rate a fit accepts.
+pub const MAX_RATE: f64 = 1e3;
+
+/// Largest background channel (absolute) a fit accepts.
+pub const MAX_BACKGROUND: f64 = 1e6;
+
 impl Init {
     /// Parses `auto` or `random:N`; anything else is a scene file name, returned as `None`
     /// for the caller to read.
@@ -114,7 +120,7 @@ impl Init {
 
 /// Most kernels a fit may start from (`random:N`, `--start-kernels`): a bound checked before
 /// anything is allocated for them.
-pub const MAX_START_KERNELS: usize = 10_000_000;
+pub const MAX_START_KERNELS: usize = 1_000_000;
 
 /// Everything a user can choose about a fit, with its defaults.
 #[derive(Clone, Debug, PartialEq)]
@@ -244,6 +250,23 @@ impl FitPlan {
                     "{flag} {value} must be finite and ≥ 0"
                 )));
             }
+            // Adam moves a parameter by about its rate each step: beyond this every
+            // parameter leaves the finite numbers within a few steps.
+            if flag.starts_with("--lr-") && value > MAX_RATE {
+                return Err(Error::usage(format!(
+                    "{flag} {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step; the defaults are around 1e-2)"
+                )));
+            }
+        }
+        if let Some(background) = self.background
+            && background
+                .iter()
+                .any(|b| !b.is_finite() || b.abs() > MAX_BACKGROUND)
+        {
+            let [r, g, b] = background;
+            return Err(Error::usage(format!(
+                "--background {r},{g},{b}: each channel must be finite and within ±{MAX_BACKGROUND} (images hold linear values around 0..1)"
+            )));
         }
         for (flag, value) in [
             ("--densify-from", self.rounds.from),
@@ -398,6 +421,13 @@ impl FitPlan {
                     [lo.min(v.time), hi.max(v.time)]
                 })
         });
+        // Values from the data are named as such: no flag was given for them.
+        let [t0, t1] = time;
+        if self.time_range.is_none() && !(t1 - t0).is_finite() {
+            return Err(Error::usage(format!(
+                "the training frames' times span {t0}..{t1}, wider than the finite numbers: check the `time` field of the frames in the transforms files (or give --time-range)"
+            )));
+        }
         match self.bounds {
             Some([x0, y0, z0, x1, y1, z1]) => Ok(SpaceTimeBox {
                 min: [x0, y0, z0],
@@ -406,7 +436,18 @@ impl FitPlan {
             }),
             None => {
                 let cameras: Vec<Camera> = train.iter().map(|v| v.camera).collect();
-                box_from_cameras(&cameras, time)
+                let inferred = box_from_cameras(&cameras, time)?;
+                let finite = (0..3).all(|c| {
+                    let (lo, hi) = (inferred.min[c], inferred.max[c]);
+                    lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()
+                });
+                if !finite {
+                    return Err(Error::usage(format!(
+                        "the box the cameras look at comes out as {:?}..{:?}, not a finite box with sides > 0: check the training frames' focal lengths (fl_x, fl_y) and positions (transform_matrix), or give --box",
+                        inferred.min, inferred.max
+                    )));
+                }
+                Ok(inferred)
             }
         }
     }
@@ -547,7 +588,7 @@ mod tests {
         .map(|(k, &eye)| View {
             camera: Camera::look_at(eye, [0.0; 3], [0.0, 1.0, 0.0], 40.0, 8, 8).unwrap(),
             time: (k % 2) as f64,
-            image: Image::filled(8, 8, [0.0; 3]),
+            image: Image::filled(8, 8, [0.0; 3]).into(),
             name: format!("view {k}"),
             weights: None,
         })
@@ -632,11 +673,12 @@ mod tests {
         // 0.7 below it.
         let mut views = views();
         for view in &mut views {
-            view.image = Image::filled(8, 8, [0.9, 0.8, 0.9]);
+            view.image = Image::filled(8, 8, [0.9, 0.8, 0.9]).into();
             for j in 3..5 {
                 for i in 3..5 {
                     let k = 3 * (j * 8 + i);
-                    view.image.pixels[k..k + 3].copy_from_slice(&[0.2, 0.1, 0.2]);
+                    std::sync::Arc::make_mut(&mut view.image).pixels[k..k + 3]
+                        .copy_from_slice(&[0.2, 0.1, 0.2]);
                 }
             }
         }

@@ -250,6 +250,11 @@ pub fn fit(
             .learning_rates
             .scaled(options.final_rate_factor.powf(progress));
         adam.step(scene, &grads, &rates);
+        if let Some(why) = non_finite_parameter(scene) {
+            return Err(Error::Numeric(format!(
+                "fitting diverged at step {step}: {why}; lower that learning rate, or check the dataset's focal lengths (fl_x, fl_y) and background"
+            )));
+        }
         if let Some(adaptive) = &options.adaptive {
             stats.accumulate(scene, &grads);
             if adaptive.round_after(step, options.steps) {
@@ -288,4 +293,63 @@ pub fn fit(
         records.push(record);
     }
     Ok(records)
+}
+
+/// The first parameter of `scene` that left the finite numbers (or a scale that is no longer
+/// > 0), named by its group and the flag of that group's learning rate.
+#[must_use]
+pub fn non_finite_parameter(scene: &Scene) -> Option<String> {
+    let bad = |values: &[f64]| values.iter().any(|v| !v.is_finite());
+    for i in 0..scene.len() {
+        let found = if bad(&scene.means[i][..3]) {
+            Some(("mean", "--lr-mean"))
+        } else if bad(&scene.means[i][3..]) {
+            Some(("time", "--lr-time"))
+        } else if bad(&scene.scales[i]) || scene.scales[i].iter().any(|&s| s <= 0.0) {
+            Some(("scale", "--lr-scale"))
+        } else if bad(&scene.amplitudes[i]) {
+            Some(("amplitude", "--lr-amplitude"))
+        } else if bad(&scene.velocities[i]) {
+            Some(("velocity", "--lr-velocity"))
+        } else if bad(&scene.rotations[i]) {
+            Some(("rotation", "none: rotations come from the start"))
+        } else {
+            None
+        };
+        if let Some((group, flag)) = found {
+            return Some(format!(
+                "kernel {i}'s {group} is no longer finite (its rate: {flag})"
+            ));
+        }
+    }
+    bad(&scene.background)
+        .then(|| "the background is no longer finite (its rate: --lr-background)".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_non_finite_parameter_is_named_with_its_rate() {
+        let kernel = crate::model::scene::Kernel::new([0.0; 4], [0.1; 4], [0.5; 3]);
+        let mut scene = Scene::from_kernels(&[kernel, kernel], [0.0; 3], "<test>").unwrap();
+        assert_eq!(non_finite_parameter(&scene), None);
+        scene.amplitudes[1][2] = f64::NAN;
+        let why = non_finite_parameter(&scene).unwrap();
+        assert!(
+            why.contains("kernel 1") && why.contains("--lr-amplitude"),
+            "{why}"
+        );
+        scene.amplitudes[1][2] = 0.5;
+        scene.scales[0][3] = 0.0;
+        assert!(non_finite_parameter(&scene).unwrap().contains("--lr-scale"));
+        scene.scales[0][3] = 0.1;
+        scene.background[0] = f64::INFINITY;
+        assert!(
+            non_finite_parameter(&scene)
+                .unwrap()
+                .contains("--lr-background")
+        );
+    }
 }

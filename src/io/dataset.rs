@@ -83,6 +83,8 @@ pub struct DatasetOptions {
     pub downscale: u32,
     /// Refuse frames whose image file is missing (otherwise they are skipped with a note).
     pub strict: bool,
+    /// Read images whose real path (symlinks followed) lies outside the dataset's folder.
+    pub allow_outside_images: bool,
 }
 
 impl Default for DatasetOptions {
@@ -91,6 +93,7 @@ impl Default for DatasetOptions {
             background: [0.0; 3],
             downscale: 1,
             strict: false,
+            allow_outside_images: false,
         }
     }
 }
@@ -450,8 +453,12 @@ impl Undistorter {
 }
 
 /// One photo as read, before it becomes a [`View`].
+/// A photo ready to fit: the image (shared with other frames when nothing changed it), its
+/// pixel weights (`None`: every pixel counts fully), and `[fx, fy, cx, cy]`.
+type PreparedPhoto = (std::sync::Arc<Image>, Option<Vec<f32>>, [f64; 4]);
+
 struct Photo {
-    image: Image,
+    image: std::sync::Arc<Image>,
     /// The mask's weights, one per photo pixel.
     mask: Option<Vec<f32>>,
     /// `[fx, fy, cx, cy]` of the photo, pixels.
@@ -466,7 +473,8 @@ fn prepare_photo(
     undistorter: &mut Undistorter,
     n: u32,
     (origin, item): (&str, &str),
-) -> Result<(Image, Option<Vec<f32>>, [f64; 4])> {
+) -> Result<PreparedPhoto> {
+    use std::sync::Arc;
     let Photo {
         mut image,
         mut mask,
@@ -477,7 +485,7 @@ fn prepare_photo(
     if !distortion.is_pinhole() {
         undistorter.undistorted += 1;
         let table = undistorter.table(size, intrinsics, &distortion);
-        image = table.undistort_image(&image);
+        image = Arc::new(table.undistort_image(&image));
         mask = Some(match mask {
             Some(m) => table.undistort_weights(&m),
             None => table.validity(),
@@ -489,13 +497,17 @@ fn prepare_photo(
             size.0, size.1
         )));
     }
+    // No second whole-image copy when nothing is downscaled: frames naming one file share
+    // its decode.
     let (image, weights) = match mask {
-        None => (downscale(&image, n), None),
+        None if n == 1 => (image, None),
+        None => (Arc::new(downscale(&image, n)), None),
         Some(m) => {
             let (image, weights) = if n == 1 {
                 (image, m)
             } else {
-                downscale_weighted(&image, &m, n)
+                let (image, weights) = downscale_weighted(&image, &m, n);
+                (Arc::new(image), weights)
             };
             if weights.iter().all(|&w| w == 0.0) {
                 return Err(Error::invalid(
@@ -653,6 +665,10 @@ fn check_downscale(n: u32) -> Result<()> {
     Ok(())
 }
 
+/// A decoded image file: the (downscaled) image, whether some pixel was transparent, and
+/// the size before downscaling.
+type Decoded = (std::sync::Arc<Image>, bool, (u32, u32));
+
 /// Reads one transforms file and its images.
 fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<FileViews> {
     let origin = path.display().to_string();
@@ -665,6 +681,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
     let mut transparent = false;
     let mut missing = Vec::new();
     let mut undistorter = Undistorter::default();
+    let mut decoded: std::collections::HashMap<PathBuf, Decoded> = std::collections::HashMap::new();
     for (index, frame) in file.frames.iter().enumerate() {
         let item = format!("frame {index}");
         unread.extend(frame.other.keys().map(String::as_str));
@@ -672,10 +689,33 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
             missing.push((item, frame.file_path.clone()));
             continue;
         };
+        if !options.allow_outside_images && !crate::io::output::inside(&image_path, dir) {
+            return Err(Error::invalid(
+                &origin,
+                &item,
+                "file_path",
+                format!(
+                    "{} lies outside the dataset's folder (by its real path, links followed); pass --allow-outside-images to read it",
+                    frame.file_path
+                ),
+            ));
+        }
         let lens = distortion(&file, frame, &origin, &item)?;
-        let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
+        // Each distinct file is decoded once; frames that name it share the image.
+        let key = image_path
+            .canonicalize()
+            .unwrap_or_else(|_| image_path.clone());
+        let (image, alpha, (w, h)) = match decoded.get(&key) {
+            Some(hit) => hit.clone(),
+            None => {
+                let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
+                let size = (image.width, image.height);
+                let hit = (std::sync::Arc::new(image), alpha, size);
+                decoded.insert(key, hit.clone());
+                hit
+            }
+        };
         transparent |= alpha;
-        let (w, h) = (image.width, image.height);
         let k = intrinsics(&file, frame, (w, h), &origin, &item)?;
         let mask = match &frame.mask_path {
             Some(mask_path) => {
@@ -702,12 +742,16 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
             frame.transform_matrix,
         )
         .map_err(|e| match e {
-            Error::Invalid { field, message, .. } => Error::invalid(
-                &origin,
-                &item,
-                &format!("transform_matrix ({field})"),
-                message,
-            ),
+            Error::Invalid { field, message, .. } => {
+                // Intrinsics are named by the file's own keys, the rest is the matrix.
+                let named = match field.as_str() {
+                    "fx" => "fl_x".to_string(),
+                    "fy" => "fl_y".to_string(),
+                    "cx" | "cy" => field,
+                    _ => format!("transform_matrix ({field})"),
+                };
+                Error::invalid(&origin, &item, &named, message)
+            }
             other => other,
         })?;
         views.push(View {
@@ -797,7 +841,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
             ));
         }
         let photo = Photo {
-            image,
+            image: std::sync::Arc::new(image),
             mask: None,
             intrinsics: camera.intrinsics,
             distortion: camera.distortion,
@@ -894,33 +938,22 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
         }
     }
     if dataset.train.is_empty() {
-        return Err(Error::invalid(
-            &train_file.display().to_string(),
-            "dataset",
-            "frames",
-            "no training frames: transforms_train.json (or transforms.json, or a COLMAP model) is missing, empty, or has no frame with an image",
-        ));
+        // The file that was read (and had no frames), or the folder when there is none.
+        let read = [&train_file, &single].into_iter().find(|p| p.is_file());
+        return Err(match read {
+            Some(file) => Error::invalid(
+                &file.display().to_string(),
+                "dataset",
+                "frames",
+                "no training frames: the `frames` list is empty",
+            ),
+            None => Error::malformed(
+                &dir.display().to_string(),
+                "no transforms_train.json or transforms.json: not a dataset folder",
+            ),
+        });
     }
     Ok(dataset)
-}
-
-/// The files a dataset in `dir` is read from (that an output must not replace): the
-/// transforms files and the COLMAP model files that exist.
-#[must_use]
-pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
-    let mut files: Vec<PathBuf> = [
-        "transforms_train.json",
-        "transforms_val.json",
-        "transforms_test.json",
-        "transforms.json",
-    ]
-    .iter()
-    .map(|name| dir.join(name))
-    .collect();
-    if let Some(sparse) = colmap::find_sparse_model(dir) {
-        files.extend(colmap::model_files(&sparse).into_iter().flatten());
-    }
-    files
 }
 
 /// Saves the images of frame `index` of `split` under `dir` and returns its entry; `first`
@@ -981,10 +1014,10 @@ fn write_transforms(
 /// Writes a dataset frame by frame into a temporary folder beside `out`, renamed into
 /// place by [`DatasetWriter::finish`]: memory does not grow with the dataset, and a run that
 /// fails (a full disk, a kill) leaves no partial dataset at `out` for `fit` to accept. An
-/// existing `out` is replaced only when it is empty or a dataset (has a `transforms_*.json`).
+/// existing `out` is replaced only when it is empty or an earlier `splat4d dataset` output
+/// ([`crate::io::output`]).
 pub struct DatasetWriter {
-    out: PathBuf,
-    temp: tempfile::TempDir,
+    folder: crate::io::output::FolderWriter,
     exr: bool,
     blend: Blend,
     /// Per split: the first camera (all must share its intrinsics) and the frames.
@@ -994,28 +1027,8 @@ pub struct DatasetWriter {
 impl DatasetWriter {
     /// A writer for `out`; checks before any work that `out` may be written.
     pub fn new(out: &Path, exr: bool) -> Result<Self> {
-        if out.exists() && !replaceable(out) {
-            return Err(Error::usage(format!(
-                "{}: exists and is not a dataset; choose a new folder",
-                out.display()
-            )));
-        }
-        let parent = crate::io::folder_of(out);
-        std::fs::create_dir_all(parent).map_err(|e| {
-            Error::write(
-                out,
-                &format!("cannot create its folder {}", parent.display()),
-                e,
-            )
-        })?;
-        crate::io::remove_stale_temps(parent);
-        let temp = tempfile::Builder::new()
-            .prefix(&format!("{}dataset-", crate::io::temp_prefix()))
-            .tempdir_in(parent)
-            .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
         Ok(DatasetWriter {
-            out: out.to_path_buf(),
-            temp,
+            folder: crate::io::output::FolderWriter::new(out, "dataset")?,
             exr,
             blend: Blend::Additive,
             splits: Default::default(),
@@ -1037,7 +1050,7 @@ impl DatasetWriter {
             .ok_or_else(|| Error::usage(format!("unknown split {split}")))?;
         let (first, frames) = &mut self.splits[k];
         let c = *first.get_or_insert(view.camera);
-        let frame = save_frame(self.temp.path(), split, frames.len(), view, &c, self.exr)?;
+        let frame = save_frame(self.folder.path(), split, frames.len(), view, &c, self.exr)?;
         frames.push(frame);
         Ok(())
     }
@@ -1047,42 +1060,11 @@ impl DatasetWriter {
     pub fn finish(self) -> Result<()> {
         for (split, (first, frames)) in SPLITS.iter().zip(self.splits) {
             if let Some(c) = first {
-                write_transforms(self.temp.path(), split, &c, frames, self.blend)?;
+                write_transforms(self.folder.path(), split, &c, frames, self.blend)?;
             }
         }
-        let out = &self.out;
-        let temp = self.temp.keep();
-        if out.exists() {
-            // Move the old dataset aside, the new one in, then drop the old.
-            let old = temp.with_extension("old");
-            std::fs::rename(out, &old)
-                .map_err(|e| Error::write(out, "cannot move the previous dataset aside", e))?;
-            std::fs::rename(&temp, out)
-                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
-            std::fs::remove_dir_all(&old)
-                .map_err(|e| Error::write(&old, "cannot remove the previous dataset", e))?;
-        } else {
-            std::fs::rename(&temp, out)
-                .map_err(|e| Error::write(out, "cannot move the dataset into place", e))?;
-        }
-        Ok(())
+        self.folder.commit()
     }
-}
-
-/// Whether `dir` may be replaced by a new dataset: an empty folder or a dataset.
-fn replaceable(dir: &Path) -> bool {
-    dir.is_dir()
-        && std::fs::read_dir(dir).is_ok_and(|mut entries| {
-            let names: Vec<String> = entries
-                .by_ref()
-                .filter_map(|e| e.ok())
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .collect();
-            names.is_empty()
-                || names
-                    .iter()
-                    .any(|n| n.starts_with("transforms") && n.ends_with(".json"))
-        })
 }
 
 /// Writes one split: its images (16-bit PNG, and float EXR when `exr`) and its
@@ -1098,4 +1080,42 @@ pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result
         .map(|(index, view)| save_frame(dir, split, index, view, &first.camera, exr))
         .collect::<Result<Vec<_>>>()?;
     write_transforms(dir, split, &first.camera, frames, Blend::Additive)
+}
+
+/// The files a dataset in `dir` is read from: its transforms files and the images their
+/// frames name (as far as they can be read; the loader reports what cannot), and the COLMAP
+/// model's files when there is one. Outputs are checked against these before any work
+/// ([`crate::io::output`]).
+#[must_use]
+pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for name in [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "transforms.json",
+    ] {
+        let path = dir.join(name);
+        files.push(path.clone());
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) else {
+            continue;
+        };
+        let frames = value.get("frames").and_then(|f| f.as_array());
+        for frame in frames.into_iter().flatten() {
+            if let Some(image) = frame
+                .get("file_path")
+                .and_then(|p| p.as_str())
+                .and_then(|p| resolve_image(dir, p))
+            {
+                files.push(image);
+            }
+        }
+    }
+    if let Some(sparse) = colmap::find_sparse_model(dir) {
+        files.extend(colmap::model_files(&sparse).into_iter().flatten());
+    }
+    files
 }

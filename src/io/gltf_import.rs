@@ -439,6 +439,12 @@ fn buffer_file(dir: &Path, uri: &str, origin: &str, item: &str) -> Result<PathBu
     if !meta.is_file() {
         return Err(refuse(format!("{uri}: not a regular file")));
     }
+    // By the real path too: a symlink beside the model may point anywhere.
+    if !crate::io::output::inside(&file, dir) {
+        return Err(refuse(format!(
+            "{uri}: is a link to a file outside the model's folder, which is not read"
+        )));
+    }
     Ok(file)
 }
 

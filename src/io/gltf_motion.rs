@@ -270,6 +270,14 @@ pub(crate) fn read_tracks(
                     "keyframe times and values do not match (count, order or finiteness)",
                 ));
             }
+            if let Some(key) = values.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+                return Err(Error::invalid(
+                    origin,
+                    &item,
+                    "sampler.output",
+                    format!("keyframe value {key} is not finite (NaN or infinity)"),
+                ));
+            }
             tracks.push(Track {
                 node: channel.target().node().index(),
                 property: channel.target().property(),
@@ -551,10 +559,18 @@ pub(crate) fn plan_samples(
             .collect();
         let mut samples = lay_out(&graded, &spacings);
         if samples.len() > MAX_SAMPLE_TIMES {
-            return Err(Error::usage(format!(
-                "{origin}: following the animation within the tolerance needs more than \
-                 {MAX_SAMPLE_TIMES} sample times; raise --tolerance or give --times"
-            )));
+            return Err(Error::usage(match spacing {
+                Spacing::Adaptive { .. } => format!(
+                    "{origin}: following the animation within the tolerance needs more than \
+                     {MAX_SAMPLE_TIMES} sample times; raise --tolerance or give --times N"
+                ),
+                Spacing::Even(n) => format!(
+                    "{origin}: the animation's {} key times are each kept as a sample, so even \
+                     --times {n} needs more than {MAX_SAMPLE_TIMES} sample times; resample the \
+                     animation with fewer keys",
+                    boundaries.len()
+                ),
+            }));
         }
         // Errors are measured as the kernels will be: with fitted weights (roughly fitted
         // while the samples move, fully at the end).

@@ -176,6 +176,19 @@ fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()>
 /// Writes `image` to `path` (format from the extension), atomically.
 pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     let kind = ImageKind::from_path(path)?;
+    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie.
+    if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
+        let pixel = k / 3;
+        let width = image.width.max(1) as usize;
+        return Err(Error::Numeric(format!(
+            "{}: not written: pixel ({}, {}) channel {} is {}, not finite (amplitudes or background too large for f32)",
+            path.display(),
+            pixel % width,
+            pixel / width,
+            k % 3,
+            image.pixels[k]
+        )));
+    }
     write_atomically(path, |w| {
         encode_image(image, kind, depth, w).map_err(std::io::Error::other)
     })
@@ -245,6 +258,15 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
         .map_err(|e| Error::read(path, "cannot read image", e))?
         .with_guessed_format()
         .map_err(|e| Error::read(path, "cannot read image", e))?;
+    if reader.format() == Some(ImageFormat::Jpeg) {
+        let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read image", e))?;
+        if !jpeg_is_complete(&bytes) {
+            return Err(Error::malformed(
+                &origin,
+                "cannot decode image: the JPEG ends before its last scan does (a truncated file)",
+            ));
+        }
+    }
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(w);
     limits.max_image_height = Some(h);
@@ -273,34 +295,72 @@ pub fn to_linear_rgb(decoded: &DynamicImage, background: [f32; 3]) -> Image {
     composite(decoded, background).0
 }
 
-/// [`to_linear_rgb`], and whether some pixel had alpha below 1.
+/// [`to_linear_rgb`], and whether some pixel had alpha below 1. The decoded samples are
+/// converted straight into the one output buffer (no whole-image intermediate: a 16384²
+/// grey PNG needs its 268 MB of samples and the 3.2 GB result, not four more copies).
 fn composite(decoded: &DynamicImage, background: [f32; 3]) -> (Image, bool) {
     let (w, h) = (decoded.width(), decoded.height());
-    let rgba: Vec<[f32; 4]> = match decoded {
-        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => {
-            decoded.to_rgba32f().pixels().map(|p| p.0).collect()
+    // 8-bit values v are read as 257 v / 65535 (= v / 255), as 16-bit ones, bit for bit.
+    let u8f = |v: u8| (f64::from(u16::from(v) * 257) / 65535.0) as f32;
+    let u16f = |v: u16| (f64::from(v) / 65535.0) as f32;
+    let f32f = |v: f32| v;
+    let mut pixels = Vec::with_capacity(3 * w as usize * h as usize);
+    let transparent = match decoded {
+        DynamicImage::ImageLuma8(b) => push_pixels(b.as_raw(), 1, u8f, background, &mut pixels),
+        DynamicImage::ImageLumaA8(b) => push_pixels(b.as_raw(), 2, u8f, background, &mut pixels),
+        DynamicImage::ImageRgb8(b) => push_pixels(b.as_raw(), 3, u8f, background, &mut pixels),
+        DynamicImage::ImageRgba8(b) => push_pixels(b.as_raw(), 4, u8f, background, &mut pixels),
+        DynamicImage::ImageLuma16(b) => push_pixels(b.as_raw(), 1, u16f, background, &mut pixels),
+        DynamicImage::ImageLumaA16(b) => push_pixels(b.as_raw(), 2, u16f, background, &mut pixels),
+        DynamicImage::ImageRgb16(b) => push_pixels(b.as_raw(), 3, u16f, background, &mut pixels),
+        DynamicImage::ImageRgba16(b) => push_pixels(b.as_raw(), 4, u16f, background, &mut pixels),
+        DynamicImage::ImageRgb32F(b) => push_pixels(b.as_raw(), 3, f32f, background, &mut pixels),
+        DynamicImage::ImageRgba32F(b) => push_pixels(b.as_raw(), 4, f32f, background, &mut pixels),
+        other => {
+            let rgba = other.to_rgba32f();
+            push_pixels(rgba.as_raw(), 4, f32f, background, &mut pixels)
         }
-        // 8-bit values v become 257 v exactly, so v/255 = 257 v/65535.
-        _ => decoded
-            .to_rgba16()
-            .pixels()
-            .map(|p| p.0.map(|v| (f64::from(v) / 65535.0) as f32))
-            .collect(),
     };
-    let mut pixels = Vec::with_capacity(3 * rgba.len());
-    let mut transparent = false;
-    for [r, g, b, a] in rgba {
-        transparent |= a < 1.0;
-        for (c, bg) in [r, g, b].into_iter().zip(background) {
-            pixels.push(if a == 1.0 { c } else { a * c + (1.0 - a) * bg });
-        }
-    }
     let image = Image {
         width: w,
         height: h,
         pixels,
     };
     (image, transparent)
+}
+
+/// Appends the linear RGB of `samples` (`channels` per pixel: grey, grey+alpha, RGB or
+/// RGBA) to `out`, alpha composited over `background`; whether some alpha was below 1.
+fn push_pixels<S: Copy>(
+    samples: &[S],
+    channels: usize,
+    to_f32: impl Fn(S) -> f32,
+    background: [f32; 3],
+    out: &mut Vec<f32>,
+) -> bool {
+    let mut transparent = false;
+    for p in samples.chunks_exact(channels) {
+        let (rgb, a) = match channels {
+            1 => ([to_f32(p[0]); 3], 1.0),
+            2 => ([to_f32(p[0]); 3], to_f32(p[1])),
+            3 => ([to_f32(p[0]), to_f32(p[1]), to_f32(p[2])], 1.0),
+            _ => ([to_f32(p[0]), to_f32(p[1]), to_f32(p[2])], to_f32(p[3])),
+        };
+        transparent |= a < 1.0;
+        for (c, bg) in rgb.into_iter().zip(background) {
+            out.push(if a == 1.0 { c } else { a * c + (1.0 - a) * bg });
+        }
+    }
+    transparent
+}
+
+/// Whether the JPEG `bytes` end their last scan with an end-of-image marker (`FF D9` after
+/// the last start-of-scan `FF DA`; entropy-coded data stuffs every `FF` byte, so neither
+/// appears inside a scan). A file cut in the middle of a scan has none: the decoder would
+/// fill the rest of the image silently.
+fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let last_scan = bytes.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    last_scan.is_some_and(|start| bytes[start..].windows(2).any(|w| w == [0xFF, 0xD9]))
 }
 
 #[cfg(test)]

@@ -24,6 +24,12 @@ pub fn parse_json<T: DeserializeOwned>(text: &str, origin: &str, what: &str) -> 
 /// in a file does not come back whole.
 const MAX_MESSAGE: usize = 300;
 
+/// `text` cut to 300 characters, with an ellipsis: every value quoted in a message.
+#[must_use]
+pub fn cut(text: &str) -> String {
+    shorten(text)
+}
+
 /// `message` cut to [`MAX_MESSAGE`] characters, with an ellipsis.
 fn shorten(message: &str) -> String {
     match message.char_indices().nth(MAX_MESSAGE) {

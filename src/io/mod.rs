@@ -17,6 +17,10 @@
 //! | [`gltf_motion`] | glTF node animation: evaluation, rates, the sample times an import follows |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
+//!
+//! [`memory`] holds the memory rule (estimates checked against what the machine has), and
+//! [`output`] the one rule every output follows (what may be replaced, temporary
+//! folders renamed into place, inputs never overwritten).
 
 pub mod camera_file;
 pub mod colmap;
@@ -26,6 +30,8 @@ pub mod gltf_motion;
 pub mod gradients_file;
 pub mod image_file;
 pub mod json;
+pub mod memory;
+pub mod output;
 pub mod path_file;
 pub mod ply;
 pub mod point_cloud;
@@ -66,6 +72,19 @@ pub fn remove_stale_temps(dir: &Path) {
         };
         if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
             let path = entry.path();
+            // An earlier output moved aside by a run killed before its successor took its
+            // place: it goes back rather than away.
+            let original = name
+                .strip_prefix(".splat4d-")
+                .and_then(|rest| rest.split_once('-'))
+                .and_then(|(_, rest)| rest.strip_prefix("old-"))
+                .map(|original| dir.join(original));
+            if let Some(original) = original
+                && std::fs::symlink_metadata(&original).is_err()
+                && std::fs::rename(&path, &original).is_ok()
+            {
+                continue;
+            }
             let _ = if path.is_dir() {
                 std::fs::remove_dir_all(&path)
             } else {
@@ -141,10 +160,10 @@ pub fn folder_of(path: &Path) -> &Path {
     }
 }
 
-/// Whether two paths name one file: the same as written, or the same once both exist.
+/// Whether two paths name one file once resolved ([`output::resolve`]: `..` and symlinks).
 #[must_use]
 pub fn same_file(a: &Path, b: &Path) -> bool {
-    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+    a == b || output::resolve(a) == output::resolve(b)
 }
 
 /// A usage error when `path`, where a file is to be written, is a folder.
@@ -183,13 +202,12 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         )));
     }
     refuse_folder(out)?;
-    if let Some(input) = inputs.iter().find(|input| same_file(out, input)) {
-        return Err(Error::usage(format!(
-            "{}: is an input of this command ({}); write the output elsewhere",
-            out.display(),
-            input.display()
-        )));
+    let mut outputs = output::Outputs::new();
+    outputs.file(out);
+    for input in inputs {
+        outputs.input(input);
     }
+    outputs.check()?;
     let parent = folder_of(out);
     std::fs::create_dir_all(parent).map_err(|e| {
         let message = format!("cannot create its folder {}", parent.display());

@@ -99,6 +99,41 @@ pub fn write_slice_ply(
     let mut names: Vec<&str> = SLICE_PROPERTIES[..9].to_vec();
     names.extend(rest.iter().map(String::as_str));
     names.extend(&SLICE_PROPERTIES[9..]);
+    let values_of = |s: usize| -> Vec<f64> {
+        let i = sliced.kernel_from_slice[s] as usize;
+        let [m0, m1, m2] = sliced.means[s];
+        let (opacity, dc) = if alpha {
+            alpha_splat_colour(sliced.amplitudes[s], sliced.opacities[s])
+        } else {
+            splat_colour(sliced.amplitudes[s])
+        };
+        // f_rest_{c·triplets + j} = sh_j,c, zero past the scene's own SH.
+        let sh = scene.sh_of(i);
+        let f_rest = (0..3 * triplets).map(|k| {
+            let (c, j) = (k / triplets, k % triplets);
+            sh.get(j).map_or(0.0, |t| t[c])
+        });
+        let [sx, sy, sz, _] = scene.scales[i];
+        let q = scene.rotations[i];
+        [m0, m1, m2, 0.0, 0.0, 0.0, dc[0], dc[1], dc[2]]
+            .into_iter()
+            .chain(f_rest)
+            .chain([opacity, sx.ln(), sy.ln(), sz.ln(), q[0], q[1], q[2], q[3]])
+            .collect()
+    };
+    // A float PLY holds what f32 holds: a kernel at x = 1e300 is refused, not written as inf.
+    for s in 0..n {
+        let values = values_of(s);
+        if let Some(k) = values.iter().position(|&v| !(v as f32).is_finite()) {
+            return Err(Error::Numeric(format!(
+                "{}: not written: kernel {}'s `{}` at t = {tau} is {:e}, beyond what a float PLY holds",
+                path.display(),
+                sliced.kernel_from_slice[s],
+                names[k],
+                values[k]
+            )));
+        }
+    }
     write_atomically(path, |w| {
         w.write_all(
             header(
@@ -110,26 +145,7 @@ pub fn write_slice_ply(
             .as_bytes(),
         )?;
         for s in 0..n {
-            let i = sliced.kernel_from_slice[s] as usize;
-            let [m0, m1, m2] = sliced.means[s];
-            let (opacity, dc) = if alpha {
-                alpha_splat_colour(sliced.amplitudes[s], sliced.opacities[s])
-            } else {
-                splat_colour(sliced.amplitudes[s])
-            };
-            // f_rest_{c·triplets + j} = sh_j,c, zero past the scene's own SH.
-            let sh = scene.sh_of(i);
-            let f_rest = (0..3 * triplets).map(|k| {
-                let (c, j) = (k / triplets, k % triplets);
-                sh.get(j).map_or(0.0, |t| t[c])
-            });
-            let [sx, sy, sz, _] = scene.scales[i];
-            let q = scene.rotations[i];
-            let values = [m0, m1, m2, 0.0, 0.0, 0.0, dc[0], dc[1], dc[2]]
-                .into_iter()
-                .chain(f_rest)
-                .chain([opacity, sx.ln(), sy.ln(), sz.ln(), q[0], q[1], q[2], q[3]]);
-            for v in values {
+            for v in values_of(s) {
                 w.write_all(&(v as f32).to_le_bytes())?;
             }
         }
@@ -162,8 +178,8 @@ pub const SEQUENCE_INDEX: &str = "frames.json";
 /// `{"frames": [{"file": "frame_0000.ply", "time": t0}, ...]}`, that sequence players read.
 /// The sequence is written into a temporary folder beside `dir` and renamed into place, so a
 /// failed run leaves no partial sequence; an existing `dir` is replaced only when it is empty
-/// or holds an earlier sequence (only `frame_*.ply` and `frames.json`). Returns the splat
-/// count of each frame.
+/// or an earlier `export-ply` sequence ([`super::output`]). Returns the splat count of each
+/// frame.
 pub fn write_slice_sequence(
     scene: &Scene,
     times: &[f64],
@@ -171,32 +187,7 @@ pub fn write_slice_sequence(
     sh_rest: bool,
     dir: &Path,
 ) -> Result<Vec<usize>> {
-    if dir.exists() {
-        let entries = std::fs::read_dir(dir)
-            .map_err(|e| Error::read(dir, "cannot list the output folder", e))?;
-        for entry in entries {
-            let name = entry
-                .map_err(|e| Error::read(dir, "cannot list the output folder", e))?
-                .file_name();
-            let name = name.to_string_lossy();
-            let ours =
-                name == SEQUENCE_INDEX || (name.starts_with("frame_") && name.ends_with(".ply"));
-            if !ours {
-                return Err(Error::usage(format!(
-                    "{}: exists and holds `{name}`, not only a slice sequence; choose another --out",
-                    dir.display()
-                )));
-            }
-        }
-    }
-    let parent = super::folder_of(dir);
-    std::fs::create_dir_all(parent)
-        .map_err(|e| Error::write(dir, "cannot create the output folder's parent", e))?;
-    super::remove_stale_temps(parent);
-    let temp = tempfile::Builder::new()
-        .prefix(&format!("{}sequence-", super::temp_prefix()))
-        .tempdir_in(parent)
-        .map_err(|e| Error::write(dir, "cannot create a temporary folder", e))?;
+    let folder = super::output::FolderWriter::new(dir, "export-ply")?;
     let mut counts = Vec::with_capacity(times.len());
     let mut index = Vec::with_capacity(times.len());
     for (k, &tau) in times.iter().enumerate() {
@@ -206,20 +197,14 @@ pub fn write_slice_sequence(
             tau,
             cutoff,
             sh_rest,
-            &temp.path().join(&file),
+            &folder.path().join(&file),
         )?);
         index.push(serde_json::json!({"file": file, "time": tau}));
     }
     let text = serde_json::to_string_pretty(&serde_json::json!({ "frames": index }))
         .expect("an index of finite times serialises");
-    super::write_bytes_atomically(&temp.path().join(SEQUENCE_INDEX), text.as_bytes())?;
-    if dir.exists() {
-        std::fs::remove_dir_all(dir)
-            .map_err(|e| Error::write(dir, "cannot remove the earlier sequence", e))?;
-    }
-    let temp = temp.keep();
-    std::fs::rename(&temp, dir)
-        .map_err(|e| Error::write(dir, "cannot move the sequence into place", e))?;
+    super::write_bytes_atomically(&folder.path().join(SEQUENCE_INDEX), text.as_bytes())?;
+    folder.commit()?;
     Ok(counts)
 }
 
@@ -582,7 +567,15 @@ impl SceneLayout {
         scene.up = self.up;
         scene.time_range = self.time_range;
         scene.check_time_range(origin)?;
-        scene.reserve(self.count);
+        // The length check says what the file can hold, not what it holds (a sparse file's
+        // hole reads as zeros): the scene must fit in memory, and it grows as rows arrive
+        // beyond a first reservation.
+        let per_kernel = std::mem::size_of::<[f64; 18]>() as u64;
+        super::memory::check(
+            (self.count as u64).saturating_mul(per_kernel),
+            &format!("{origin}: {} kernels", self.count),
+        )?;
+        scene.reserve(self.count.min(1 << 20));
         Ok(scene)
     }
 

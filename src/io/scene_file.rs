@@ -177,6 +177,10 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
 
 /// Writes a scene atomically: 4D scene PLY for `.ply`, JSON otherwise.
 pub fn save_scene(scene: &Scene, path: &Path) -> Result<()> {
+    // Only what splat4d reads back leaves (a NaN would be written as `null`).
+    scene
+        .validate("<scene to write>")
+        .map_err(|e| Error::Numeric(format!("{}: not written: {e}", path.display())))?;
     if is_ply(path) {
         return super::ply::write_scene_ply(scene, path);
     }

@@ -13,22 +13,13 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 
 use crate::io::image_file::{BitDepth, save_image};
+use crate::io::output::FolderWriter;
 use crate::io::write_atomically;
 use crate::model::image::quantize;
 use crate::model::{Error, Image, Result};
 
 /// Largest side of a GIF frame (the format stores sides in 16 bits).
 pub const MAX_GIF_SIDE: u32 = 65_535;
-
-/// Whether `dir` holds nothing but a video's numbered frames (so it may be replaced).
-fn only_frames(dir: &Path) -> bool {
-    std::fs::read_dir(dir).is_ok_and(|entries| {
-        entries.filter_map(|e| e.ok()).all(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            name.starts_with("frame_") && name.ends_with(".png")
-        })
-    })
-}
 
 /// What was written for one video.
 #[derive(Clone, Debug, PartialEq)]
@@ -96,33 +87,24 @@ pub fn write_video(
         return Err(Error::usage("--fps must be at least 1"));
     }
     let frames_dir = dir.join(name);
-    if frames_dir.exists() && !only_frames(&frames_dir) {
-        return Err(Error::usage(format!(
-            "{}: exists and holds more than the frames of a video; choose another --out",
-            frames_dir.display()
-        )));
-    }
     std::fs::create_dir_all(dir)
         .map_err(|e| Error::write(dir, "cannot create the output folder", e))?;
-    crate::io::remove_stale_temps(dir);
     // Frames go to a temporary folder renamed into place at the end: a re-run never mixes
     // its frames with an older video's, and a failed one leaves the old video as it was.
-    let temp = tempfile::Builder::new()
-        .prefix(&format!("{}frames-", crate::io::temp_prefix()))
-        .tempdir_in(dir)
-        .map_err(|e| Error::write(dir, "cannot create a temporary folder", e))?;
+    // Only an earlier video's frames are ever replaced ([`crate::io::output`]).
+    let folder = FolderWriter::new(&frames_dir, "video")?;
     let mut image = Image::default();
     let mut write_frame = |k: usize| -> Result<RgbaImage> {
         next_frame(k, &mut image)?;
         if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
             return Err(Error::usage(format!(
-                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): use --no-gif",
+                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller --size (splat4d video also takes --no-gif)",
                 image.width, image.height
             )));
         }
         save_image(
             &image,
-            &temp.path().join(format!("frame_{k:04}.png")),
+            &folder.path().join(format!("frame_{k:04}.png")),
             BitDepth::Eight,
         )?;
         Ok(to_rgba8(&image))
@@ -161,18 +143,21 @@ pub fn write_video(
         }
         None
     };
-    if frames_dir.exists() {
-        std::fs::remove_dir_all(&frames_dir)
-            .map_err(|e| Error::write(&frames_dir, "cannot remove the previous frames", e))?;
-    }
-    let temp = temp.keep();
-    std::fs::rename(&temp, &frames_dir)
-        .map_err(|e| Error::write(&frames_dir, "cannot move the frames into place", e))?;
+    folder.commit()?;
     let (mp4, mp4_note) = if options.mp4 {
         encode_mp4(&frames_dir, dir, name, options.fps)
     } else {
         (None, None)
     };
+    // An earlier run's GIF or MP4 of this name (the output check let it through only as
+    // this command's own) would pass for one of these frames: it goes.
+    for (written, ext) in [(gif.is_some(), "gif"), (mp4.is_some(), "mp4")] {
+        let stale = dir.join(format!("{name}.{ext}"));
+        if !written && stale.is_file() {
+            std::fs::remove_file(&stale)
+                .map_err(|e| Error::write(&stale, "cannot remove the earlier run's video", e))?;
+        }
+    }
     Ok(VideoFiles {
         frames_dir,
         frames: frame_count,

@@ -26,6 +26,13 @@ pub const DEFAULT_FAR: f64 = 1e6;
 /// at validation rather than failing to allocate.
 pub const MAX_PIXELS: u64 = 1 << 28;
 
+/// Smallest focal length, in units of the image's smaller side (a field of view just under
+/// 180°).
+pub const MIN_FOCAL_RATIO: f64 = 1e-4;
+
+/// Largest focal length, in units of the image's larger side (a field of view of 1e-5 rad).
+pub const MAX_FOCAL_RATIO: f64 = 1e5;
+
 /// A validated pinhole camera. Build it with [`Camera::new`], [`Camera::look_at`],
 /// [`Camera::from_opengl_camera_to_world`], or read one with [`crate::io::camera_file`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -267,6 +274,24 @@ impl Camera {
                     item,
                     field,
                     format!("{value} must be > 0"),
+                ));
+            }
+        }
+        // A focal length far outside any lens makes the work non-finite (a subnormal one
+        // divides to inf, 1e30 squares past f64): refused here, where the field is named.
+        let (small, side) = (
+            f64::from(self.width.min(self.height)),
+            f64::from(self.width.max(self.height)),
+        );
+        for (field, value) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(MIN_FOCAL_RATIO * small..=MAX_FOCAL_RATIO * side).contains(&value) {
+                return Err(Error::invalid(
+                    origin,
+                    item,
+                    field,
+                    format!(
+                        "{value:e} pixels is outside {MIN_FOCAL_RATIO:e} times the image's smaller side ({small}) to {MAX_FOCAL_RATIO:e} times its larger side ({side}): no lens has it"
+                    ),
                 ));
             }
         }

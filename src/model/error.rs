@@ -118,7 +118,7 @@ impl Error {
             origin: origin.to_owned(),
             item: item.into(),
             field: field.to_owned(),
-            message: message.into(),
+            message: cut(&message.into(), MAX_QUOTE),
         }
     }
 
@@ -127,14 +127,31 @@ impl Error {
     pub fn malformed(origin: &str, message: impl Into<String>) -> Self {
         Error::Malformed {
             origin: origin.to_owned(),
-            message: message.into(),
+            message: cut(&message.into(), MAX_QUOTE),
         }
     }
 
     /// A request that cannot be carried out.
     #[must_use]
     pub fn usage(message: impl Into<String>) -> Self {
-        Error::Usage(message.into())
+        Error::Usage(cut(&message.into(), 3 * MAX_QUOTE))
+    }
+}
+
+/// Most characters of a value quoted in a message (a 10 MB string in a file does not come
+/// back whole).
+pub const MAX_QUOTE: usize = 300;
+
+/// `text` cut to `limit` characters, with an ellipsis and the full length.
+#[must_use]
+pub fn cut(text: &str, limit: usize) -> String {
+    match text.char_indices().nth(limit) {
+        Some((end, _)) => format!(
+            "{}… ({} characters in all)",
+            &text[..end],
+            text.chars().count()
+        ),
+        None => text.to_owned(),
     }
 }
 

@@ -11,8 +11,8 @@ pub struct View {
     pub camera: Camera,
     /// Scene time.
     pub time: f64,
-    /// Linear RGB.
-    pub image: Image,
+    /// Linear RGB, shared: frames that name one file share one decoded image.
+    pub image: std::sync::Arc<Image>,
     /// Where it came from (`./train/r_000`), for messages and reports.
     pub name: String,
     /// Per-pixel loss weights in `[0, 1]`, row-major, one per pixel of `image`: 0 leaves a

@@ -181,7 +181,7 @@ pub fn render_views(
                 View {
                     camera: *camera,
                     time,
-                    image: context.image().clone(),
+                    image: context.image().clone().into(),
                     name,
                     weights: None,
                 },

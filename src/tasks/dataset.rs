@@ -55,8 +55,17 @@ pub fn write_dataset(
 ) -> Result<DatasetSummary> {
     request.options.validate()?;
     request.spec.validate()?;
+    // Before any work: the output folder holds no input and may be replaced.
+    let mut outputs = crate::io::output::Outputs::new();
+    outputs.input(&request.scene).folder(&request.out);
+    outputs.check()?;
     let scene = load_scene(&request.scene)?;
     let spec = &request.spec;
+    let pixels = u64::from(spec.width) * u64::from(spec.height);
+    crate::io::memory::check(
+        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        &format!("{}×{} views", spec.width, spec.height),
+    )?;
     let mut writer = DatasetWriter::new(&request.out, request.exr)?.with_blend(scene.blend);
     progress.start("render", frame_count(spec));
     let mut frames = [0_usize; 3];

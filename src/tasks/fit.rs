@@ -25,6 +25,8 @@ pub struct FitRequest {
     pub downscale: u32,
     /// Refuse frames whose image is missing (otherwise skipped with a note).
     pub strict: bool,
+    /// Read dataset images that lie outside the dataset's folder.
+    pub allow_outside_images: bool,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
     /// Everything else about the fit.
@@ -93,12 +95,49 @@ impl FitProgress for Silent {
     fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
 }
 
+/// Refuses, before the dataset is decoded, a fit whose images and start kernels would not
+/// fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
+/// RGB, and the largest is decoded once more while it is converted.
+fn check_fit_memory(request: &FitRequest) -> Result<()> {
+    use crate::io::memory::{FIT_BYTES_PER_KERNEL, check};
+    let (mut kept, mut largest, mut frames) = (0_u64, 0_u64, 0_usize);
+    // Frames that name one file share its decoded image.
+    let mut seen = std::collections::HashSet::new();
+    for file in crate::io::dataset::dataset_files(&request.views) {
+        if file
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+            || !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone()))
+        {
+            continue;
+        }
+        if let Ok((w, h)) = crate::io::image_file::image_size(&file) {
+            let pixels = u64::from(w) * u64::from(h);
+            let n = u64::from(request.downscale.max(1));
+            kept = kept.saturating_add(pixels / (n * n) * 12);
+            largest = largest.max(pixels * 16);
+            frames += 1;
+        }
+    }
+    let kernels = match Init::parse_builtin(&request.init)? {
+        Some(Init::Random(n)) => n,
+        Some(Init::Auto) => request.plan.start_kernels.max(1),
+        _ => 0,
+    };
+    check(
+        kept.saturating_add(largest)
+            .saturating_add((kernels as u64).saturating_mul(FIT_BYTES_PER_KERNEL)),
+        &format!("fitting {kernels} start kernels to {frames} frames"),
+    )
+}
+
 /// Fits kernels to the dataset in `request.views` and writes the scene (and the log).
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
     let plan = &request.plan;
     plan.validate()?;
     // Outputs are checked before the work: a fit is never lost to an unwritable path, and
     // never replaces its dataset or its start.
+    // Every file the fit reads: the transforms files, the images they name, the start.
     let mut inputs = dataset_files(&request.views);
     inputs.push(PathBuf::from(&request.init));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
@@ -112,10 +151,12 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             )));
         }
     }
+    check_fit_memory(request)?;
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
         strict: request.strict,
+        allow_outside_images: request.allow_outside_images,
     };
     let dataset = load_dataset(&request.views, &options)?;
     for note in &dataset.notes {

@@ -46,6 +46,16 @@ impl CameraSource {
         }
     }
 
+    /// The file it is read from.
+    #[must_use]
+    pub fn file(&self) -> PathBuf {
+        match self {
+            CameraSource::File(path) => path.clone(),
+            CameraSource::Gltf { spec, .. } => split_camera_spec(spec)
+                .map_or_else(|_| PathBuf::from(spec), |(path, _)| path.to_path_buf()),
+        }
+    }
+
     /// Its name, for messages.
     #[must_use]
     pub fn name(&self) -> String {
@@ -119,6 +129,23 @@ impl fmt::Display for RenderSummary {
     }
 }
 
+/// Refuses a render whose image and kernels would not fit in memory
+/// ([`crate::io::memory`]).
+pub fn check_render_memory(camera: &Camera, scene: &Scene) -> Result<()> {
+    use crate::io::memory::{FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, check};
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    check(
+        pixels.saturating_mul(RENDER_BYTES_PER_PIXEL)
+            + (scene.len() as u64).saturating_mul(FIT_BYTES_PER_KERNEL / 4),
+        &format!(
+            "a {}×{} render of {} kernels",
+            camera.width,
+            camera.height,
+            scene.len()
+        ),
+    )
+}
+
 /// Renders a scene through a camera at one time into a PNG or EXR image.
 pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     // Check the output's extension before any work, so a typo costs nothing.
@@ -130,7 +157,13 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         )));
     }
     let view = &request.view;
+    check_output(
+        &request.out,
+        &["png", "exr"],
+        &[&view.scene, &view.camera.file()],
+    )?;
     let (scene, camera) = view.load()?;
+    check_render_memory(&camera, &scene)?;
     let mut context = RenderContext::new();
     let stats = with_threads(view.threads, || {
         context.render(&scene, &camera, view.time, &view.options)
@@ -186,8 +219,13 @@ impl fmt::Display for GradSummary {
 /// The MSE of a render against a target image and its gradient per kernel, as JSON.
 pub fn grad(request: &GradRequest) -> Result<GradSummary> {
     let view = &request.view;
-    check_output(&request.out, &["json"], &[&view.scene, &request.target])?;
+    check_output(
+        &request.out,
+        &["json"],
+        &[&view.scene, &request.target, &view.camera.file()],
+    )?;
     let (scene, camera) = view.load()?;
+    check_render_memory(&camera, &scene)?;
     let background = scene.background.map(|b| b as f32);
     // The header first: a target of the wrong size is refused before it is decoded.
     let size = image_size(&request.target)?;
@@ -216,6 +254,24 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
             &mut grads,
         )
     })??;
+    // Nothing non-finite leaves (JSON would hold `null`).
+    let bad_kernel = (0..grads.len()).find(|&i| {
+        grads.v_means[i]
+            .iter()
+            .chain(&grads.v_amplitudes[i])
+            .chain(&grads.v_velocities[i])
+            .any(|v| !v.is_finite())
+    });
+    if !loss.is_finite() || bad_kernel.is_some() {
+        let what = bad_kernel.map_or_else(
+            || format!("the loss is {loss}"),
+            |i| format!("kernel {i}'s gradient is not finite"),
+        );
+        return Err(Error::Numeric(format!(
+            "{}: not written: {what} (the scene's amplitudes, background or the target's values are too large for f32)",
+            request.out.display()
+        )));
+    }
     write_bytes_atomically(&request.out, gradients_to_json(&grads, loss).as_bytes())?;
     Ok(GradSummary {
         out: request.out.clone(),

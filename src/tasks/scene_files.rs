@@ -73,7 +73,11 @@ pub struct ImportRequest {
 
 /// Samples a glTF model and its node animation into 4D kernels.
 pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
-    check_output(&request.out, &["json", "ply"], &[&request.model])?;
+    // The model and the buffer files it names are inputs the output may not replace.
+    let mut inputs = vec![request.model.clone()];
+    inputs.extend(buffer_files(&request.model));
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    check_output(&request.out, &["json", "ply"], &inputs)?;
     let imported = import_scene(
         &request.model,
         request.kernels,
@@ -112,6 +116,27 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
         line,
         warnings,
     })
+}
+
+/// The external buffer files a `.gltf` model names (as far as its JSON can be read; the
+/// importer reports what cannot), beside the model.
+fn buffer_files(model: &Path) -> Vec<PathBuf> {
+    let Ok(text) = std::fs::read_to_string(model) else {
+        return Vec::new();
+    };
+    let Ok(document) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return Vec::new();
+    };
+    let dir = crate::io::folder_of(model);
+    document
+        .get("buffers")
+        .and_then(|b| b.as_array())
+        .into_iter()
+        .flatten()
+        .filter_map(|buffer| buffer.get("uri").and_then(|u| u.as_str()))
+        .filter(|uri| !uri.starts_with("data:"))
+        .map(|uri| dir.join(uri))
+        .collect()
 }
 
 /// `splat4d export-ply`.
@@ -188,6 +213,11 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             request.out.display()
         )));
     }
+    // Before any work: the folder holds no input and may be replaced.
+    let mut outputs = crate::io::output::Outputs::new();
+    outputs.input(&request.scene).folder(&request.out);
+    outputs.check()?;
+    crate::io::output::check_replaceable(&request.out, "export-ply")?;
     let scene = load_scene(&request.scene)?;
     let times = match &request.times {
         ExportTimes::List(times) => times.clone(),

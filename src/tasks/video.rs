@@ -4,6 +4,7 @@
 use std::fmt;
 use std::path::PathBuf;
 
+use crate::io::output::{Outputs, check_replaceable, unique_names};
 use crate::io::path_file::{load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
@@ -125,6 +126,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         let name = path
             .file_stem()
             .map_or("path".into(), |s| s.to_string_lossy().into_owned());
+        let name = crate::io::output::sanitize_label(&name, "path");
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
         let cameras = load_any_path(path)?;
@@ -139,7 +141,42 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
             .collect();
         videos.push((name, frames));
     }
+    // Names that can never leave the folder or clash: orbits at times that round to one label,
+    // a path file named like the spiral.
+    let names: Vec<String> = videos.iter().map(|(name, _)| name.clone()).collect();
+    for ((name, _), unique) in videos.iter_mut().zip(unique_names(&names)) {
+        *name = unique;
+    }
     Ok(videos)
+}
+
+/// Checks, before any work, every output of the videos named `names` in `out` against the
+/// inputs and each other; an existing frames folder must be an earlier video's, and an
+/// existing GIF, MP4 or camera path beside it belongs to that video.
+fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<()> {
+    let mut outputs = Outputs::new();
+    outputs.input(&request.scene);
+    if let Some(path) = &request.path {
+        outputs.input(path);
+    }
+    for name in names {
+        let frames = request.out.join(name);
+        check_replaceable(&frames, "video")?;
+        let ours = frames.is_dir();
+        outputs.folder(&frames);
+        for ext in ["gif", "mp4", "camera_path.json"] {
+            let file = request.out.join(format!("{name}.{ext}"));
+            if file.exists() && !ours {
+                return Err(Error::usage(format!(
+                    "{}: exists and is not part of an earlier `splat4d video` output (no {} folder of frames beside it); choose another --out",
+                    file.display(),
+                    frames.display()
+                )));
+            }
+            outputs.file(&file);
+        }
+    }
+    outputs.check()
 }
 
 /// Renders and writes every video of `request`.
@@ -152,7 +189,14 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         )));
     }
     let scene = load_scene(&request.scene)?;
+    let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);
+    crate::io::memory::check(
+        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        &format!("{}×{} frames", request.lens.width, request.lens.height),
+    )?;
     let videos = paths(request, &scene)?;
+    let names: Vec<&str> = videos.iter().map(|(name, _)| name.as_str()).collect();
+    check_outputs(request, &names)?;
     progress.start("frames", videos.iter().map(|(_, f)| f.len()).sum());
     let mut context = RenderContext::new();
     // One scene, many frames: each frame visits only the kernels alive at its time.

@@ -83,6 +83,22 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
         .scene
         .file_stem()
         .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    // Times that round to one label get distinct files; none may be an input.
+    let files = crate::io::output::unique_names(
+        &request
+            .times
+            .iter()
+            .map(|tau| {
+                crate::io::output::sanitize_label(&format!("{name}_volume_t{tau:.2}"), "volume")
+            })
+            .collect::<Vec<_>>(),
+    );
+    let mut outputs = crate::io::output::Outputs::new();
+    outputs.input(&request.scene);
+    for file in &files {
+        outputs.file(&request.out.join(format!("{file}.png")));
+    }
+    outputs.check()?;
     let mut volumes = Vec::new();
     for &tau in &request.times {
         let start = Instant::now();
@@ -102,8 +118,8 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
         .map(|(_, v, _)| v.range().0)
         .fold(0.0, f32::max);
     let mut rows = Vec::new();
-    for (tau, volume, seconds) in &volumes {
-        let path = request.out.join(format!("{name}_volume_t{tau:.2}.png"));
+    for ((tau, volume, seconds), file) in volumes.iter().zip(&files) {
+        let path = request.out.join(format!("{file}.png"));
         volume_slices_figure(&path, &name, *tau, volume, vmax)?;
         let (hi, lo) = volume.range();
         rows.push((*tau, hi, lo, *seconds));

@@ -663,13 +663,13 @@ fn colmap_text_and_binary_load_as_the_equivalent_transforms_json() {
         .iter()
         .find(|v| v.name.ends_with("00004.png"))
         .unwrap();
-    assert_ne!(undistorted.image, capture.images[4]);
+    assert_ne!(*undistorted.image, capture.images[4]);
     let plain = json
         .train
         .iter()
         .find(|v| v.name.ends_with("00003.png"))
         .unwrap();
-    assert_eq!(plain.image, capture.images[3]);
+    assert_eq!(*plain.image, capture.images[3]);
     assert!(plain.weights.is_none());
     // The held-out view is the first by name, as nerfstudio splits.
     assert_eq!(binary.test[0].name, "images/frame_00000.png");

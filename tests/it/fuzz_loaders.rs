@@ -70,12 +70,16 @@ fn images_png_and_exr() {
     let image = splat4d::Image::filled(9, 7, [0.3, 0.6, 0.9]);
     for (name, runs) in [("i.png", 4000), ("i.exr", 4000)] {
         let path = dir.path().join(name);
-        splat4d::io::image_file::save_image(
+        // Encoded directly: `save_image` itself refuses to write a non-finite pixel.
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        splat4d::io::image_file::encode_image(
             &image,
-            &path,
+            splat4d::io::image_file::ImageKind::Exr,
             splat4d::io::image_file::BitDepth::Sixteen,
+            &mut bytes,
         )
         .unwrap();
+        std::fs::write(&path, bytes.into_inner()).unwrap();
         let good = std::fs::read(&path).unwrap();
         let target = dir.path().join(format!("m_{name}"));
         fuzz(name, &good, runs, 3, |b| {
@@ -306,12 +310,16 @@ fn non_finite_pixels_are_refused_naming_the_pixel() {
         );
         let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][run % 3];
         image.pixels[3 * (y * w + x) as usize + c] = bad;
-        splat4d::io::image_file::save_image(
+        // Encoded directly: `save_image` itself refuses to write a non-finite pixel.
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        splat4d::io::image_file::encode_image(
             &image,
-            &path,
+            splat4d::io::image_file::ImageKind::Exr,
             splat4d::io::image_file::BitDepth::Sixteen,
+            &mut bytes,
         )
         .unwrap();
+        std::fs::write(&path, bytes.into_inner()).unwrap();
         let error = splat4d::io::image_file::load_image(&path, [0.0; 3])
             .expect_err("a non-finite pixel is refused")
             .to_string();

@@ -494,3 +494,26 @@ fn the_animated_box_is_followed_in_renders() {
     }
     eprintln!("animated box: {per_point} times per point, rendered centroid within {worst:.4}");
 }
+
+/// Issue 23: a NaN animation key is reported as such (not as "no triangle with a finite,
+/// positive area"), naming the channel and the key.
+#[test]
+fn a_nan_key_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nan.gltf");
+    let (triangle, times, _) = turning_triangle();
+    let mut moves: Vec<Vec<f32>> = times.iter().map(|&t| vec![t, 0.0, 0.0]).collect();
+    moves[2][1] = f32::NAN;
+    write_gltf(
+        &path,
+        &[triangle],
+        &[(0, "translation", "LINEAR", times, moves)],
+    );
+    let error = import_scene(&path, 50, DEFAULT, 0).unwrap_err().to_string();
+    assert!(
+        error.contains("animation 0 channel 0")
+            && error.contains("sampler.output")
+            && error.contains("keyframe value 2 is not finite"),
+        "{error}"
+    );
+}

@@ -615,6 +615,10 @@ fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
             .unwrap()
             .success()
     );
+    // A symlink beside the model to a file outside it (a real path check, not a lexical one).
+    std::fs::write(d.join("secret.bin"), &payload).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(d.join("secret.bin"), d.join("models/link.bin")).unwrap();
     for (uri, needle) in [
         ("/etc/passwd", "absolute"),
         ("../../../../etc/passwd", "leaves the model's folder"),
@@ -623,6 +627,7 @@ fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
         ("sub/../../x.bin", "leaves the model's folder"),
         ("pipe", "not a regular file"),
         (".", "not a regular file"),
+        ("link.bin", "outside the model's folder"),
     ] {
         let output = with_uri(uri);
         let stderr = String::from_utf8_lossy(&output.stderr);
@@ -728,7 +733,7 @@ fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
         ],
         d,
         2,
-        "not a dataset",
+        "was not written by `splat4d dataset`",
     );
     assert_eq!(
         std::fs::read_to_string(d.join("photos/keep.txt")).unwrap(),
@@ -763,7 +768,10 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert!(video("0.5,0.5,0.5,3,20,6", "16x12").status.success());
     assert!(video("0.5,0.5,0.5,3,20,3", "16x12").status.success());
     let frames = std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count();
-    assert_eq!(frames, 3, "no stale frames from the longer video");
+    assert_eq!(
+        frames, 4,
+        "no stale frames from the longer video (3 and the marker)"
+    );
     let names: Vec<String> = std::fs::read_dir(d.join("v"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -783,7 +791,7 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert!(String::from_utf8_lossy(&output.stderr).contains("--no-gif"));
     assert_eq!(
         std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count(),
-        3,
+        4,
         "the old video is intact"
     );
     // A folder of other files is never replaced.

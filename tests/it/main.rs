@@ -19,6 +19,8 @@ mod dataset;
 mod dataset_variants;
 /// The same bits for every thread count.
 mod determinism;
+/// Nothing non-finite leaves with exit 0; absurd inputs are refused naming their field.
+mod finite_outputs;
 /// Fitting recovers known scenes; adaptive fits find the kernels they need.
 mod fit;
 /// The alpha fit recovers occluding scenes.
@@ -41,6 +43,10 @@ mod layers;
 mod limits;
 /// Each fast stage against its f64 twin, and whole renders against independent vectors.
 mod matches_reference;
+/// The memory rule: estimates above the available memory or --max-memory are refused first.
+mod memory;
+/// The output rule: only a command's own earlier output is replaced, never an input.
+mod outputs;
 /// PLY: 3DGS slices read by an independent parser, 4D scenes round-tripped.
 mod ply;
 /// Property tests (proptest, fixed seed) on random cameras and scenes.

@@ -350,7 +350,15 @@ fn export_ply_writes_a_sequence_with_an_index() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names, ["frame_0000.ply", "frame_0001.ply", "frames.json"]);
+    assert_eq!(
+        names,
+        [
+            ".splat4d-output",
+            "frame_0000.ply",
+            "frame_0001.ply",
+            "frames.json"
+        ]
+    );
     // A folder holding anything else is never replaced.
     std::fs::write(d.join("seq/notes.txt"), "mine").unwrap();
     let output = splat4d(

@@ -142,8 +142,8 @@ fn video_command_writes_orbits_spiral_and_path_videos() {
     ] {
         assert_eq!(
             std::fs::read_dir(d.join("v").join(name)).unwrap().count(),
-            frames,
-            "{name}"
+            frames + 1,
+            "{name}: the frames and the marker"
         );
         assert_eq!(
             gif_frames(&d.join(format!("v/{name}.gif"))),
@@ -297,7 +297,7 @@ fn video_without_a_path_flag_orbits_the_scene_at_its_times() {
         let frames = std::fs::read_dir(d.join(format!("a/orbit_t{t}")))
             .unwrap()
             .count();
-        assert_eq!(frames, 60, "t = {t}");
+        assert_eq!(frames, 61, "t = {t}: 60 frames and the marker");
     }
     // Nothing at all: the scene's own time range (the blob's one kernel: t = 0.5), +z up.
     let mut args = vec!["video", "--out", "b", "--up", "z"];

@@ -1,0 +1,494 @@
+//! The output rule, in one place: a command only ever replaces what it created itself.
+//!
+//! - Every path is compared after [`resolve`] (absolute, `.` and `..` resolved, symlinks of
+//!   its existing part followed), so `ds/../ds` is `ds` and a symlink is its target.
+//! - [`Outputs::check`] refuses, before any work, an output that is an input, a folder output
+//!   that holds an input (or lies inside an input folder), and two outputs of one run that
+//!   overlap.
+//! - An output folder is written under a temporary name beside it ([`FolderWriter`]) and
+//!   renamed into place once complete. An existing folder is replaced only when it is empty
+//!   or carries the [`MARKER`] file that the same command wrote into it; any other folder is
+//!   refused (exit 2) before any work.
+//! - Names derived from labels (a path file's stem, an orbit's time) go through
+//!   [`sanitize_label`] and [`unique_names`]: never `.`, `..`, empty, hidden, a separator, or
+//!   the name of another output of the run.
+
+use std::path::{Component, Path, PathBuf};
+
+use crate::model::{Error, Result};
+
+/// The marker file splat4d writes into every folder it creates as a whole; its content is
+/// the command's name.
+pub const MARKER: &str = ".splat4d-output";
+
+/// `path` made absolute, with `.` and `..` resolved and the symlinks of its longest existing
+/// ancestor followed (`canonicalize`); the part that does not exist yet is resolved
+/// lexically.
+#[must_use]
+pub fn resolve(path: &Path) -> PathBuf {
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .unwrap_or_else(|_| PathBuf::from("/"))
+            .join(path)
+    };
+    if let Ok(real) = absolute.canonicalize() {
+        return real;
+    }
+    // Lexically first (so that `missing/..` does not stop the walk), then the longest
+    // existing ancestor canonicalized.
+    let mut lexical = PathBuf::new();
+    for part in absolute.components() {
+        match part {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                lexical.pop();
+            }
+            other => lexical.push(other.as_os_str()),
+        }
+    }
+    let mut rest = Vec::new();
+    let mut base = lexical.as_path();
+    loop {
+        if let Ok(real) = base.canonicalize() {
+            let mut out = real;
+            for part in rest.iter().rev() {
+                out.push(part);
+            }
+            return out;
+        }
+        match (base.parent(), base.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                base = parent;
+            }
+            _ => return lexical,
+        }
+    }
+}
+
+/// Whether the existing file `file` lies, by its real path (symlinks followed), inside the
+/// real folder `dir`: the confinement of files a model or dataset names.
+#[must_use]
+pub fn inside(file: &Path, dir: &Path) -> bool {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    match (file.canonicalize(), dir.canonicalize()) {
+        (Ok(file), Ok(dir)) => file.starts_with(dir),
+        _ => false,
+    }
+}
+
+/// Whether `inner` is `outer` or lies inside it (both resolved).
+fn within(inner: &Path, outer: &Path) -> bool {
+    inner.starts_with(outer)
+}
+
+/// A label made a safe file name: characters other than ASCII letters, digits, `-`, `_`,
+/// `.` and `+` become `_`, leading dots are dropped (never hidden, `.` or `..`), at most 100
+/// characters; `fallback` when nothing is left.
+#[must_use]
+pub fn sanitize_label(label: &str, fallback: &str) -> String {
+    let cleaned: String = label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.' | '+') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let trimmed: String = cleaned.trim_start_matches('.').chars().take(100).collect();
+    if trimmed.is_empty() || trimmed.chars().all(|c| c == '.' || c == '_') {
+        fallback.to_string()
+    } else {
+        trimmed
+    }
+}
+
+/// `names` made distinct: a name seen before gets `_2`, `_3`, … (compared without case, so
+/// they stay distinct on case-insensitive file systems too).
+#[must_use]
+pub fn unique_names(names: &[String]) -> Vec<String> {
+    let mut taken: Vec<String> = Vec::new();
+    names
+        .iter()
+        .map(|name| {
+            let mut candidate = name.clone();
+            let mut k = 2;
+            while taken.iter().any(|t| t.eq_ignore_ascii_case(&candidate)) {
+                candidate = format!("{name}_{k}");
+                k += 1;
+            }
+            taken.push(candidate.clone());
+            candidate
+        })
+        .collect()
+}
+
+/// The paths under `dir` (relative, `/`-separated, sorted; symlinks not followed), or
+/// `None` when it cannot be listed.
+fn listing(dir: &Path) -> Option<Vec<String>> {
+    let mut found = Vec::new();
+    let mut stack = vec![PathBuf::new()];
+    while let Some(relative) = stack.pop() {
+        for entry in std::fs::read_dir(dir.join(&relative)).ok()? {
+            let entry = entry.ok()?;
+            let path = relative.join(entry.file_name());
+            if entry.file_type().ok()?.is_dir() {
+                stack.push(path.clone());
+            }
+            found.push(path.to_string_lossy().replace('\\', "/"));
+        }
+    }
+    found.sort();
+    Some(found)
+}
+
+/// Why `command` may not replace the existing folder `dir`, or `None` when it may: it is
+/// empty, or it holds the [`MARKER`] naming `command` and nothing but what the marker lists
+/// (what that command wrote there; a file added since keeps the folder).
+fn not_replaceable(dir: &Path, command: &str) -> Option<String> {
+    let Some(present) = listing(dir) else {
+        return Some("cannot be listed".into());
+    };
+    if present.is_empty() {
+        return None;
+    }
+    let Ok(marker) = std::fs::read_to_string(dir.join(MARKER)) else {
+        return Some(format!(
+            "was not written by `splat4d {command}` (it has no {MARKER} file naming it)"
+        ));
+    };
+    let mut lines = marker.lines();
+    if lines.next().map(str::trim) != Some(command) {
+        return Some(format!(
+            "was not written by `splat4d {command}` (its {MARKER} names another command)"
+        ));
+    }
+    let written: std::collections::BTreeSet<&str> = lines.collect();
+    present
+        .iter()
+        .find(|p| *p != MARKER && !written.contains(p.as_str()))
+        .map(|extra| {
+            format!(
+                "holds {}, which `splat4d {command}` did not write there",
+                super::json::cut(extra)
+            )
+        })
+}
+
+/// Whether the folder `dir` may be replaced by `command`'s new output ([`check_replaceable`]).
+#[must_use]
+pub fn replaceable(dir: &Path, command: &str) -> bool {
+    not_replaceable(dir, command).is_none()
+}
+
+/// Refuses (usage error) a folder `dir` that exists and may not be replaced by `command`:
+/// only an empty folder, or one that command wrote and nobody added to since, is replaced.
+pub fn check_replaceable(dir: &Path, command: &str) -> Result<()> {
+    match std::fs::symlink_metadata(dir) {
+        Err(_) => Ok(()),
+        Ok(meta) if !meta.is_dir() => Err(Error::usage(format!(
+            "{}: exists and is not a folder; name a new folder for the output",
+            dir.display()
+        ))),
+        Ok(_) => match not_replaceable(dir, command) {
+            None => Ok(()),
+            Some(why) => Err(Error::usage(format!(
+                "{}: exists and {why}, so it is not replaced; name a new folder, or move that one away yourself",
+                dir.display()
+            ))),
+        },
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Entry {
+    shown: PathBuf,
+    real: PathBuf,
+    folder: bool,
+}
+
+/// The inputs and outputs of one run, checked against each other before any work.
+#[derive(Clone, Debug, Default)]
+pub struct Outputs {
+    inputs: Vec<Entry>,
+    outputs: Vec<Entry>,
+}
+
+impl Outputs {
+    /// An empty set.
+    #[must_use]
+    pub fn new() -> Self {
+        Outputs::default()
+    }
+
+    /// A file the command reads.
+    pub fn input(&mut self, path: &Path) -> &mut Self {
+        self.inputs.push(Entry {
+            shown: path.to_path_buf(),
+            real: resolve(path),
+            folder: false,
+        });
+        self
+    }
+
+    /// A folder the command reads (no output may lie inside it or hold it whole).
+    pub fn input_folder(&mut self, path: &Path) -> &mut Self {
+        self.inputs.push(Entry {
+            shown: path.to_path_buf(),
+            real: resolve(path),
+            folder: true,
+        });
+        self
+    }
+
+    /// A file the command writes (replacing a file of that name).
+    pub fn file(&mut self, path: &Path) -> &mut Self {
+        self.outputs.push(Entry {
+            shown: path.to_path_buf(),
+            real: resolve(path),
+            folder: false,
+        });
+        self
+    }
+
+    /// A folder the command writes whole (replacing only its own earlier output).
+    pub fn folder(&mut self, path: &Path) -> &mut Self {
+        self.outputs.push(Entry {
+            shown: path.to_path_buf(),
+            real: resolve(path),
+            folder: true,
+        });
+        self
+    }
+
+    /// Refuses (usage error) an output that is, holds or lies in an input it must not
+    /// replace, and two outputs that overlap.
+    pub fn check(&self) -> Result<()> {
+        for out in &self.outputs {
+            for input in &self.inputs {
+                let clash = out.real == input.real
+                    || (out.folder && within(&input.real, &out.real))
+                    || (input.folder && within(&out.real, &input.real) && out.folder);
+                if clash {
+                    let how = if out.real == input.real {
+                        "is"
+                    } else if within(&input.real, &out.real) {
+                        "holds"
+                    } else {
+                        "lies inside"
+                    };
+                    return Err(Error::usage(format!(
+                        "{}: {how} an input of this command ({}); write the output elsewhere",
+                        out.shown.display(),
+                        input.shown.display()
+                    )));
+                }
+            }
+        }
+        for (k, a) in self.outputs.iter().enumerate() {
+            for b in &self.outputs[k + 1..] {
+                let clash = a.real == b.real
+                    || (a.folder && within(&b.real, &a.real))
+                    || (b.folder && within(&a.real, &b.real));
+                if clash {
+                    return Err(Error::usage(format!(
+                        "{} and {}: two outputs of this command name the same place; give them different names",
+                        a.shown.display(),
+                        b.shown.display()
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// An output folder written under a temporary name beside its target and moved into place
+/// by [`FolderWriter::commit`] once complete, with the [`MARKER`] naming the command.
+pub struct FolderWriter {
+    shown: PathBuf,
+    target: PathBuf,
+    command: String,
+    temp: tempfile::TempDir,
+}
+
+impl FolderWriter {
+    /// Checks that `command` may replace `out` (absent, empty, or its own earlier output) and
+    /// makes the temporary folder beside it.
+    pub fn new(out: &Path, command: &str) -> Result<Self> {
+        check_replaceable(out, command)?;
+        let target = resolve(out);
+        if target.parent().is_none() || target.file_name().is_none() {
+            return Err(Error::usage(format!(
+                "{}: cannot be an output folder; name a folder to write",
+                out.display()
+            )));
+        }
+        let parent = super::folder_of(&target).to_path_buf();
+        std::fs::create_dir_all(&parent).map_err(|e| {
+            Error::write(
+                out,
+                &format!("cannot create its folder {}", parent.display()),
+                e,
+            )
+        })?;
+        super::remove_stale_temps(&parent);
+        let temp = tempfile::Builder::new()
+            .prefix(&format!("{}{command}-", super::temp_prefix()))
+            .tempdir_in(&parent)
+            .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
+        Ok(FolderWriter {
+            shown: out.to_path_buf(),
+            target,
+            command: command.to_string(),
+            temp,
+        })
+    }
+
+    /// The temporary folder to fill.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        self.temp.path()
+    }
+
+    /// Writes the marker and moves the finished folder into place. An earlier output is moved
+    /// aside only now (the new one complete beside it), and back if the new one cannot take
+    /// its place.
+    pub fn commit(self) -> Result<()> {
+        let out = &self.shown;
+        // The marker lists what was written, so that a later run can tell it from files
+        // added since.
+        let written = listing(self.temp.path()).ok_or_else(|| {
+            Error::write(
+                out,
+                "cannot list the finished output",
+                std::io::Error::other("read_dir failed"),
+            )
+        })?;
+        let mut marker = format!("{}\n", self.command);
+        for path in written {
+            marker.push_str(&path);
+            marker.push('\n');
+        }
+        super::write_bytes_atomically(&self.temp.path().join(MARKER), marker.as_bytes())?;
+        // Checked again: the folder may have appeared or changed during the work.
+        check_replaceable(&self.target, &self.command)?;
+        let temp = self.temp.keep();
+        let target = &self.target;
+        if std::fs::symlink_metadata(target).is_ok() {
+            // Named after the target: a run killed between the two renames leaves it, and the
+            // next run's clean-up ([`super::remove_stale_temps`]) moves it back.
+            let name = target.file_name().unwrap_or_default().to_string_lossy();
+            let old = super::folder_of(target).join(format!("{}old-{name}", super::temp_prefix()));
+            std::fs::rename(target, &old)
+                .map_err(|e| Error::write(out, "cannot move the previous output aside", e))?;
+            if let Err(e) = std::fs::rename(&temp, target) {
+                let _ = std::fs::rename(&old, target);
+                return Err(Error::write(
+                    out,
+                    "cannot move the new output into place",
+                    e,
+                ));
+            }
+            std::fs::remove_dir_all(&old)
+                .map_err(|e| Error::write(&old, "cannot remove the previous output", e))?;
+        } else {
+            std::fs::rename(&temp, target)
+                .map_err(|e| Error::write(out, "cannot move the output into place", e))?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_become_safe_distinct_names() {
+        assert_eq!(sanitize_label("..", "path"), "path");
+        assert_eq!(sanitize_label(".", "path"), "path");
+        assert_eq!(sanitize_label("", "path"), "path");
+        assert_eq!(sanitize_label(".hidden", "path"), "hidden");
+        assert_eq!(sanitize_label("a/b\\c", "path"), "a_b_c");
+        assert_eq!(sanitize_label("orbit_t0.50", "x"), "orbit_t0.50");
+        let names = ["a", "A", "a", "b"].map(String::from);
+        assert_eq!(unique_names(&names), ["a", "A_2", "a_3", "b"]);
+    }
+
+    #[test]
+    fn paths_are_compared_resolved() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir(d.join("ds")).unwrap();
+        assert_eq!(resolve(&d.join("ds/../ds")), resolve(&d.join("ds")));
+        assert_eq!(resolve(&d.join("new/../x")), resolve(&d.join("x")));
+        assert_eq!(
+            resolve(&d.join("ds/./a/b")),
+            resolve(&d.join("ds")).join("a/b")
+        );
+        let mut outputs = Outputs::new();
+        outputs
+            .input(&d.join("ds/scene.json"))
+            .folder(&d.join("ds/../ds"));
+        assert!(outputs.check().is_err());
+        let mut outputs = Outputs::new();
+        outputs.file(&d.join("a.gif")).file(&d.join("ds/../a.gif"));
+        assert!(outputs.check().is_err());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn an_output_moved_aside_by_a_killed_run_comes_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        // No process has this id (above any pid_max).
+        let aside = d.join(".splat4d-4294967295-old-ds");
+        std::fs::create_dir(&aside).unwrap();
+        std::fs::write(aside.join("a.txt"), "kept").unwrap();
+        super::super::remove_stale_temps(d);
+        assert_eq!(std::fs::read_to_string(d.join("ds/a.txt")).unwrap(), "kept");
+        assert!(!aside.exists());
+        // With its successor in place, it goes.
+        std::fs::create_dir(&aside).unwrap();
+        super::super::remove_stale_temps(d);
+        assert!(!aside.exists());
+        assert!(d.join("ds/a.txt").exists());
+    }
+
+    #[test]
+    fn only_a_marked_folder_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        std::fs::write(out.join("notes.txt"), "mine").unwrap();
+        assert!(FolderWriter::new(&out, "dataset").is_err());
+        std::fs::remove_file(out.join("notes.txt")).unwrap();
+        let writer = FolderWriter::new(&out, "dataset").unwrap();
+        std::fs::write(writer.path().join("a.txt"), "new").unwrap();
+        writer.commit().unwrap();
+        assert_eq!(
+            std::fs::read_to_string(out.join(MARKER)).unwrap(),
+            "dataset\na.txt\n"
+        );
+        assert!(FolderWriter::new(&out, "video").is_err());
+        // A file added to it since keeps it.
+        std::fs::write(out.join("b.txt"), "mine").unwrap();
+        assert!(FolderWriter::new(&out, "dataset").is_err());
+        std::fs::remove_file(out.join("b.txt")).unwrap();
+        let writer = FolderWriter::new(&dir.path().join("out/../out"), "dataset").unwrap();
+        writer.commit().unwrap();
+        assert!(!out.join("a.txt").exists());
+        assert!(out.join(MARKER).exists());
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1);
+    }
+}

@@ -1,0 +1,478 @@
+//! The output rule (issue 23): a command only replaces what it created itself, never an
+//! input, and one run's outputs never overwrite each other. Each test is a reproducer, from
+//! flags and bytes.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use crate::common::data;
+
+fn run(args: &[&str], cwd: &Path, path_env: Option<&str>) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_splat4d"));
+    command.args(args).current_dir(cwd);
+    if let Some(p) = path_env {
+        command.env("PATH", p);
+    }
+    command.output().unwrap()
+}
+
+fn ok(output: &Output) {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Exit status 2 and `needle` in the message.
+fn refused(output: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains(needle), "{stderr}");
+}
+
+/// The names in `dir`, sorted.
+fn names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// A 4-camera × 2-time 8×8 dataset of the blob (`s.json` in `d`) into `out`.
+fn dataset(d: &Path, scene: &str, out: &str) -> Output {
+    run(
+        &[
+            "dataset", "--scene", scene, "--views", "4", "--times", "2", "--size", "8x8", "--out",
+            out,
+        ],
+        d,
+        None,
+    )
+}
+
+fn blob_in(d: &Path, name: &str) {
+    std::fs::copy(data("blob.json"), d.join(name)).unwrap();
+}
+
+#[test]
+fn a_path_file_named_dot_dot_never_names_the_folder_above() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    std::fs::write(d.join("notes.txt"), "mine").unwrap();
+    let camera: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("blob_camera.json")).unwrap()).unwrap();
+    let path =
+        serde_json::json!([{"camera": camera, "time": 0.5}, {"camera": camera, "time": 0.6}]);
+    std::fs::write(d.join("...json"), path.to_string()).unwrap();
+    let output = run(
+        &[
+            "video", "--scene", "s.json", "--path", "...json", "--no-mp4", "--out", "newvids",
+        ],
+        d,
+        None,
+    );
+    ok(&output);
+    assert_eq!(names(d), ["...json", "newvids", "notes.txt", "s.json"]);
+    assert_eq!(
+        std::fs::read_to_string(d.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // The frames went to a folder of a safe name inside newvids.
+    let frames = names(&d.join("newvids/path"));
+    assert_eq!(
+        frames,
+        [".splat4d-output", "frame_0000.png", "frame_0001.png"]
+    );
+}
+
+#[test]
+fn dataset_replaces_only_its_own_output_and_never_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    // A nerfstudio capture is not a splat4d dataset: refused, untouched.
+    std::fs::create_dir_all(d.join("cap/images")).unwrap();
+    std::fs::write(d.join("cap/transforms.json"), r#"{"frames": []}"#).unwrap();
+    std::fs::write(d.join("cap/images/photo.png"), "photo").unwrap();
+    refused(
+        &dataset(d, "s.json", "cap"),
+        "was not written by `splat4d dataset`",
+    );
+    assert_eq!(names(&d.join("cap")), ["images", "transforms.json"]);
+    assert_eq!(
+        std::fs::read_to_string(d.join("cap/images/photo.png")).unwrap(),
+        "photo"
+    );
+    // A dataset's own folder holding the scene it is made from: refused, scene intact.
+    ok(&dataset(d, "s.json", "ds"));
+    blob_in(d, "ds/scene.json");
+    refused(&dataset(d, "ds/scene.json", "ds"), "holds an input");
+    assert!(d.join("ds/scene.json").is_file());
+    assert!(d.join("ds/transforms_train.json").is_file());
+    // `ds/../ds` is `ds`: replaced whole, nothing lost or left beside it.
+    std::fs::remove_file(d.join("ds/scene.json")).unwrap();
+    ok(&dataset(d, "s.json", "ds/../ds"));
+    assert_eq!(names(d), ["cap", "ds", "s.json"]);
+    assert_eq!(
+        names(&d.join("ds")),
+        [
+            ".splat4d-output",
+            "test",
+            "train",
+            "transforms_test.json",
+            "transforms_train.json",
+            "transforms_val.json",
+            "val"
+        ]
+    );
+    // Another command's output is not a dataset to replace.
+    ok(&run(
+        &[
+            "export-ply",
+            "--scene",
+            "s.json",
+            "--frames",
+            "2",
+            "--out",
+            "seq",
+        ],
+        d,
+        None,
+    ));
+    refused(
+        &dataset(d, "s.json", "seq"),
+        "was not written by `splat4d dataset`",
+    );
+}
+
+#[test]
+fn a_ply_sequence_replaces_only_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    let export = |scene: &str, out: &str| {
+        run(
+            &[
+                "export-ply",
+                "--scene",
+                scene,
+                "--frames",
+                "3",
+                "--out",
+                out,
+            ],
+            d,
+            None,
+        )
+    };
+    ok(&export("s.json", "seq"));
+    ok(&export("s.json", "seq/../seq"));
+    assert_eq!(names(d), ["s.json", "seq"]);
+    assert_eq!(
+        names(&d.join("seq")),
+        [
+            ".splat4d-output",
+            "frame_0000.ply",
+            "frame_0001.ply",
+            "frame_0002.ply",
+            "frames.json"
+        ]
+    );
+    // Its own frame as the input: refused before anything moves.
+    let before = std::fs::read(d.join("seq/frame_0000.ply")).unwrap();
+    refused(&export("seq/frame_0000.ply", "seq"), "holds an input");
+    assert_eq!(std::fs::read(d.join("seq/frame_0000.ply")).unwrap(), before);
+}
+
+#[test]
+fn fit_and_grad_never_write_over_what_they_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    ok(&dataset(d, "s.json", "ds"));
+    let photo = d.join("ds/train/r_001.png");
+    let before = std::fs::read(&photo).unwrap();
+    let fit = run(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "f.json",
+            "--log",
+            "ds/train/r_001.png",
+        ],
+        d,
+        None,
+    );
+    refused(&fit, "is an input");
+    // The same photo through `..`.
+    let fit = run(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "f.json",
+            "--log",
+            "ds/../ds/train/r_001.png",
+        ],
+        d,
+        None,
+    );
+    refused(&fit, "is an input");
+    assert_eq!(std::fs::read(&photo).unwrap(), before);
+    assert!(!d.join("f.json").exists());
+    // grad --camera c.json --out c.json.
+    std::fs::copy(data("blob_camera.json"), d.join("c.json")).unwrap();
+    let camera = std::fs::read(d.join("c.json")).unwrap();
+    let grad = run(
+        &[
+            "grad",
+            "--scene",
+            "s.json",
+            "--camera",
+            "c.json",
+            "--time",
+            "0.5",
+            "--target",
+            "ds/train/r_000.png",
+            "--out",
+            "c.json",
+        ],
+        d,
+        None,
+    );
+    refused(&grad, "is an input");
+    assert_eq!(std::fs::read(d.join("c.json")).unwrap(), camera);
+}
+
+#[test]
+fn videos_of_one_run_never_overwrite_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    let camera: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("blob_camera.json")).unwrap()).unwrap();
+    let path = serde_json::json!([{"camera": camera, "time": 0.5}]);
+    std::fs::write(d.join("spiral.json"), path.to_string()).unwrap();
+    // A spiral and a path file named spiral.json; three orbits whose times round to 0.00.
+    let output = run(
+        &[
+            "video",
+            "--scene",
+            "s.json",
+            "--spiral=0.5,0.5,0.5,3,20,2",
+            "--path",
+            "spiral.json",
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.001,0.002,0.003",
+            "--size",
+            "8x8",
+            "--no-mp4",
+            "--out",
+            "v",
+        ],
+        d,
+        None,
+    );
+    ok(&output);
+    let frames = |name: &str| {
+        names(&d.join("v").join(name))
+            .iter()
+            .filter(|n| n.starts_with("frame_"))
+            .count()
+    };
+    assert_eq!(frames("orbit_t0.00"), 2);
+    assert_eq!(frames("orbit_t0.00_2"), 2);
+    assert_eq!(frames("orbit_t0.00_3"), 2);
+    assert_eq!(frames("spiral"), 2);
+    assert_eq!(frames("spiral_2"), 1, "the path's one camera");
+    assert!(d.join("v/spiral_2.gif").is_file());
+    assert!(d.join("v/orbit_t0.00_3.camera_path.json").is_file());
+}
+
+#[cfg(unix)]
+#[test]
+fn a_failing_ffmpeg_leaves_no_earlier_mp4_and_foreign_files_are_kept() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    let bin = d.join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let good = "#!/bin/sh\nfor last; do :; done\necho mp4 > \"$last\"\n";
+    let bad = "#!/bin/sh\nif [ \"$1\" = \"-version\" ]; then exit 0; fi\nexit 1\n";
+    let path_env = format!("{}:/usr/bin:/bin", bin.display());
+    let video = |script: &str| {
+        std::fs::write(bin.join("ffmpeg"), script).unwrap();
+        std::fs::set_permissions(bin.join("ffmpeg"), std::fs::Permissions::from_mode(0o755))
+            .unwrap();
+        run(
+            &[
+                "video",
+                "--scene",
+                "s.json",
+                "--orbit=0.5,0.5,0.5,3,20,2",
+                "--times",
+                "0.5",
+                "--size",
+                "8x8",
+                "--out",
+                "v",
+            ],
+            d,
+            Some(&path_env),
+        )
+    };
+    ok(&video(good));
+    assert!(d.join("v/orbit_t0.50.mp4").is_file());
+    let output = video(bad);
+    ok(&output);
+    assert!(String::from_utf8_lossy(&output.stdout).contains("ffmpeg failed"));
+    assert!(d.join("v/orbit_t0.50.gif").is_file());
+    assert!(
+        !d.join("v/orbit_t0.50.mp4").exists(),
+        "the previous run's MP4 would pass for this one"
+    );
+    // A GIF of that name beside no video of ours is not ours to replace.
+    std::fs::create_dir(d.join("w")).unwrap();
+    std::fs::write(d.join("w/orbit_t0.50.gif"), "mine").unwrap();
+    let output = run(
+        &[
+            "video",
+            "--scene",
+            "s.json",
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "8x8",
+            "--no-mp4",
+            "--out",
+            "w",
+        ],
+        d,
+        None,
+    );
+    refused(&output, "orbit_t0.50.gif");
+    assert_eq!(names(&d.join("w")), ["orbit_t0.50.gif"]);
+}
+
+/// Dataset images are read only from inside the dataset's folder, by their real path;
+/// `--allow-outside-images` reads them where the user means it.
+#[cfg(unix)]
+#[test]
+fn dataset_images_outside_the_folder_need_a_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    ok(&dataset(d, "s.json", "ds"));
+    // One training image replaced by a link to a copy outside the dataset.
+    std::fs::copy(d.join("ds/train/r_000.png"), d.join("outside.png")).unwrap();
+    std::fs::remove_file(d.join("ds/train/r_000.png")).unwrap();
+    std::os::unix::fs::symlink(d.join("outside.png"), d.join("ds/train/r_000.png")).unwrap();
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit", "--views", "ds", "--steps", "1", "--init", "random:2", "--out", "f.json",
+        ];
+        args.extend_from_slice(extra);
+        run(&args, d, None)
+    };
+    refused(&fit(&[]), "--allow-outside-images");
+    let stderr = String::from_utf8_lossy(&fit(&[]).stderr).into_owned();
+    assert!(
+        stderr.contains("transforms_train.json")
+            && stderr.contains("frame 0")
+            && stderr.contains("file_path"),
+        "{stderr}"
+    );
+    assert!(!d.join("f.json").exists());
+    ok(&fit(&["--allow-outside-images"]));
+    assert!(d.join("f.json").is_file());
+}
+
+/// Frames naming one image share one decode (25 frames, one 16×16 file: one image in memory).
+#[test]
+fn frames_naming_one_file_share_one_decoded_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let image = splat4d::Image::filled(16, 16, [0.25, 0.5, 0.75]);
+    splat4d::io::image_file::save_image(
+        &image,
+        &d.join("one.png"),
+        splat4d::io::image_file::BitDepth::Sixteen,
+    )
+    .unwrap();
+    let frames: Vec<serde_json::Value> = (0..25)
+        .map(|k| {
+            serde_json::json!({"file_path": "one.png", "time": f64::from(k) / 24.0,
+                "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]})
+        })
+        .collect();
+    let file = serde_json::json!({"camera_angle_x": 0.7, "frames": frames});
+    std::fs::write(d.join("transforms_train.json"), file.to_string()).unwrap();
+    let dataset =
+        splat4d::io::dataset::load_dataset(d, &splat4d::io::dataset::DatasetOptions::default())
+            .unwrap();
+    assert_eq!(dataset.train.len(), 25);
+    let first = &dataset.train[0].image;
+    assert!(
+        dataset
+            .train
+            .iter()
+            .all(|v| std::sync::Arc::ptr_eq(&v.image, first))
+    );
+    assert_eq!(std::sync::Arc::strong_count(first), 25);
+    assert!((first.pixels[1] - 0.5).abs() < 1e-4);
+}
+
+/// import-gltf never writes over a buffer file its model reads.
+#[test]
+fn import_gltf_never_writes_over_its_buffer() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    let mut gltf: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    let uri = gltf["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let payload = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',').unwrap().1)
+        .unwrap();
+    // A buffer file with a name an output could have.
+    std::fs::write(d.join("data.ply"), &payload).unwrap();
+    gltf["buffers"][0]["uri"] = serde_json::json!("data.ply");
+    std::fs::write(d.join("m.gltf"), gltf.to_string()).unwrap();
+    let output = run(
+        &[
+            "import-gltf",
+            "m.gltf",
+            "--kernels",
+            "20",
+            "--out",
+            "data.ply",
+        ],
+        d,
+        None,
+    );
+    refused(&output, "is an input");
+    assert_eq!(std::fs::read(d.join("data.ply")).unwrap(), payload);
+    ok(&run(
+        &[
+            "import-gltf",
+            "m.gltf",
+            "--kernels",
+            "20",
+            "--out",
+            "m.json",
+        ],
+        d,
+        None,
+    ));
+}
