@@ -23,7 +23,7 @@
 
 use rayon::prelude::*;
 
-use crate::backward::raster::ScreenGradients;
+use crate::backward::raster::{ScreenGradients, screen_gradients_from_moments};
 use crate::composite::{
     CompositeScratch, Contribution, MAX_ALPHA, composite_half_row, prepare_alpha_tile,
 };
@@ -274,16 +274,11 @@ fn reduce(
     out.v_covariances.clear();
     out.v_opacities.clear();
     for (p, s) in sums.iter().enumerate() {
-        let [a, b, _] = proj.conics[p];
-        let e = 1.0 / proj.covariances[p][2];
-        let [s_t, s_tt, s_v, s_tv, s_vv] = [s[3], s[4], s[5], s[6], s[7]];
         out.v_amplitudes.push([s[0], s[1], s[2]]);
-        out.v_means.push([a * s_t, b * s_t + e * s_v]);
-        out.v_covariances.push([
-            0.5 * a * a * s_tt,
-            0.5 * a * (b * s_tt + e * s_tv),
-            0.5 * (b * b * s_tt + 2.0 * b * e * s_tv + e * e * s_vv),
-        ]);
+        let (v_mean, v_covariance) =
+            screen_gradients_from_moments(proj, p, [s[3], s[4], s[5], s[6], s[7]]);
+        out.v_means.push(v_mean);
+        out.v_covariances.push(v_covariance);
         out.v_opacities.push(s[8]);
     }
 }

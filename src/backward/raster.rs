@@ -352,19 +352,32 @@ fn reduce(
     out.v_covariances.clear();
     out.v_opacities.clear();
     for (p, s) in sums.iter().enumerate() {
-        let [a, b, _] = proj.conics[p];
-        let e = 1.0 / proj.covariances[p][2];
-        let [s_t, s_tt, s_v, s_tv, s_vv] = [s[3], s[4], s[5], s[6], s[7]];
         out.v_amplitudes.push([s[0], s[1], s[2]]);
-        // Σ w Q d with Q d = (a t, b t + e Δv).
-        out.v_means.push([a * s_t, b * s_t + e * s_v]);
-        // ½ Σ w (Q d)(Q d)ᵀ.
-        out.v_covariances.push([
+        let (v_mean, v_covariance) =
+            screen_gradients_from_moments(proj, p, [s[3], s[4], s[5], s[6], s[7]]);
+        out.v_means.push(v_mean);
+        out.v_covariances.push(v_covariance);
+    }
+}
+
+/// `∂L/∂m2` and `∂L/∂Σ2` of projected kernel `p` from its moments `Σ w (t, t², Δv, t Δv,
+/// Δv²)` (`∂L/∂q = -½ w` per pair): `Σ w Q d` and `½ Σ w (Q d)(Q d)ᵀ` with
+/// `Q d = (Qxx t, Qxy t + Δv/Σ2yy)`. Shared by the additive and the alpha backward.
+pub(crate) fn screen_gradients_from_moments(
+    proj: &ProjectedKernels,
+    p: usize,
+    [s_t, s_tt, s_v, s_tv, s_vv]: [f64; 5],
+) -> ([f64; 2], [f64; 3]) {
+    let [a, b, _] = proj.conics[p];
+    let e = 1.0 / proj.covariances[p][2];
+    (
+        [a * s_t, b * s_t + e * s_v],
+        [
             0.5 * a * a * s_tt,
             0.5 * a * (b * s_tt + e * s_tv),
             0.5 * (b * b * s_tt + 2.0 * b * e * s_tv + e * e * s_vv),
-        ]);
-    }
+        ],
+    )
 }
 
 #[cfg(test)]
