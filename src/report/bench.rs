@@ -150,6 +150,25 @@ fn sample_pixels(camera: &Camera, samples: usize) -> Vec<(u32, u32)> {
         .collect()
 }
 
+/// The f64 reference's colour and `Σ|a|` at `pixels`, for the scene's blend. The alpha blend
+/// has no `Σ|a|` bound: its bound column is against the tests' absolute tolerance,
+/// `1e-6 + 2e-6` (the same formula with `Σ = 1`).
+fn reference_colours(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    pixels: &[(u32, u32)],
+) -> Vec<([f64; 3], [f64; 3])> {
+    match scene.blend {
+        Blend::Additive => reference_at_pixels(scene, camera, tau, options, pixels),
+        Blend::Alpha => reference_alpha_at_pixels(scene, camera, tau, options, pixels)
+            .into_iter()
+            .map(|colour| (colour, [1.0; 3]))
+            .collect(),
+    }
+}
+
 /// `|image - reference|` at `pixels`: max, mean, and the largest ratio to the bound.
 fn errors(image: &Image, pixels: &[(u32, u32)], reference: &[([f64; 3], [f64; 3])]) -> [f64; 3] {
     let (mut max_error, mut sum, mut bound_ratio) = (0.0_f64, 0.0, 0.0_f64);
@@ -226,15 +245,7 @@ pub fn bench_render(
         })?,
     };
     let pixels = sample_pixels(camera, samples);
-    let reference = match scene.blend {
-        Blend::Additive => reference_at_pixels(scene, camera, tau, options, &pixels),
-        // The alpha blend has no Σ|a| bound: the bound column is against the tests' absolute
-        // tolerance, 1e-6 + 2e-6 (the same formula with Σ = 1).
-        Blend::Alpha => reference_alpha_at_pixels(scene, camera, tau, options, &pixels)
-            .into_iter()
-            .map(|colour| (colour, [1.0; 3]))
-            .collect(),
-    };
+    let reference = reference_colours(scene, camera, tau, options, &pixels);
     let image = match method {
         Method::Tiles => context.image(),
         Method::Dense => &dense_image,
@@ -337,7 +348,7 @@ pub fn sweep(
         dilation: DEFAULT_DILATION,
         exp: ExpMode::Std,
     };
-    let exact = reference_at_pixels(scene, camera, settings.tau, &exact_options, &pixels);
+    let exact = reference_colours(scene, camera, settings.tau, &exact_options, &pixels);
     let mut context = RenderContext::new();
     let mut points = Vec::new();
     for &dilation in &grid.dilations {
@@ -347,7 +358,7 @@ pub fn sweep(
                 cutoff,
                 exp: ExpMode::Std,
             };
-            let reference = reference_at_pixels(scene, camera, settings.tau, &own, &pixels);
+            let reference = reference_colours(scene, camera, settings.tau, &own, &pixels);
             for &exp in &grid.exps {
                 let options = RenderOptions { exp, ..own };
                 let pairs = context.render(scene, camera, settings.tau, &options)?.pairs;
