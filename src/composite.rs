@@ -175,8 +175,8 @@ fn tile_on(
         (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
             composite_tile_avx2::<false>(bins, t, background, scratch, band)
         },
-        (_, ExpMode::Poly) => composite_tile::<true>(bins, t, background, scratch, band),
-        (_, ExpMode::Std) => composite_tile::<false>(bins, t, background, scratch, band),
+        (_, ExpMode::Poly) => composite_tile::<true, false>(bins, t, background, scratch, band),
+        (_, ExpMode::Std) => composite_tile::<false, false>(bins, t, background, scratch, band),
     }
 }
 
@@ -190,7 +190,7 @@ fn composite_tile_avx2<const FAST: bool>(
     scratch: &CompositeScratch,
     band: &mut [f32],
 ) -> u64 {
-    composite_tile::<FAST>(bins, t, background, scratch, band)
+    composite_tile::<FAST, true>(bins, t, background, scratch, band)
 }
 
 /// The state of one half row after compositing: per lane the colour, the transmittance,
@@ -199,6 +199,45 @@ pub(crate) struct HalfRowState {
     pub(crate) colour: [[f64; LANES]; 3],
     pub(crate) transmittance: [f64; LANES],
     pub(crate) pairs: u64,
+}
+
+/// One entry's 8 lanes: `t`, `G` (zero where the lane is not a pair) and whether each lane
+/// is a pair — [`RowEntry::lane`] lane by lane, or its AVX2 twin (the same operations, so
+/// the same bits) when `AVX2`.
+#[inline(always)]
+fn entry_lanes<const FAST: bool, const AVX2: bool>(
+    entry: &RowEntry,
+    kernel: &TileKernel,
+    first: f32,
+    lanes: f32,
+) -> ([f32; LANES], [f32; LANES], [bool; LANES]) {
+    let mut t = [0.0_f32; LANES];
+    let mut g = [0.0_f32; LANES];
+    let mut hit = [false; LANES];
+    if AVX2 {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: AVX2 is only asked for on the paths whose CPU has it (checked by the
+        // callers' dispatch).
+        unsafe {
+            use crate::raster::avx2::{gaussian, lane_numbers, lanes as avx2_lanes};
+            use std::arch::x86_64::*;
+            let (t8, q, mask) = avx2_lanes(entry, kernel, lane_numbers(lanes), first);
+            let g8 = _mm256_and_ps(gaussian::<FAST>(q), mask);
+            _mm256_storeu_ps(t.as_mut_ptr(), t8);
+            _mm256_storeu_ps(g.as_mut_ptr(), g8);
+            let bits = _mm256_movemask_ps(mask);
+            for (i, h) in hit.iter_mut().enumerate() {
+                *h = bits & (1 << i) != 0;
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        unreachable!("AVX2 on x86-64 only")
+    } else {
+        for i in 0..LANES {
+            (t[i], g[i], hit[i]) = entry.lane::<FAST>(kernel, first, lanes, i);
+        }
+    }
+    (t, g, hit)
 }
 
 /// A pair that contributed to a pixel, as [`composite_half_row`] reports it.
@@ -221,7 +260,7 @@ pub(crate) struct Contribution {
 /// `lanes` are outside the image and take nothing), calling `visit` for every pair that
 /// contributes, front to back.
 #[inline(always)]
-pub(crate) fn composite_half_row<const FAST: bool>(
+pub(crate) fn composite_half_row<const FAST: bool, const AVX2: bool>(
     entries: &[RowEntry],
     kernels: &[TileKernel],
     opacities: &[f64],
@@ -238,12 +277,7 @@ pub(crate) fn composite_half_row<const FAST: bool>(
     for (n, entry) in entries.iter().enumerate() {
         let kernel = &kernels[entry.kernel as usize];
         let opacity = opacities[entry.kernel as usize];
-        let mut t = [0.0_f32; LANES];
-        let mut g = [0.0_f32; LANES];
-        let mut hit = [false; LANES];
-        for i in 0..LANES {
-            (t[i], g[i], hit[i]) = entry.lane::<FAST>(kernel, first, lanes, i);
-        }
+        let (t, g, hit) = entry_lanes::<FAST, AVX2>(entry, kernel, first, lanes);
         for (i, lane_alive) in alive.iter_mut().enumerate() {
             if !(hit[i] && *lane_alive) {
                 continue;
@@ -281,7 +315,7 @@ pub(crate) fn composite_half_row<const FAST: bool>(
 /// lanes (the same operations on the same values: adding `colour · 0` to a sum that starts
 /// at +0 and only grows changes nothing), so that each path's compiled copy vectorises it.
 #[inline(always)]
-fn composite_half_row_fast<const FAST: bool>(
+fn composite_half_row_fast<const FAST: bool, const AVX2: bool>(
     entries: &[RowEntry],
     kernels: &[TileKernel],
     opacities: &[f64],
@@ -297,13 +331,7 @@ fn composite_half_row_fast<const FAST: bool>(
     for entry in entries {
         let kernel = &kernels[entry.kernel as usize];
         let opacity = opacities[entry.kernel as usize];
-        let mut g = [0.0_f32; LANES];
-        let mut hit = [false; LANES];
-        for i in 0..LANES {
-            let (_, value, inside) = entry.lane::<FAST>(kernel, first, lanes, i);
-            g[i] = value;
-            hit[i] = inside;
-        }
+        let (_, g, hit) = entry_lanes::<FAST, AVX2>(entry, kernel, first, lanes);
         let mut pairs = 0;
         let mut any_alive = false;
         for i in 0..LANES {
@@ -333,7 +361,7 @@ fn composite_half_row_fast<const FAST: bool>(
 /// Composites the prepared tile `t` half row by half row into `band` (the image rows of its
 /// tile row). Returns the pairs.
 #[inline(always)]
-fn composite_tile<const FAST: bool>(
+fn composite_tile<const FAST: bool, const AVX2: bool>(
     bins: &TileBins,
     t: usize,
     background: [f64; 3],
@@ -350,7 +378,7 @@ fn composite_tile<const FAST: bool>(
         lanes,
     } in half_rows(rect)
     {
-        let state = composite_half_row_fast::<FAST>(
+        let state = composite_half_row_fast::<FAST, AVX2>(
             &scratch.tile.halves[index],
             &scratch.tile.kernels,
             &scratch.opacities,
@@ -394,6 +422,7 @@ mod tests {
         row_forms(&context.projected, &context.bins, &mut forms);
         let mut scratch = CompositeScratch::default();
         let (mut stopped, mut compared) = (0, 0);
+        let avx2 = SimdPath::available().contains(&SimdPath::Avx2);
         for t in 0..context.bins.tile_count() {
             prepare_alpha_tile(&context.projected, &context.bins, &forms, t, &mut scratch);
             for half in half_rows(context.bins.tile_rect(t)) {
@@ -401,23 +430,36 @@ mod tests {
                 let (first, lanes) = (half.first as f32, half.lanes as f32);
                 let (kernels, opacities) = (&scratch.tile.kernels, &scratch.opacities);
                 let mut recorded = 0;
-                let slow =
-                    composite_half_row::<true>(entries, kernels, opacities, first, lanes, |_| {
-                        recorded += 1
-                    });
-                let fast =
-                    composite_half_row_fast::<true>(entries, kernels, opacities, first, lanes);
-                assert_eq!(slow.pairs, fast.pairs);
-                for i in 0..LANES {
-                    assert_eq!(
-                        slow.transmittance[i].to_bits(),
-                        fast.transmittance[i].to_bits()
-                    );
-                    stopped += usize::from(slow.transmittance[i] < 1e-3);
-                    for c in 0..3 {
-                        assert_eq!(slow.colour[c][i].to_bits(), fast.colour[c][i].to_bits());
+                let slow = composite_half_row::<true, false>(
+                    entries,
+                    kernels,
+                    opacities,
+                    first,
+                    lanes,
+                    |_| recorded += 1,
+                );
+                let mut fast = vec![composite_half_row_fast::<true, false>(
+                    entries, kernels, opacities, first, lanes,
+                )];
+                if avx2 {
+                    // The AVX2 lanes: the same operations, the same bits.
+                    fast.push(composite_half_row_fast::<true, true>(
+                        entries, kernels, opacities, first, lanes,
+                    ));
+                }
+                for fast in &fast {
+                    assert_eq!(slow.pairs, fast.pairs);
+                    for i in 0..LANES {
+                        assert_eq!(
+                            slow.transmittance[i].to_bits(),
+                            fast.transmittance[i].to_bits()
+                        );
+                        for c in 0..3 {
+                            assert_eq!(slow.colour[c][i].to_bits(), fast.colour[c][i].to_bits());
+                        }
                     }
                 }
+                stopped += (0..LANES).filter(|&i| slow.transmittance[i] < 1e-3).count();
                 compared += recorded;
             }
         }

@@ -126,10 +126,10 @@ pub(crate) fn composite_backward_on(
                         backward_tile_avx2::<false>(bins, t, background, v_image, run, scratch)
                     },
                     (_, ExpMode::Poly) => {
-                        backward_tile::<true>(bins, t, background, v_image, run, scratch)
+                        backward_tile::<true, false>(bins, t, background, v_image, run, scratch)
                     }
                     (_, ExpMode::Std) => {
-                        backward_tile::<false>(bins, t, background, v_image, run, scratch)
+                        backward_tile::<false, false>(bins, t, background, v_image, run, scratch)
                     }
                 }
             })
@@ -156,13 +156,13 @@ fn backward_tile_avx2<const FAST: bool>(
     run: &mut [AlphaPartial],
     scratch: &mut Scratch,
 ) -> [f64; 3] {
-    backward_tile::<FAST>(bins, t, background, v_image, run, scratch)
+    backward_tile::<FAST, true>(bins, t, background, v_image, run, scratch)
 }
 
 /// Tile `t` (prepared in `scratch.composite`) into `run`, one partial per tile entry;
 /// returns the tile's `Σ v T_final`.
 #[inline(always)]
-fn backward_tile<const FAST: bool>(
+fn backward_tile<const FAST: bool, const AVX2: bool>(
     bins: &TileBins,
     t: usize,
     background: [f64; 3],
@@ -192,7 +192,7 @@ fn backward_tile<const FAST: bool>(
         let entries = &tile.halves[index];
         let (first_lane, lanes_f) = (first as f32, lanes as f32);
         records.clear();
-        let state = composite_half_row::<FAST>(
+        let state = composite_half_row::<FAST, AVX2>(
             entries,
             &tile.kernels,
             &composite.opacities,
