@@ -108,6 +108,8 @@ pub struct RenderContext {
     row_forms: Vec<crate::raster::RowForm>,
     /// Scratch of the depth order (alpha scenes).
     depth_keys: Vec<(f64, u32, u32)>,
+    /// Alpha frames: each pixel's final transmittance and stop, for the backward.
+    pixel_stops: Vec<crate::composite::PixelStop>,
     image: Image,
 }
 
@@ -183,18 +185,25 @@ impl RenderContext {
         }
         bin(&self.projected, camera.width, camera.height, &mut self.bins);
         let background = scene.background.map(|b| b as f32);
-        let blend = match scene.blend {
-            Blend::Additive => rasterize,
-            Blend::Alpha => composite,
+        let pairs = match scene.blend {
+            Blend::Additive => rasterize(
+                &self.projected,
+                &self.bins,
+                background,
+                options.exp,
+                &mut self.row_forms,
+                &mut self.image,
+            ),
+            Blend::Alpha => composite(
+                &self.projected,
+                &self.bins,
+                background,
+                options.exp,
+                &mut self.row_forms,
+                &mut self.image,
+                &mut self.pixel_stops,
+            ),
         };
-        let pairs = blend(
-            &self.projected,
-            &self.bins,
-            background,
-            options.exp,
-            &mut self.row_forms,
-            &mut self.image,
-        );
         RenderStats {
             sliced: self.sliced.len(),
             projected: self.projected.len(),
@@ -242,6 +251,7 @@ impl RenderContext {
                 &self.projected,
                 &self.bins,
                 &self.row_forms,
+                &self.pixel_stops,
                 scene.background.map(|b| b as f32),
                 v_image,
                 options.exp,

@@ -14,18 +14,20 @@
 //! ```
 //!
 //! and `w` goes to `m2` and `Σ2` through the additive raster's moments of `(t, Δv)` (see
-//! [`crate::backward::raster`]). Each half row is composited again exactly as the forward
-//! did ([`crate::composite`]: the same entries, `G`, `α̂` and `T`, bit for bit), recording
-//! each contributing pair; then the records are walked back to front, so `S_i` is a sum
-//! built from the back and no transmittance is ever recovered by division. Per kernel of a
-//! tile the nine sums are f64; the tiles' partials are reduced in entry order (tile-major):
-//! no atomics, the same bits for any thread count or SIMD path.
+//! [`crate::backward::raster`]). The forward kept, per pixel, its final transmittance and
+//! the entry of its half row's list that stopped it ([`PixelStop`]); each half row's entries
+//! are walked from there back to the first, with the forward's lanes (the same `t`, `G` and
+//! pairs), rebuilding `T_i = T_{i+1} / (1 - α̂_i)` in f64 (at most a few clamped kernels
+//! before a stop: the division loses nothing measurable, tested against finite differences)
+//! and building `S_i` from the back. Per kernel of a tile the nine sums are f64; the tiles'
+//! partials are reduced in entry order (tile-major): no atomics, the same bits for any
+//! thread count or SIMD path.
 
 use rayon::prelude::*;
 
 use crate::backward::raster::{ScreenGradients, screen_gradients_from_moments};
 use crate::composite::{
-    CompositeScratch, Contribution, MAX_ALPHA, composite_half_row, prepare_alpha_tile,
+    CompositeScratch, MAX_ALPHA, PixelStop, clamped_alpha, entry_lanes, prepare_alpha_tile,
 };
 use crate::project::ProjectedKernels;
 use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
@@ -39,7 +41,6 @@ pub(crate) type AlphaPartial = [f64; 9];
 #[derive(Default)]
 struct Scratch {
     composite: CompositeScratch,
-    records: Vec<Contribution>,
     sums: Vec<AlphaPartial>,
 }
 
@@ -48,13 +49,14 @@ thread_local! {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major) of the alpha frame last composited
-/// (`proj` in depth order, `bins`, `forms` of that frame) into `out` (one entry per projected
-/// kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
+/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame) into `out` (one entry
+/// per projected kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
     forms: &[RowForm],
+    stops: &[PixelStop],
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -66,6 +68,7 @@ pub fn composite_backward(
         proj,
         bins,
         forms,
+        stops,
         background,
         v_image,
         exp,
@@ -81,6 +84,7 @@ pub(crate) fn composite_backward_on(
     proj: &ProjectedKernels,
     bins: &TileBins,
     forms: &[RowForm],
+    stops: &[PixelStop],
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -98,7 +102,14 @@ pub(crate) fn composite_backward_on(
         "∂L/∂C has the image's size"
     );
     assert_eq!(forms.len(), proj.len(), "the forward's row forms");
+    assert_eq!(stops.len(), v_image.len() / 3, "the forward's pixel stops");
     let background = background.map(f64::from);
+    let frame = Frame {
+        bins,
+        stops,
+        v_image,
+        background,
+    };
     partials.clear();
     partials.resize(bins.proj_from_entry.len(), [0.0; 9]);
     let mut runs = Vec::with_capacity(bins.tile_count());
@@ -118,19 +129,15 @@ pub(crate) fn composite_backward_on(
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: checked above that the CPU has the path's features.
                     (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
-                        backward_tile_avx2::<true>(bins, t, background, v_image, run, scratch)
+                        backward_tile_avx2::<true>(&frame, t, run, scratch)
                     },
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
                     (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
-                        backward_tile_avx2::<false>(bins, t, background, v_image, run, scratch)
+                        backward_tile_avx2::<false>(&frame, t, run, scratch)
                     },
-                    (_, ExpMode::Poly) => {
-                        backward_tile::<true, false>(bins, t, background, v_image, run, scratch)
-                    }
-                    (_, ExpMode::Std) => {
-                        backward_tile::<false, false>(bins, t, background, v_image, run, scratch)
-                    }
+                    (_, ExpMode::Poly) => backward_tile::<true, false>(&frame, t, run, scratch),
+                    (_, ExpMode::Std) => backward_tile::<false, false>(&frame, t, run, scratch),
                 }
             })
         })
@@ -145,42 +152,43 @@ pub(crate) fn composite_backward_on(
     v_background
 }
 
+/// What every tile of the frame's backward shares.
+struct Frame<'a> {
+    bins: &'a TileBins,
+    stops: &'a [PixelStop],
+    v_image: &'a [f32],
+    background: [f64; 3],
+}
+
 /// [`backward_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn backward_tile_avx2<const FAST: bool>(
-    bins: &TileBins,
+    frame: &Frame,
     t: usize,
-    background: [f64; 3],
-    v_image: &[f32],
     run: &mut [AlphaPartial],
     scratch: &mut Scratch,
 ) -> [f64; 3] {
-    backward_tile::<FAST, true>(bins, t, background, v_image, run, scratch)
+    backward_tile::<FAST, true>(frame, t, run, scratch)
 }
 
 /// Tile `t` (prepared in `scratch.composite`) into `run`, one partial per tile entry;
 /// returns the tile's `Σ v T_final`.
 #[inline(always)]
 fn backward_tile<const FAST: bool, const AVX2: bool>(
-    bins: &TileBins,
+    frame: &Frame,
     t: usize,
-    background: [f64; 3],
-    v_image: &[f32],
     run: &mut [AlphaPartial],
     scratch: &mut Scratch,
 ) -> [f64; 3] {
-    let Scratch {
-        composite,
-        records,
-        sums,
-    } = scratch;
+    let Scratch { composite, sums } = scratch;
     let tile = &composite.tile;
     sums.clear();
     sums.resize(tile.kernels.len(), [0.0; 9]);
-    let rect = bins.tile_rect(t);
+    let rect = frame.bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
-    let width = bins.width as usize;
+    let width = frame.bins.width as usize;
+    let background = frame.background;
     let mut v_background = [0.0; 3];
     for HalfRow {
         row,
@@ -191,62 +199,61 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
     {
         let entries = &tile.halves[index];
         let (first_lane, lanes_f) = (first as f32, lanes as f32);
-        records.clear();
-        let state = composite_half_row::<FAST, AVX2>(
-            entries,
-            &tile.kernels,
-            &composite.opacities,
-            first_lane,
-            lanes_f,
-            |contribution| records.push(contribution),
-        );
-        // ∂L/∂C of the half row; zero past the image's edge.
+        let pixel = (ty0 as usize + row) * width + tx0 as usize + first;
+        // ∂L/∂C, the final transmittance and the end of each lane; nothing past the edge.
         let mut v = [[0.0_f64; LANES]; 3];
-        let start = 3 * ((ty0 as usize + row) * width + tx0 as usize + first);
-        for (i, pixel) in v_image[start..start + 3 * lanes]
-            .chunks_exact(3)
-            .enumerate()
-        {
-            for c in 0..3 {
-                v[c][i] = f64::from(pixel[c]);
-            }
-        }
-        // The light behind each pair, built from the back: first the background's share.
+        let mut transmittance = [1.0_f64; LANES];
+        let mut end = [0_u32; LANES];
         let mut behind = [[0.0_f64; LANES]; 3];
         for i in 0..lanes {
+            let stop = frame.stops[pixel + i];
+            transmittance[i] = stop.transmittance;
+            end[i] = stop.end;
             for c in 0..3 {
-                behind[c][i] = state.transmittance[i] * background[c];
-                v_background[c] += v[c][i] * state.transmittance[i];
+                v[c][i] = f64::from(frame.v_image[3 * (pixel + i) + c]);
+                // The light behind the last kernel: the background's share.
+                behind[c][i] = stop.transmittance * background[c];
+                v_background[c] += v[c][i] * stop.transmittance;
             }
         }
-        for record in records.iter().rev() {
-            let entry = &entries[record.entry as usize];
+        let last = end.iter().copied().max().unwrap_or(0) as usize;
+        for n in (0..last.min(entries.len())).rev() {
+            let entry = &entries[n];
             let k = entry.kernel as usize;
             let kernel = &tile.kernels[k];
-            let i = record.lane as usize;
-            let (alpha, transmittance) = (record.alpha, record.transmittance);
-            let weight = alpha * transmittance;
-            // ∂L/∂α̂ = T Σ_c v_c colour_c - (Σ_c v_c S_c) / (1 - α̂)
-            let (mut in_front, mut light_behind) = (0.0, 0.0);
+            let opacity = composite.opacities[k];
+            let (t, g, hit) = entry_lanes::<FAST, AVX2>(entry, kernel, first_lane, lanes_f);
+            let dv = f64::from(entry.dv);
             let sum = &mut sums[k];
-            for c in 0..3 {
-                let colour = kernel.amplitude[c];
-                in_front += v[c][i] * colour;
-                light_behind += v[c][i] * behind[c][i];
-                behind[c][i] += colour * weight;
-                sum[c] += v[c][i] * weight;
-            }
-            let v_alpha = transmittance * in_front - light_behind / (1.0 - alpha);
-            if alpha < MAX_ALPHA {
-                let (t, g) = (f64::from(record.t), record.g);
-                let dv = f64::from(entry.dv);
-                let w = v_alpha * alpha;
-                sum[3] += w * t;
-                sum[4] += w * t * t;
-                sum[5] += w * dv;
-                sum[6] += w * t * dv;
-                sum[7] += w * dv * dv;
-                sum[8] += v_alpha * f64::from(g);
+            for i in 0..LANES {
+                if !(hit[i] && (n as u32) < end[i]) {
+                    continue;
+                }
+                let alpha = clamped_alpha(opacity, g[i]);
+                // T in front of this kernel, from the one behind it.
+                let in_front_t = transmittance[i] / (1.0 - alpha);
+                transmittance[i] = in_front_t;
+                let weight = alpha * in_front_t;
+                // ∂L/∂α̂ = T Σ_c v_c colour_c - (Σ_c v_c S_c) / (1 - α̂)
+                let (mut in_front, mut light_behind) = (0.0, 0.0);
+                for c in 0..3 {
+                    let colour = kernel.amplitude[c];
+                    in_front += v[c][i] * colour;
+                    light_behind += v[c][i] * behind[c][i];
+                    behind[c][i] += colour * weight;
+                    sum[c] += v[c][i] * weight;
+                }
+                let v_alpha = in_front_t * in_front - light_behind / (1.0 - alpha);
+                if alpha < MAX_ALPHA {
+                    let t = f64::from(t[i]);
+                    let w = v_alpha * alpha;
+                    sum[3] += w * t;
+                    sum[4] += w * t * t;
+                    sum[5] += w * dv;
+                    sum[6] += w * t * dv;
+                    sum[7] += w * dv * dv;
+                    sum[8] += v_alpha * f64::from(g[i]);
+                }
             }
         }
     }

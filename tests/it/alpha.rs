@@ -250,6 +250,7 @@ fn every_thread_count_and_simd_path_composites_the_same_bits() {
     for &path in splat4d::raster::SimdPath::available() {
         let mut forms = Vec::new();
         let mut image = Image::default();
+        let mut stops = Vec::new();
         splat4d::composite::composite_on(
             path,
             &context.projected,
@@ -258,6 +259,7 @@ fn every_thread_count_and_simd_path_composites_the_same_bits() {
             options.exp,
             &mut forms,
             &mut image,
+            &mut stops,
         );
         images.push(image);
     }
