@@ -95,8 +95,8 @@ impl FitProgress for Silent {
     fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
 }
 
-/// Refuses, before the dataset is decoded, a fit whose images and start kernels would not
-/// fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
+/// Refuses, before the dataset is decoded, a fit whose images and kernels (the start, or an
+/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
 /// RGB, and the largest is decoded once more while it is converted.
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
     use crate::io::memory::{FIT_BYTES_PER_KERNEL, check};
@@ -119,15 +119,19 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
             frames += 1;
         }
     }
-    let kernels = match Init::parse_builtin(&request.init)? {
+    let mut kernels = match Init::parse_builtin(&request.init)? {
         Some(Init::Random(n)) => n,
         Some(Init::Auto) => request.plan.start_kernels.max(1),
         _ => 0,
     };
+    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget.
+    if request.blend != Some(Blend::Additive) {
+        kernels = kernels.max(request.alpha.max_kernels);
+    }
     check(
         kept.saturating_add(largest)
             .saturating_add((kernels as u64).saturating_mul(FIT_BYTES_PER_KERNEL)),
-        &format!("fitting {kernels} start kernels to {frames} frames"),
+        &format!("fitting up to {kernels} kernels to {frames} frames"),
     )
 }
 
