@@ -561,7 +561,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     densify_fraction: 0.05,
     densify_threshold: 0.0,
     percent_dense: 0.01,
-    prune_opacity: 0.005,
+    prune_opacity: 0.05,
 };
 
 impl Default for AlphaFitOptions {

@@ -164,6 +164,9 @@ fn scene_comments(scene: &Scene) -> Vec<String> {
     if let Some([t0, t1]) = scene.time_range {
         comments.push(format!("time_range {t0:?} {t1:?}"));
     }
+    if let Some(([x, y, z], r)) = scene.framing {
+        comments.push(format!("framing {x:?} {y:?} {z:?} {r:?}"));
+    }
     if let Some(up) = scene.up {
         comments.push(format!("up {up}"));
     }
@@ -352,6 +355,7 @@ struct SceneLayout {
     background: [f64; 3],
     up: Option<Up>,
     time_range: Option<[f64; 2]>,
+    framing: Option<([f64; 3], f64)>,
 }
 
 /// The size of a PLY scalar type, and whether it is a float type.
@@ -388,6 +392,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
     let mut up = None;
     let mut blend = Blend::Additive;
     let mut time_range = None;
+    let mut framing = None;
     let mut format_seen = false;
     for line in lines {
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -411,6 +416,13 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
                         .map_err(|_| bad(format!("time range value `{v}` is not a number")))
                 };
                 time_range = Some([parse(t0)?, parse(t1)?]);
+            }
+            ["comment", "framing", x, y, z, r] => {
+                let parse = |v: &str| {
+                    v.parse::<f64>()
+                        .map_err(|_| bad(format!("framing value `{v}` is not a number")))
+                };
+                framing = Some(([parse(x)?, parse(y)?, parse(z)?], parse(r)?));
             }
             ["comment", "blend", name] => {
                 blend = name.parse().map_err(|e| bad(format!("blend: {e}")))?;
@@ -522,6 +534,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
         background,
         up,
         time_range,
+        framing,
     })
 }
 
@@ -566,6 +579,7 @@ impl SceneLayout {
         let mut scene = Scene::from_kernels(&[], self.background, origin)?;
         scene.up = self.up;
         scene.time_range = self.time_range;
+        scene.framing = self.framing;
         scene.check_time_range(origin)?;
         // The length check says what the file can hold, not what it holds (a sparse file's
         // hole reads as zeros): the scene must fit in memory, and it grows as rows arrive

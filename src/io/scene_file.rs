@@ -9,7 +9,8 @@
 //! written so that they read back exactly (serde_json's `float_roundtrip`).
 //!
 //! A fitted scene records `"time_range": [t0, t1]`, the times of the data it came from
-//! (videos and sequences span it by default).
+//! (videos and sequences span it by default), and `"framing": {"centre": [x, y, z],
+//! "radius": r}`, the sphere its cameras look at (videos frame it by default).
 //!
 //! Alpha scenes (SPEC §8) add `"blend": "alpha"` at the top and per kernel `"opacity": o`
 //! (0–1, default 1) and `"sh": [[r, g, b], …]` (3, 8 or 15 triplets, the same count for
@@ -39,6 +40,16 @@ struct SceneFile {
     up: Option<Up>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     time_range: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    framing: Option<Framing>,
+}
+
+/// The sphere a fitted scene's cameras look at.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Framing {
+    centre: [f64; 3],
+    radius: f64,
 }
 
 fn is_additive(blend: &Blend) -> bool {
@@ -83,6 +94,7 @@ pub fn scene_from_json(text: &str, origin: &str) -> Result<Scene> {
     let mut scene = Scene::from_kernels(&kernels, file.background, origin)?;
     scene.up = file.up;
     scene.time_range = file.time_range;
+    scene.framing = file.framing.map(|f| (f.centre, f.radius));
     scene.check_time_range(origin)?;
     match file.blend {
         Blend::Additive => {
@@ -161,6 +173,9 @@ pub fn scene_to_json(scene: &Scene) -> String {
         background: scene.background,
         up: scene.up,
         time_range: scene.time_range,
+        framing: scene
+            .framing
+            .map(|(centre, radius)| Framing { centre, radius }),
     };
     serde_json::to_string_pretty(&file).expect("a scene of finite numbers serialises")
 }

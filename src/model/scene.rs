@@ -167,6 +167,9 @@ pub struct Scene {
     /// The time range `[t0, t1]` of the data a fitted scene came from: videos and sequences
     /// span it by default (else the range of the kernels' time means).
     pub time_range: Option<[f64; 2]>,
+    /// The sphere (centre, radius) the cameras of the data a fitted scene came from look at:
+    /// videos frame it by default (else the kernels alive).
+    pub framing: Option<([f64; 3], f64)>,
     /// How kernels make a pixel.
     pub blend: Blend,
     /// Alpha scenes: the peak opacity `o ∈ [0, 1]` per kernel (empty for additive scenes).
@@ -257,7 +260,21 @@ impl Scene {
                     format!("[{t0}, {t1}] is not a finite, ordered pair"),
                 ))
             }
-            _ => Ok(()),
+            _ => match self.framing {
+                Some((centre, radius))
+                    if !(centre.iter().all(|c| c.is_finite())
+                        && radius.is_finite()
+                        && radius > 0.0) =>
+                {
+                    Err(Error::invalid(
+                        origin,
+                        "scene",
+                        "framing",
+                        format!("centre {centre:?}, radius {radius}: finite, radius > 0"),
+                    ))
+                }
+                _ => Ok(()),
+            },
         }
     }
 

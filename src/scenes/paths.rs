@@ -77,12 +77,18 @@ pub fn framing_distance(radius: f64, lens: &Lens) -> f64 {
     1.05 * radius / half.sin()
 }
 
-/// The circle about `up` that frames every kernel of `scene` alive at `times` (slice
-/// centres ± 3σ, at cut-off `cutoff`): centred on them at [`framing_distance`], 20° above
-/// the plane, 60 frames. A scene with nothing alive gets the unit ball at the origin.
+/// The circle about `up` that frames the sphere a fitted scene records
+/// ([`Scene::framing`]), else every kernel of `scene` alive at `times` (slice centres ± 3σ,
+/// at cut-off `cutoff`): centred on it at [`framing_distance`], 20° above the plane, 60
+/// frames. A scene with nothing alive gets the unit ball at the origin.
 #[must_use]
 pub fn framing_circle(scene: &Scene, times: &[f64], cutoff: f64, lens: &Lens, up: Up) -> Circle {
-    let (centre, r) = scene_sphere(scene, times, cutoff).unwrap_or(([0.0; 3], 3f64.sqrt()));
+    // A fitted scene is framed on what its data's cameras looked at (its kernels may reach
+    // far beyond the object: faint or dark ones the images never showed).
+    let (centre, r) = scene
+        .framing
+        .or_else(|| scene_sphere(scene, times, cutoff))
+        .unwrap_or(([0.0; 3], 3f64.sqrt()));
     Circle {
         centre,
         radius: framing_distance(r, lens),

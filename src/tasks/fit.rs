@@ -230,6 +230,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     })??;
     scene.up = up;
     scene.time_range = data_time_range(&dataset);
+    scene.framing = data_framing(&dataset);
     finish_fit(
         request,
         &dataset,
@@ -346,6 +347,7 @@ fn fit_alpha_dataset(
     })??;
     scene.up = up.or(scene.up);
     scene.time_range = data_time_range(dataset);
+    scene.framing = data_framing(dataset);
     finish_fit(
         request,
         dataset,
@@ -354,6 +356,20 @@ fn fit_alpha_dataset(
         &options.render,
         options.steps,
     )
+}
+
+/// The sphere the training cameras look at ([`crate::fit::init::box_from_cameras`]: the
+/// point nearest their optical axes, half as wide as the median camera sees), if they say.
+fn data_framing(dataset: &crate::model::Dataset) -> Option<([f64; 3], f64)> {
+    let cameras: Vec<crate::model::Camera> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = crate::fit::init::box_from_cameras(&cameras, [0.0, 0.0]).ok()?;
+    let centre = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    let radius = 0.5
+        * (0..3)
+            .map(|a| (bounds.max[a] - bounds.min[a]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+    (radius > 0.0 && radius.is_finite()).then_some((centre, radius))
 }
 
 /// The range of every view's time (train, val and test): what the data shows.

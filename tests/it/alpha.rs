@@ -283,6 +283,21 @@ fn alpha_scenes_round_trip_through_json_and_ply() {
         // A fitted scene records the time range of its data; videos span it by default.
         scene.time_range = Some([0.25, 0.75]);
         assert_eq!(splat4d::scenes::paths::time_range(&scene), [0.25, 0.75]);
+        // … and the sphere its cameras looked at, which videos frame.
+        scene.framing = Some(([0.1, -0.2, 0.3], 1.5));
+        let lens = splat4d::scenes::paths::Lens {
+            width: 64,
+            height: 48,
+            fov_y_degrees: 40.0,
+        };
+        let circle = splat4d::scenes::paths::framing_circle(
+            &scene,
+            &[0.5],
+            1.0 / 255.0,
+            &lens,
+            splat4d::model::Up::Y,
+        );
+        assert_eq!(circle.centre, [0.1, -0.2, 0.3]);
         for name in ["s.json", "s.ply"] {
             let path = dir.path().join(name);
             splat4d::io::scene_file::save_scene(&scene, &path).unwrap();
