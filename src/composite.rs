@@ -12,9 +12,9 @@
 //! ```
 //!
 //! The layout is the additive raster's ([`crate::raster`]): the same per-tile set-up
-//! ([`crate::raster::prepare_tile`]) gives per half row (8 pixels) the entries of the
+//! (`raster::prepare_tile`) gives per half row (8 pixels) the entries of the
 //! kernels reaching it, in list order, with the same `q` and `G = exp(-½ q)` in f32
-//! ([`crate::raster::RowEntry::lane`]). `α̂`, `T` and `C` are f64 per lane, so the
+//! (`raster::RowEntry::lane`). `α̂`, `T` and `C` are f64 per lane, so the
 //! transmittance's product keeps its precision over long lists and the stop decision
 //! follows the f64 model; a half row ends when all its lanes have stopped. The loop is one
 //! portable function compiled for each [`SimdPath`] (no fused operation can form: Rust never

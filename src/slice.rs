@@ -157,7 +157,7 @@ pub fn slice(scene: &Scene, tau: f64, cutoff: f64, out: &mut SlicedKernels) {
 }
 
 /// Slices only `candidates` (ascending scene indices, a superset of the kernels alive at
-/// `tau`, as [`TemporalIndex::candidates`] gives): the same output as [`slice`].
+/// `tau`, as [`TemporalIndex::candidates`] gives): the same output as [`slice()`].
 pub fn slice_candidates(
     scene: &Scene,
     candidates: &[u32],

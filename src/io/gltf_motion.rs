@@ -15,7 +15,7 @@
 //! `L' = [R' S + R S' | t']` and a child's world matrix `M = P L` gives `M' = P' L + P L'`.
 //! A point `x` of a node moves at `M' x` (tested against finite differences).
 //!
-//! **Sampling** ([`plan_samples`]): boundaries at the range's ends and at every key time;
+//! **Sampling** (`plan_samples`): boundaries at the range's ends and at every key time;
 //! where a node's pose jumps (a STEP key) by more than the tolerance the boundary is a step,
 //! with a ladder starting at `r = 5·10⁻⁴ (t1 - t0)` ([`STEP_WINDOW`]); where the rate jumps
 //! by `ΔV` (a kink between segments, or an end where the motion stops: outside the range the
@@ -405,7 +405,7 @@ fn largest_offset(m: &DMat4, points: &[DVec3]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// How [`plan_samples`] spaces the samples.
+/// How `plan_samples` spaces the samples.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Spacing {
     /// Refined until every point follows its path within `tolerance` × the model's size.

@@ -5,7 +5,7 @@
 //! f64 reference ([`crate::reference::reference_at_pixels`]) at a seeded sample of pixels:
 //! max and mean `|fast - ref|`, and the largest ratio to the documented bound
 //! `1e-6 + 2e-6 Σ|a|` (band pairs aside). The seed-style dense evaluation
-//! ([`crate::dense`]) is timed the same way as a baseline, and [`sweep`] measures speed
+//! ([`crate::reference::dense`]) is timed the same way as a baseline, and [`sweep`] measures speed
 //! against the error to the exact model over the cut-off, dilation and exp evaluation.
 
 use std::time::Instant;

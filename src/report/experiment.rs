@@ -1,7 +1,7 @@
 //! The seed paper's experiment (§4–5, SPEC §7), end to end:
 //!
-//! 1. ground truth: the paper's point data as 30 000 small kernels ([`crate::toy`]);
-//! 2. a multi-view dataset of it ([`crate::fit::dataset`]): train (seen cameras × training
+//! 1. ground truth: the paper's point data as 30 000 small kernels ([`crate::scenes::toy`]);
+//! 2. a multi-view dataset of it ([`crate::scenes::dataset`]): train (seen cameras × training
 //!    times), val (seen cameras, times between), test (new cameras, times between);
 //! 3. the 4D model: N kernels from a seeded random start, means and amplitudes fitted with
 //!    Adam, σ fixed (the paper's setting);

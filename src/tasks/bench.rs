@@ -56,7 +56,7 @@ pub struct BenchRequest {
 /// Opacity of the built-in scenes' kernels with the alpha blend.
 pub const BENCH_OPACITY: f64 = 0.5;
 
-/// What [`bench`] measured: a table, or the sweep's table and files.
+/// What [`bench()`] measured: a table, or the sweep's table and files.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BenchSummary {
     text: String,
