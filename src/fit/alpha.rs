@@ -27,8 +27,8 @@ use rand::seq::SliceRandom;
 
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::loss::{psnr, view_mse_with_gradient};
-use crate::fit::train::{StepRecord, check_views, evaluate};
+use crate::fit::loss::view_mse_with_gradient;
+use crate::fit::train::{StepRecord, check_views, heldout_psnr_at};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
@@ -306,18 +306,14 @@ pub fn fit_alpha(
             screen_gradient = vec![0.0; scene.len()];
             seen = vec![0; scene.len()];
         }
-        let evaluate_now =
-            step == options.steps || (options.eval_every > 0 && step % options.eval_every == 0);
-        let heldout_psnr = if evaluate_now && !heldout.is_empty() {
-            Some(psnr(evaluate(
-                scene,
-                heldout,
-                &options.render,
-                &mut context,
-            )?))
-        } else {
-            None
-        };
+        let heldout_psnr = heldout_psnr_at(
+            step,
+            (options.steps, options.eval_every),
+            scene,
+            heldout,
+            &options.render,
+            &mut context,
+        )?;
         let record = StepRecord {
             step,
             seconds: start.elapsed().as_secs_f64(),

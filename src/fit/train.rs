@@ -185,6 +185,23 @@ pub fn evaluate(
     Ok(total / views.len().max(1) as f64)
 }
 
+/// The held-out PSNR after step `step` of `steps` when it is evaluated (every `eval_every`
+/// steps, and the last), else `None` (also without held-out views).
+pub fn heldout_psnr_at(
+    step: usize,
+    (steps, eval_every): (usize, usize),
+    scene: &Scene,
+    heldout: &[View],
+    render: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<Option<f64>> {
+    let evaluate_now = step == steps || (eval_every > 0 && step % eval_every == 0);
+    if !evaluate_now || heldout.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(psnr(evaluate(scene, heldout, render, context)?)))
+}
+
 /// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
 /// step. Returns every step's record. With `options.adaptive` the scene's kernels change
 /// between steps (densify and prune); otherwise only their parameters do.
@@ -270,18 +287,14 @@ pub fn fit(
                 stats = stats.next_window(scene.len());
             }
         }
-        let evaluate_now =
-            step == options.steps || (options.eval_every > 0 && step % options.eval_every == 0);
-        let heldout_psnr = if evaluate_now && !heldout.is_empty() {
-            Some(psnr(evaluate(
-                scene,
-                heldout,
-                &options.render,
-                &mut context,
-            )?))
-        } else {
-            None
-        };
+        let heldout_psnr = heldout_psnr_at(
+            step,
+            (options.steps, options.eval_every),
+            scene,
+            heldout,
+            &options.render,
+            &mut context,
+        )?;
         let record = StepRecord {
             step,
             seconds: start.elapsed().as_secs_f64(),
