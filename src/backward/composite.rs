@@ -25,7 +25,7 @@
 
 use rayon::prelude::*;
 
-use crate::backward::raster::{ScreenGradients, screen_gradients_from_moments};
+use crate::backward::raster::{ScreenGradients, reduce};
 use crate::composite::{
     CompositeScratch, MAX_ALPHA, PixelStop, clamped_alpha, entry_lanes, prepare_alpha_tile,
 };
@@ -142,7 +142,7 @@ pub(crate) fn composite_backward_on(
             })
         })
         .collect();
-    reduce(proj, bins, partials, out);
+    reduce(proj, bins, partials, &mut Vec::new(), out);
     let mut v_background = [0.0; 3];
     for tile in v_backgrounds {
         for (sum, v) in v_background.iter_mut().zip(tile) {
@@ -261,31 +261,4 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         run[n as usize] = *sum;
     }
     v_background
-}
-
-/// Reduces the per-entry partials into per-kernel gradients in entry order (tile-major).
-fn reduce(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    partials: &[AlphaPartial],
-    out: &mut ScreenGradients,
-) {
-    let mut sums = vec![[0.0_f64; 9]; proj.len()];
-    for (partial, &p) in partials.iter().zip(&bins.proj_from_entry) {
-        for (s, v) in sums[p as usize].iter_mut().zip(partial) {
-            *s += v;
-        }
-    }
-    out.v_amplitudes.clear();
-    out.v_means.clear();
-    out.v_covariances.clear();
-    out.v_opacities.clear();
-    for (p, s) in sums.iter().enumerate() {
-        out.v_amplitudes.push([s[0], s[1], s[2]]);
-        let (v_mean, v_covariance) =
-            screen_gradients_from_moments(proj, p, [s[3], s[4], s[5], s[6], s[7]]);
-        out.v_means.push(v_mean);
-        out.v_covariances.push(v_covariance);
-        out.v_opacities.push(s[8]);
-    }
 }

@@ -53,10 +53,16 @@ impl Gradients {
     /// Zero gradients for every field of `scene` (alpha scenes: opacity and SH too).
     #[must_use]
     pub fn for_scene(scene: &crate::model::Scene) -> Self {
-        let mut grads = Gradients::zeros(scene.len());
-        grads.v_opacities.resize(scene.opacities.len(), 0.0);
-        grads.v_sh.resize(scene.sh.len(), [0.0; 3]);
+        let mut grads = Gradients::default();
+        grads.reset_for_scene(scene);
         grads
+    }
+
+    /// Sets every gradient of `scene`'s fields to zero, keeping the buffers.
+    pub fn reset_for_scene(&mut self, scene: &crate::model::Scene) {
+        self.reset(scene.len());
+        self.v_opacities.resize(scene.opacities.len(), 0.0);
+        self.v_sh.resize(scene.sh.len(), [0.0; 3]);
     }
 
     /// Sets every gradient to zero, for `n` kernels (alpha fields emptied: see

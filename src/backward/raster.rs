@@ -332,19 +332,21 @@ mod avx2 {
 }
 
 /// Reduces the per-entry partials into per-kernel gradients, in entry order (tile-major)
-/// in f64, so the result does not depend on the thread count.
-fn reduce(
+/// in f64, so the result does not depend on the thread count. Partials hold `Σ ∂L/∂a` (3)
+/// and the five moments of [`screen_gradients_from_moments`], and with a ninth number (the
+/// alpha backward's) `∂L/∂o(τ)`. Shared by the additive and the alpha backward.
+pub(crate) fn reduce<T: Copy + Into<f64>, const N: usize>(
     proj: &ProjectedKernels,
     bins: &TileBins,
-    partials: &[[f32; 8]],
-    sums: &mut Vec<[f64; 8]>,
+    partials: &[[T; N]],
+    sums: &mut Vec<[f64; N]>,
     out: &mut ScreenGradients,
 ) {
     sums.clear();
-    sums.resize(proj.len(), [0.0; 8]);
+    sums.resize(proj.len(), [0.0; N]);
     for (partial, &p) in partials.iter().zip(&bins.proj_from_entry) {
-        for (s, v) in sums[p as usize].iter_mut().zip(partial) {
-            *s += f64::from(*v);
+        for (s, &v) in sums[p as usize].iter_mut().zip(partial) {
+            *s += v.into();
         }
     }
     out.v_amplitudes.clear();
@@ -357,6 +359,9 @@ fn reduce(
             screen_gradients_from_moments(proj, p, [s[3], s[4], s[5], s[6], s[7]]);
         out.v_means.push(v_mean);
         out.v_covariances.push(v_covariance);
+        if let Some(&v_opacity) = s.get(8) {
+            out.v_opacities.push(v_opacity);
+        }
     }
 }
 

@@ -232,6 +232,7 @@ pub fn fit_alpha(
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
     let mut context = RenderContext::new();
+    let mut grads = Gradients::for_scene(scene);
     let width = stride(scene.sh_count);
     let mut moments = Moments {
         first: vec![0.0; width * scene.len()],
@@ -248,7 +249,7 @@ pub fn fit_alpha(
     let mut records = Vec::with_capacity(options.steps);
     let batch = options.batch_size.clamp(1, train.len());
     for step in 1..=options.steps {
-        let mut grads = Gradients::for_scene(scene);
+        grads.reset_for_scene(scene);
         let weight = 1.0 / batch as f64;
         let mut train_loss = 0.0;
         for _ in 0..batch {
@@ -364,11 +365,14 @@ fn adam_step(
             _ => 0.0,
         })
         .collect();
+    // One kernel's gradient in optimisation space and its step, reused kernel after kernel.
+    let mut gradient = Vec::with_capacity(width);
+    let mut delta = vec![0.0; width];
     for i in 0..scene.len() {
         let scale = scene.scales[i];
         let opacity = scene.opacities[i];
         let o = opacity.clamp(1e-6, 1.0 - 1e-6);
-        let mut gradient = Vec::with_capacity(width);
+        gradient.clear();
         gradient.extend_from_slice(&grads.v_means[i][..3]);
         gradient.push(grads.v_means[i][3]);
         gradient.extend_from_slice(&grads.v_velocities[i]);
@@ -377,7 +381,7 @@ fn adam_step(
         gradient.push(o * (1.0 - o) * grads.v_opacities[i]);
         gradient.extend_from_slice(&grads.v_amplitudes[i]);
         gradient.extend(grads.v_sh[i * count..(i + 1) * count].iter().flatten());
-        let mut delta = vec![0.0; width];
+        delta.fill(0.0);
         for (k, (&g, &lr)) in gradient.iter().zip(&lrs).enumerate() {
             if lr == 0.0 {
                 continue;
