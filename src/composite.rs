@@ -59,6 +59,50 @@ thread_local! {
         std::cell::RefCell::new(CompositeScratch::default());
 }
 
+/// The forward's prepared tiles, kept for the backward of the same frame so that a
+/// training step sets each tile up once. A tile is kept when its row entries fit its share
+/// of [`TileCache::BUDGET`] (a rule on the tile alone: deterministic, whatever the thread
+/// count); the backward prepares the others again, to the same values.
+#[derive(Default)]
+pub struct TileCache {
+    tiles: Vec<CompositeScratch>,
+    kept: Vec<bool>,
+}
+
+impl std::fmt::Debug for TileCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kept = self.kept.iter().filter(|&&k| k).count();
+        write!(
+            f,
+            "TileCache {{ {kept} of {} tiles kept }}",
+            self.kept.len()
+        )
+    }
+}
+
+impl TileCache {
+    /// Bytes of row entries the cache may hold over a whole frame (256 MiB).
+    pub const BUDGET: usize = 256 << 20;
+
+    /// Empties the cache for a frame of `tiles` tiles.
+    fn start_frame(&mut self, tiles: usize) {
+        self.tiles.resize_with(tiles, CompositeScratch::default);
+        self.kept.clear();
+        self.kept.resize(tiles, false);
+    }
+
+    /// The prepared tile `t`, if the forward kept it.
+    pub(crate) fn tile(&self, t: usize) -> Option<&CompositeScratch> {
+        (self.kept.get(t) == Some(&true)).then(|| &self.tiles[t])
+    }
+
+    /// Whether `scratch` (one prepared tile of a frame of `tiles` tiles) fits its share.
+    fn fits(scratch: &CompositeScratch, tiles: usize) -> bool {
+        let entries: usize = scratch.tile.halves.iter().map(Vec::len).sum();
+        entries * std::mem::size_of::<RowEntry>() <= Self::BUDGET / tiles.max(1)
+    }
+}
+
 /// Fills `scratch` for tile `t`: [`prepare_tile`], then the opacity of each tile kernel.
 #[inline(always)]
 pub(crate) fn prepare_alpha_tile(
@@ -127,6 +171,39 @@ pub fn composite_on(
     image: &mut Image,
     stops: &mut Vec<PixelStop>,
 ) -> u64 {
+    let outputs = Outputs {
+        forms,
+        image,
+        stops,
+        cache: None,
+    };
+    composite_frame(path, proj, bins, background, exp, outputs)
+}
+
+/// Where a composited frame goes: the row forms (scratch), the image, each pixel's stop
+/// and, when given, the prepared tiles kept for the backward.
+pub(crate) struct Outputs<'a> {
+    pub(crate) forms: &'a mut Vec<RowForm>,
+    pub(crate) image: &'a mut Image,
+    pub(crate) stops: &'a mut Vec<PixelStop>,
+    pub(crate) cache: Option<&'a mut TileCache>,
+}
+
+/// [`composite_on`], keeping the prepared tiles in `outputs.cache` when it is given.
+pub(crate) fn composite_frame(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    outputs: Outputs,
+) -> u64 {
+    let Outputs {
+        forms,
+        image,
+        stops,
+        mut cache,
+    } = outputs;
     assert!(
         SimdPath::available().contains(&path),
         "this CPU cannot run the {path} path"
@@ -147,28 +224,49 @@ pub fn composite_on(
     }
     stops.clear();
     stops.resize(w * h, PixelStop::default());
+    if let Some(cache) = cache.as_deref_mut() {
+        cache.start_frame(bins.tile_count());
+    }
     if w == 0 || h == 0 {
         return 0;
     }
     let background = background.map(f64::from);
     let forms: &[RowForm] = forms;
+    let tiles_x = bins.tiles_x as usize;
+    // Per tile row, its run of the cache (empty runs when nothing is kept).
+    let cache_rows: Vec<(&mut [CompositeScratch], &mut [bool])> = match cache {
+        Some(cache) => cache
+            .tiles
+            .chunks_mut(tiles_x)
+            .zip(cache.kept.chunks_mut(tiles_x))
+            .collect(),
+        None => (0..bins.tiles_y)
+            .map(|_| (&mut [][..], &mut [][..]))
+            .collect(),
+    };
     image
         .pixels
         .par_chunks_mut(3 * w * ROW)
         .zip(stops.par_chunks_mut(w * ROW))
+        .zip(cache_rows)
         .enumerate()
-        .map(|(ty, (band, band_stops))| {
+        .map(|(ty, ((band, band_stops), (cached, kept)))| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
                 let mut pairs = 0;
-                for tx in 0..bins.tiles_x as usize {
-                    let t = ty * bins.tiles_x as usize + tx;
+                for tx in 0..tiles_x {
+                    let t = ty * tiles_x + tx;
                     prepare_alpha_tile(proj, bins, forms, t, scratch);
                     let out = Band {
                         pixels: band,
                         stops: band_stops,
                     };
                     pairs += tile_on(path, exp, bins, t, background, scratch, out);
+                    // Keep the tile by swapping buffers: no copy.
+                    if !cached.is_empty() && TileCache::fits(scratch, bins.tile_count()) {
+                        std::mem::swap(scratch, &mut cached[tx]);
+                        kept[tx] = true;
+                    }
                 }
                 pairs
             })
@@ -195,17 +293,41 @@ fn tile_on(
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `composite_on` checked that the CPU has the path's features.
-        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            composite_tile_avx512::<true>(bins, t, background, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx512, ExpMode::Std) => unsafe {
+            composite_tile_avx512::<false>(bins, t, background, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Poly) => unsafe {
             composite_tile_avx2::<true>(bins, t, background, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+        (SimdPath::Avx2, ExpMode::Std) => unsafe {
             composite_tile_avx2::<false>(bins, t, background, scratch, band)
         },
         (_, ExpMode::Poly) => composite_tile::<true, false>(bins, t, background, scratch, band),
         (_, ExpMode::Std) => composite_tile::<false, false>(bins, t, background, scratch, band),
     }
+}
+
+/// [`composite_tile`] compiled for AVX-512 (the f64 lanes in one register; the same
+/// operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+fn composite_tile_avx512<const FAST: bool>(
+    bins: &TileBins,
+    t: usize,
+    background: [f64; 3],
+    scratch: &CompositeScratch,
+    band: Band,
+) -> u64 {
+    composite_tile::<FAST, true>(bins, t, background, scratch, band)
 }
 
 /// [`composite_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
@@ -366,10 +488,123 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
     pairs
 }
 
+/// The alpha blend's ceiling probe: the ideal inner loop of a front-to-back compositor on
+/// this CPU, with the renderer's precision (SPEC §8: `G` in f32 by the fast exp, `α̂`, `T`
+/// and the colour in f64), to measure [`composite`] against (`splat4d bench --blend
+/// alpha`). One row of 16 pixels whose colour and transmittance stay in registers while
+/// every one of `kernels` kernels passes over it (`q = Qxx t² + row_q`, `α̂ = min(0.99,
+/// o G)`, `C += colour α̂ T`, `T ← T (1 - α̂)`); the kernels' constants sit in L1; no
+/// binning, no pair test, no stop, no memory traffic. Every lane counts as a pair. Compiled
+/// for `path` like the renderer. Returns the pairs composited and a checksum (so that the
+/// work cannot be optimised away).
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+#[must_use]
+pub fn alpha_ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f64) {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+    // Kernels of a few pixels near the row, q in the exp's useful range, opacities that
+    // keep T well above f64's smallest normal over a pass.
+    let constants: Vec<ProbeKernel> = (0..kernels.max(1))
+        .map(|k| {
+            let x = k as f32;
+            ProbeKernel {
+                t0: -7.5 + (x * 0.37) % 3.0,
+                qxx: 0.02 + (x * 0.013) % 0.1,
+                row_q: (x * 0.21) % 2.0,
+                opacity: 0.02 + f64::from((x * 0.11) % 0.2),
+                colour: [0.3 + f64::from((x * 0.07) % 0.5), 0.2, 0.1],
+            }
+        })
+        .collect();
+    let checksum = match path {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: checked above.
+        SimdPath::Avx512 => unsafe { alpha_ceiling_avx512(&constants, passes) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: checked above.
+        SimdPath::Avx2 => unsafe { alpha_ceiling_avx2(&constants, passes) },
+        _ => alpha_ceiling_loop(&constants, passes),
+    };
+    ((constants.len() * passes * ROW) as u64, checksum)
+}
+
+/// One kernel of [`alpha_ceiling_probe`].
+struct ProbeKernel {
+    t0: f32,
+    qxx: f32,
+    row_q: f32,
+    opacity: f64,
+    colour: [f64; 3],
+}
+
+/// [`alpha_ceiling_loop`] compiled for AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+fn alpha_ceiling_avx512(constants: &[ProbeKernel], passes: usize) -> f64 {
+    alpha_ceiling_loop(constants, passes)
+}
+
+/// [`alpha_ceiling_loop`] compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn alpha_ceiling_avx2(constants: &[ProbeKernel], passes: usize) -> f64 {
+    alpha_ceiling_loop(constants, passes)
+}
+
+/// The loop of [`alpha_ceiling_probe`]: branch-free over the 16 lanes (vectorised by the
+/// compiler on each path).
+#[inline(always)]
+fn alpha_ceiling_loop(constants: &[ProbeKernel], passes: usize) -> f64 {
+    let mut checksum = 0.0;
+    for _ in 0..passes {
+        let mut colour = [[0.0_f64; ROW]; 3];
+        let mut transmittance = [1.0_f64; ROW];
+        for kernel in constants {
+            let mut g = [0.0_f32; ROW];
+            for (i, g) in g.iter_mut().enumerate() {
+                let t = kernel.t0 + i as f32;
+                *g = crate::raster::fast_exp_neg_half(kernel.qxx * t * t + kernel.row_q);
+            }
+            for i in 0..ROW {
+                let alpha = clamped_alpha(kernel.opacity, g[i]);
+                let weight = alpha * transmittance[i];
+                for (channel, &value) in colour.iter_mut().zip(&kernel.colour) {
+                    channel[i] += value * weight;
+                }
+                transmittance[i] *= 1.0 - alpha;
+            }
+        }
+        checksum += colour.iter().flatten().sum::<f64>() + transmittance.iter().sum::<f64>();
+    }
+    checksum
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::render::{RenderContext, RenderOptions};
+
+    #[test]
+    fn the_alpha_ceiling_probe_counts_every_lane_and_agrees_across_paths() {
+        let sums: Vec<f64> = SimdPath::available()
+            .iter()
+            .map(|&path| {
+                let (pairs, checksum) = alpha_ceiling_probe(path, 37, 3);
+                assert_eq!(pairs, 37 * 3 * 16, "{path}");
+                assert!(checksum.is_finite() && checksum > 0.0, "{path}: {checksum}");
+                checksum
+            })
+            .collect();
+        // The same operations on every path: the same bits.
+        assert!(
+            sums.iter().all(|s| s.to_bits() == sums[0].to_bits()),
+            "{sums:?}"
+        );
+    }
 
     #[test]
     fn the_avx2_lanes_composite_what_the_portable_ones_do_bit_for_bit() {

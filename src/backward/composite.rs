@@ -19,15 +19,17 @@
 //! are walked from there back to the first, with the forward's lanes (the same `t`, `G` and
 //! pairs), rebuilding `T_i = T_{i+1} / (1 - α̂_i)` in f64 (at most a few clamped kernels
 //! before a stop: the division loses nothing measurable, tested against finite differences)
-//! and building `S_i` from the back. Per kernel of a tile the nine sums are f64; the tiles'
-//! partials are reduced in entry order (tile-major): no atomics, the same bits for any
-//! thread count or SIMD path.
+//! and carrying `R_i = S_i / T_{i+1}` from the back, so that `S_i / (1 - α̂_i) = R_i T_i`
+//! needs no second division. Per kernel of a tile the nine sums are f64, kept lane by lane
+//! and added over the lanes once per tile; the tiles' partials are reduced in entry order
+//! (tile-major): no atomics, the same bits for any thread count or SIMD path.
 
 use rayon::prelude::*;
 
 use crate::backward::raster::{ScreenGradients, reduce};
 use crate::composite::{
-    CompositeScratch, MAX_ALPHA, PixelStop, clamped_alpha, entry_lanes, prepare_alpha_tile,
+    CompositeScratch, MAX_ALPHA, PixelStop, TileCache, clamped_alpha, entry_lanes,
+    prepare_alpha_tile,
 };
 use crate::project::ProjectedKernels;
 use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
@@ -37,11 +39,18 @@ use crate::tiles::TileBins;
 /// `Σ w Δv²`, `Σ ∂L/∂α̂ G`.
 pub(crate) type AlphaPartial = [f64; 9];
 
-/// Scratch of one worker.
+/// Scratch of one worker: a tile's set-up (when the forward did not keep it) and its
+/// kernels' sums.
 #[derive(Default)]
 struct Scratch {
     composite: CompositeScratch,
-    sums: Vec<AlphaPartial>,
+    sums: Vec<LaneSums>,
+}
+
+/// One tile's backward: its set-up and where its kernels' sums go.
+struct TileWork<'a> {
+    tile: &'a CompositeScratch,
+    sums: &'a mut Vec<LaneSums>,
 }
 
 thread_local! {
@@ -49,14 +58,16 @@ thread_local! {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major) of the alpha frame last composited
-/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame) into `out` (one entry
-/// per projected kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
+/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame, and the tiles it kept
+/// in `cache`, if any) into `out` (one entry per projected kernel, reset first) and returns
+/// `∂L/∂b`. `partials` is scratch.
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
     forms: &[RowForm],
     stops: &[PixelStop],
+    cache: Option<&TileCache>,
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -69,6 +80,7 @@ pub fn composite_backward(
         bins,
         forms,
         stops,
+        cache,
         background,
         v_image,
         exp,
@@ -85,6 +97,7 @@ pub(crate) fn composite_backward_on(
     bins: &TileBins,
     forms: &[RowForm],
     stops: &[PixelStop],
+    cache: Option<&TileCache>,
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -124,16 +137,34 @@ pub(crate) fn composite_backward_on(
         .map(|(t, run)| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
-                prepare_alpha_tile(proj, bins, forms, t, &mut scratch.composite);
+                let Scratch { composite, sums } = scratch;
+                let tile = match cache.and_then(|cache| cache.tile(t)) {
+                    Some(kept) => kept,
+                    None => {
+                        prepare_alpha_tile(proj, bins, forms, t, composite);
+                        composite
+                    }
+                };
+                let scratch = TileWork { tile, sums };
                 match (path, exp) {
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: checked above that the CPU has the path's features.
-                    (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+                    (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+                        backward_tile_avx512::<true>(&frame, t, run, scratch)
+                    },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    (SimdPath::Avx512, ExpMode::Std) => unsafe {
+                        backward_tile_avx512::<false>(&frame, t, run, scratch)
+                    },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    (SimdPath::Avx2, ExpMode::Poly) => unsafe {
                         backward_tile_avx2::<true>(&frame, t, run, scratch)
                     },
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
-                    (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+                    (SimdPath::Avx2, ExpMode::Std) => unsafe {
                         backward_tile_avx2::<false>(&frame, t, run, scratch)
                     },
                     (_, ExpMode::Poly) => backward_tile::<true, false>(&frame, t, run, scratch),
@@ -160,6 +191,19 @@ struct Frame<'a> {
     background: [f64; 3],
 }
 
+/// [`backward_tile`] compiled for AVX-512 (the f64 lanes in one register; the same
+/// operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+fn backward_tile_avx512<const FAST: bool>(
+    frame: &Frame,
+    t: usize,
+    run: &mut [AlphaPartial],
+    scratch: TileWork,
+) -> [f64; 3] {
+    backward_tile::<FAST, true>(frame, t, run, scratch)
+}
+
 /// [`backward_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
@@ -167,28 +211,39 @@ fn backward_tile_avx2<const FAST: bool>(
     frame: &Frame,
     t: usize,
     run: &mut [AlphaPartial],
-    scratch: &mut Scratch,
+    scratch: TileWork,
 ) -> [f64; 3] {
     backward_tile::<FAST, true>(frame, t, run, scratch)
 }
 
 /// Tile `t` (prepared in `scratch.composite`) into `run`, one partial per tile entry;
 /// returns the tile's `Σ v T_final`.
+///
+/// Per lane, walking a half row's entries back to front, with `R = S_i / T_{i+1}` (the
+/// light behind kernel `i` per unit of the transmittance just behind it, `R = b` behind
+/// the last kernel): `T_i = T_{i+1} / (1 - α̂_i)`, `∂L/∂α̂_i = T_i v · (colour_i - R)`, then
+/// `R ← R (1 - α̂_i) + colour_i α̂_i` — one division per pair. The loop over the 8 lanes
+/// is branch-free (a lane that is not a pair, or past its stop, takes `α̂ = 0`, which
+/// leaves `T` and `R` as they are and adds `0` to sums that start at +0), and each tile
+/// kernel keeps its nine sums lane by lane, added over the lanes (in lane order) once per
+/// tile: no sum is carried from lane to lane inside the hot loop.
 #[inline(always)]
 fn backward_tile<const FAST: bool, const AVX2: bool>(
     frame: &Frame,
     t: usize,
     run: &mut [AlphaPartial],
-    scratch: &mut Scratch,
+    scratch: TileWork,
 ) -> [f64; 3] {
-    let Scratch { composite, sums } = scratch;
+    let TileWork {
+        tile: composite,
+        sums,
+    } = scratch;
     let tile = &composite.tile;
     sums.clear();
-    sums.resize(tile.kernels.len(), [0.0; 9]);
+    sums.resize(tile.kernels.len(), [[0.0; LANES]; 9]);
     let rect = frame.bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
     let width = frame.bins.width as usize;
-    let background = frame.background;
     let mut v_background = [0.0; 3];
     for HalfRow {
         row,
@@ -197,68 +252,194 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         lanes,
     } in half_rows(rect)
     {
-        let entries = &tile.halves[index];
-        let (first_lane, lanes_f) = (first as f32, lanes as f32);
         let pixel = (ty0 as usize + row) * width + tx0 as usize + first;
-        // ∂L/∂C, the final transmittance and the end of each lane; nothing past the edge.
-        let mut v = [[0.0_f64; LANES]; 3];
-        let mut transmittance = [1.0_f64; LANES];
-        let mut end = [0_u32; LANES];
-        let mut behind = [[0.0_f64; LANES]; 3];
-        for i in 0..lanes {
-            let stop = frame.stops[pixel + i];
-            transmittance[i] = stop.transmittance;
-            end[i] = stop.end;
-            for c in 0..3 {
-                v[c][i] = f64::from(frame.v_image[3 * (pixel + i) + c]);
-                // The light behind the last kernel: the background's share.
-                behind[c][i] = stop.transmittance * background[c];
-                v_background[c] += v[c][i] * stop.transmittance;
+        let mut state = LaneState::at_stops(frame, pixel, lanes);
+        for (c, sum) in v_background.iter_mut().enumerate() {
+            for i in 0..lanes {
+                *sum += state.v[c][i] * state.transmittance[i];
             }
         }
-        let last = end.iter().copied().max().unwrap_or(0) as usize;
+        let entries = &tile.halves[index];
+        let last = state.end.iter().copied().max().unwrap_or(0) as usize;
         for n in (0..last.min(entries.len())).rev() {
             let entry = &entries[n];
             let k = entry.kernel as usize;
             let kernel = &tile.kernels[k];
-            let opacity = composite.opacities[k];
-            let (t, g, hit) = entry_lanes::<FAST, AVX2>(entry, kernel, first_lane, lanes_f);
-            let dv = f64::from(entry.dv);
-            let sum = &mut sums[k];
-            for i in 0..LANES {
-                if !(hit[i] && (n as u32) < end[i]) {
-                    continue;
-                }
-                let alpha = clamped_alpha(opacity, g[i]);
-                // T in front of this kernel, from the one behind it.
-                let in_front_t = transmittance[i] / (1.0 - alpha);
-                transmittance[i] = in_front_t;
-                let weight = alpha * in_front_t;
-                // ∂L/∂α̂ = T Σ_c v_c colour_c - (Σ_c v_c S_c) / (1 - α̂)
-                let (mut in_front, mut light_behind) = (0.0, 0.0);
-                for c in 0..3 {
-                    let colour = kernel.amplitude[c];
-                    in_front += v[c][i] * colour;
-                    light_behind += v[c][i] * behind[c][i];
-                    behind[c][i] += colour * weight;
-                    sum[c] += v[c][i] * weight;
-                }
-                let v_alpha = in_front_t * in_front - light_behind / (1.0 - alpha);
-                if alpha < MAX_ALPHA {
-                    let t = f64::from(t[i]);
-                    let w = v_alpha * alpha;
-                    sum[3] += w * t;
-                    sum[4] += w * t * t;
-                    sum[5] += w * dv;
-                    sum[6] += w * t * dv;
-                    sum[7] += w * dv * dv;
-                    sum[8] += v_alpha * f64::from(g[i]);
-                }
-            }
+            let lanes_in = entry_lanes::<FAST, AVX2>(entry, kernel, first as f32, lanes as f32);
+            state.step_back(
+                n as u32,
+                lanes_in,
+                composite.opacities[k],
+                kernel.amplitude,
+                f64::from(entry.dv),
+                &mut sums[k],
+            );
         }
     }
     for (sum, &n) in sums.iter().zip(&tile.entry_of) {
-        run[n as usize] = *sum;
+        run[n as usize] = sum.map(|lanes| lanes.iter().sum());
     }
     v_background
+}
+
+/// Per tile kernel, its nine sums lane by lane.
+type LaneSums = [[f64; LANES]; 9];
+
+/// The backward's state of one half row's lanes.
+struct LaneState {
+    /// `∂L/∂C` per channel.
+    v: [[f64; LANES]; 3],
+    /// `T` just behind the next entry to walk (in front of the one walked last).
+    transmittance: [f64; LANES],
+    /// `R`, the light behind per unit transmittance, per channel.
+    behind: [[f64; LANES]; 3],
+    /// The forward's stop per lane (0 outside the image: nothing walked).
+    end: [u32; LANES],
+}
+
+impl LaneState {
+    /// The lanes of the half row whose first pixel is `pixel`, at their forward stops.
+    #[inline(always)]
+    fn at_stops(frame: &Frame, pixel: usize, lanes: usize) -> LaneState {
+        let mut state = LaneState {
+            v: [[0.0; LANES]; 3],
+            transmittance: [1.0; LANES],
+            behind: frame.background.map(|b| [b; LANES]),
+            end: [0; LANES],
+        };
+        for i in 0..lanes {
+            let stop = frame.stops[pixel + i];
+            state.transmittance[i] = stop.transmittance;
+            state.end[i] = stop.end;
+            for c in 0..3 {
+                state.v[c][i] = f64::from(frame.v_image[3 * (pixel + i) + c]);
+            }
+        }
+        state
+    }
+
+    /// Walks entry `n` (its lanes' `t`, `G` and pairs), adding its pairs' terms to `sums`.
+    #[inline(always)]
+    fn step_back(
+        &mut self,
+        n: u32,
+        (t, g, hit): ([f32; LANES], [f32; LANES], [bool; LANES]),
+        opacity: f64,
+        colour: [f64; 3],
+        dv: f64,
+        sums: &mut LaneSums,
+    ) {
+        for i in 0..LANES {
+            let live = hit[i] & (n < self.end[i]);
+            let alpha = if live {
+                clamped_alpha(opacity, g[i])
+            } else {
+                0.0
+            };
+            let through = 1.0 - alpha;
+            let in_front_t = self.transmittance[i] / through;
+            self.transmittance[i] = in_front_t;
+            let weight = alpha * in_front_t;
+            let mut v_dot = 0.0;
+            for c in 0..3 {
+                let v = self.v[c][i];
+                v_dot += v * (colour[c] - self.behind[c][i]);
+                self.behind[c][i] = self.behind[c][i] * through + colour[c] * alpha;
+                sums[c][i] += v * weight;
+            }
+            let v_alpha = in_front_t * v_dot;
+            // Clamped at 0.99 (or not a pair): nothing flows through α̂.
+            let v_alpha = if live & (alpha < MAX_ALPHA) {
+                v_alpha
+            } else {
+                0.0
+            };
+            let (t, w) = (f64::from(t[i]), v_alpha * alpha);
+            sums[3][i] += w * t;
+            sums[4][i] += w * t * t;
+            sums[5][i] += w * dv;
+            sums[6][i] += w * t * dv;
+            sums[7][i] += w * dv * dv;
+            sums[8][i] += v_alpha * f64::from(g[i]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::{RenderContext, RenderOptions};
+
+    #[test]
+    fn every_simd_path_gives_the_same_alpha_gradients_bit_for_bit() {
+        // 161 × 97: partial tiles on the right and at the bottom.
+        let camera = crate::scenes::synthetic::bench_camera(161, 97);
+        let n = 3000;
+        let scene = crate::scenes::synthetic::bench_scene(n, 11)
+            .into_alpha(
+                (0..n)
+                    .map(|i| 0.1 + 0.9 * ((i * 53) % 97) as f64 / 96.0)
+                    .collect(),
+                0,
+                Vec::new(),
+                "<test>",
+            )
+            .unwrap();
+        let mut context = RenderContext::new();
+        context.keep_tiles_for_backward(true);
+        let options = RenderOptions::default();
+        context.render(&scene, &camera, 0.4, &options).unwrap();
+        let v_image: Vec<f32> = (0..context.image().pixels.len())
+            .map(|i| ((i * 7919) % 211) as f32 / 105.0 - 1.0)
+            .collect();
+        let mut forms = Vec::new();
+        crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
+        let stops = context.pixel_stops.clone();
+        let gradients = |path, cache| {
+            let mut out = ScreenGradients::default();
+            let v_background = composite_backward_on(
+                path,
+                &context.projected,
+                &context.bins,
+                &forms,
+                &stops,
+                cache,
+                [0.2, 0.3, 0.4],
+                &v_image,
+                ExpMode::Poly,
+                &mut Vec::new(),
+                &mut out,
+            );
+            (out, v_background)
+        };
+        let (portable, portable_background) = gradients(SimdPath::Baseline, None);
+        assert!(
+            portable.v_opacities.iter().filter(|v| **v != 0.0).count() > 1000,
+            "most kernels get an opacity gradient"
+        );
+        let bits = |g: &ScreenGradients| {
+            let mut bits: Vec<u64> = Vec::new();
+            for p in 0..g.v_opacities.len() {
+                bits.extend(g.v_amplitudes[p].map(f64::to_bits));
+                bits.extend(g.v_means[p].map(f64::to_bits));
+                bits.extend(g.v_covariances[p].map(f64::to_bits));
+                bits.push(g.v_opacities[p].to_bits());
+            }
+            bits
+        };
+        // The forward kept every tile of this small frame; the backward from them is the
+        // backward that prepares each tile again.
+        let cache = context.tile_cache.as_ref().unwrap();
+        assert!((0..context.bins.tile_count()).all(|t| cache.tile(t).is_some()));
+        for &path in SimdPath::available() {
+            for cache in [None, Some(cache)] {
+                let (vector, vector_background) = gradients(path, cache);
+                assert!(bits(&portable) == bits(&vector), "{path} differs");
+                assert_eq!(
+                    portable_background.map(f64::to_bits),
+                    vector_background.map(f64::to_bits)
+                );
+            }
+        }
+    }
 }
