@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use crate::backward::Gradients;
 use crate::fit::loss::{psnr, view_loss_and_gradients};
 use crate::io::camera_file::load_camera;
-use crate::io::gltf_import::{load_camera as load_gltf_camera, split_camera_spec};
+use crate::io::gltf::{load_camera as load_gltf_camera, split_camera_spec};
 use crate::io::gradients_file::gradients_to_json;
 use crate::io::image_file::{
     BitDepth, ImageKind, image_size, load_image, save_image, save_rgb8_png,

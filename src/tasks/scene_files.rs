@@ -4,8 +4,8 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::io::check_output;
-use crate::io::gltf_import::import_scene;
-use crate::io::gltf_motion::Spacing;
+use crate::io::gltf::Spacing;
+use crate::io::gltf::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::model::{Blend, Error, Result, Scene};
