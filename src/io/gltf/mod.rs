@@ -3,10 +3,10 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | [`check`] | what the importer relies on and the `gltf` crate does not check, one function per glTF array |
-//! | [`buffers`] | the buffers: GLB chunk, data URIs, files beside the model |
-//! | [`read`] | the checked document as plain data: node tree, tracks, triangles |
-//! | this file | cameras, and imports: the readers above, then [`crate::scenes::surfels`] |
+//! | `check.rs` | what the importer relies on and the `gltf` crate does not check, one function per glTF array |
+//! | `buffers.rs` | the buffers: GLB chunk, data URIs, files beside the model |
+//! | `read.rs` | the checked document as plain data: node tree, tracks, triangles |
+//! | `mod.rs` | cameras, and imports: the readers above, then [`crate::scenes::surfels`] |
 //!
 //! **Cameras.** A perspective camera (`yfov`, `aspectRatio`, `znear`, `zfar`) on a node looks
 //! down the node's −Z with +Y up (OpenGL axes); its world transform (translation and
