@@ -36,7 +36,7 @@ pub struct Triangle {
     pub colours: [[f64; 3]; 3],
 }
 
-/// What [`import_scene`] made.
+/// What [`surfels`] made (and `io::gltf::import_scene` returns).
 #[derive(Clone, Debug)]
 pub struct Imported {
     /// The 4D scene.
