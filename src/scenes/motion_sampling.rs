@@ -245,17 +245,20 @@ fn graded(boundaries: &[Boundary], spacings: &[f64]) -> Vec<Boundary> {
 
 /// The refusal when the samples would be more than [`MAX_SAMPLE_TIMES`].
 fn too_many_samples(spacing: Spacing, boundaries: usize, origin: &str) -> Error {
-    Error::usage(match spacing {
-        Spacing::Adaptive { .. } => format!(
-            "{origin}: following the animation within the tolerance needs more than \
-             {MAX_SAMPLE_TIMES} sample times; raise --tolerance or give --times N"
-        ),
-        Spacing::Even(n) => format!(
-            "{origin}: the animation's {boundaries} key times are each kept as a sample, so even \
-             --times {n} needs more than {MAX_SAMPLE_TIMES} sample times; resample the \
+    Error::setting(
+        &["tolerance", "times"],
+        match spacing {
+            Spacing::Adaptive { .. } => format!(
+                "{origin}: following the animation within the tolerance needs more than \
+             {MAX_SAMPLE_TIMES} sample times; raise `tolerance` or give `times` N"
+            ),
+            Spacing::Even(n) => format!(
+                "{origin}: the animation's {boundaries} key times are each kept as a sample, so even \
+             `times` {n} needs more than {MAX_SAMPLE_TIMES} sample times; resample the \
              animation with fewer keys"
-        ),
-    })
+            ),
+        },
+    )
 }
 
 /// Every node's pose at a sample: held outside the range, else corrected by `½ M'' σ²`.

@@ -192,10 +192,13 @@ fn animated_samples(
     let size = (hi - lo).length().max(f64::MIN_POSITIVE);
     let plan = plan_samples(animation, range, &corners, size, spacing, origin)?;
     if points.saturating_mul(plan.samples.len()) > MAX_IMPORT_KERNELS {
-        return Err(Error::usage(format!(
-            "--kernels {points} × {} sample times is more than the {MAX_IMPORT_KERNELS} kernels an import may make; lower --kernels or raise --tolerance",
-            plan.samples.len()
-        )));
+        return Err(Error::setting(
+            &["kernels", "tolerance"],
+            format!(
+                "`kernels` {points} × {} sample times is more than the {MAX_IMPORT_KERNELS} kernels an import may make; lower `kernels` or raise `tolerance`",
+                plan.samples.len()
+            ),
+        ));
     }
     Ok(Timing {
         samples: plan.samples,

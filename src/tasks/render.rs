@@ -151,10 +151,13 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     // Check the output's extension before any work, so a typo costs nothing.
     let kind = ImageKind::from_path(&request.out)?;
     if request.overlay && kind != ImageKind::Png {
-        return Err(Error::usage(format!(
-            "{}: --overlay draws an 8-bit PNG; use a .png output",
-            request.out.display()
-        )));
+        return Err(Error::setting(
+            &["overlay"],
+            format!(
+                "{}: `overlay` draws an 8-bit PNG; use a .png output",
+                request.out.display()
+            ),
+        ));
     }
     let view = &request.view;
     check_output(

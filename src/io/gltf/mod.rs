@@ -179,28 +179,35 @@ fn import_scene_unguarded(
 ) -> Result<Imported> {
     let origin = path.display().to_string();
     match spacing {
-        Spacing::Even(0) => return Err(Error::usage("--times must be at least 1")),
+        Spacing::Even(0) => return Err(Error::setting(&["times"], "`times` must be at least 1")),
         Spacing::Adaptive { tolerance } if !(tolerance > 0.0 && tolerance.is_finite()) => {
-            return Err(Error::usage(format!(
-                "--tolerance {tolerance} must be a positive number"
-            )));
+            return Err(Error::setting(
+                &["tolerance"],
+                format!("`tolerance` {tolerance} must be a positive number"),
+            ));
         }
         _ => {}
     }
     if points == 0 {
-        return Err(Error::usage("--kernels must be at least 1"));
+        return Err(Error::setting(&["kernels"], "`kernels` must be at least 1"));
     }
     if points > MAX_IMPORT_KERNELS {
-        return Err(Error::usage(format!(
-            "--kernels {points} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
-        )));
+        return Err(Error::setting(
+            &["kernels"],
+            format!(
+                "`kernels` {points} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
+            ),
+        ));
     }
     if let Spacing::Even(times) = spacing
         && points.saturating_mul(times) > MAX_IMPORT_KERNELS
     {
-        return Err(Error::usage(format!(
-            "--kernels {points} × --times {times} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
-        )));
+        return Err(Error::setting(
+            &["kernels", "times"],
+            format!(
+                "`kernels` {points} × `times` {times} is more than the {MAX_IMPORT_KERNELS} kernels an import may make"
+            ),
+        ));
     }
     let (gltf, buffers, animation) = load_animated(path)?;
     let triangles = read::read_triangles(&gltf.document, &buffers, &origin)?;
