@@ -172,8 +172,8 @@ fn count_band_reaches(n: usize, out: &mut TileBins) {
         .par_chunks_mut(tiles_y.max(1))
         .enumerate()
         .for_each(|(c, counts)| {
-            for p in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                for band in band_range(pixel_bounds[p]) {
+            for &bounds in &pixel_bounds[c * CHUNK..((c + 1) * CHUNK).min(n)] {
+                for band in band_range(bounds) {
                     counts[band] += 1;
                 }
             }

@@ -105,7 +105,7 @@ fn pixel_partials(
     let mut v_a = [0.0; 3];
     for j in 0..camera.height {
         for i in 0..camera.width {
-            let q = quadratic_form(&kernel, i, j);
+            let q = quadratic_form(kernel, i, j);
             if q > kernel.qmax {
                 continue;
             }
