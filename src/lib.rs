@@ -4,7 +4,7 @@
 //! # Layers
 //!
 //! Each layer imports only from the layers above it in this list (a test, `layers`, checks
-//! every `crate::` path in `src/`):
+//! every `crate::` path in `src/`, and that no folder has an import cycle among its files):
 //!
 //! | layer | modules | what |
 //! |---|---|---|
@@ -16,12 +16,13 @@
 //! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |
 //! | reference | [`reference`](mod@reference) | the f64 twin of every stage, and the dense baseline |
 //! | fit | [`fit`] | loss, Adam, initial scenes, adaptive density, the training loop, and [`fit::plan`]: every fit default |
-//! | scenes | [`scenes`] | synthetic and toy scenes, camera paths and framing, synthetic datasets |
-//! | io | [`io`] | every file format; atomic writes |
+//! | scenes | [`scenes`] | synthetic and toy scenes, camera paths and framing, synthetic datasets; node animation, motion sampling and surfels (the glTF import's math, on plain data) |
+//! | io | [`io`] | every file format (reading, checking, handing plain data over); atomic writes |
 //! | report | [`report`] | the seed experiment, metrics, charts, markdown, bench tables |
 //! | tasks | [`tasks`] | one call per subcommand: read, compute, write, summarise |
 //!
-//! The binary (`src/main.rs`, `src/cli/`) only parses flags into a task's request.
+//! The binary (`src/main.rs`, `src/cli/`) only parses flags into a task's request, and shows
+//! the fields a library error names as the flags the user gave (`cli::flags`).
 //!
 //! # Data flow
 //!

@@ -27,6 +27,8 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
+            let given = cli::flags::given_flags(std::env::args());
+            let error = cli::flags::name_given_flags(error, &given);
             eprintln!("error: {error}");
             ExitCode::from(exit_code(error.kind()))
         }

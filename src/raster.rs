@@ -413,6 +413,11 @@ pub fn rasterize_on(
 /// its box). f64 throughout; no division or square root. Inlined into each path's compiled
 /// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
 /// path).
+///
+/// A measured hot loop kept in one body (103 lines): split into an inlined 16-row function
+/// and an inlined push of the rows, the forward render measured 4–11 % slower
+/// (`splat4d bench --scene 100k --size 1280x720 --no-dense --threads 1`, three alternating
+/// runs of each build in one session: 336/343/350 ms before, 373/358/368 ms after).
 #[inline(always)]
 pub(crate) fn prepare_tile(
     bins: &TileBins,

@@ -122,12 +122,18 @@ impl TileBins {
 /// its kernels by tile, straight into the tiles' lists. The lists are the same whatever the
 /// number of threads.
 pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins) {
-    use rayon::prelude::*;
     out.width = width;
     out.height = height;
     out.tiles_x = width.div_ceil(TILE_SIZE);
     out.tiles_y = height.div_ceil(TILE_SIZE);
-    let (tiles_x, tiles_y) = (out.tiles_x as usize, out.tiles_y as usize);
+    pixel_boxes(proj, width, height, out);
+    count_band_reaches(proj.len(), out);
+    fill_band_reaches(proj, out);
+    sort_reaches_by_tile(out);
+}
+
+/// Pass 1: per kernel, its pixel box (empty off the image).
+fn pixel_boxes(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins) {
     let n = proj.len();
     fill_in_parallel(&mut out.pixel_bounds, n, |p| {
         let [mx, my] = proj.means[p];
@@ -141,15 +147,22 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
             _ => [0, 0, 0, 0],
         }
     });
+}
+
+/// The tile rows a kernel's pixel box `[x0, x1, y0, y1]` covers.
+fn band_range([x0, x1, y0, y1]: [u32; 4]) -> std::ops::Range<usize> {
+    if x0 >= x1 || y0 >= y1 {
+        0..0
+    } else {
+        (y0 / TILE_SIZE) as usize..y1.div_ceil(TILE_SIZE) as usize
+    }
+}
+
+/// Pass 2: per chunk of kernels, how many reach each tile row; the rows' offsets.
+fn count_band_reaches(n: usize, out: &mut TileBins) {
+    use rayon::prelude::*;
+    let tiles_y = out.tiles_y as usize;
     let pixel_bounds = &out.pixel_bounds;
-    let band_range = |p: usize| {
-        let [x0, x1, y0, y1] = pixel_bounds[p];
-        if x0 >= x1 || y0 >= y1 {
-            0..0
-        } else {
-            (y0 / TILE_SIZE) as usize..y1.div_ceil(TILE_SIZE) as usize
-        }
-    };
     // Per chunk of kernels, how many reach each tile row.
     let chunks = n.div_ceil(CHUNK);
     let chunk_band_counts = &mut out.chunk_band_counts;
@@ -159,8 +172,8 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
         .par_chunks_mut(tiles_y.max(1))
         .enumerate()
         .for_each(|(c, counts)| {
-            for p in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                for band in band_range(p) {
+            for &bounds in &pixel_bounds[c * CHUNK..((c + 1) * CHUNK).min(n)] {
+                for band in band_range(bounds) {
                     counts[band] += 1;
                 }
             }
@@ -173,6 +186,15 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
         out.band_offsets
             .push(out.band_offsets[band] + reaching as u32);
     }
+}
+
+/// Pass 3: each kernel's tile columns on each of its tile rows, into the rows' lists.
+fn fill_band_reaches(proj: &ProjectedKernels, out: &mut TileBins) {
+    use rayon::prelude::*;
+    let tiles_y = out.tiles_y as usize;
+    let n = proj.len();
+    let chunks = n.div_ceil(CHUNK);
+    let count = |c: usize, band: usize| out.chunk_band_counts[c * tiles_y + band] as usize;
     // Each chunk writes its kernels' reaches into its own part of every tile row's list:
     // the lists are laid out by tile row, then chunk, then kernel.
     out.band_reaches.clear();
@@ -188,6 +210,7 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
             rest = tail;
         }
     }
+    let pixel_bounds = &out.pixel_bounds;
     parts.into_par_iter().enumerate().for_each(|(c, mut rows)| {
         let mut filled = vec![0_usize; tiles_y];
         let first = c * CHUNK;
@@ -203,6 +226,12 @@ pub fn bin(proj: &ProjectedKernels, width: u32, height: u32, out: &mut TileBins)
             });
         }
     });
+}
+
+/// Pass 4: per tile row, a counting sort of its kernels by tile, into the tiles' lists.
+fn sort_reaches_by_tile(out: &mut TileBins) {
+    use rayon::prelude::*;
+    let (tiles_x, tiles_y) = (out.tiles_x as usize, out.tiles_y as usize);
     // Per tile row, its entries per tile; the rows' totals give each its part of the tiles'
     // lists.
     out.band_tile_counts.resize_with(tiles_y, Vec::new);

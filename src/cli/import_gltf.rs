@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use splat4d::Result;
-use splat4d::io::gltf_motion::Spacing;
+use splat4d::io::gltf::Spacing;
 use splat4d::tasks::scene_files::{ImportRequest, import_gltf};
 
 #[derive(Debug, clap::Args)]

@@ -7,6 +7,7 @@ mod bench;
 mod dataset;
 mod export_ply;
 mod fit;
+pub mod flags;
 mod grad;
 mod import_gltf;
 mod progress;

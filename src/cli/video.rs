@@ -121,5 +121,18 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         options: args.render.options(),
         threads: args.render.threads(),
     };
-    super::with_progress(|bars| write_videos(&request, bars))
+    super::with_progress(|bars| write_videos(&request, bars)).map_err(offer_no_gif)
+}
+
+/// A GIF that cannot be written is a setting of `gif`: `video` can leave it out.
+fn offer_no_gif(error: splat4d::Error) -> splat4d::Error {
+    match error {
+        splat4d::Error::Setting { fields, message } if fields.contains(&"gif") => {
+            splat4d::Error::Setting {
+                fields,
+                message: format!("{message} (splat4d video takes --no-gif)"),
+            }
+        }
+        other => other,
+    }
 }

@@ -47,11 +47,14 @@ pub fn show(bytes: u64) -> String {
 pub fn check(need: u64, what: &str) -> Result<()> {
     let limit = LIMIT.load(Ordering::Relaxed);
     if need > limit {
-        return Err(Error::usage(format!(
-            "{what} needs about {} of memory, more than --max-memory {}; make it smaller",
-            show(need),
-            show(limit)
-        )));
+        return Err(Error::setting(
+            &["max_memory"],
+            format!(
+                "{what} needs about {} of memory, more than `max_memory` {}; make it smaller",
+                show(need),
+                show(limit)
+            ),
+        ));
     }
     if let Some(free) = available()
         && need > free

@@ -13,8 +13,7 @@
 //! | [`dataset`] | D-NeRF / Blender `transforms_*.json`, nerfstudio `transforms.json` and COLMAP datasets |
 //! | [`colmap`] | COLMAP sparse models, text and binary |
 //! | [`point_cloud`] | PLY point clouds shipped with datasets |
-//! | [`gltf_import`] | glTF 2.0 models and their cameras, sampled into kernels |
-//! | [`gltf_motion`] | glTF node animation: evaluation, rates, the sample times an import follows |
+//! | [`gltf`] | glTF 2.0 models and their cameras: read, checked, handed to the scene math as plain data |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
 //!
@@ -25,8 +24,7 @@
 pub mod camera_file;
 pub mod colmap;
 pub mod dataset;
-pub mod gltf_import;
-pub mod gltf_motion;
+pub mod gltf;
 pub mod gradients_file;
 pub mod image_file;
 pub mod json;

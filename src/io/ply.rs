@@ -386,6 +386,28 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
     if lines.next() != Some("ply") {
         return Err(bad("the file does not start with `ply`".into()));
     }
+    let header = read_header_lines(lines, origin)?;
+    header_layout(header, end + END.len(), origin)
+}
+
+/// What the lines of a header say, before the properties are checked.
+struct HeaderLines {
+    count: Option<usize>,
+    properties: Vec<Property>,
+    background: [f64; 3],
+    up: Option<Up>,
+    blend: Blend,
+    time_range: Option<[f64; 2]>,
+    framing: Option<([f64; 3], f64)>,
+    format_seen: bool,
+}
+
+/// Reads the header's lines after `ply`, one by one.
+fn read_header_lines<'a>(
+    lines: impl Iterator<Item = &'a str>,
+    origin: &str,
+) -> Result<HeaderLines> {
+    let bad = |message: String| bad_ply(origin, message);
     let mut count: Option<usize> = None;
     let mut properties: Vec<Property> = Vec::new();
     let mut background = [0.0; 3];
@@ -462,6 +484,31 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
             _ => return Err(bad(format!("unexpected header line `{line}`"))),
         }
     }
+    Ok(HeaderLines {
+        count,
+        properties,
+        background,
+        up,
+        blend,
+        time_range,
+        framing,
+        format_seen,
+    })
+}
+
+/// The layout of a scene's rows from its header's lines; the rows start at `body_start`.
+fn header_layout(header: HeaderLines, body_start: usize, origin: &str) -> Result<SceneLayout> {
+    let bad = |message: String| bad_ply(origin, message);
+    let HeaderLines {
+        count,
+        properties,
+        background,
+        up,
+        mut blend,
+        time_range,
+        framing,
+        format_seen,
+    } = header;
     if !format_seen {
         return Err(bad("no `format` line".into()));
     }
@@ -523,7 +570,7 @@ fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
         )));
     }
     Ok(SceneLayout {
-        body_start: end + END.len(),
+        body_start,
         count,
         stride,
         kind,

@@ -128,6 +128,76 @@ pub fn parse_point_cloud(bytes: &[u8], origin: &str) -> Result<Vec<DatasetPoint>
             "not a PLY file: it does not start with `ply`",
         ));
     }
+    let (ascii, elements) = read_header_lines(lines, origin)?;
+    let ascii =
+        ascii.ok_or_else(|| Error::malformed(origin, "no `format` line in the PLY header"))?;
+    let index = elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| Error::malformed(origin, "no `element vertex` in the PLY header"))?;
+    let vertex = &elements[index];
+    let find = |name: &str| -> Result<usize> {
+        vertex
+            .properties
+            .iter()
+            .position(|p| p.name == name && p.list.is_none())
+            .ok_or_else(|| {
+                Error::invalid(
+                    origin,
+                    "element vertex",
+                    name,
+                    "no such scalar property (need x y z red green blue)",
+                )
+            })
+    };
+    let coordinates = [find("x")?, find("y")?, find("z")?];
+    let colours = [find("red")?, find("green")?, find("blue")?];
+    let mut scales = [0.0; 3];
+    for (scale, &k) in scales.iter_mut().zip(&colours) {
+        let p = &vertex.properties[k];
+        *scale = p.scalar.colour_scale().ok_or_else(|| {
+            Error::invalid(
+                origin,
+                "element vertex",
+                &p.name,
+                format!(
+                    "{:?} colours are not read (uchar, ushort, float or double)",
+                    p.scalar
+                ),
+            )
+        })?;
+    }
+    let rest = &bytes[body..];
+    let rows = if ascii {
+        ascii_rows(rest, &elements[..index], vertex, origin)?
+    } else {
+        binary_rows(rest, &elements[..index], vertex, origin)?
+    };
+    let mut points = Vec::with_capacity(rows.len() / vertex.properties.len().max(1));
+    for (i, row) in rows.chunks_exact(vertex.properties.len()).enumerate() {
+        let position = coordinates.map(|k| row[k]);
+        let colour = std::array::from_fn(|c| (row[colours[c]] * scales[c]) as f32);
+        for (field, v) in ["x", "y", "z"].iter().zip(position) {
+            if !v.is_finite() {
+                return Err(Error::invalid(
+                    origin,
+                    format!("vertex {i}"),
+                    field,
+                    format!("{v} is not finite"),
+                ));
+            }
+        }
+        points.push(DatasetPoint { position, colour });
+    }
+    Ok(points)
+}
+
+/// The header's lines after `ply`: whether the body is ascii (if a `format` line says),
+/// and its elements.
+fn read_header_lines<'a>(
+    lines: impl Iterator<Item = &'a str>,
+    origin: &str,
+) -> Result<(Option<bool>, Vec<Element>)> {
     let mut ascii = None;
     let mut elements: Vec<Element> = Vec::new();
     for (n, line) in lines.enumerate() {
@@ -211,67 +281,7 @@ pub fn parse_point_cloud(bytes: &[u8], origin: &str) -> Result<Vec<DatasetPoint>
             }
         }
     }
-    let ascii =
-        ascii.ok_or_else(|| Error::malformed(origin, "no `format` line in the PLY header"))?;
-    let index = elements
-        .iter()
-        .position(|e| e.name == "vertex")
-        .ok_or_else(|| Error::malformed(origin, "no `element vertex` in the PLY header"))?;
-    let vertex = &elements[index];
-    let find = |name: &str| -> Result<usize> {
-        vertex
-            .properties
-            .iter()
-            .position(|p| p.name == name && p.list.is_none())
-            .ok_or_else(|| {
-                Error::invalid(
-                    origin,
-                    "element vertex",
-                    name,
-                    "no such scalar property (need x y z red green blue)",
-                )
-            })
-    };
-    let coordinates = [find("x")?, find("y")?, find("z")?];
-    let colours = [find("red")?, find("green")?, find("blue")?];
-    let mut scales = [0.0; 3];
-    for (scale, &k) in scales.iter_mut().zip(&colours) {
-        let p = &vertex.properties[k];
-        *scale = p.scalar.colour_scale().ok_or_else(|| {
-            Error::invalid(
-                origin,
-                "element vertex",
-                &p.name,
-                format!(
-                    "{:?} colours are not read (uchar, ushort, float or double)",
-                    p.scalar
-                ),
-            )
-        })?;
-    }
-    let rest = &bytes[body..];
-    let rows = if ascii {
-        ascii_rows(rest, &elements[..index], vertex, origin)?
-    } else {
-        binary_rows(rest, &elements[..index], vertex, origin)?
-    };
-    let mut points = Vec::with_capacity(rows.len() / vertex.properties.len().max(1));
-    for (i, row) in rows.chunks_exact(vertex.properties.len()).enumerate() {
-        let position = coordinates.map(|k| row[k]);
-        let colour = std::array::from_fn(|c| (row[colours[c]] * scales[c]) as f32);
-        for (field, v) in ["x", "y", "z"].iter().zip(position) {
-            if !v.is_finite() {
-                return Err(Error::invalid(
-                    origin,
-                    format!("vertex {i}"),
-                    field,
-                    format!("{v} is not finite"),
-                ));
-            }
-        }
-        points.push(DatasetPoint { position, colour });
-    }
-    Ok(points)
+    Ok((ascii, elements))
 }
 
 /// The vertices' scalar values, row after row, of an ascii body.

@@ -84,7 +84,7 @@ pub fn write_video(
     mut next_frame: impl FnMut(usize, &mut Image) -> Result<()>,
 ) -> Result<VideoFiles> {
     if options.fps == 0 {
-        return Err(Error::usage("--fps must be at least 1"));
+        return Err(Error::setting(&["fps"], "`fps` must be at least 1"));
     }
     let frames_dir = dir.join(name);
     std::fs::create_dir_all(dir)
@@ -97,10 +97,13 @@ pub fn write_video(
     let mut write_frame = |k: usize| -> Result<RgbaImage> {
         next_frame(k, &mut image)?;
         if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
-            return Err(Error::usage(format!(
-                "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller --size (splat4d video also takes --no-gif)",
-                image.width, image.height
-            )));
+            return Err(Error::setting(
+                &["size", "gif"],
+                format!(
+                    "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller `size` or no GIF",
+                    image.width, image.height
+                ),
+            ));
         }
         save_image(
             &image,

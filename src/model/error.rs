@@ -48,6 +48,14 @@ pub enum Error {
     /// A request that cannot be carried out ([`ErrorKind::Usage`]).
     #[error("{0}")]
     Usage(String),
+    /// A setting of a request that cannot be carried out ([`ErrorKind::Usage`]). The message
+    /// names settings as `` `field` `` (the request's field names, listed in `fields`); the
+    /// command line shows a field as its flag where the user gave that flag.
+    #[error("{message}")]
+    Setting {
+        fields: Vec<&'static str>,
+        message: String,
+    },
     /// A file could not be written ([`ErrorKind::Output`]).
     #[error("{origin}: {message}: {source}")]
     Write {
@@ -72,7 +80,7 @@ impl Error {
             Error::Read { .. } | Error::Malformed { .. } | Error::Invalid { .. } => {
                 ErrorKind::Input
             }
-            Error::Usage(_) => ErrorKind::Usage,
+            Error::Usage(_) | Error::Setting { .. } => ErrorKind::Usage,
             Error::Write { .. } => ErrorKind::Output,
             Error::Numeric(_) => ErrorKind::Numeric,
         }
@@ -128,6 +136,16 @@ impl Error {
         Error::Malformed {
             origin: origin.to_owned(),
             message: cut(&message.into(), MAX_QUOTE),
+        }
+    }
+
+    /// A setting that cannot be carried out: `message` names each of `fields` as
+    /// `` `field` ``.
+    #[must_use]
+    pub fn setting(fields: &[&'static str], message: impl Into<String>) -> Self {
+        Error::Setting {
+            fields: fields.to_vec(),
+            message: cut(&message.into(), 3 * MAX_QUOTE),
         }
     }
 

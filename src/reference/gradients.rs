@@ -6,7 +6,7 @@ use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 use crate::backward::Gradients;
 use crate::model::{Camera, Scene};
 use crate::reference::pixels::{quadratic_form, render_reference};
-use crate::reference::reference_kernels;
+use crate::reference::{ReferenceKernel, reference_kernels};
 use crate::render::RenderOptions;
 
 /// `MSE = mean over pixels and channels of (C - C_gt)²` (SPEC §6, one view), in f64.
@@ -58,88 +58,8 @@ pub fn reference_loss_and_gradients(
     let rc = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
     for kernel in reference_kernels(scene, camera, tau, options) {
         let q_mat = DMat2::from_cols_array_2d(&kernel.conic).transpose();
-        let mut v_q = DMat2::ZERO;
-        let mut v_m2 = DVec2::ZERO;
-        let mut v_a = [0.0; 3];
-        for j in 0..camera.height {
-            for i in 0..camera.width {
-                let q = quadratic_form(&kernel, i, j);
-                if q > kernel.qmax {
-                    continue;
-                }
-                let k = 3 * (j as usize * camera.width as usize + i as usize);
-                let g = (-0.5 * q).exp();
-                let mut v_q_scalar = 0.0;
-                for c in 0..3 {
-                    v_a[c] += v_image[k + c] * g;
-                    v_q_scalar += -0.5 * g * v_image[k + c] * kernel.amplitude[c];
-                }
-                let d =
-                    DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5) - DVec2::from(kernel.mean);
-                v_q += v_q_scalar * DMat2::from_cols(d * d.x, d * d.y);
-                v_m2 += v_q_scalar * (-2.0 * (q_mat * d));
-            }
-        }
-        // Σ2 = J Σc Jᵀ + s I; as 3×3 with a zero third row of J.
-        let [x, y, z] = kernel.camera_mean;
-        let [tx, ty] = kernel.clamped_xy;
-        let (fx, fy) = (camera.fx, camera.fy);
-        let j_of = |entries: [[f64; 3]; 2]| {
-            DMat3::from_cols_array_2d(&[
-                [entries[0][0], entries[1][0], 0.0],
-                [entries[0][1], entries[1][1], 0.0],
-                [entries[0][2], entries[1][2], 0.0],
-            ])
-        };
-        let jac = j_of([
-            [fx / z, 0.0, -fx * tx / (z * z)],
-            [0.0, fy / z, -fy * ty / (z * z)],
-        ]);
-        let v_sigma2 = -(q_mat * v_q * q_mat);
-        let v_sigma2_3 = DMat3::from_cols_array_2d(&[
-            [v_sigma2.x_axis.x, v_sigma2.x_axis.y, 0.0],
-            [v_sigma2.y_axis.x, v_sigma2.y_axis.y, 0.0],
-            [0.0; 3],
-        ]);
-        let v_jac = 2.0 * v_sigma2_3 * jac * kernel.camera_covariance;
-        // ∂J/∂x, ∂J/∂y, ∂J/∂z with tx = x (unclamped) or z·lim (clamped), SPEC §6.
-        let (dtx_dx, dtx_dz) = if kernel.clamped[0] {
-            (0.0, tx / z)
-        } else {
-            (1.0, 0.0)
-        };
-        let (dty_dy, dty_dz) = if kernel.clamped[1] {
-            (0.0, ty / z)
-        } else {
-            (1.0, 0.0)
-        };
-        let dj_dx = j_of([[0.0, 0.0, -fx * dtx_dx / (z * z)], [0.0; 3]]);
-        let dj_dy = j_of([[0.0; 3], [0.0, 0.0, -fy * dty_dy / (z * z)]]);
-        let dj_dz = j_of([
-            [
-                -fx / (z * z),
-                0.0,
-                -fx * dtx_dz / (z * z) + 2.0 * fx * tx / (z * z * z),
-            ],
-            [
-                0.0,
-                -fy / (z * z),
-                -fy * dty_dz / (z * z) + 2.0 * fy * ty / (z * z * z),
-            ],
-        ]);
-        let frobenius = |a: DMat3, b: DMat3| {
-            a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
-        };
-        let dm2_dp = [
-            [fx / z, 0.0, -fx * x / (z * z)],
-            [0.0, fy / z, -fy * y / (z * z)],
-        ];
-        let v_p = DVec3::new(
-            frobenius(v_jac, dj_dx) + v_m2.x * dm2_dp[0][0] + v_m2.y * dm2_dp[1][0],
-            frobenius(v_jac, dj_dy) + v_m2.x * dm2_dp[0][1] + v_m2.y * dm2_dp[1][1],
-            frobenius(v_jac, dj_dz) + v_m2.x * dm2_dp[0][2] + v_m2.y * dm2_dp[1][2],
-        );
-        let v_m = rc.transpose() * v_p;
+        let (v_q, v_m2, v_a) = pixel_partials(&kernel, &q_mat, camera, &v_image);
+        let (v_m, jac, v_sigma2_3) = projection_partials(&kernel, &q_mat, camera, v_q, v_m2, &rc);
         // Slice (SPEC §6).
         let i = kernel.index;
         let amplitude = scene.amplitudes[i];
@@ -170,4 +90,108 @@ pub fn reference_loss_and_gradients(
         ];
     }
     (loss, grads)
+}
+
+/// One kernel's partials summed over the pixels it reaches: `∂L/∂Q`, `∂L/∂m2` and the
+/// amplitude's `Σ ∂L/∂C G` (before the temporal weight).
+fn pixel_partials(
+    kernel: &ReferenceKernel,
+    q_mat: &DMat2,
+    camera: &Camera,
+    v_image: &[f64],
+) -> (DMat2, DVec2, [f64; 3]) {
+    let mut v_q = DMat2::ZERO;
+    let mut v_m2 = DVec2::ZERO;
+    let mut v_a = [0.0; 3];
+    for j in 0..camera.height {
+        for i in 0..camera.width {
+            let q = quadratic_form(kernel, i, j);
+            if q > kernel.qmax {
+                continue;
+            }
+            let k = 3 * (j as usize * camera.width as usize + i as usize);
+            let g = (-0.5 * q).exp();
+            let mut v_q_scalar = 0.0;
+            for c in 0..3 {
+                v_a[c] += v_image[k + c] * g;
+                v_q_scalar += -0.5 * g * v_image[k + c] * kernel.amplitude[c];
+            }
+            let d = DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5) - DVec2::from(kernel.mean);
+            v_q += v_q_scalar * DMat2::from_cols(d * d.x, d * d.y);
+            v_m2 += v_q_scalar * (-2.0 * (q_mat * d));
+        }
+    }
+    (v_q, v_m2, v_a)
+}
+
+/// Through the projection: `∂L/∂m` (camera-to-world applied), and the Jacobian `J` and
+/// `∂L/∂Σ2` (as 3×3) the scales' partials need.
+fn projection_partials(
+    kernel: &ReferenceKernel,
+    q_mat: &DMat2,
+    camera: &Camera,
+    v_q: DMat2,
+    v_m2: DVec2,
+    rc: &DMat3,
+) -> (DVec3, DMat3, DMat3) {
+    // Σ2 = J Σc Jᵀ + s I; as 3×3 with a zero third row of J.
+    let [x, y, z] = kernel.camera_mean;
+    let [tx, ty] = kernel.clamped_xy;
+    let (fx, fy) = (camera.fx, camera.fy);
+    let j_of = |entries: [[f64; 3]; 2]| {
+        DMat3::from_cols_array_2d(&[
+            [entries[0][0], entries[1][0], 0.0],
+            [entries[0][1], entries[1][1], 0.0],
+            [entries[0][2], entries[1][2], 0.0],
+        ])
+    };
+    let jac = j_of([
+        [fx / z, 0.0, -fx * tx / (z * z)],
+        [0.0, fy / z, -fy * ty / (z * z)],
+    ]);
+    let v_sigma2 = -(*q_mat * v_q * *q_mat);
+    let v_sigma2_3 = DMat3::from_cols_array_2d(&[
+        [v_sigma2.x_axis.x, v_sigma2.x_axis.y, 0.0],
+        [v_sigma2.y_axis.x, v_sigma2.y_axis.y, 0.0],
+        [0.0; 3],
+    ]);
+    let v_jac = 2.0 * v_sigma2_3 * jac * kernel.camera_covariance;
+    // ∂J/∂x, ∂J/∂y, ∂J/∂z with tx = x (unclamped) or z·lim (clamped), SPEC §6.
+    let (dtx_dx, dtx_dz) = if kernel.clamped[0] {
+        (0.0, tx / z)
+    } else {
+        (1.0, 0.0)
+    };
+    let (dty_dy, dty_dz) = if kernel.clamped[1] {
+        (0.0, ty / z)
+    } else {
+        (1.0, 0.0)
+    };
+    let dj_dx = j_of([[0.0, 0.0, -fx * dtx_dx / (z * z)], [0.0; 3]]);
+    let dj_dy = j_of([[0.0; 3], [0.0, 0.0, -fy * dty_dy / (z * z)]]);
+    let dj_dz = j_of([
+        [
+            -fx / (z * z),
+            0.0,
+            -fx * dtx_dz / (z * z) + 2.0 * fx * tx / (z * z * z),
+        ],
+        [
+            0.0,
+            -fy / (z * z),
+            -fy * dty_dz / (z * z) + 2.0 * fy * ty / (z * z * z),
+        ],
+    ]);
+    let frobenius = |a: DMat3, b: DMat3| {
+        a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+    };
+    let dm2_dp = [
+        [fx / z, 0.0, -fx * x / (z * z)],
+        [0.0, fy / z, -fy * y / (z * z)],
+    ];
+    let v_p = DVec3::new(
+        frobenius(v_jac, dj_dx) + v_m2.x * dm2_dp[0][0] + v_m2.y * dm2_dp[1][0],
+        frobenius(v_jac, dj_dy) + v_m2.x * dm2_dp[0][1] + v_m2.y * dm2_dp[1][1],
+        frobenius(v_jac, dj_dz) + v_m2.x * dm2_dp[0][2] + v_m2.y * dm2_dp[1][2],
+    );
+    (rc.transpose() * v_p, jac, v_sigma2_3)
 }

@@ -518,7 +518,8 @@ fn fit_4d(
     Ok((scene, log, start.elapsed().as_secs_f64()))
 }
 
-/// Runs the whole experiment.
+/// Runs the whole experiment, phase by phase: dataset → sweep → fits → baselines →
+/// evaluation → ablation → model size → volumes.
 pub fn run_experiment(
     config: &ExperimentConfig,
     progress: &mut dyn Progress,
@@ -529,64 +530,86 @@ pub fn run_experiment(
         cutoff: POINTS_CUTOFF,
         ..RenderOptions::default()
     };
-    let options = RenderOptions::default();
     let spec = DatasetSpec {
         seed: config.seed,
         ..config.dataset
     };
-
     progress.start("dataset", crate::scenes::dataset::frame_count(&spec));
     let dataset = render_dataset(&truth, &spec, &truth_options, || progress.tick())?;
     let cameras: Vec<crate::Camera> = dataset.train.iter().map(|v| v.camera).collect();
     let bounds = box_from_cameras(&cameras, spec.time_range)?;
-    let test_cameras: Vec<crate::Camera> = {
-        let mut seen: Vec<crate::Camera> = Vec::new();
-        for view in &dataset.test {
-            if !seen.contains(&view.camera) {
-                seen.push(view.camera);
-            }
-        }
-        seen
+    let mut bench = Evaluation {
+        dataset: &dataset,
+        test_cameras: distinct_cameras(&dataset.test),
+        sweep: Sweep {
+            times: Vec::new(),
+            truth: Vec::new(),
+        },
+        options: RenderOptions::default(),
+        context: RenderContext::new(),
     };
-
-    // The dense sweep of ground truth and blob renders.
-    let times = crate::scenes::paths::even_times(spec.time_range, config.sweep_times.max(2));
-    progress.start("sweep", test_cameras.len() * times.len());
-    let mut context = RenderContext::new();
-    let mut render_all = |scene: &Scene,
-                          opts: &RenderOptions,
-                          progress: &mut dyn Progress|
-     -> Result<Vec<Vec<Image>>> {
-        let mut out = Vec::new();
-        for camera in &test_cameras {
-            let mut row = Vec::new();
-            for &tau in &times {
-                context.render(scene, camera, tau, opts)?;
-                row.push(context.image().clone());
-                progress.tick();
-            }
-            out.push(row);
-        }
-        Ok(out)
-    };
-    let truth_sweep = render_all(&truth, &truth_options, progress)?;
-    let sweep = Sweep {
-        times,
-        truth: truth_sweep,
-    };
-    let ground_truth_roughness = sweep
+    bench.sweep = bench.sweep_truth(&truth, &truth_options, &spec, config, progress)?;
+    let ground_truth_roughness = bench
+        .sweep
         .truth
         .iter()
         .map(|frames| temporal_roughness(frames))
         .sum::<f64>()
-        / test_cameras.len() as f64;
-
-    // The 4D model.
+        / bench.test_cameras.len() as f64;
     progress.start("fit 4D", config.model_steps);
     let (model, fit_log, model_seconds) =
         fit_4d(config, &dataset, &bounds, config.model_scale, progress)?;
+    let (frames, frame_seconds) = fit_frame_baselines(config, &dataset, &bounds, progress)?;
+    let methods = bench.evaluate_methods(
+        [
+            ("4D (paper)", Method::Model4d(&model), model_seconds),
+            ("frame 3D", Method::FrameNearest(&frames), frame_seconds),
+            (
+                "interpolation",
+                Method::FrameInterpolation(&frames),
+                frame_seconds,
+            ),
+        ],
+        progress,
+    )?;
+    let ablation = bench.sigma_t_ablation(config, &bounds, progress)?;
+    let model_size = bench.model_size(config, &methods, &model, &frames, progress)?;
+    let volumes = volumes(config, &truth, &model, progress);
+    Ok(ExperimentResults {
+        config: config.clone(),
+        split_sizes: [dataset.train.len(), dataset.val.len(), dataset.test.len()],
+        ground_truth_roughness,
+        methods,
+        fit_log,
+        ablation,
+        model_size,
+        volumes,
+        model,
+        gallery_times: bench.sweep.times.clone(),
+        gallery_truth: bench.sweep.truth.first().cloned().unwrap_or_default(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
 
-    // Frame-based baselines: one static fit per training time, on that time's views.
+/// The cameras of `views`, each once, in order.
+fn distinct_cameras(views: &[View]) -> Vec<crate::Camera> {
+    let mut seen: Vec<crate::Camera> = Vec::new();
+    for view in views {
+        if !seen.contains(&view.camera) {
+            seen.push(view.camera);
+        }
+    }
+    seen
+}
+
+/// Frame-based baselines: one static fit per training time, on that time's views; and the
+/// seconds they took.
+fn fit_frame_baselines(
+    config: &ExperimentConfig,
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    progress: &mut dyn Progress,
+) -> Result<(FrameModels, f64)> {
     let train_times = {
         let mut t: Vec<f64> = dataset.train.iter().map(|v| v.time).collect();
         t.sort_by(f64::total_cmp);
@@ -605,7 +628,7 @@ pub fn run_experiment(
             .collect();
         let frame_box = SpaceTimeBox {
             time: [time, time],
-            ..bounds
+            ..*bounds
         };
         let sigma = config.frame_sigma;
         // σt far above the time range: constant in time.
@@ -630,120 +653,196 @@ pub fn run_experiment(
         times: train_times,
         scenes,
     };
+    Ok((frames, frame_seconds))
+}
 
-    // Metrics.
-    let methods_to_run = [
-        ("4D (paper)", Method::Model4d(&model), model_seconds),
-        ("frame 3D", Method::FrameNearest(&frames), frame_seconds),
-        (
-            "interpolation",
-            Method::FrameInterpolation(&frames),
-            frame_seconds,
-        ),
-    ];
-    progress.start("evaluate", methods_to_run.len());
-    let mut methods = Vec::new();
-    for (name, method, fit_seconds) in methods_to_run {
-        let (splits, ssims) = all_splits(&method, &dataset, &options, &mut context)?;
-        let SweepMetrics {
-            psnr_per_time,
-            roughness,
-            render_ms,
-            first_camera,
-        } = sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?;
-        methods.push(MethodResult {
-            name: name.to_owned(),
-            parameters: method.parameter_count(),
-            fit_seconds,
-            psnr_splits: splits,
-            ssim_splits: ssims,
-            roughness,
-            render_ms,
-            psnr_per_time,
-            gallery: first_camera,
-        });
-        progress.tick();
+/// What every method is measured on: the dataset's splits and the dense sweep from the
+/// test cameras, rendered with one context.
+struct Evaluation<'a> {
+    dataset: &'a Dataset,
+    test_cameras: Vec<crate::Camera>,
+    sweep: Sweep,
+    options: RenderOptions,
+    context: RenderContext,
+}
+
+impl Evaluation<'_> {
+    /// The dense sweep of ground-truth renders.
+    fn sweep_truth(
+        &mut self,
+        truth: &Scene,
+        truth_options: &RenderOptions,
+        spec: &DatasetSpec,
+        config: &ExperimentConfig,
+        progress: &mut dyn Progress,
+    ) -> Result<Sweep> {
+        let times = crate::scenes::paths::even_times(spec.time_range, config.sweep_times.max(2));
+        progress.start("sweep", self.test_cameras.len() * times.len());
+        let mut renders = Vec::new();
+        for camera in &self.test_cameras {
+            let mut row = Vec::new();
+            for &tau in &times {
+                self.context.render(truth, camera, tau, truth_options)?;
+                row.push(self.context.image().clone());
+                progress.tick();
+            }
+            renders.push(row);
+        }
+        Ok(Sweep {
+            times,
+            truth: renders,
+        })
     }
 
-    // σt ablation.
-    progress.start(
-        "ablation",
-        config.ablation_sigma_t.len() * config.model_steps,
-    );
-    let mut ablation = Vec::new();
-    for &sigma_t in &config.ablation_sigma_t {
-        let [sx, sy, sz, _] = config.model_scale;
-        let (scene, _, _) = fit_4d(config, &dataset, &bounds, [sx, sy, sz, sigma_t], progress)?;
-        let method = Method::Model4d(&scene);
-        let (splits, ssims) = all_splits(&method, &dataset, &options, &mut context)?;
-        let roughness =
-            sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.roughness;
-        ablation.push(AblationRow {
-            sigma_t,
-            psnr_splits: splits,
-            ssim_splits: ssims,
-            roughness,
-        });
+    /// Every method's scores on the splits and the sweep.
+    fn evaluate_methods(
+        &mut self,
+        methods_to_run: [(&str, Method<'_>, f64); 3],
+        progress: &mut dyn Progress,
+    ) -> Result<Vec<MethodResult>> {
+        progress.start("evaluate", methods_to_run.len());
+        let mut methods = Vec::new();
+        for (name, method, fit_seconds) in methods_to_run {
+            let (splits, ssims) =
+                all_splits(&method, self.dataset, &self.options, &mut self.context)?;
+            let SweepMetrics {
+                psnr_per_time,
+                roughness,
+                render_ms,
+                first_camera,
+            } = self.sweep_metrics(&method)?;
+            methods.push(MethodResult {
+                name: name.to_owned(),
+                parameters: method.parameter_count(),
+                fit_seconds,
+                psnr_splits: splits,
+                ssim_splits: ssims,
+                roughness,
+                render_ms,
+                psnr_per_time,
+                gallery: first_camera,
+            });
+            progress.tick();
+        }
+        Ok(methods)
     }
 
-    // Model size: adaptive static and velocity fits against the fixed count and the frames,
-    // on the points, then the same on the continuous blob.
-    progress.start("model size", 8 * config.adaptive_steps);
-    let mut model_size = Vec::new();
-    for method in &methods {
-        if method.name == "4D (paper)" || method.name == "frame 3D" {
-            let kernels = if method.name == "frame 3D" {
-                frames.scenes.iter().map(Scene::len).sum()
-            } else {
-                model.len()
-            };
-            model_size.push(ModelSizeRow {
-                dataset: "seed points".into(),
-                method: if method.name == "4D (paper)" {
-                    FIXED_NAME.into()
-                } else {
-                    "frame 3D (per-frame baseline)".into()
-                },
-                kernels,
-                parameters: method.parameters,
-                heldout_psnr: method.psnr_splits[2],
-                heldout_ssim: method.ssim_splits[2],
-                render_ms: method.render_ms,
-                fit_seconds: method.fit_seconds,
+    fn sweep_metrics(&mut self, method: &Method<'_>) -> Result<SweepMetrics> {
+        sweep_metrics(
+            method,
+            &self.test_cameras,
+            &self.sweep,
+            &self.options,
+            &mut self.context,
+        )
+    }
+
+    /// σt ablation: the 4D fit again at each σt.
+    fn sigma_t_ablation(
+        &mut self,
+        config: &ExperimentConfig,
+        bounds: &SpaceTimeBox,
+        progress: &mut dyn Progress,
+    ) -> Result<Vec<AblationRow>> {
+        let dataset = self.dataset;
+        progress.start(
+            "ablation",
+            config.ablation_sigma_t.len() * config.model_steps,
+        );
+        let mut ablation = Vec::new();
+        for &sigma_t in &config.ablation_sigma_t {
+            let [sx, sy, sz, _] = config.model_scale;
+            let (scene, _, _) = fit_4d(config, dataset, bounds, [sx, sy, sz, sigma_t], progress)?;
+            let method = Method::Model4d(&scene);
+            let (splits, ssims) = all_splits(&method, dataset, &self.options, &mut self.context)?;
+            let roughness = self.sweep_metrics(&method)?.roughness;
+            ablation.push(AblationRow {
+                sigma_t,
+                psnr_splits: splits,
+                ssim_splits: ssims,
+                roughness,
             });
         }
-    }
-    for fitted in &adaptive_fits(config, &dataset, progress)? {
-        let method = Method::Model4d(&fitted.2);
-        let heldout = split_scores(&method, &dataset.test, &options, &mut context)?;
-        let render_ms =
-            sweep_metrics(&method, &test_cameras, &sweep, &options, &mut context)?.render_ms;
-        model_size.push(ModelSizeRow::of_fit(
-            "seed points",
-            fitted,
-            heldout,
-            render_ms,
-        ));
-    }
-    model_size.extend(synthetic_model_size(
-        "seed blob",
-        &crate::scenes::toy::blob_scene(),
-        config.blob_dataset,
-        config,
-        progress,
-    )?);
-    model_size.extend(synthetic_model_size(
-        "three blobs",
-        &crate::scenes::motion::three_blobs_scene(),
-        config.motion_dataset,
-        config,
-        progress,
-    )?);
 
-    // Volumes on one grid: the ground truth's and the model's.
+        Ok(ablation)
+    }
+
+    /// Model size: adaptive static and velocity fits against the fixed count and the frames,
+    /// on the points, then the same on the continuous blob and the three blobs.
+    fn model_size(
+        &mut self,
+        config: &ExperimentConfig,
+        methods: &[MethodResult],
+        model: &Scene,
+        frames: &FrameModels,
+        progress: &mut dyn Progress,
+    ) -> Result<Vec<ModelSizeRow>> {
+        let dataset = self.dataset;
+        progress.start("model size", 8 * config.adaptive_steps);
+        let mut model_size = Vec::new();
+        for method in methods {
+            if method.name == "4D (paper)" || method.name == "frame 3D" {
+                let kernels = if method.name == "frame 3D" {
+                    frames.scenes.iter().map(Scene::len).sum()
+                } else {
+                    model.len()
+                };
+                model_size.push(ModelSizeRow {
+                    dataset: "seed points".into(),
+                    method: if method.name == "4D (paper)" {
+                        FIXED_NAME.into()
+                    } else {
+                        "frame 3D (per-frame baseline)".into()
+                    },
+                    kernels,
+                    parameters: method.parameters,
+                    heldout_psnr: method.psnr_splits[2],
+                    heldout_ssim: method.ssim_splits[2],
+                    render_ms: method.render_ms,
+                    fit_seconds: method.fit_seconds,
+                });
+            }
+        }
+        for fitted in &adaptive_fits(config, dataset, progress)? {
+            let method = Method::Model4d(&fitted.2);
+            let heldout = split_scores(&method, &dataset.test, &self.options, &mut self.context)?;
+            let render_ms = self.sweep_metrics(&method)?.render_ms;
+            model_size.push(ModelSizeRow::of_fit(
+                "seed points",
+                fitted,
+                heldout,
+                render_ms,
+            ));
+        }
+        model_size.extend(synthetic_model_size(
+            "seed blob",
+            &crate::scenes::toy::blob_scene(),
+            config.blob_dataset,
+            config,
+            progress,
+        )?);
+        model_size.extend(synthetic_model_size(
+            "three blobs",
+            &crate::scenes::motion::three_blobs_scene(),
+            config.motion_dataset,
+            config,
+            progress,
+        )?);
+
+        Ok(model_size)
+    }
+}
+
+/// Volumes on one grid: the ground truth's and the model's.
+fn volumes(
+    config: &ExperimentConfig,
+    truth: &Scene,
+    model: &Scene,
+    progress: &mut dyn Progress,
+) -> Vec<VolumeResult> {
     progress.start("volumes", 2 * config.volume_times.len());
     let (min, max) =
-        scene_bounds(&truth, &config.volume_times, POINTS_CUTOFF).unwrap_or(([-0.5; 3], [1.5; 3]));
+        scene_bounds(truth, &config.volume_times, POINTS_CUTOFF).unwrap_or(([-0.5; 3], [1.5; 3]));
     let grid = Grid {
         min,
         max,
@@ -751,8 +850,8 @@ pub fn run_experiment(
     };
     let mut volumes = Vec::new();
     for (name, scene, cutoff) in [
-        ("ground truth (points)", &truth, 1e-6),
-        ("4D model", &model, 1e-6),
+        ("ground truth (points)", truth, 1e-6),
+        ("4D model", model, 1e-6),
     ] {
         for &tau in &config.volume_times {
             let begin = Instant::now();
@@ -767,18 +866,5 @@ pub fn run_experiment(
         }
     }
 
-    Ok(ExperimentResults {
-        config: config.clone(),
-        split_sizes: [dataset.train.len(), dataset.val.len(), dataset.test.len()],
-        ground_truth_roughness,
-        methods,
-        fit_log,
-        ablation,
-        model_size,
-        volumes,
-        model,
-        gallery_times: sweep.times.clone(),
-        gallery_truth: sweep.truth.first().cloned().unwrap_or_default(),
-        seconds: start.elapsed().as_secs_f64(),
-    })
+    volumes
 }

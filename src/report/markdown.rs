@@ -35,8 +35,28 @@ fn file_stem(name: &str) -> String {
         .join("_")
 }
 
-/// Writes `out/report.md` and the charts; returns the report's path.
+/// Writes `out/report.md` and the charts; returns the report's path. The report reads as
+/// its sections, in order: introduction, headline, gallery, charts, σt ablation and its
+/// optimum, model size, volumes, the fitted scene.
 pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> Result<PathBuf> {
+    let mut md = introduction(results, command);
+    md.push_str(&headline(results));
+    write_gallery(results, out, &mut md)?;
+    write_charts(results, out)?;
+    md.push_str(&chart_sections());
+    md.push_str(&ablation_section(results));
+    write_sigma_t_optimum(&mut md, results);
+    write_model_size(&mut md, results, out)?;
+    md.push_str(&volumes_section(results, out)?);
+    crate::io::scene_file::save_scene(&results.model, &out.join("fitted_4d.json"))?;
+    md.push_str(&fitted_scene_note());
+    let path = out.join("report.md");
+    write_bytes_atomically(&path, md.as_bytes())?;
+    Ok(path)
+}
+
+/// The title, how the report was made, the data and the methods.
+fn introduction(results: &ExperimentResults, command: &str) -> String {
     let c = &results.config;
     let mut md = String::new();
     let w = &mut md;
@@ -80,6 +100,15 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         d.views
     );
 
+    md
+}
+
+/// The headline table of every method, and MSE per split.
+fn headline(results: &ExperimentResults) -> String {
+    let c = &results.config;
+    let d = &c.dataset;
+    let mut md = String::new();
+    let w = &mut md;
     let _ = writeln!(w, "## Headline\n");
     let _ = writeln!(
         w,
@@ -130,9 +159,18 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         );
     }
 
-    write_gallery(results, out, w)?;
+    md
+}
 
-    // Charts.
+/// The fit, per-time, roughness, speed and ablation charts.
+fn write_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
+    write_fit_charts(results, out)?;
+    write_method_charts(results, out)?;
+    write_ablation_charts(results, out)
+}
+
+/// The 4D fit's PSNR against step and against seconds.
+fn write_fit_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
     let chart = |name: &str| out.join(name);
     let log = &results.fit_log;
     let train_step = Series {
@@ -174,6 +212,12 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         "PSNR (dB)",
         &[with_seconds(&train_step), with_seconds(&held_step)],
     )?;
+    Ok(())
+}
+
+/// Every method's PSNR per time, roughness, and speed against error.
+fn write_method_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
+    let chart = |name: &str| out.join(name);
     let per_time: Vec<Series> = results
         .methods
         .iter()
@@ -216,6 +260,12 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         "PSNR, held-out views and times (dB)",
         &speed,
     )?;
+    Ok(())
+}
+
+/// The σt ablation's PSNR and roughness.
+fn write_ablation_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
+    let chart = |name: &str| out.join(name);
     let ablation_psnr = ["train", "held-out times", "held-out views and times"]
         .iter()
         .enumerate()
@@ -264,6 +314,13 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         &ablation_rough,
     )?;
 
+    Ok(())
+}
+
+/// The sections that show the charts of [`write_charts`].
+fn chart_sections() -> String {
+    let mut md = String::new();
+    let w = &mut md;
     let _ = writeln!(
         w,
         "## Fitting\n\n![PSNR against step](fit_vs_step.png)\n\n![PSNR against seconds](fit_vs_seconds.png)\n"
@@ -273,6 +330,13 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         "## Per time, smoothness, speed\n\n![PSNR per time](psnr_per_time.png)\n\n![Roughness](roughness.png)\n\n![Speed against error](speed_vs_error.png)\n"
     );
 
+    md
+}
+
+/// The σt ablation table and its charts.
+fn ablation_section(results: &ExperimentResults) -> String {
+    let mut md = String::new();
+    let w = &mut md;
     let _ = writeln!(w, "## σt ablation (paper §5.4)\n");
     let _ = writeln!(
         w,
@@ -293,10 +357,14 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         "\nGround truth roughness: {:.2e}.\n\n![σt against PSNR](ablation_psnr.png)\n\n![σt against roughness](ablation_roughness.png)\n",
         results.ground_truth_roughness
     );
-    write_sigma_t_optimum(w, results);
+    md
+}
 
-    write_model_size(w, results, out)?;
-
+/// The volumes table and figures (written into `out`).
+fn volumes_section(results: &ExperimentResults, out: &Path) -> Result<String> {
+    let c = &results.config;
+    let mut md = String::new();
+    let w = &mut md;
     let _ = writeln!(w, "## Volumes (paper Fig. 1, §5.2)\n");
     let _ = writeln!(
         w,
@@ -341,14 +409,18 @@ pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> R
         volume_slices_figure(&out.join(&name), &v.name, v.tau, &v.volume, vmax)?;
         let _ = writeln!(w, "![{} at t = {}]({name})\n", v.name, v.tau);
     }
-    crate::io::scene_file::save_scene(&results.model, &out.join("fitted_4d.json"))?;
+    Ok(md)
+}
+
+/// Where the fitted scene is saved.
+fn fitted_scene_note() -> String {
+    let mut md = String::new();
+    let w = &mut md;
     let _ = writeln!(
         w,
         "The fitted 4D scene is saved as `fitted_4d.json` (render it, or make videos of it with `splat4d video`)."
     );
-    let path = out.join("report.md");
-    write_bytes_atomically(&path, md.as_bytes())?;
-    Ok(path)
+    md
 }
 
 /// The model size section: parameters against held-out PSNR, and the default it supports.
@@ -394,35 +466,7 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
             r.fit_seconds
         );
     }
-    let datasets = ["seed points", "seed blob", "three blobs"];
-    let models = [
-        "fixed count (paper)",
-        "adaptive static",
-        "adaptive velocity",
-        "frames (per-frame 3D)",
-    ];
-    let points: Vec<SizePoint> = results
-        .model_size
-        .iter()
-        .map(|r| SizePoint {
-            dataset: datasets.iter().position(|d| *d == r.dataset).unwrap_or(0),
-            model: match r.method.as_str() {
-                m if m == crate::report::experiment::FIXED_NAME => 0,
-                m if m == crate::report::experiment::VELOCITY_NAME => 2,
-                m if m.starts_with("frame") => 3,
-                _ => 1,
-            },
-            parameters: r.parameters as f64,
-            psnr: r.heldout_psnr,
-        })
-        .collect();
-    model_size_chart(
-        &out.join("model_size.png"),
-        "Parameters against held-out PSNR",
-        &datasets,
-        &models,
-        &points,
-    )?;
+    write_model_size_chart(results, out)?;
     // Velocity kernels against the paper's fixed count, and whether any model beats them on
     // both parameters and PSNR (the Pareto front of each dataset).
     let velocity = crate::report::experiment::VELOCITY_NAME;
@@ -465,6 +509,39 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
         comparisons.join("; ")
     );
     Ok(())
+}
+
+/// The model size chart: parameters against held-out PSNR, by dataset and model.
+fn write_model_size_chart(results: &ExperimentResults, out: &Path) -> Result<()> {
+    let datasets = ["seed points", "seed blob", "three blobs"];
+    let models = [
+        "fixed count (paper)",
+        "adaptive static",
+        "adaptive velocity",
+        "frames (per-frame 3D)",
+    ];
+    let points: Vec<SizePoint> = results
+        .model_size
+        .iter()
+        .map(|r| SizePoint {
+            dataset: datasets.iter().position(|d| *d == r.dataset).unwrap_or(0),
+            model: match r.method.as_str() {
+                m if m == crate::report::experiment::FIXED_NAME => 0,
+                m if m == crate::report::experiment::VELOCITY_NAME => 2,
+                m if m.starts_with("frame") => 3,
+                _ => 1,
+            },
+            parameters: r.parameters as f64,
+            psnr: r.heldout_psnr,
+        })
+        .collect();
+    model_size_chart(
+        &out.join("model_size.png"),
+        "Parameters against held-out PSNR",
+        &datasets,
+        &models,
+        &points,
+    )
 }
 
 /// Nearest-neighbour upscaling of the gallery's frames.

@@ -55,25 +55,30 @@ impl DatasetSpec {
     /// [`MAX_VIEWS`], a frame size a camera accepts, a field of view in (0°, 180°), a finite
     /// ordered time range.
     pub fn validate(&self) -> Result<()> {
-        for (flag, value) in [("--views", self.views), ("--times", self.times)] {
+        for (field, value) in [("views", self.views), ("times", self.times)] {
             if !(1..=MAX_VIEWS).contains(&value) {
-                return Err(Error::usage(format!(
-                    "{flag} {value} must be between 1 and {MAX_VIEWS}"
-                )));
+                return Err(Error::setting(
+                    &[field],
+                    format!("`{field}` {value} must be between 1 and {MAX_VIEWS}"),
+                ));
             }
         }
         let pixels = u64::from(self.width) * u64::from(self.height);
         if self.width == 0 || self.height == 0 || pixels > crate::model::camera::MAX_PIXELS {
-            return Err(Error::usage(format!(
-                "--size {}x{} must be at least 1×1 and at most 16384² pixels",
-                self.width, self.height
-            )));
+            return Err(Error::setting(
+                &["size"],
+                format!(
+                    "`size` {}x{} must be at least 1×1 and at most 16384² pixels",
+                    self.width, self.height
+                ),
+            ));
         }
         let fov = self.fov_y_degrees;
         if !(fov > 0.0 && fov < 180.0) {
-            return Err(Error::usage(format!(
-                "--fov {fov} must be in (0, 180) degrees"
-            )));
+            return Err(Error::setting(
+                &["fov"],
+                format!("`fov` {fov} must be in (0, 180) degrees"),
+            ));
         }
         let [t0, t1] = self.time_range;
         if !(t0.is_finite() && t1.is_finite() && t0 <= t1 && (t1 - t0).is_finite()) {

@@ -1,5 +1,5 @@
 //! Sample times for motion given as a path over `[t0, t1]`, with Gaussian temporal weights
-//! that form a partition of unity (used by the glTF importer, [`crate::io::gltf_import`]).
+//! that form a partition of unity (used by the sample planner, [`crate::scenes::motion_sampling`]).
 //!
 //! A 4D kernel at time `t_k` with temporal σ `σ_k` and amplitude factor `a_k` weighs
 //! `a_k exp(-½ ((τ - t_k)/σ_k)²)` at τ (SPEC §2). A point of a moving surface becomes one

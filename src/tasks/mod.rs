@@ -38,9 +38,10 @@ pub const MAX_THREADS: usize = 1024;
 pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(work()),
-        Some(n) if n == 0 || n > MAX_THREADS => Err(Error::usage(format!(
-            "--threads {n} must be between 1 and {MAX_THREADS}"
-        ))),
+        Some(n) if n == 0 || n > MAX_THREADS => Err(Error::setting(
+            &["threads"],
+            format!("`threads` {n} must be between 1 and {MAX_THREADS}"),
+        )),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)

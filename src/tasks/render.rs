@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use crate::backward::Gradients;
 use crate::fit::loss::{psnr, view_loss_and_gradients};
 use crate::io::camera_file::load_camera;
-use crate::io::gltf_import::{load_camera as load_gltf_camera, split_camera_spec};
+use crate::io::gltf::{load_camera as load_gltf_camera, split_camera_spec};
 use crate::io::gradients_file::gradients_to_json;
 use crate::io::image_file::{
     BitDepth, ImageKind, image_size, load_image, save_image, save_rgb8_png,
@@ -151,10 +151,13 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     // Check the output's extension before any work, so a typo costs nothing.
     let kind = ImageKind::from_path(&request.out)?;
     if request.overlay && kind != ImageKind::Png {
-        return Err(Error::usage(format!(
-            "{}: --overlay draws an 8-bit PNG; use a .png output",
-            request.out.display()
-        )));
+        return Err(Error::setting(
+            &["overlay"],
+            format!(
+                "{}: `overlay` draws an 8-bit PNG; use a .png output",
+                request.out.display()
+            ),
+        ));
     }
     let view = &request.view;
     check_output(

@@ -4,8 +4,8 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::io::check_output;
-use crate::io::gltf_import::import_scene;
-use crate::io::gltf_motion::Spacing;
+use crate::io::gltf::Spacing;
+use crate::io::gltf::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::model::{Blend, Error, Result, Scene};
@@ -173,27 +173,29 @@ pub const MAX_EXPORT_FRAMES: usize = 10_000;
 /// with an index ([`crate::io::ply::write_slice_sequence`]).
 pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     if !(request.cutoff.is_finite() && request.cutoff >= 0.0) {
-        return Err(Error::usage(format!(
-            "--cutoff {} must be finite and ≥ 0",
-            request.cutoff
-        )));
+        return Err(Error::setting(
+            &["cutoff"],
+            format!("`cutoff` {} must be finite and ≥ 0", request.cutoff),
+        ));
     }
     match &request.times {
         ExportTimes::One(tau) if !tau.is_finite() => {
-            return Err(Error::usage("--time must be finite"));
+            return Err(Error::setting(&["time"], "`time` must be finite"));
         }
         ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
-            return Err(Error::usage(format!(
-                "--times needs 1 to {MAX_EXPORT_FRAMES} times"
-            )));
+            return Err(Error::setting(
+                &["times"],
+                format!("`times` needs 1 to {MAX_EXPORT_FRAMES} times"),
+            ));
         }
         ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
-            return Err(Error::usage("--times must be finite"));
+            return Err(Error::setting(&["times"], "`times` must be finite"));
         }
         ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
-            return Err(Error::usage(format!(
-                "--frames {n} must be from 1 to {MAX_EXPORT_FRAMES}"
-            )));
+            return Err(Error::setting(
+                &["frames"],
+                format!("`frames` {n} must be from 1 to {MAX_EXPORT_FRAMES}"),
+            ));
         }
         _ => {}
     }
@@ -208,10 +210,13 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
         });
     }
     if crate::io::same_file(&request.out, &request.scene) {
-        return Err(Error::usage(format!(
-            "{}: --out names the scene; a sequence goes to a folder",
-            request.out.display()
-        )));
+        return Err(Error::setting(
+            &["out"],
+            format!(
+                "{}: `out` names the scene; a sequence goes to a folder",
+                request.out.display()
+            ),
+        ));
     }
     // Before any work: the folder holds no input and may be replaced.
     let mut outputs = crate::io::output::Outputs::new();

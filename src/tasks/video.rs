@@ -167,11 +167,14 @@ fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<()> {
         for ext in ["gif", "mp4", "camera_path.json"] {
             let file = request.out.join(format!("{name}.{ext}"));
             if file.exists() && !ours {
-                return Err(Error::usage(format!(
-                    "{}: exists and is not part of an earlier `splat4d video` output (no {} folder of frames beside it); choose another --out",
-                    file.display(),
-                    frames.display()
-                )));
+                return Err(Error::setting(
+                    &["out"],
+                    format!(
+                        "{}: exists and is not part of an earlier `splat4d video` output (no {} folder of frames beside it); choose another `out`",
+                        file.display(),
+                        frames.display()
+                    ),
+                ));
             }
             outputs.file(&file);
         }
@@ -184,9 +187,10 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
     request.options.validate()?;
     let fov = request.lens.fov_y_degrees;
     if !(fov > 0.0 && fov < 180.0) {
-        return Err(Error::usage(format!(
-            "--fov {fov} must be in (0, 180) degrees"
-        )));
+        return Err(Error::setting(
+            &["fov"],
+            format!("`fov` {fov} must be in (0, 180) degrees"),
+        ));
     }
     let scene = load_scene(&request.scene)?;
     let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);

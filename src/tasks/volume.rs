@@ -62,10 +62,10 @@ impl fmt::Display for VolumeSummary {
 /// Evaluates the volume at every time and writes slices through each one's peak.
 pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
     if !(request.cutoff.is_finite() && request.cutoff >= 0.0) {
-        return Err(Error::usage(format!(
-            "--cutoff {} must be finite and ≥ 0",
-            request.cutoff
-        )));
+        return Err(Error::setting(
+            &["cutoff"],
+            format!("`cutoff` {} must be finite and ≥ 0", request.cutoff),
+        ));
     }
     let scene = load_scene(&request.scene)?;
     let (min, max) = scene_bounds(&scene, &request.times, request.cutoff).ok_or_else(|| {

@@ -98,14 +98,10 @@ fn gltf_and_glb() {
     let target = dir.path().join("m.gltf");
     fuzz("glTF", &good, 1500, 4, |b| {
         std::fs::write(&target, b).unwrap();
-        let scene = splat4d::io::gltf_import::import_scene(
-            &target,
-            20,
-            splat4d::io::gltf_motion::Spacing::Even(3),
-            0,
-        )
-        .is_ok();
-        let camera = splat4d::io::gltf_import::load_camera(&target, 0, Some((8, 8))).is_ok();
+        let scene =
+            splat4d::io::gltf::import_scene(&target, 20, splat4d::io::gltf::Spacing::Even(3), 0)
+                .is_ok();
+        let camera = splat4d::io::gltf::load_camera(&target, 0, Some((8, 8))).is_ok();
         scene || camera
     });
 }
@@ -266,13 +262,13 @@ fn gltf_structural_mutations() {
         std::fs::write(&target, doc.to_string()).unwrap();
         let start = std::time::Instant::now();
         let outcome = catch_unwind(AssertUnwindSafe(|| {
-            let scene = splat4d::io::gltf_import::import_scene(
+            let scene = splat4d::io::gltf::import_scene(
                 &target,
                 20,
-                splat4d::io::gltf_motion::Spacing::Adaptive { tolerance: 1e-3 },
+                splat4d::io::gltf::Spacing::Adaptive { tolerance: 1e-3 },
                 0,
             );
-            let camera = splat4d::io::gltf_import::load_camera(&target, 0, Some((8, 8)));
+            let camera = splat4d::io::gltf::load_camera(&target, 0, Some((8, 8)));
             (scene.is_ok(), camera.is_ok())
         }));
         match outcome {

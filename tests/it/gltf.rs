@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use splat4d::io::gltf_import::{import_scene, load_camera};
-use splat4d::io::gltf_motion::Spacing;
+use splat4d::io::gltf::Spacing;
+use splat4d::io::gltf::{import_scene, load_camera};
 
 const ADAPTIVE: Spacing = Spacing::Adaptive { tolerance: 1e-3 };
 use splat4d::slice::{SlicedKernels, slice};
@@ -360,8 +360,8 @@ fn a_glb_imports_like_its_gltf() {
 /// additive import shows them through.
 #[test]
 fn an_alpha_import_closes_its_surfaces() {
-    use splat4d::io::gltf_import::import_scene;
-    use splat4d::io::gltf_motion::Spacing;
+    use splat4d::io::gltf::Spacing;
+    use splat4d::io::gltf::import_scene;
     let path = sample("BoxAnimated.gltf");
     let imported = import_scene(&path, 3000, Spacing::Even(3), 0).unwrap();
     let additive = imported.scene.clone();

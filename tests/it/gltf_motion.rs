@@ -7,8 +7,9 @@
 
 use base64::Engine;
 use serde_json::json;
-use splat4d::io::gltf_import::{import_scene, world_matrices_at};
-use splat4d::io::gltf_motion::{STEP_WINDOW, Spacing};
+use splat4d::io::gltf::Spacing;
+use splat4d::io::gltf::{import_scene, world_matrices_at};
+use splat4d::scenes::motion_sampling::STEP_WINDOW;
 use splat4d::{Camera, Image, RenderOptions, Scene, render};
 
 const DEFAULT: Spacing = Spacing::Adaptive { tolerance: 1e-3 };
