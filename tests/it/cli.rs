@@ -755,6 +755,16 @@ fn bench_runs_builtin_scenes_by_size() {
         .and_then(|r| r.parse().ok())
         .unwrap_or_else(|| panic!("{stdout}"));
     assert!(rate > 1e7, "{stdout}");
+    // Both blends' probes, each on its own line.
+    let alpha_rate: f64 = stdout
+        .split("alpha ceiling probe (")
+        .nth(1)
+        .and_then(|r| r.split("1 thread): ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(alpha_rate > 1e7, "{stdout}");
+    assert_eq!(stdout.lines().count(), 2, "{stdout}");
     let output = splat4d(&["bench", "--scene", "no-such-scene.json"], dir.path());
     assert_eq!(output.status.code(), Some(2));
     assert!(stderr(&output).contains("no-such-scene.json"));

@@ -5,10 +5,11 @@ use splat4d::model::random::{log_uniform, random_rotation, seeded_rng};
 use splat4d::reference::ReferenceImage;
 use splat4d::{Camera, Image, Kernel, Scene};
 
-/// Absolute part of the f32 bound: `|fast - ref| ≤ ATOL + RTOL Σ|a| + ε·(1 + 1e-2)·borderline`.
-pub const ATOL: f64 = 1e-6;
+/// Absolute part of the f32 bound: `|fast - ref| ≤ ATOL + RTOL Σ|a| + ε·(1 + 1e-2)·borderline`
+/// ([`splat4d::reference::ERROR_BOUND`], `1e-6 + 2e-6·Σ|a|`, plus the cut-off band).
+pub const ATOL: f64 = splat4d::reference::ERROR_BOUND.absolute;
 /// Relative part of the bound, against the sum of |contributions| at the pixel.
-pub const RTOL: f64 = 2e-6;
+pub const RTOL: f64 = splat4d::reference::ERROR_BOUND.relative;
 
 /// A camera with an off-centre principal point and unequal focal lengths.
 pub fn test_camera(width: u32, height: u32) -> Camera {
