@@ -10,6 +10,7 @@ use crate::bench::{
     sweep_table,
 };
 use crate::io::camera_file::load_camera;
+use crate::io::image_file::save_rgb8_png;
 use crate::io::scene_file::load_scene;
 use crate::io::write_bytes_atomically;
 use crate::model::{Blend, Camera, Error, Progress, Result, Scene};
@@ -331,8 +332,8 @@ fn write_sweep(
         })
         .collect();
     let chart = out.join("sweep.png");
-    pareto_chart(
-        &chart,
+    let picture = pareto_chart(
+        "sweep.png",
         &format!(
             "Speed against error: {name}, {}x{}, {threads} threads",
             camera.width, camera.height
@@ -341,6 +342,7 @@ fn write_sweep(
         &series,
         &chart_points,
     )?;
+    save_rgb8_png(&chart, picture.width, picture.height, &picture.rgb)?;
     Ok(format!(
         "{}\nwrote {} and {}",
         table.trim_end(),
