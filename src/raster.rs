@@ -325,20 +325,49 @@ pub(crate) struct TileScratch {
     pub(crate) halves: [Vec<RowEntry>; 2 * ROW],
 }
 
-thread_local! {
-    /// One scratch per worker thread, kept between tiles and frames.
-    static SCRATCH: std::cell::RefCell<TileScratch> = std::cell::RefCell::new(TileScratch::default());
+/// The forward's per-tile scratch, owned by the render context and kept between frames: a
+/// stack of [`TileScratch`]es from which each band of tiles takes one while it runs (as many
+/// as bands ran at once, so one per worker thread), its buffers keeping their capacity.
+#[derive(Default)]
+pub struct TileScratchPool {
+    free: std::sync::Mutex<Vec<TileScratch>>,
+}
+
+impl fmt::Debug for TileScratchPool {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let free = self.free.lock().map_or(0, |free| free.len());
+        write!(f, "TileScratchPool {{ {free} scratches }}")
+    }
+}
+
+impl TileScratchPool {
+    /// Runs `work` with a scratch of the pool (a fresh one when all are in use).
+    fn with<R>(&self, work: impl FnOnce(&mut TileScratch) -> R) -> R {
+        let taken = self
+            .free
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .pop();
+        let mut scratch = taken.unwrap_or_default();
+        let result = work(&mut scratch);
+        self.free
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(scratch);
+        result
+    }
 }
 
 /// Sums the binned kernels into `image` (resized to the bins' size) over `background`,
-/// evaluating the Gaussian as `exp` says, on the widest [`SimdPath`] the CPU has. `forms` is
-/// scratch for [`row_forms`]. Returns the number of (pixel, kernel) pairs summed.
+/// evaluating the Gaussian as `exp` says, on the widest [`SimdPath`] the CPU has. `forms` and
+/// `scratch` are scratch for [`row_forms`] and the tiles. Returns the number of (pixel,
+/// kernel) pairs summed.
 pub fn rasterize(
     proj: &ProjectedKernels,
     bins: &TileBins,
     background: [f32; 3],
     exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+    (forms, scratch): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
     rasterize_on(
@@ -347,7 +376,7 @@ pub fn rasterize(
         bins,
         background,
         exp,
-        forms,
+        (forms, scratch),
         image,
     )
 }
@@ -362,7 +391,7 @@ pub fn rasterize_on(
     bins: &TileBins,
     background: [f32; 3],
     exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+    (forms, pool): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
     assert!(
@@ -395,8 +424,7 @@ pub fn rasterize_on(
         .par_chunks_mut(3 * w * ROW)
         .enumerate()
         .map(|(ty, band)| {
-            SCRATCH.with(|cell| {
-                let scratch = &mut *cell.borrow_mut();
+            pool.with(|scratch| {
                 let mut pairs = 0;
                 for tx in 0..bins.tiles_x as usize {
                     let t = ty * bins.tiles_x as usize + tx;
@@ -873,6 +901,7 @@ mod tests {
             context.render(&scene, &camera, 0.5, &options).unwrap();
             let (proj, bins) = (&context.projected, &context.bins);
             let mut forms = Vec::new();
+            let pool = TileScratchPool::default();
             let mut first: Option<(Image, u64)> = None;
             for &path in paths {
                 let mut image = Image::default();
@@ -882,7 +911,7 @@ mod tests {
                     bins,
                     [0.1, 0.2, 0.3],
                     exp,
-                    &mut forms,
+                    (&mut forms, &pool),
                     &mut image,
                 );
                 assert!(pairs > 0);
