@@ -663,13 +663,7 @@ fn commands_honour_an_alpha_scene() {
         .collect();
     let pairs_per_second: f64 = row[7].parse().unwrap();
     let share: f64 = row[8].trim_end_matches('%').parse().unwrap();
-    let probe: f64 = bench
-        .split("alpha ceiling probe (")
-        .nth(1)
-        .and_then(|rest| rest.split("thread): ").nth(1))
-        .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|rate| rate.parse().ok())
-        .unwrap_or_else(|| panic!("{bench}"));
+    let probe = crate::common::probe_rate(&bench, "alpha ceiling probe", 1);
     assert!(!bench.contains("\nceiling probe ("), "{bench}");
     let expected = 100.0 * pairs_per_second / probe;
     assert!(

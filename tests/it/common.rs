@@ -422,3 +422,17 @@ pub fn refused_quickly<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(
     assert!(stderr.contains(needle), "{args:?}: {stderr}");
     assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
 }
+
+/// The pairs per second `splat4d bench` printed for `probe` (`ceiling probe`, `alpha ceiling
+/// probe`) on `threads` threads: its line `<probe> (<path> path, <threads> thread[s]): <rate>
+/// pairs/s`.
+pub fn probe_rate(stdout: &str, probe: &str, threads: usize) -> f64 {
+    let threads = format!(", {threads} thread");
+    stdout
+        .lines()
+        .find(|l| l.starts_with(&format!("{probe} (")) && l.contains(&threads))
+        .and_then(|l| l.split("): ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no {probe} line for{threads}: {stdout}"))
+}
