@@ -80,13 +80,6 @@ pub struct AdaptiveOptions {
     pub min_time_scale: f64,
 }
 
-/// [`crate::fit::plan::DEFAULT_ROUNDS`].
-impl Default for AdaptiveOptions {
-    fn default() -> Self {
-        crate::fit::plan::DEFAULT_ROUNDS
-    }
-}
-
 impl AdaptiveOptions {
     /// Whether a round runs after `step` (1-based) of `steps`.
     #[must_use]

@@ -149,10 +149,10 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     if let Some(log) = &request.log {
         check_output(log, &[], &inputs)?;
         if same_file(log, &request.out) {
-            return Err(crate::model::Error::usage(format!(
-                "{}: --log and --out name the same file",
-                log.display()
-            )));
+            return Err(crate::model::Error::setting(
+                &["log", "out"],
+                format!("{}: `log` and `out` name the same file", log.display()),
+            ));
         }
     }
     check_fit_memory(request)?;
@@ -167,7 +167,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         progress.note(note);
     }
     if dataset.transparent && plan.background.is_none() {
-        progress.note("images with transparency were composited over black (--background r,g,b chooses the colour)");
+        progress.note(
+            "images with transparency were composited over black (`background` chooses the colour)",
+        );
     }
     let up = cameras_up(&dataset.train);
     if let Some(up) = up
