@@ -63,7 +63,7 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
         &dataset.train,
         &dataset.test,
         &fit_options,
-        |_| {},
+        |_, _| {},
     )
     .unwrap();
     let heldout = records.last().unwrap().heldout_psnr.unwrap();

@@ -3,7 +3,7 @@
 //! time slider change it, a dataset camera is chosen and compared, a frame at a known camera
 //! and time equals `splat4d render` of it (exactly with lossless frames, within the JPEG
 //! tolerance otherwise), the server answers on loopback only, and frames per second are
-//! measured on 10k and 100k kernels. Skipped, saying so, where no browser is installed.
+//! measured on 10k and 100k kernels; `fit --view` shows the running fit. Skipped, saying so, where no browser is installed.
 
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
@@ -478,4 +478,85 @@ fn frames_per_second_on_10k_and_100k_kernels() {
         "10k kernels: {:.1} frames/s",
         measured[0]
     );
+}
+
+#[test]
+fn a_running_fit_is_shown_with_its_chart() {
+    let Some(binary) = browser_binary() else {
+        println!("SKIPPED: no browser (chromium) found; `.ci/run` installs Debian's chromium");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
+    let made = splat4d(
+        &[
+            "dataset",
+            "--scene",
+            "scene.json",
+            "--views",
+            "4",
+            "--times",
+            "2",
+            "--size",
+            "48x36",
+            "--out",
+            "ds",
+        ],
+        d,
+    );
+    assert!(made.status.success(), "{}", crate::common::stderr(&made));
+    let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"))
+        .args([
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "fitted.json",
+            "--blend",
+            "additive",
+            "--steps",
+            "100000",
+            "--view",
+            "0",
+        ])
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(fit.stderr.take().unwrap()).lines();
+    let url = loop {
+        let line = lines
+            .next()
+            .expect("the fit names its viewer's address")
+            .unwrap();
+        if let Some(rest) = line.split("viewing the fit at ").nth(1) {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in lines {});
+    let mut browser = Browser::launch(&binary, &url, [800, 600]);
+    browser.wait_for("window.splat4dFrames > 0", "a frame of the fit's scene");
+    browser.wait_for(
+        "/step \\d+ \\/ 100000 · \\d+ kernels/.test(document.getElementById('live-text').textContent)",
+        "the fit's progress",
+    );
+    browser.screenshot(&std::env::temp_dir().join("splat4d_view_fit.png"));
+    let _ = fit.kill();
+    let _ = fit.wait();
+}
+
+#[test]
+fn a_busy_port_is_refused_naming_it() {
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = held.local_addr().unwrap().port().to_string();
+    let blob = crate::common::data("blob.json");
+    let output = splat4d(
+        &["view", "--scene", blob.to_str().unwrap(), "--port", &port],
+        Path::new("."),
+    );
+    let message = crate::common::stderr(&output);
+    assert_eq!(output.status.code(), Some(2), "{message}");
+    assert!(message.contains(&format!("port {port}")), "{message}");
 }
