@@ -252,8 +252,12 @@ impl Rgb8 {
             );
             (png.write_image(&self.bytes, w, h, kind), "image/png")
         } else {
-            let jpeg = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY);
-            (jpeg.write_image(&self.bytes, w, h, kind), "image/jpeg")
+            let mut bytes = out.into_inner();
+            // Sides are at most MAX_SIDE, well within the format's 65535.
+            let jpeg = jpeg_encoder::Encoder::new(&mut bytes, JPEG_QUALITY);
+            jpeg.encode(&self.bytes, w as u16, h as u16, jpeg_encoder::ColorType::Rgb)
+                .expect("encoding an in-memory RGB image");
+            return (bytes, "image/jpeg");
         };
         // In-memory encoding of a buffer of the right size cannot fail.
         result.expect("encoding an in-memory RGB image");
