@@ -183,15 +183,13 @@ fn centripetal_catmull_rom(p: [DVec3; 4], u: f64) -> DVec3 {
 /// The row-major camera-to-world matrix of a rotation and a position.
 fn orthonormal(rotation: DQuat, position: DVec3) -> [[f64; 4]; 4] {
     let r = DMat3::from_quat(rotation);
-    let mut m = [[0.0; 4]; 4];
-    for row in 0..3 {
-        for col in 0..3 {
-            m[row][col] = r.col(col)[row];
+    std::array::from_fn(|row| {
+        if row == 3 {
+            [0.0, 0.0, 0.0, 1.0]
+        } else {
+            [r.col(0)[row], r.col(1)[row], r.col(2)[row], position[row]]
         }
-        m[row][3] = position[row];
-    }
-    m[3] = [0.0, 0.0, 0.0, 1.0];
-    m
+    })
 }
 
 /// The frames of a path of `poses` at `width × height`; a pose without a time takes

@@ -255,8 +255,13 @@ impl Rgb8 {
             let mut bytes = out.into_inner();
             // Sides are at most MAX_SIDE, well within the format's 65535.
             let jpeg = jpeg_encoder::Encoder::new(&mut bytes, JPEG_QUALITY);
-            jpeg.encode(&self.bytes, w as u16, h as u16, jpeg_encoder::ColorType::Rgb)
-                .expect("encoding an in-memory RGB image");
+            jpeg.encode(
+                &self.bytes,
+                w as u16,
+                h as u16,
+                jpeg_encoder::ColorType::Rgb,
+            )
+            .expect("encoding an in-memory RGB image");
             return (bytes, "image/jpeg");
         };
         // In-memory encoding of a buffer of the right size cannot fail.
