@@ -11,9 +11,10 @@ const cam = { eye: [0, 0, 5], right: [1, 0, 0], up: [0, 1, 0], back: [0, 0, 1], 
 const st = { t0: 0, t1: 0, time: 0, playing: false, loop: true, speed: 1, lastMove: -1e9,
   sentId: 0, gotId: 0, drawnId: 0, lastLow: false, dirty: true, views: [], live: false,
   version: 0, keyframes: [], path: null, pathAction: null, playback: null, kernels: 0,
-  maxSide: 4096, drawTimes: [] };
+  maxSide: 4096, drawTimes: [], playScale: 1 };
 const MOVE_REST_MS = 250;     // the camera is resting this long after the last move
 const LOW_SCALE = 0.5;        // resolution while it moves
+const PLAY_BUDGET_MS = 25;    // while time plays, the resolution adapts to keep frames this cheap
 const SWEEP_SECONDS = 5;      // the whole time range plays in this long at 1×
 
 const add = (a, b) => a.map((v, i) => v + b[i]);
@@ -169,6 +170,16 @@ function draw(header, bitmap) {
   bitmap.close();
   window.splat4dFrames += 1;
   window.splat4dLast = header;
+  // While time plays, the resolution follows the server's cost per frame.
+  if ((st.playing || st.playback) && $('adaptive').checked) {
+    const cost = header.render_ms + header.encode_ms;
+    const full = canvas.width * canvas.height;
+    const share = (header.width * header.height) / full;
+    if (share >= st.playScale * st.playScale * 0.8) {
+      if (cost > PLAY_BUDGET_MS) st.playScale = Math.max(LOW_SCALE, st.playScale * 0.9);
+      else if (cost < 0.6 * PLAY_BUDGET_MS) st.playScale = Math.min(1, st.playScale * 1.05);
+    }
+  }
   const now = performance.now();
   st.drawTimes.push(now);
   while (st.drawTimes.length && st.drawTimes[0] < now - 1000) st.drawTimes.shift();
@@ -197,11 +208,13 @@ function fullSize() {
 
 function requestFrame(now) {
   const [w, h] = fullSize();
-  const low = now - st.lastMove < MOVE_REST_MS;
+  const moving = now - st.lastMove < MOVE_REST_MS;
+  const playing = (st.playing || !!st.playback) && $('adaptive').checked;
+  const low = moving || (playing && st.playScale < 1);
   // At rest after moving: the full resolution once more.
   if (!low && st.lastLow) st.dirty = true;
   if (!st.dirty || st.sentId - st.gotId >= 2) return;
-  const s = low ? LOW_SCALE : 1;
+  const s = moving ? Math.min(LOW_SCALE, st.playScale) : playing ? st.playScale : 1;
   st.sentId += 1;
   send({ type: 'frame', id: st.sentId, c2w: c2w(), fov: cam.fov, width: Math.max(1, Math.round(w * s)),
     height: Math.max(1, Math.round(h * s)), time: st.time, lossless: $('lossless').checked });
@@ -315,22 +328,30 @@ function chart(steps) {
 function listen() {
   const canvas = $('view');
   let drag = null;
-  canvas.addEventListener('contextmenu', (e) => e.preventDefault());
-  canvas.addEventListener('pointerdown', (e) => {
+  // Drags start anywhere but on a control (the panels' text does not block the view).
+  const control = (t) => t instanceof Element && !!t.closest('button, input, select, label, a, #side');
+  document.addEventListener('contextmenu', (e) => { if (!control(e.target)) e.preventDefault(); });
+  document.addEventListener('pointerdown', (e) => {
+    if (control(e.target)) return;
+    e.preventDefault();
     try { canvas.setPointerCapture(e.pointerId); } catch (_) { /* a synthetic pointer */ }
     canvas.focus();
     drag = { x: e.clientX, y: e.clientY, pan: e.button === 2 || e.button === 1 || e.shiftKey };
   });
-  canvas.addEventListener('pointermove', (e) => {
+  document.addEventListener('pointermove', (e) => {
     if (!drag) return;
     const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
     drag.x = e.clientX; drag.y = e.clientY;
     if (drag.pan || e.shiftKey) pan(dx, dy); else orbit(dx, dy);
   });
   const end = () => { drag = null; };
-  canvas.addEventListener('pointerup', end);
-  canvas.addEventListener('pointercancel', end);
-  canvas.addEventListener('wheel', (e) => { e.preventDefault(); zoom(e.deltaY * 0.0015); }, { passive: false });
+  document.addEventListener('pointerup', end);
+  document.addEventListener('pointercancel', end);
+  document.addEventListener('wheel', (e) => {
+    if (control(e.target)) return;
+    e.preventDefault();
+    zoom(e.deltaY * 0.0015);
+  }, { passive: false });
   window.addEventListener('keydown', (e) => {
     if (e.target instanceof HTMLInputElement && e.target.type !== 'range') return;
     if (e.target instanceof HTMLSelectElement) return;
@@ -346,7 +367,9 @@ function listen() {
     };
     if (keys[e.key]) { e.preventDefault(); keys[e.key](); }
   });
-  $('time').addEventListener('input', (e) => { setPlaying(false); st.playback = null; setTime(Number(e.target.value), true); });
+  const scrub = (e) => { setPlaying(false); st.playback = null; setTime(Number(e.target.value), true); };
+  $('time').addEventListener('input', scrub);
+  $('time').addEventListener('change', scrub);
   $('play').addEventListener('click', () => setPlaying(!st.playing));
   $('loop').addEventListener('change', (e) => { st.loop = e.target.checked; });
   $('speed').addEventListener('change', (e) => { st.speed = Number(e.target.value); });
