@@ -59,7 +59,10 @@ pub fn view_scene(request: &ViewRequest, listening: impl FnOnce(&str)) -> Result
         None => Vec::new(),
     };
     let showing = Showing {
-        title: request.scene.display().to_string(),
+        title: request.scene.file_name().map_or_else(
+            || request.scene.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        ),
         scene: Arc::new(scene),
         views: Arc::new(views),
         options: RenderOptions::default(),
