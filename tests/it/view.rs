@@ -434,6 +434,50 @@ fn the_page_draws_orbits_scrubs_compares_and_matches_render() {
     let listed = browser.eval("window.splat4dState().views[1].time");
     assert_eq!(view, listed, "the page jumped to the view's time");
     browser.screenshot(&shots.join("splat4d_view_compare.png"));
+
+    // Two keyframes placed on the page, the path played back and saved: the saved file is
+    // what `splat4d video --path` renders, fps × seconds frames.
+    browser.eval(
+        "const b = document.getElementById('key-add'); b.click(); window.splat4d.orbit(150, 0); \
+         window.splat4d.setTime(0.7); b.click(); document.getElementById('path-fps').value = 5; \
+         document.getElementById('path-seconds').value = 1.2; \
+         document.getElementById('path-play').click(); true",
+    );
+    browser.wait_for("!!window.splat4dState().path", "the interpolated path");
+    let file = browser.eval("window.splat4dState().path.file");
+    let keys = browser.eval("window.splat4dState().keyframes");
+    assert_eq!(
+        file["camera_path"].as_array().unwrap().len(),
+        6,
+        "5 fps × 1.2 s"
+    );
+    let first = file["camera_path"][0]["camera_to_world"]
+        .as_array()
+        .unwrap();
+    for (a, b) in first.iter().zip(keys[0]["c2w"].as_array().unwrap()) {
+        let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+        assert!((a - b).abs() < 1e-9, "frame 0 is keyframe 0: {a} vs {b}");
+    }
+    std::fs::write(d.join("page_path.json"), file.to_string()).unwrap();
+    let video = splat4d(
+        &[
+            "video",
+            "--scene",
+            "scene.json",
+            "--path",
+            "page_path.json",
+            "--out",
+            "pv",
+            "--no-gif",
+            "--no-mp4",
+        ],
+        d,
+    );
+    assert!(video.status.success(), "{}", crate::common::stderr(&video));
+    assert!(
+        d.join("pv/page_path/frame_0005.png").exists()
+            && !d.join("pv/page_path/frame_0006.png").exists()
+    );
     println!(
         "screenshots: {}",
         shots.join("splat4d_view_*.png").display()
@@ -606,4 +650,148 @@ fn readme_screenshot() {
     browser.settle();
     std::thread::sleep(Duration::from_millis(1200));
     browser.screenshot(Path::new(&out));
+}
+
+/// Reads the server's messages until a binary one; its header and first part.
+fn next_binary(socket: &mut Socket) -> (Value, Vec<u8>) {
+    loop {
+        match socket.read().unwrap() {
+            tungstenite::Message::Binary(bytes) => {
+                let n = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+                let header: Value = serde_json::from_slice(&bytes[4..4 + n]).unwrap();
+                let size = header["parts"][0]["bytes"].as_u64().unwrap() as usize;
+                return (header, bytes[4 + n..4 + n + size].to_vec());
+            }
+            tungstenite::Message::Text(text) => {
+                let value: Value = serde_json::from_str(text.as_str()).unwrap();
+                assert_ne!(value["type"], "error", "{value}");
+            }
+            _ => {}
+        }
+    }
+}
+
+fn next_text(socket: &mut Socket) -> Value {
+    loop {
+        if let tungstenite::Message::Text(text) = socket.read().unwrap() {
+            return serde_json::from_str(text.as_str()).unwrap();
+        }
+    }
+}
+
+/// Without a browser: the socket's protocol on an alpha scene (4D PLY) and a 3DGS PLY. A
+/// lossless frame is the library's render, bit for bit; malformed messages get errors naming
+/// their field and the server goes on; a path is interpolated as `video --path` does.
+#[test]
+fn the_socket_serves_alpha_and_3dgs_scenes_and_survives_malformed_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = crate::alpha::alpha_scene(bench_scene_in_time(300, 5, 1.0), 5, 3);
+    save_scene(&scene, &d.join("alpha.ply")).unwrap();
+    let exported = splat4d(
+        &[
+            "export-ply",
+            "--scene",
+            "alpha.ply",
+            "--time",
+            "0.5",
+            "--out",
+            "g.ply",
+        ],
+        d,
+    );
+    assert!(
+        exported.status.success(),
+        "{}",
+        crate::common::stderr(&exported)
+    );
+    for name in ["alpha.ply", "g.ply"] {
+        let viewer = Viewer::start(&["--scene", name], d);
+        let ws_url = format!("{}ws", viewer.url.replace("http://", "ws://"));
+        let (mut socket, _) = tungstenite::connect(ws_url.as_str()).unwrap();
+        let hello = next_text(&mut socket);
+        assert_eq!(hello["type"], "hello");
+        assert_eq!(hello["scene"]["blend"], "alpha", "{name}");
+        let c2w = &hello["camera"]["c2w"];
+        let send = |socket: &mut Socket, text: String| {
+            socket.send(tungstenite::Message::text(text)).unwrap();
+        };
+        for (bad, field) in [
+            ("not json".to_owned(), "json"),
+            (r#"{"type":"frame","id":1}"#.to_owned(), "json"),
+            (
+                json!({"type":"frame","id":2,"c2w":[1,2],"fov":40,"width":8,"height":8,"time":0})
+                    .to_string(),
+                "c2w",
+            ),
+            (
+                json!({"type":"frame","id":3,"c2w":c2w,"fov":40,"width":0,"height":8,"time":0})
+                    .to_string(),
+                "width",
+            ),
+            (
+                json!({"type":"path","keyframes":[],"fps":10,"seconds":1,"width":8,"height":8})
+                    .to_string(),
+                "keyframes",
+            ),
+        ] {
+            send(&mut socket, bad);
+            let answer = next_text(&mut socket);
+            assert_eq!(answer["type"], "error", "{answer}");
+            assert!(
+                answer["message"].as_str().unwrap().contains(field),
+                "{answer}"
+            );
+        }
+        send(
+            &mut socket,
+            json!({"type":"frame","id":7,"c2w":c2w,"fov":40,"width":96,"height":64,"time":0.5,"lossless":true}).to_string(),
+        );
+        let (header, png) = next_binary(&mut socket);
+        assert_eq!(
+            (header["id"].as_u64(), header["width"].as_u64()),
+            (Some(7), Some(96))
+        );
+        let drawn = image::load_from_memory(&png).unwrap().to_rgb8();
+        let m: Vec<f64> = c2w
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let camera = splat4d::Camera::from_opengl_camera_to_world(
+            96,
+            64,
+            splat4d::Camera::centred_intrinsics(96, 64, 40f64.to_radians()),
+            std::array::from_fn(|r| std::array::from_fn(|k| m[4 * r + k])),
+        )
+        .unwrap();
+        let loaded = splat4d::io::scene_file::load_scene(&d.join(name)).unwrap();
+        let expected =
+            splat4d::render(&loaded, &camera, 0.5, &splat4d::RenderOptions::default()).unwrap();
+        let bytes: Vec<u8> = expected
+            .pixels
+            .iter()
+            .map(|&c| splat4d::model::image::quantize(c, 255) as u8)
+            .collect();
+        assert_eq!(
+            drawn.as_raw(),
+            &bytes,
+            "{name}: the lossless frame is the render"
+        );
+        // A path through two keyframes: fps × seconds frames from keyframe 0.
+        let key = |x: f64, t: f64| json!({"c2w": [1,0,0,x, 0,1,0,0, 0,0,1,5, 0,0,0,1], "fov": 40, "time": t});
+        send(
+            &mut socket,
+            json!({"type":"path","keyframes":[key(0.0, 0.0), key(1.0, 1.0)],"fps":4,"seconds":1.5,"width":32,"height":24}).to_string(),
+        );
+        let path = next_text(&mut socket);
+        assert_eq!(path["type"], "path", "{path}");
+        let frames = path["frames"].as_array().unwrap();
+        assert_eq!(frames.len(), 6);
+        assert_eq!(frames[0]["c2w"][3], 0.0);
+        assert_eq!(frames[5]["time"], 1.0);
+        assert_eq!(path["file"]["camera_path"].as_array().unwrap().len(), 6);
+        assert_eq!(path["file"]["keyframes"].as_array().unwrap().len(), 2);
+    }
 }

@@ -388,7 +388,8 @@ function listen() {
 // For tests and scripts: the camera and time of the newest request, and controls.
 window.splat4dState = () => ({
   moving: performance.now() - st.lastMove < MOVE_REST_MS || st.playing || !!st.playback,
-  sent: st.sentId, drawn: st.drawnId, dirty: st.dirty, views: st.views,
+  sent: st.sentId, drawn: st.drawnId, dirty: st.dirty, views: st.views, path: st.path,
+  keyframes: st.keyframes,
 });
 window.splat4d = {
   camera: () => ({ c2w: c2w(), fov: cam.fov, time: st.time, width: $('view').width, height: $('view').height }),
