@@ -511,25 +511,38 @@ fn frames_per_second_on_10k_and_100k_kernels() {
             );
         }
         browser.wait_for("window.splat4dFrames > 2", "the first frames");
-        // The page plays on arrival: the time slider sweeps the scene's range. First at the
-        // full size (the resolution's adaptation off), then as the page plays by default.
-        for adapt in [false, true] {
+        // The page plays on arrival: time sweeps the scene's range. Measured at the full
+        // size (the resolution's adaptation off), then as the page plays by default, then
+        // with the slider dragged through the range (an input event every 10 ms).
+        for (mode, adapt, sweep) in [
+            ("playing, full size", false, false),
+            ("playing", true, false),
+            ("slider swept", true, true),
+        ] {
             browser.eval(&format!(
                 "document.getElementById('adaptive').checked = {adapt}; true"
             ));
+            if sweep {
+                browser.eval(
+                    "const s = document.getElementById('time'); let k = 0; \
+                     window.sweep = setInterval(() => { k = (k + 1) % 300; \
+                     s.value = Number(s.min) + (Number(s.max) - Number(s.min)) * k / 300; \
+                     s.dispatchEvent(new Event('input')); }, 10); true",
+                );
+            }
             std::thread::sleep(Duration::from_millis(500));
             let fps = browser.frames_per_second(2.5);
             let last = browser.eval("window.splat4dLast");
             println!(
-                "{kernels} kernels, {}×{} frames{}: {fps:.1} frames/s (server per frame: render {:.1} ms, encode {:.1} ms, send {:.1} ms)",
+                "{kernels} kernels, {mode}, {}×{} frames: {fps:.1} frames/s (server per frame: render {:.1} ms, encode {:.1} ms, send {:.1} ms)",
                 last["width"],
                 last["height"],
-                if adapt { " (adaptive)" } else { "" },
                 last["render_ms"].as_f64().unwrap(),
                 last["encode_ms"].as_f64().unwrap(),
                 last["send_ms"].as_f64().unwrap()
             );
-            if !adapt {
+            if sweep {
+                browser.eval("clearInterval(window.sweep); true");
                 measured.push(fps);
             }
         }

@@ -8,7 +8,7 @@ window.splat4dFrames = 0;
 // Camera: eye and an orthonormal OpenGL basis (x right, y up, z backward), orbiting `centre`.
 const cam = { eye: [0, 0, 5], right: [1, 0, 0], up: [0, 1, 0], back: [0, 0, 1], fov: 40,
   centre: [0, 0, 0], worldUp: [0, 1, 0] };
-const st = { t0: 0, t1: 0, time: 0, playing: false, loop: true, speed: 1, lastMove: -1e9,
+const st = { t0: 0, t1: 0, time: 0, playing: false, loop: true, speed: 1, lastMove: -1e9, lastScrub: -1e9,
   sentId: 0, gotId: 0, drawnId: 0, lastLow: false, dirty: true, views: [], live: false,
   version: 0, keyframes: [], path: null, pathAction: null, playback: null, kernels: 0,
   maxSide: 4096, drawTimes: [], playScale: 1 };
@@ -171,7 +171,7 @@ function draw(header, bitmap) {
   window.splat4dFrames += 1;
   window.splat4dLast = header;
   // While time plays, the resolution follows the server's cost per frame.
-  if ((st.playing || st.playback) && $('adaptive').checked) {
+  if (animating(performance.now()) && $('adaptive').checked) {
     const cost = header.render_ms + header.encode_ms;
     const full = canvas.width * canvas.height;
     const share = (header.width * header.height) / full;
@@ -206,10 +206,15 @@ function fullSize() {
   return [w, h];
 }
 
+// Time moves: playing, a path playing back, or the slider being dragged.
+function animating(now) {
+  return st.playing || !!st.playback || now - st.lastScrub < MOVE_REST_MS;
+}
+
 function requestFrame(now) {
   const [w, h] = fullSize();
   const moving = now - st.lastMove < MOVE_REST_MS;
-  const playing = (st.playing || !!st.playback) && $('adaptive').checked;
+  const playing = animating(now) && $('adaptive').checked;
   const low = moving || (playing && st.playScale < 1);
   // At rest after moving: the full resolution once more.
   if (!low && st.lastLow) st.dirty = true;
@@ -367,7 +372,12 @@ function listen() {
     };
     if (keys[e.key]) { e.preventDefault(); keys[e.key](); }
   });
-  const scrub = (e) => { setPlaying(false); st.playback = null; setTime(Number(e.target.value), true); };
+  const scrub = (e) => {
+    setPlaying(false);
+    st.playback = null;
+    st.lastScrub = performance.now();
+    setTime(Number(e.target.value), true);
+  };
   $('time').addEventListener('input', scrub);
   $('time').addEventListener('change', scrub);
   $('play').addEventListener('click', () => setPlaying(!st.playing));
@@ -387,7 +397,7 @@ function listen() {
 
 // For tests and scripts: the camera and time of the newest request, and controls.
 window.splat4dState = () => ({
-  moving: performance.now() - st.lastMove < MOVE_REST_MS || st.playing || !!st.playback,
+  moving: performance.now() - st.lastMove < MOVE_REST_MS || animating(performance.now()),
   sent: st.sentId, drawn: st.drawnId, dirty: st.dirty, views: st.views, path: st.path,
   keyframes: st.keyframes,
 });
