@@ -52,7 +52,9 @@ pub struct VideoArgs {
     /// (a scene fitted from a dataset carries its cameras' mean up), else `y`.
     #[arg(long, allow_hyphen_values = true)]
     up: Option<Up>,
-    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
+    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`, or nerfstudio's
+    /// `camera_path.json` (its cameras, or `fps × seconds` frames through its keyframes;
+    /// perspective cameras only).
     #[arg(long)]
     path: Option<PathBuf>,
     /// Output folder.
