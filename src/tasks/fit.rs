@@ -453,9 +453,13 @@ impl FitViewer {
             .chain(&dataset.test)
             .cloned()
             .collect();
+        // Framed on what the cameras look at, over the data's times (as the fitted scene).
+        let mut start = scene.clone();
+        start.framing = data_framing(dataset);
+        start.time_range = data_time_range(dataset);
         let showing = Showing {
             title: "fit".into(),
-            scene: Arc::new(scene.clone()),
+            scene: Arc::new(start),
             views: Arc::new(views),
             options: *render,
             live: Some(Arc::clone(&live)),

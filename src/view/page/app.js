@@ -303,8 +303,9 @@ function onLive(m) {
     ? `step ${last.step} / ${m.steps}${m.done ? ' (done)' : ''} · ${last.kernels} kernels · loss ${last.loss.toExponential(3)}`
       + (psnr ? ` · held-out ${psnr.heldout_psnr.toFixed(2)} dB` : '')
     : 'waiting for the first step…';
-  chart(m.steps);
+  chart(last ? last.step : 1);
 }
+// The loss (log) and held-out PSNR over the steps so far, each scaled to its own range.
 function chart(steps) {
   const canvas = $('chart');
   const ctx = canvas.getContext('2d');
