@@ -99,26 +99,38 @@ impl Server {
     }
 }
 
-/// The `hello` message: the scene's facts, a framing camera, the dataset's views.
-fn hello(showing: &Showing) -> serde_json::Value {
+/// Vertical field of view of the first view, degrees.
+const START_FOV: f64 = 40.0;
+
+/// The first view: the framing orbit's first camera ([`framing_circle`]) at the start of the
+/// time range, as an OpenGL camera-to-world matrix, and the framing circle.
+fn start_view(showing: &Showing) -> (Option<[[f64; 4]; 4]>, crate::scenes::paths::Circle) {
     let scene = &showing.scene;
     let [t0, t1] = time_range(scene);
-    let up = scene.up.unwrap_or_default();
     let lens = Lens {
         width: 512,
         height: 512,
-        fov_y_degrees: 40.0,
+        fov_y_degrees: START_FOV,
     };
     let circle = framing_circle(
         scene,
         &[t0, 0.5 * (t0 + t1), t1],
         showing.options.cutoff,
         &lens,
-        up,
+        scene.up.unwrap_or_default(),
     );
-    let camera = orbit(&circle, &lens, t0)
+    let pose = orbit(&circle, &lens, t0)
         .ok()
-        .and_then(|frames| frames.first().map(|f| f.camera));
+        .and_then(|frames| frames.first().map(|f| f.camera.opengl_camera_to_world()));
+    (pose, circle)
+}
+
+/// The `hello` message: the scene's facts, a framing camera, the dataset's views.
+fn hello(showing: &Showing) -> serde_json::Value {
+    let scene = &showing.scene;
+    let [t0, t1] = time_range(scene);
+    let up = scene.up.unwrap_or_default();
+    let (pose, circle) = start_view(showing);
     let flat = |m: [[f64; 4]; 4]| m.iter().flatten().copied().collect::<Vec<f64>>();
     let fov =
         |c: &crate::model::Camera| (2.0 * (0.5 * f64::from(c.height) / c.fy).atan()).to_degrees();
@@ -145,7 +157,7 @@ fn hello(showing: &Showing) -> serde_json::Value {
             "distance": circle.radius,
             "up": up.basis().0,
         },
-        "camera": camera.map(|c| serde_json::json!({"c2w": flat(c.opengl_camera_to_world()), "fov": lens.fov_y_degrees})),
+        "camera": pose.map(|m| serde_json::json!({"c2w": flat(m), "fov": START_FOV})),
         "views": views,
         "live": showing.live.is_some(),
         "max_side": crate::view::MAX_SIDE,
@@ -249,10 +261,56 @@ impl Page {
             );
         } else if path == "/ws" && upgrade {
             self.websocket(head, stream);
+        } else if path.starts_with("/first.jpg") {
+            match self.first_frame(&path) {
+                Some(jpeg) => respond(&mut stream, "200 OK", "image/jpeg", &jpeg),
+                None => respond(
+                    &mut stream,
+                    "503 Service Unavailable",
+                    "text/plain",
+                    b"no frame",
+                ),
+            }
         } else if let Some((kind, body)) = asset(&path) {
             respond(&mut stream, "200 OK", kind, body.as_bytes());
         } else {
             respond(&mut stream, "404 Not Found", "text/plain", b"not found");
+        }
+    }
+
+    /// The first frame as a JPEG, `GET /first.jpg?width=W&height=H` (sides clamped to
+    /// [`crate::view::MAX_SIDE`]): the start view at the start time. The page loads it as an
+    /// image, so the page's load (and a screenshot taken then) waits for a drawn scene.
+    fn first_frame(&self, path: &str) -> Option<Vec<u8>> {
+        let query = path.split_once('?').map_or("", |(_, q)| q);
+        let side = |key: &str, default: u32| {
+            query
+                .split('&')
+                .filter_map(|pair| pair.split_once('='))
+                .find(|(k, _)| *k == key)
+                .and_then(|(_, v)| v.parse::<u32>().ok())
+                .unwrap_or(default)
+                .clamp(1, crate::view::MAX_SIDE)
+        };
+        let (width, height) = (side("width", 800), side("height", 600));
+        let camera = crate::model::Camera::from_opengl_camera_to_world(
+            width,
+            height,
+            crate::model::Camera::centred_intrinsics(width, height, START_FOV.to_radians()),
+            start_view(&self.showing).0?,
+        )
+        .ok()?;
+        let (reply, frames) = channel();
+        let job = Job::Frame {
+            id: 0,
+            camera,
+            time: time_range(&self.showing.scene)[0],
+            lossless: false,
+        };
+        self.queue.submit(2 * self.id, job, reply);
+        match frames.recv_timeout(Duration::from_secs(60)).ok()? {
+            Output::Frame { image, .. } => Some(image.encode(false).0),
+            _ => None,
         }
     }
 

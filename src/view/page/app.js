@@ -123,6 +123,7 @@ function onHello(m) {
   setTime(st.t0);
   st.live = m.live;
   st.views = m.views;
+  st.ready = true;
   if (m.views.length) {
     $('views-section').hidden = false;
     for (const v of m.views) {
@@ -148,7 +149,7 @@ function onBinary(buffer) {
   }
   if (header.type === 'frame') {
     st.gotId = Math.max(st.gotId, header.id);
-    createImageBitmap(parts.frame).then((bitmap) => draw(header, bitmap));
+    createImageBitmap(parts.frame).then((bitmap) => { draw(header, bitmap); tick(); });
   } else if (header.type === 'compare') {
     for (const name of ['render', 'truth', 'error']) {
       const img = $(`cmp-${name}`);
@@ -163,6 +164,8 @@ function onBinary(buffer) {
 function draw(header, bitmap) {
   if (header.id < st.drawnId) { bitmap.close(); return; }
   st.drawnId = header.id;
+  const first = $('first');
+  if (first) first.remove();
   const canvas = $('view');
   const ctx = canvas.getContext('2d');
   ctx.imageSmoothingEnabled = true;
@@ -212,6 +215,9 @@ function animating(now) {
 }
 
 function requestFrame(now) {
+  // Nothing is asked before the scene is known (a request sent into a closed socket would
+  // count as in flight for ever).
+  if (!st.ready || !ws || ws.readyState !== 1) return;
   const [w, h] = fullSize();
   const moving = now - st.lastMove < MOVE_REST_MS;
   const playing = animating(now) && $('adaptive').checked;
@@ -228,8 +234,9 @@ function requestFrame(now) {
 }
 
 let lastTick = performance.now();
-function tick(now) {
-  const dt = Math.min(0.1, (now - lastTick) / 1000);
+function tick() {
+  const now = performance.now();
+  const dt = Math.max(0, Math.min(0.1, (now - lastTick) / 1000));
   lastTick = now;
   if (st.playback) stepPlayback(now);
   else if (st.playing) {
@@ -241,8 +248,10 @@ function tick(now) {
     setTime(t);
   }
   requestFrame(now);
-  requestAnimationFrame(tick);
 }
+// Animation frames drive the page; a timer too, where they are throttled (hidden tabs,
+// screenshot tools).
+function animate() { tick(); requestAnimationFrame(animate); }
 
 // --- dataset views -------------------------------------------------------------------------
 function chooseView(index) {
@@ -407,6 +416,28 @@ window.splat4d = {
   setPlaying, setTime, chooseView, orbit,
 };
 
+// The first frame comes as an image the page's load waits for (so a screenshot taken at
+// load shows the scene); frames over the socket replace it.
+function firstFrame() {
+  const canvas = $('view');
+  const [w, h] = [Math.max(1, canvas.clientWidth), Math.max(1, canvas.clientHeight)];
+  const img = new Image();
+  img.id = 'first';
+  img.alt = '';
+  img.onload = () => {
+    if (st.drawnId > 0) return;
+    canvas.width = w; canvas.height = h;
+    canvas.getContext('2d').drawImage(img, 0, 0, w, h);
+    window.splat4dFrames += 1;
+  };
+  img.src = `/first.jpg?width=${w}&height=${h}`;
+  // Shown over the canvas until the socket's first frame (an image is on screen as soon as
+  // it loads; a canvas may be presented a frame later).
+  canvas.after(img);
+}
+
 listen();
+firstFrame();
 connect();
-requestAnimationFrame(tick);
+requestAnimationFrame(animate);
+setInterval(() => { if (performance.now() - lastTick > 30) tick(); }, 15);
