@@ -140,7 +140,15 @@ impl Browser {
         };
         // Keep draining the browser's log so it never blocks on a full pipe.
         std::thread::spawn(move || for _ in lines {});
-        let (socket, _) = tungstenite::connect(endpoint.as_str()).unwrap();
+        let socket = match tungstenite::connect(endpoint.as_str()) {
+            Ok((socket, _)) => socket,
+            Err(e) => {
+                // Never leave a browser behind.
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("cannot reach the browser's DevTools socket: {e}");
+            }
+        };
         let mut browser = Browser {
             child,
             socket,
