@@ -14,6 +14,7 @@
 //! | [`scene_files::export_ply`] | `export-ply` |
 //! | [`volume::write_volumes`] | `volume` |
 //! | [`video::write_videos`] | `video` |
+//! | [`view::view_scene`] | `view` |
 //! | [`bench::bench`] | `bench` |
 //! | [`report::write_report`] | `report`, and `splat4d` alone |
 //!
@@ -26,6 +27,7 @@ pub mod render;
 pub mod report;
 pub mod scene_files;
 pub mod video;
+pub mod view;
 pub mod volume;
 
 use crate::model::{Error, Result};
