@@ -27,8 +27,10 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            let given = cli::flags::given_flags(std::env::args());
-            let error = cli::flags::name_given_flags(error, &given);
+            let args: Vec<String> = std::env::args().collect();
+            let given = cli::flags::given_flags(args.iter().cloned());
+            let known = cli::flags::command_flags(&args);
+            let error = cli::flags::name_flags(error, &given, &known);
             eprintln!("error: {error}");
             ExitCode::from(exit_code(error.kind()))
         }

@@ -127,6 +127,7 @@ impl Progress for Bars {
     }
 
     fn note(&mut self, text: &str) {
+        let text = crate::cli::flags::name_advice(text);
         match &self.bar {
             Some(bar) => bar.println(format!("note: {text}")),
             None => eprintln!("note: {text}"),

@@ -19,7 +19,7 @@ impl SpaceTimeBox {
         for (lo, hi) in sides {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi && (hi - lo).is_finite()) {
                 return Err(Error::usage(format!(
-                    "the space-time box side {lo}..{hi} is not finite and ordered (--box, --time-range)"
+                    "the space-time box side {lo}..{hi} is not finite and ordered (`box`, `time_range`)"
                 )));
             }
         }
@@ -62,7 +62,7 @@ pub fn box_from_cameras(cameras: &[Camera], time: [f64; 2]) -> Result<SpaceTimeB
     let det = normal.determinant();
     if !det.is_finite() || det.abs() <= 1e-9 {
         return Err(Error::Usage(
-            "cannot infer a box from the cameras (fewer than two distinct viewing directions): pass --box".into(),
+            "cannot infer a box from the cameras (fewer than two distinct viewing directions): give `box`".into(),
         ));
     }
     let target = normal.inverse() * rhs;

@@ -13,8 +13,8 @@
 //!   compact models in the report) and `paper` otherwise.
 //! - **splitting**: densified kernels are split only when the scales are fixed (the fit
 //!   cannot shrink them), above an eighth of the largest initial scale; otherwise cloned.
-//! - **numbers**: every default (steps, rates, batch, the adaptive rounds) is a constant
-//!   here; `FitOptions::default` and `AdaptiveOptions::default` read them.
+//! - **numbers**: every default (steps, rates, batch, the adaptive rounds, the alpha fit)
+//!   is a constant of [`crate::fit::defaults`], re-exported here.
 //! - **background** `b` (SPEC §5): a fitted parameter group (its own learning rate,
 //!   `freeze_background` keeps it), starting from the one given, else from the data: the
 //!   median of the training images' border pixels ([`border_median`]). A start from a
@@ -24,57 +24,11 @@
 
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
-use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+pub use crate::fit::defaults::*;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::train::{FitMode, FitOptions};
 use crate::model::{Camera, Error, Result, Scene, View};
 use crate::render::RenderOptions;
-
-/// Adam steps of a fit (`splat4d fit` without `--steps`).
-pub const DEFAULT_STEPS: usize = 4000;
-/// Kernels an automatic start spreads at random in the box: several, so that separate
-/// objects each draw one (a single start at the centre converges on the brightest object
-/// and can leave the others unexplained: measured on the three-blob scene, 4 of 4 camera
-/// sets reach 38.4–39.3 dB with 4 starts; with 1, one set stays at 33 dB with 4 kernels).
-pub const DEFAULT_START_KERNELS: usize = 4;
-
-/// Views per step.
-pub const DEFAULT_BATCH_SIZE: usize = 8;
-/// Learning rates at the last step as a fraction of the first (exponential decay).
-pub const DEFAULT_FINAL_RATE_FACTOR: f64 = 0.05;
-/// Held-out evaluation period, steps.
-pub const DEFAULT_EVAL_EVERY: usize = 50;
-/// Amplitude of every channel of a random or automatic start when the data cannot say
-/// (no pixel differs from the background): the report's fixed-count fits use it too.
-pub const DEFAULT_INIT_AMPLITUDE: f64 = 0.1;
-/// A pixel whose colour differs from the background by more than this in some channel
-/// counts as foreground when the start's amplitude is taken from the data.
-pub const FOREGROUND_THRESHOLD: f32 = 1.0 / 255.0;
-
-/// Initial learning rates of every group (a mode then zeroes the groups it does not fit).
-pub const DEFAULT_RATES: LearningRates = LearningRates {
-    mean: 2e-3,
-    time: 2e-3,
-    amplitude: 1e-2,
-    velocity: 2e-3,
-    scale: 1e-2,
-    background: 2e-3,
-};
-
-/// The adaptive rounds (densify, prune, merge; [`crate::fit::adaptive`]).
-pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
-    every: 50,
-    from: 0.3,
-    until: 0.7,
-    gradient_threshold: 1e-5,
-    min_improvement: 0.05,
-    prune_below: 2.0 / 255.0,
-    max_growth: 0.5,
-    max_kernels: 100_000,
-    merge_tolerance: 0.1,
-    min_scale: f64::INFINITY,
-    min_time_scale: f64::INFINITY,
-};
 
 /// Where a fit starts.
 #[derive(Clone, Debug, PartialEq)]
@@ -88,12 +42,6 @@ pub enum Init {
     /// A given scene.
     Scene(Scene),
 }
-
-/// Largest learning rate a fit accepts.
-pub const MAX_RATE: f64 = 1e3;
-
-/// Largest background channel (absolute) a fit accepts.
-pub const MAX_BACKGROUND: f64 = 1e6;
 
 impl Init {
     /// Parses `auto` or `random:N`; anything else is a scene file name, returned as `None`
@@ -109,18 +57,17 @@ impl Init {
                 .filter(|&n| (1..=MAX_START_KERNELS).contains(&n))
                 .map(|n| Some(Init::Random(n)))
                 .ok_or_else(|| {
-                    Error::usage(format!(
-                        "--init {text}: N must be a whole number from 1 to {MAX_START_KERNELS}"
-                    ))
+                    Error::setting(
+                        &["init"],
+                        format!(
+                            "`init` {text}: N must be a whole number from 1 to {MAX_START_KERNELS}"
+                        ),
+                    )
                 }),
             None => Ok(None),
         }
     }
 }
-
-/// Most kernels a fit may start from (`random:N`, `--start-kernels`): a bound checked before
-/// anything is allocated for them.
-pub const MAX_START_KERNELS: usize = 1_000_000;
 
 /// Everything a user can choose about a fit, with its defaults.
 #[derive(Clone, Debug, PartialEq)]
@@ -231,84 +178,120 @@ impl FitPlan {
     /// Checks the values no type rules out: rates ≥ 0, fractions in range, a finite box.
     pub fn validate(&self) -> Result<()> {
         self.render.validate()?;
+        self.validate_rates()?;
+        self.validate_start()
+    }
+
+    /// Rates and the adaptive rounds' thresholds: finite, ≥ 0, rates at most [`MAX_RATE`];
+    /// the rounds' window inside the run; a final rate factor > 0.
+    fn validate_rates(&self) -> Result<()> {
         let r = &self.rates;
-        for (flag, value) in [
-            ("--lr-mean", r.mean),
-            ("--lr-time", r.time),
-            ("--lr-amplitude", r.amplitude),
-            ("--lr-velocity", r.velocity),
-            ("--lr-scale", r.scale),
-            ("--lr-background", r.background),
-            ("--densify-threshold", self.rounds.gradient_threshold),
-            ("--merge-tolerance", self.rounds.merge_tolerance),
-            ("--max-growth", self.rounds.max_growth),
-            ("--prune-below", self.rounds.prune_below),
-            ("--min-scale", self.min_scale.unwrap_or(0.0)),
+        for (field, value) in [
+            ("lr_mean", r.mean),
+            ("lr_time", r.time),
+            ("lr_amplitude", r.amplitude),
+            ("lr_velocity", r.velocity),
+            ("lr_scale", r.scale),
+            ("lr_background", r.background),
+            ("densify_threshold", self.rounds.gradient_threshold),
+            ("merge_tolerance", self.rounds.merge_tolerance),
+            ("max_growth", self.rounds.max_growth),
+            ("prune_below", self.rounds.prune_below),
+            ("min_scale", self.min_scale.unwrap_or(0.0)),
         ] {
             if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::usage(format!(
-                    "{flag} {value} must be finite and ≥ 0"
-                )));
+                return Err(Error::setting(
+                    &[field],
+                    format!("`{field}` {value} must be finite and ≥ 0"),
+                ));
             }
             // Adam moves a parameter by about its rate each step: beyond this every
             // parameter leaves the finite numbers within a few steps.
-            if flag.starts_with("--lr-") && value > MAX_RATE {
-                return Err(Error::usage(format!(
-                    "{flag} {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step; the defaults are around 1e-2)"
-                )));
+            if field.starts_with("lr_") && value > MAX_RATE {
+                return Err(Error::setting(
+                    &[field],
+                    format!(
+                        "`{field}` {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step; the defaults are around 1e-2)"
+                    ),
+                ));
             }
         }
+        for (field, value) in [
+            ("densify_from", self.rounds.from),
+            ("densify_until", self.rounds.until),
+        ] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err(Error::setting(
+                    &[field],
+                    format!("`{field}` {value} must be in [0, 1]"),
+                ));
+            }
+        }
+        let f = self.final_rate_factor;
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::setting(
+                &["lr_final"],
+                format!("`lr_final` {f} must be finite and > 0"),
+            ));
+        }
+        if !self.rounds.min_improvement.is_finite() {
+            return Err(Error::setting(
+                &["min_improvement"],
+                "`min_improvement` must be finite",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The start: background, kernel count, amplitude, batch, box and scales in range.
+    fn validate_start(&self) -> Result<()> {
         if let Some(background) = self.background
             && background
                 .iter()
                 .any(|b| !b.is_finite() || b.abs() > MAX_BACKGROUND)
         {
             let [r, g, b] = background;
-            return Err(Error::usage(format!(
-                "--background {r},{g},{b}: each channel must be finite and within ±{MAX_BACKGROUND} (images hold linear values around 0..1)"
-            )));
-        }
-        for (flag, value) in [
-            ("--densify-from", self.rounds.from),
-            ("--densify-until", self.rounds.until),
-        ] {
-            if !(0.0..=1.0).contains(&value) {
-                return Err(Error::usage(format!("{flag} {value} must be in [0, 1]")));
-            }
+            return Err(Error::setting(
+                &["background"],
+                format!(
+                    "`background` {r},{g},{b}: each channel must be finite and within ±{MAX_BACKGROUND} (images hold linear values around 0..1)"
+                ),
+            ));
         }
         if self.start_kernels > MAX_START_KERNELS {
-            return Err(Error::usage(format!(
-                "--start-kernels {} is more than {MAX_START_KERNELS}",
-                self.start_kernels
-            )));
-        }
-        let f = self.final_rate_factor;
-        if !(f.is_finite() && f > 0.0) {
-            return Err(Error::usage(format!(
-                "--lr-final {f} must be finite and > 0"
-            )));
-        }
-        if !self.rounds.min_improvement.is_finite() {
-            return Err(Error::usage("--min-improvement must be finite"));
+            return Err(Error::setting(
+                &["start_kernels"],
+                format!(
+                    "`start_kernels` {} is more than {MAX_START_KERNELS}",
+                    self.start_kernels
+                ),
+            ));
         }
         if let Some(a) = self.init_amplitude
             && !a.is_finite()
         {
-            return Err(Error::usage(format!("--init-amplitude {a} must be finite")));
+            return Err(Error::setting(
+                &["init_amplitude"],
+                format!("`init_amplitude` {a} must be finite"),
+            ));
         }
         if self.batch_size == 0 {
-            return Err(Error::usage("--batch must be at least 1"));
+            return Err(Error::setting(&["batch"], "`batch` must be at least 1"));
         }
         if let Some([x0, y0, z0, x1, y1, z1]) = self.bounds
             && !(x0 < x1 && y0 < y1 && z0 < z1)
         {
-            return Err(Error::usage("--box: need x0 < x1, y0 < y1, z0 < z1"));
+            return Err(Error::setting(
+                &["box"],
+                "`box`: need x0 < x1, y0 < y1, z0 < z1",
+            ));
         }
         if let Some(scale) = self.init_scale
             && scale.iter().any(|&s| !(s > 0.0 && s.is_finite()))
         {
-            return Err(Error::usage(
-                "--init-scale: every scale must be finite and > 0",
+            return Err(Error::setting(
+                &["init_scale"],
+                "`init_scale`: every scale must be finite and > 0",
             ));
         }
         if let Some([x0, y0, z0, x1, y1, z1]) = self.bounds {
@@ -425,7 +408,7 @@ impl FitPlan {
         let [t0, t1] = time;
         if self.time_range.is_none() && !(t1 - t0).is_finite() {
             return Err(Error::usage(format!(
-                "the training frames' times span {t0}..{t1}, wider than the finite numbers: check the `time` field of the frames in the transforms files (or give --time-range)"
+                "the training frames' times span {t0}..{t1}, wider than the finite numbers: check the `time` field of the frames in the transforms files (or give `time_range`)"
             )));
         }
         match self.bounds {
@@ -443,7 +426,7 @@ impl FitPlan {
                 });
                 if !finite {
                     return Err(Error::usage(format!(
-                        "the box the cameras look at comes out as {:?}..{:?}, not a finite box with sides > 0: check the training frames' focal lengths (fl_x, fl_y) and positions (transform_matrix), or give --box",
+                        "the box the cameras look at comes out as {:?}..{:?}, not a finite box with sides > 0: check the training frames' focal lengths (fl_x, fl_y) and positions (transform_matrix), or give `box`",
                         inferred.min, inferred.max
                     )));
                 }
@@ -481,10 +464,6 @@ pub fn border_median(views: &[View]) -> [f64; 3] {
         f64::from(values[values.len() / 2])
     })
 }
-
-/// A velocity kernel whose `st` exceeds this many training-time spacings is split in time
-/// by the adaptive rounds ([`crate::fit::adaptive`]).
-pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
 
 /// The median gap between consecutive distinct training times; `∞` with fewer than two.
 #[must_use]
@@ -524,50 +503,6 @@ pub fn start_amplitude(views: &[View], background: [f64; 3]) -> [f64; 3] {
         return [DEFAULT_INIT_AMPLITUDE; 3];
     }
     sum.map(|s| s / count as f64)
-}
-
-/// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
-/// papers' rates and density rules, scaled to runs of a few thousand steps.
-pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
-    steps: 3000,
-    batch_size: 4,
-    rates: AlphaRates {
-        mean: 1.6e-4,
-        time: 1.6e-4,
-        velocity: 1.6e-4,
-        scale: 5e-3,
-        rotation: 1e-3,
-        opacity: 5e-2,
-        colour: 2.5e-3,
-        sh: 5e-4,
-    },
-    final_rate_factor: 0.01,
-    eval_every: DEFAULT_EVAL_EVERY,
-    seed: 0,
-    render: RenderOptions {
-        dilation: crate::render::DEFAULT_DILATION,
-        cutoff: crate::render::DEFAULT_CUTOFF,
-        exp: crate::raster::ExpMode::Poly,
-    },
-    start_kernels: 2000,
-    start_opacity: 0.1,
-    start_time_scale: 0.25,
-    sh_count: 3,
-    sh_raise_every: 1000,
-    max_kernels: 200_000,
-    densify_every: 100,
-    densify_from: 0.05,
-    densify_until: 0.6,
-    densify_fraction: 0.05,
-    densify_threshold: 0.0,
-    percent_dense: 0.01,
-    prune_opacity: 0.05,
-};
-
-impl Default for AlphaFitOptions {
-    fn default() -> Self {
-        DEFAULT_ALPHA
-    }
 }
 
 #[cfg(test)]

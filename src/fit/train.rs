@@ -14,7 +14,6 @@ use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
 use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
 use crate::fit::loss::{psnr, view_mse, view_mse_with_gradient};
-use crate::fit::plan;
 use crate::model::View;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
@@ -105,27 +104,6 @@ pub struct FitOptions {
     pub adaptive: Option<AdaptiveOptions>,
 }
 
-/// The defaults of [`crate::fit::plan`] with the paper's mode and a fixed count.
-impl Default for FitOptions {
-    fn default() -> Self {
-        FitOptions {
-            steps: plan::DEFAULT_STEPS,
-            batch_size: plan::DEFAULT_BATCH_SIZE,
-            // The paper fits no background.
-            learning_rates: LearningRates {
-                background: 0.0,
-                ..FitMode::Paper.learning_rates(plan::DEFAULT_RATES)
-            },
-            final_rate_factor: plan::DEFAULT_FINAL_RATE_FACTOR,
-            adam: AdamConfig::default(),
-            eval_every: plan::DEFAULT_EVAL_EVERY,
-            seed: 0,
-            render: RenderOptions::default(),
-            adaptive: None,
-        }
-    }
-}
-
 /// One step of the run.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct StepRecord {
@@ -203,14 +181,14 @@ pub fn heldout_psnr_at(
 }
 
 /// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
-/// step. Returns every step's record. With `options.adaptive` the scene's kernels change
+/// step with its record and the scene. Returns every step's record. With `options.adaptive` the scene's kernels change
 /// between steps (densify and prune); otherwise only their parameters do.
 pub fn fit(
     scene: &mut Scene,
     train: &[View],
     heldout: &[View],
     options: &FitOptions,
-    mut on_step: impl FnMut(&StepRecord),
+    mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
     if train.is_empty() {
         return Err(Error::Usage("no training views".into()));
@@ -302,28 +280,29 @@ pub fn fit(
             heldout_psnr,
             kernels: scene.len(),
         };
-        on_step(&record);
+        on_step(&record, scene);
         records.push(record);
     }
     Ok(records)
 }
 
-/// The first parameter of `scene` that left the finite numbers (or a scale that is no longer
-/// > 0), named by its group and the flag of that group's learning rate.
+/// The first parameter of `scene` that left the finite numbers (or a scale that is no
+/// longer positive), named by its group and the field of that group's learning rate
+/// (`` `lr_mean` ``, which the command line shows as its flag).
 #[must_use]
 pub fn non_finite_parameter(scene: &Scene) -> Option<String> {
     let bad = |values: &[f64]| values.iter().any(|v| !v.is_finite());
     for i in 0..scene.len() {
         let found = if bad(&scene.means[i][..3]) {
-            Some(("mean", "--lr-mean"))
+            Some(("mean", "`lr_mean`"))
         } else if bad(&scene.means[i][3..]) {
-            Some(("time", "--lr-time"))
+            Some(("time", "`lr_time`"))
         } else if bad(&scene.scales[i]) || scene.scales[i].iter().any(|&s| s <= 0.0) {
-            Some(("scale", "--lr-scale"))
+            Some(("scale", "`lr_scale`"))
         } else if bad(&scene.amplitudes[i]) {
-            Some(("amplitude", "--lr-amplitude"))
+            Some(("amplitude", "`lr_amplitude`"))
         } else if bad(&scene.velocities[i]) {
-            Some(("velocity", "--lr-velocity"))
+            Some(("velocity", "`lr_velocity`"))
         } else if bad(&scene.rotations[i]) {
             Some(("rotation", "none: rotations come from the start"))
         } else {
@@ -336,7 +315,7 @@ pub fn non_finite_parameter(scene: &Scene) -> Option<String> {
         }
     }
     bad(&scene.background)
-        .then(|| "the background is no longer finite (its rate: --lr-background)".to_string())
+        .then(|| "the background is no longer finite (its rate: `lr_background`)".to_string())
 }
 
 #[cfg(test)]
@@ -351,18 +330,18 @@ mod tests {
         scene.amplitudes[1][2] = f64::NAN;
         let why = non_finite_parameter(&scene).unwrap();
         assert!(
-            why.contains("kernel 1") && why.contains("--lr-amplitude"),
+            why.contains("kernel 1") && why.contains("`lr_amplitude`"),
             "{why}"
         );
         scene.amplitudes[1][2] = 0.5;
         scene.scales[0][3] = 0.0;
-        assert!(non_finite_parameter(&scene).unwrap().contains("--lr-scale"));
+        assert!(non_finite_parameter(&scene).unwrap().contains("`lr_scale`"));
         scene.scales[0][3] = 0.1;
         scene.background[0] = f64::INFINITY;
         assert!(
             non_finite_parameter(&scene)
                 .unwrap()
-                .contains("--lr-background")
+                .contains("`lr_background`")
         );
     }
 }

@@ -492,10 +492,13 @@ fn prepare_photo(
         });
     }
     if size.0 < n || size.1 < n {
-        return Err(Error::usage(format!(
-            "{origin}: {item}: {}×{} is smaller than --downscale {n}",
-            size.0, size.1
-        )));
+        return Err(Error::setting(
+            &["downscale"],
+            format!(
+                "{origin}: {item}: {}×{} is smaller than `downscale` {n}",
+                size.0, size.1
+            ),
+        ));
     }
     // No second whole-image copy when nothing is downscaled: frames naming one file share
     // its decode.
@@ -603,7 +606,7 @@ fn missing_frames(
     let frames = if count == 1 { "frame" } else { "frames" };
     if strict || loaded == 0 {
         let why = if strict {
-            "--strict refuses them"
+            "`strict` refuses them"
         } else {
             "no frame has one"
         };
@@ -658,9 +661,10 @@ struct FileViews {
 /// Checks the `downscale` option.
 fn check_downscale(n: u32) -> Result<()> {
     if !(1..=MAX_DOWNSCALE).contains(&n) {
-        return Err(Error::usage(format!(
-            "--downscale {n} must be between 1 and {MAX_DOWNSCALE}"
-        )));
+        return Err(Error::setting(
+            &["downscale"],
+            format!("`downscale` {n} must be between 1 and {MAX_DOWNSCALE}"),
+        ));
     }
     Ok(())
 }
@@ -695,7 +699,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 &item,
                 "file_path",
                 format!(
-                    "{} lies outside the dataset's folder (by its real path, links followed); pass --allow-outside-images to read it",
+                    "{} lies outside the dataset's folder (by its real path, links followed); pass `allow_outside_images` to read it",
                     frame.file_path
                 ),
             ));

@@ -430,9 +430,13 @@ fn fit_adaptive(
         mut scene, options, ..
     } = plan.prepare(Init::Auto, &dataset.train)?;
     let start = Instant::now();
-    fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
-        progress.tick()
-    })?;
+    fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| progress.tick(),
+    )?;
     Ok((scene, start.elapsed().as_secs_f64()))
 }
 
@@ -496,7 +500,7 @@ fn synthetic_model_size(
         &dataset.train,
         &dataset.val,
         &fit_options(config.adaptive_steps, config.seed, model_rates()),
-        |_| progress.tick(),
+        |_, _| progress.tick(),
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
     let mut fits = vec![(Method::FixedCount, FitMode::Paper, fixed, fixed_seconds)];
@@ -525,9 +529,13 @@ fn fit_4d(
     )?;
     let start = Instant::now();
     let options = fit_options(config.model_steps, config.seed, model_rates());
-    let log = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
-        progress.tick()
-    })?;
+    let log = fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| progress.tick(),
+    )?;
     Ok((scene, log, start.elapsed().as_secs_f64()))
 }
 
@@ -661,7 +669,7 @@ fn fit_frame_baselines(
             &views,
             &[],
             &fit_options(config.frame_steps, config.seed, frame_rates()),
-            |_| progress.tick(),
+            |_, _| progress.tick(),
         )?;
         scenes.push(scene);
     }

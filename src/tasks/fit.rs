@@ -2,19 +2,27 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use crate::fit::alpha::{
-    AlphaFitOptions, alpha_bounds, fit_alpha, point_cloud_alpha_scene, random_alpha_scene,
+    AlphaFitOptions, alpha_bounds, fit_alpha, hull_alpha_scene, point_cloud_alpha_scene,
+    random_alpha_scene,
 };
+use crate::fit::hull::{HULL_GRID, flat_background, visual_hull};
+use crate::fit::init::SpaceTimeBox;
 use crate::fit::loss::psnr;
 use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
-use crate::model::{Blend, Result, Silent, Up};
+use crate::model::{Blend, Result, Scene, Silent, Up};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
+use crate::view::live::StepPoint;
+use crate::view::{Live, Server, Showing};
 
 /// `splat4d fit`.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,6 +49,8 @@ pub struct FitRequest {
     pub log: Option<PathBuf>,
     /// Worker threads (`None`: one per core).
     pub threads: Option<usize>,
+    /// Serve the viewer on this loopback port while the fit runs.
+    pub view: Option<u16>,
 }
 
 /// What [`fit_dataset`] did: the fit and the PSNR per split.
@@ -149,13 +159,18 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     if let Some(log) = &request.log {
         check_output(log, &[], &inputs)?;
         if same_file(log, &request.out) {
-            return Err(crate::model::Error::usage(format!(
-                "{}: --log and --out name the same file",
-                log.display()
-            )));
+            return Err(crate::model::Error::setting(
+                &["log", "out"],
+                format!("{}: `log` and `out` name the same file", log.display()),
+            ));
         }
     }
     check_fit_memory(request)?;
+    // A busy port is refused before the dataset is read.
+    let server = request
+        .view
+        .map(|port| Server::bind("127.0.0.1", port))
+        .transpose()?;
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
@@ -167,7 +182,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         progress.note(note);
     }
     if dataset.transparent && plan.background.is_none() {
-        progress.note("images with transparency were composited over black (--background r,g,b chooses the colour)");
+        progress.note(
+            "images with transparency were composited over black (`background` chooses the colour)",
+        );
     }
     let up = cameras_up(&dataset.train);
     if let Some(up) = up
@@ -195,7 +212,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     }
     if blend == Blend::Alpha {
         progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
-        return fit_alpha_dataset(request, &dataset, init, up, progress);
+        return fit_alpha_dataset(request, &dataset, init, up, server, progress);
     }
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
@@ -212,6 +229,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     } else {
         &dataset.val
     };
+    let viewer = server.map(|server| {
+        FitViewer::start(server, &scene, &dataset, &plan.render, plan.steps, progress)
+    });
     progress.start(plan.steps);
     let mut last_heldout = None;
     let records = with_threads(request.threads, || {
@@ -220,14 +240,18 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             &dataset.train,
             heldout,
             &prepared.options,
-            |record| {
+            |record, scene| {
                 if record.heldout_psnr.is_some() {
                     last_heldout = record.heldout_psnr;
                 }
                 progress.step(record, last_heldout);
+                if let Some(viewer) = &viewer {
+                    viewer.step(record, scene);
+                }
             },
         )
     })??;
+    drop(viewer);
     scene.up = up;
     scene.time_range = data_time_range(&dataset);
     scene.framing = data_framing(&dataset);
@@ -283,6 +307,32 @@ fn finish_fit(
     })
 }
 
+/// The alpha fit's start when the dataset has no point cloud: the visual hull of the
+/// training views where their background is flat ([`crate::fit::hull`]), else kernels at
+/// random in the cameras' box.
+fn start_from_images(
+    dataset: &crate::model::Dataset,
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    colour: [f64; 3],
+    options: &AlphaFitOptions,
+    progress: &mut dyn FitProgress,
+) -> Result<Scene> {
+    if flat_background(&dataset.train, background) {
+        let (cells, side) = visual_hull(&dataset.train, background, bounds);
+        if !cells.is_empty() {
+            progress.note(&format!(
+                "starting from the visual hull of the training views ({} of {} cells kept)",
+                cells.len(),
+                HULL_GRID.pow(3)
+            ));
+            return hull_alpha_scene(&cells, side, bounds, background, options);
+        }
+    }
+    progress.note("starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from)");
+    random_alpha_scene(bounds, background, colour, options)
+}
+
 /// The alpha fit of SPEC §8 ([`crate::fit::alpha`]): a random start in the cameras' box (or
 /// the given alpha scene), over the given background or the median of the training images'
 /// border pixels.
@@ -291,6 +341,7 @@ fn fit_alpha_dataset(
     dataset: &crate::model::Dataset,
     init: Init,
     up: Option<Up>,
+    server: Option<Server>,
     progress: &mut dyn FitProgress,
 ) -> Result<FitSummary> {
     let options = &request.alpha;
@@ -311,7 +362,7 @@ fn fit_alpha_dataset(
                 ));
                 point_cloud_alpha_scene(points, &bounds, background, options)?
             }
-            _ => random_alpha_scene(&bounds, background, colour, options)?,
+            _ => start_from_images(dataset, &bounds, background, colour, options, progress)?,
         },
         Init::Random(n) => random_alpha_scene(
             &bounds,
@@ -328,6 +379,16 @@ fn fit_alpha_dataset(
     } else {
         &dataset.val
     };
+    let viewer = server.map(|server| {
+        FitViewer::start(
+            server,
+            &scene,
+            dataset,
+            &options.render,
+            options.steps,
+            progress,
+        )
+    });
     progress.start(options.steps);
     let mut last_heldout = None;
     let records = with_threads(request.threads, || {
@@ -337,14 +398,18 @@ fn fit_alpha_dataset(
             &dataset.train,
             heldout,
             options,
-            |record| {
+            |record, scene| {
                 if record.heldout_psnr.is_some() {
                     last_heldout = record.heldout_psnr;
                 }
                 progress.step(record, last_heldout);
+                if let Some(viewer) = &viewer {
+                    viewer.step(record, scene);
+                }
             },
         )
     })??;
+    drop(viewer);
     scene.up = up.or(scene.up);
     scene.time_range = data_time_range(dataset);
     scene.framing = data_framing(dataset);
@@ -356,6 +421,83 @@ fn fit_alpha_dataset(
         &options.render,
         options.steps,
     )
+}
+
+/// How often a running fit hands its viewer a copy of its scene.
+const VIEW_SNAPSHOT_EVERY: Duration = Duration::from_secs(3);
+/// The share of the time the viewer of a running fit may render (the fit keeps the rest).
+const VIEW_DUTY: f64 = 0.05;
+
+/// The viewer of a running fit ([`crate::view`]): served on its own thread, handed a
+/// snapshot of the scene every [`VIEW_SNAPSHOT_EVERY`]; stops when dropped.
+struct FitViewer {
+    live: Arc<Live>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl FitViewer {
+    fn start(
+        server: Server,
+        scene: &Scene,
+        dataset: &crate::model::Dataset,
+        render: &crate::render::RenderOptions,
+        steps: usize,
+        progress: &mut dyn FitProgress,
+    ) -> FitViewer {
+        let live = Arc::new(Live::new(steps, VIEW_SNAPSHOT_EVERY));
+        let views: Vec<_> = dataset
+            .train
+            .iter()
+            .chain(&dataset.val)
+            .chain(&dataset.test)
+            .cloned()
+            .collect();
+        // Framed on what the cameras look at, over the data's times (as the fitted scene).
+        let mut start = scene.clone();
+        start.framing = data_framing(dataset);
+        start.time_range = data_time_range(dataset);
+        let showing = Showing {
+            title: "fit".into(),
+            scene: Arc::new(start),
+            views: Arc::new(views),
+            options: *render,
+            live: Some(Arc::clone(&live)),
+            duty: VIEW_DUTY,
+        };
+        progress.note(&format!("viewing the fit at {}", server.url()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            // Serving ends only when stopped; its errors have no reader once the fit runs.
+            let _ = server.run(&showing, &flag);
+        });
+        FitViewer {
+            live,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    fn step(&self, record: &StepRecord, scene: &Scene) {
+        let point = StepPoint {
+            step: record.step,
+            seconds: record.seconds,
+            loss: record.train_loss,
+            heldout_psnr: record.heldout_psnr,
+            kernels: record.kernels,
+        };
+        self.live.step(point, || scene.clone());
+    }
+}
+
+impl Drop for FitViewer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
 }
 
 /// The sphere the training cameras look at ([`crate::fit::init::box_from_cameras`]: the

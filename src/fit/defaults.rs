@@ -1,0 +1,148 @@
+//! Every default and limit of a fit, as constants: the additive fit's (steps, rates,
+//! batch, the adaptive rounds) and the alpha fit's ([`DEFAULT_ALPHA`]), and the `Default`
+//! of each options type. The policy that chooses among them is [`crate::fit::plan`]; this
+//! module only names numbers (each with the measurement behind it), and the training
+//! stages below it never read it.
+
+use crate::fit::adam::{AdamConfig, LearningRates};
+use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::train::{FitMode, FitOptions};
+use crate::render::RenderOptions;
+
+/// Adam steps of a fit (`splat4d fit` without `--steps`).
+pub const DEFAULT_STEPS: usize = 4000;
+
+/// Kernels an automatic start spreads at random in the box: several, so that separate
+/// objects each draw one (a single start at the centre converges on the brightest object
+/// and can leave the others unexplained: measured on the three-blob scene, 4 of 4 camera
+/// sets reach 38.4–39.3 dB with 4 starts; with 1, one set stays at 33 dB with 4 kernels).
+pub const DEFAULT_START_KERNELS: usize = 4;
+
+/// Views per step.
+pub const DEFAULT_BATCH_SIZE: usize = 8;
+
+/// Learning rates at the last step as a fraction of the first (exponential decay).
+pub const DEFAULT_FINAL_RATE_FACTOR: f64 = 0.05;
+
+/// Held-out evaluation period, steps.
+pub const DEFAULT_EVAL_EVERY: usize = 50;
+
+/// Amplitude of every channel of a random or automatic start when the data cannot say
+/// (no pixel differs from the background): the report's fixed-count fits use it too.
+pub const DEFAULT_INIT_AMPLITUDE: f64 = 0.1;
+
+/// A pixel whose colour differs from the background by more than this in some channel
+/// counts as foreground when the start's amplitude is taken from the data.
+pub const FOREGROUND_THRESHOLD: f32 = 1.0 / 255.0;
+
+/// Initial learning rates of every group (a mode then zeroes the groups it does not fit).
+pub const DEFAULT_RATES: LearningRates = LearningRates {
+    mean: 2e-3,
+    time: 2e-3,
+    amplitude: 1e-2,
+    velocity: 2e-3,
+    scale: 1e-2,
+    background: 2e-3,
+};
+
+/// The adaptive rounds (densify, prune, merge; [`crate::fit::adaptive`]).
+pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
+    every: 50,
+    from: 0.3,
+    until: 0.7,
+    gradient_threshold: 1e-5,
+    min_improvement: 0.05,
+    prune_below: 2.0 / 255.0,
+    max_growth: 0.5,
+    max_kernels: 100_000,
+    merge_tolerance: 0.1,
+    min_scale: f64::INFINITY,
+    min_time_scale: f64::INFINITY,
+};
+
+/// Largest learning rate a fit accepts.
+pub const MAX_RATE: f64 = 1e3;
+
+/// Largest background channel (absolute) a fit accepts.
+pub const MAX_BACKGROUND: f64 = 1e6;
+
+/// Most kernels a fit may start from (`random:N`, `--start-kernels`): a bound checked before
+/// anything is allocated for them.
+pub const MAX_START_KERNELS: usize = 1_000_000;
+
+/// A velocity kernel whose `st` exceeds this many training-time spacings is split in time
+/// by the adaptive rounds ([`crate::fit::adaptive`]).
+pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
+
+/// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
+/// papers' rates and density rules, scaled to runs of a few thousand steps.
+pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
+    steps: 3000,
+    batch_size: 4,
+    rates: AlphaRates {
+        mean: 1.6e-4,
+        time: 1.6e-4,
+        velocity: 1.6e-4,
+        scale: 5e-3,
+        rotation: 1e-3,
+        opacity: 5e-2,
+        colour: 2.5e-3,
+        sh: 5e-4,
+    },
+    final_rate_factor: 0.01,
+    eval_every: DEFAULT_EVAL_EVERY,
+    seed: 0,
+    render: RenderOptions {
+        dilation: crate::render::DEFAULT_DILATION,
+        cutoff: crate::render::DEFAULT_CUTOFF,
+        exp: crate::raster::ExpMode::Poly,
+    },
+    start_kernels: 2000,
+    start_opacity: 0.1,
+    start_time_scale: 0.25,
+    sh_count: 3,
+    sh_raise_every: 1000,
+    max_kernels: 200_000,
+    densify_every: 100,
+    densify_from: 0.05,
+    densify_until: 0.6,
+    densify_fraction: 0.05,
+    densify_threshold: 0.0,
+    percent_dense: 0.01,
+    prune_opacity: 0.05,
+};
+
+/// The defaults of this module with the paper's mode and a fixed count.
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            steps: DEFAULT_STEPS,
+            batch_size: DEFAULT_BATCH_SIZE,
+            // The paper fits no background.
+            learning_rates: LearningRates {
+                background: 0.0,
+                ..FitMode::Paper.learning_rates(DEFAULT_RATES)
+            },
+            final_rate_factor: DEFAULT_FINAL_RATE_FACTOR,
+            adam: AdamConfig::default(),
+            eval_every: DEFAULT_EVAL_EVERY,
+            seed: 0,
+            render: RenderOptions::default(),
+            adaptive: None,
+        }
+    }
+}
+
+/// [`DEFAULT_ROUNDS`].
+impl Default for AdaptiveOptions {
+    fn default() -> Self {
+        DEFAULT_ROUNDS
+    }
+}
+
+impl Default for AlphaFitOptions {
+    fn default() -> Self {
+        DEFAULT_ALPHA
+    }
+}
