@@ -326,7 +326,7 @@ pub(crate) struct TileScratch {
 }
 
 /// The forward's per-tile scratch, owned by the render context and kept between frames: a
-/// stack of [`TileScratch`]es from which each band of tiles takes one while it runs (as many
+/// stack of `TileScratch`es from which each band of tiles takes one while it runs (as many
 /// as bands ran at once, so one per worker thread), its buffers keeping their capacity.
 #[derive(Default)]
 pub struct TileScratchPool {

@@ -6,7 +6,7 @@
 //!   `C += colour α̂ T`, `T ← T (1 - α̂)`), compiled per SIMD path, and its pairs per second;
 //! - [`measure`]: one configuration timed (median of warm renders) with its error at seeded
 //!   pixels against the reference, as a ratio to [`crate::reference::ERROR_BOUND`];
-//! - [`sweep`]: speed against error over cut-off, dilation and exp, with its Pareto front;
+//! - [`sweep`](mod@sweep): speed against error over cut-off, dilation and exp, with its Pareto front;
 //! - [`table`]: the rows, the probes' lines and the sweep as text.
 //!
 //! Stage modules ([`crate::raster`], [`crate::composite`]) keep only what rendering needs.

@@ -51,7 +51,7 @@ pub enum Content {
         fps: u32,
     },
     /// The fitted scene (scene JSON).
-    Scene(Scene),
+    Scene(Box<Scene>),
 }
 
 /// One file of the report: its name in the report's folder and what it holds.
@@ -88,7 +88,7 @@ pub fn report_files(results: &ExperimentResults, command: &str) -> Result<Vec<Re
     md.push_str(&volumes_section(results, &mut files)?);
     files.push(ReportFile::new(
         "fitted_4d.json",
-        Content::Scene(results.model.clone()),
+        Content::Scene(Box::new(results.model.clone())),
     ));
     md.push_str(&fitted_scene_note());
     files.push(ReportFile::new("report.md", Content::Markdown(md)));
