@@ -287,7 +287,6 @@ pub fn fit_alpha(
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
     let mut context = RenderContext::new();
-    context.keep_tiles_for_backward(true);
     let mut grads = Gradients::for_scene(scene);
     let width = stride(scene.sh_count);
     let mut moments = Moments {
