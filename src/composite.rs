@@ -513,16 +513,7 @@ mod tests {
     fn the_avx2_lanes_composite_what_the_portable_ones_do_bit_for_bit() {
         let camera = crate::scenes::synthetic::bench_camera(97, 61);
         let n = 3000;
-        let scene = crate::scenes::synthetic::bench_scene(n, 5)
-            .into_alpha(
-                (0..n)
-                    .map(|i| 0.2 + 0.8 * ((i * 37) % 101) as f64 / 100.0)
-                    .collect(),
-                0,
-                Vec::new(),
-                "<test>",
-            )
-            .unwrap();
+        let scene = crate::scenes::synthetic::varied_alpha_bench_scene(n, 5, 0.2);
         let mut context = RenderContext::new();
         let options = RenderOptions::default();
         context.render(&scene, &camera, 0.5, &options).unwrap();
