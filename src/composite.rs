@@ -38,6 +38,9 @@ pub const T_STOP: f64 = 1e-4 * (1.0 + 1e-5);
 
 /// What the backward needs of a composited pixel: its final transmittance and the number of
 /// its half row's entries it consumed (entries from `end` on add nothing to it).
+///
+/// SPEC §8: a pixel stops when its transmittance would fall below 1e-4; the backward
+/// walks back from here.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PixelStop {
     /// `T` after the last kernel it composited.
@@ -63,6 +66,9 @@ thread_local! {
 /// training step sets each tile up once. A tile is kept when its row entries fit its share
 /// of [`TileCache::BUDGET`] (a rule on the tile alone: deterministic, whatever the thread
 /// count); the backward prepares the others again, to the same values.
+///
+/// SPEC §8 (the compositing's backward); kept by
+/// `RenderContext::keep_tiles_for_backward`.
 #[derive(Default)]
 pub struct TileCache {
     tiles: Vec<CompositeScratch>,
