@@ -1,11 +1,21 @@
-//! `docs/commands.md` is generated from the clap definitions: this test renders the help of
-//! the command and of every subcommand, as `splat4d help COMMAND` prints it, and compares it
-//! with the file. `SPLAT4D_BLESS=1 cargo test --release --bin splat4d commands_reference`
+//! `docs/commands.md` is generated from the clap definitions: this test has clap parse
+//! `splat4d help` and `splat4d help COMMAND` for every subcommand and takes the help it
+//! renders (the text the executable prints), and compares it with the file. `SPLAT4D_BLESS=1 cargo test --release --bin splat4d commands_reference`
 //! rewrites the file.
 
 use clap::CommandFactory;
 
 const PATH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/commands.md");
+
+/// What `splat4d help ARGS…` prints: clap's own rendering of the help it was asked for.
+fn help(args: &[&str]) -> String {
+    let argv = ["splat4d", "help"].into_iter().chain(args.iter().copied());
+    let error = super::Cli::command()
+        .try_get_matches_from(argv)
+        .expect_err("`help` ends parsing with the help text");
+    assert_eq!(error.kind(), clap::error::ErrorKind::DisplayHelp);
+    error.render().to_string().trim_end().to_string()
+}
 
 /// The whole of `docs/commands.md`.
 fn reference() -> String {
@@ -39,12 +49,11 @@ fn reference() -> String {
         ));
     }
     text.push_str("\n## `splat4d`\n\n```text\n");
-    text.push_str(command.render_long_help().to_string().trim_end());
+    text.push_str(&help(&[]));
     text.push_str("\n```\n");
     for name in names {
-        let sub = command.find_subcommand_mut(&name).expect("listed above");
         text.push_str(&format!("\n## `splat4d {name}`\n\n```text\n"));
-        text.push_str(sub.render_long_help().to_string().trim_end());
+        text.push_str(&help(&[&name]));
         text.push_str("\n```\n");
     }
     text
