@@ -215,26 +215,53 @@ pub fn densify_and_prune(
     stats: &DensityStats,
     options: &AdaptiveOptions,
 ) -> Result<(Scene, Vec<Option<usize>>, RoundReport)> {
+    let keep = prune(scene, options.prune_below);
+    let pruned = scene.len() - keep.len();
+    let (keep, kernels, merged) = merge_and_rejoin(scene, keep, options.merge_tolerance);
+    let (kernels, sources, added, split) = densify(kernels, &keep, stats, options);
+    let next = Scene::from_kernels(&kernels, scene.background, "<densified scene>")?;
+    Ok((
+        next,
+        sources,
+        RoundReport {
+            pruned,
+            merged,
+            added,
+            split,
+        },
+    ))
+}
+
+/// Phase 1, prune: the kernels whose peak amplitude reaches `prune_below` (the brightest
+/// alone when none does, rather than an empty model), ascending.
+fn prune(scene: &Scene, prune_below: f64) -> Vec<usize> {
     let n = scene.len();
     let peak = |i: usize| {
         scene.amplitudes[i]
             .iter()
             .fold(0.0_f64, |m, a| m.max(a.abs()))
     };
-    let mut keep: Vec<usize> = (0..n).filter(|&i| peak(i) >= options.prune_below).collect();
+    let mut keep: Vec<usize> = (0..n).filter(|&i| peak(i) >= prune_below).collect();
     if keep.is_empty() && n > 0 {
-        // Keep the brightest kernel rather than an empty model.
         let brightest = (0..n).max_by(|&a, &b| peak(a).total_cmp(&peak(b)).then(b.cmp(&a)));
         keep.extend(brightest);
     }
-    let pruned = n - keep.len();
-    // Merge: `absorbed[k]` lists the kept kernels folded into kept kernel `k`.
+    keep
+}
+
+/// Phase 2, merge and rejoin: kept kernels that are the same Gaussian within `tolerance`
+/// fold into the first of them; two halves of one path rejoin (one rejoin per kernel and
+/// round). Returns the survivors' old indices, their kernels, and how many were folded.
+fn merge_and_rejoin(
+    scene: &Scene,
+    keep: Vec<usize>,
+    tolerance: f64,
+) -> (Vec<usize>, Vec<Kernel>, usize) {
     // `merged_into[b] = (a, rejoined)`: kept kernel `b` folds into kept kernel `a`, as the
     // same Gaussian or (rejoined) as the other half of its path.
     let mut merged_into: Vec<Option<(usize, bool)>> = vec![None; keep.len()];
     let mut merged = 0;
-    if options.merge_tolerance > 0.0 && keep.len() <= MERGE_LIMIT {
-        let tolerance = options.merge_tolerance;
+    if tolerance > 0.0 && keep.len() <= MERGE_LIMIT {
         for a in 0..keep.len() {
             if merged_into[a].is_some() {
                 continue;
@@ -248,7 +275,6 @@ pub fn densify_and_prune(
                     merged_into[b] = Some((a, false));
                     merged += 1;
                 } else if !rejoined && halves_of_one_path(scene, keep[a], keep[b], tolerance) {
-                    // One rejoin per kernel and round: the joined kernel is a new one.
                     merged_into[b] = Some((a, true));
                     rejoined = true;
                     merged += 1;
@@ -256,22 +282,38 @@ pub fn densify_and_prune(
             }
         }
     }
-    let mut kernels_kept: Vec<Kernel> = keep.iter().map(|&i| scene.kernel(i)).collect();
+    let mut kernels: Vec<Kernel> = keep.iter().map(|&i| scene.kernel(i)).collect();
     for b in 0..keep.len() {
         if let Some((a, rejoined)) = merged_into[b] {
-            let other = kernels_kept[b];
+            let other = kernels[b];
             if rejoined {
-                kernels_kept[a] = rejoin(&kernels_kept[a], &other);
+                kernels[a] = rejoin(&kernels[a], &other);
             } else {
-                merge_into(&mut kernels_kept[a], &other);
+                merge_into(&mut kernels[a], &other);
             }
         }
     }
     let survivors: Vec<usize> = (0..keep.len())
         .filter(|&k| merged_into[k].is_none())
         .collect();
-    let kernels_kept: Vec<Kernel> = survivors.iter().map(|&k| kernels_kept[k]).collect();
-    let keep: Vec<usize> = survivors.iter().map(|&k| keep[k]).collect();
+    (
+        survivors.iter().map(|&k| keep[k]).collect(),
+        survivors.iter().map(|&k| kernels[k]).collect(),
+        merged,
+    )
+}
+
+/// Phase 3, densify: the kept kernels (`kernels`, old indices `keep`) with the largest mean
+/// positional gradient, once the loss has stalled, each split in time (`st` above
+/// `min_time_scale`) or halved in amplitude and cloned half a standard deviation down the
+/// gradient (shrunk first when larger than `min_scale`), within `max_growth` and
+/// `max_kernels`. Returns the kernels, their sources, the candidates and the splits.
+fn densify(
+    mut kernels: Vec<Kernel>,
+    keep: &[usize],
+    stats: &DensityStats,
+    options: &AdaptiveOptions,
+) -> (Vec<Kernel>, Vec<Option<usize>>, usize, usize) {
     let mut candidates: Vec<usize> = keep
         .iter()
         .copied()
@@ -290,7 +332,6 @@ pub fn densify_and_prune(
     let room = options.max_kernels.saturating_sub(keep.len());
     candidates.truncate(growth.min(room));
     candidates.sort_unstable();
-    let mut kernels = kernels_kept;
     let mut sources: Vec<Option<usize>> = keep.iter().map(|&i| Some(i)).collect();
     let mut split = 0;
     for &i in &candidates {
@@ -312,31 +353,26 @@ pub fn densify_and_prune(
             }
             split += 1;
         }
-        let mut clone = *parent;
-        let direction = stats.sum[i];
-        let length = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if length > 0.0 && length.is_finite() {
-            // Half a standard deviation per axis, down the gradient.
-            for (c, m) in clone.mean.iter_mut().enumerate() {
-                *m -= 0.5 * clone.scale[c] * direction[c] / length;
-            }
-        } else {
-            clone.mean[0] += 0.5 * clone.scale[0];
-        }
+        let clone = clone_down_gradient(parent, stats.sum[i]);
         kernels.push(clone);
         sources.push(None);
     }
-    let next = Scene::from_kernels(&kernels, scene.background, "<densified scene>")?;
-    Ok((
-        next,
-        sources,
-        RoundReport {
-            pruned,
-            merged,
-            added: candidates.len(),
-            split,
-        },
-    ))
+    (kernels, sources, candidates.len(), split)
+}
+
+/// A copy of `parent` half a standard deviation per axis (x, y, z, t) down `direction` (the summed
+/// positional gradient; along x when it has no direction).
+fn clone_down_gradient(parent: &Kernel, direction: [f64; 4]) -> Kernel {
+    let mut clone = *parent;
+    let length = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if length > 0.0 && length.is_finite() {
+        for (c, m) in clone.mean.iter_mut().enumerate() {
+            *m -= 0.5 * clone.scale[c] * direction[c] / length;
+        }
+    } else {
+        clone.mean[0] += 0.5 * clone.scale[0];
+    }
+    clone
 }
 
 /// Splits `parent` in time: it and the returned kernel sit `d = st/√2` before and after its

@@ -202,6 +202,61 @@ pub fn point_cloud_alpha_scene(
     )
 }
 
+/// Most kernels a start from the visual hull makes (cells taken evenly through the kept
+/// ones beyond it).
+pub const HULL_MAX_START: usize = 10_000;
+
+/// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them: at
+/// least `options.start_kernels` kernels (cells taken again when fewer were kept) and at
+/// most [`HULL_MAX_START`], each placed at random in its cell (seeded), with a spatial σ of
+/// half the spacing the kernels have through the kept volume, a random time mean and σt
+/// `start_time_scale` of the time range, as the random start has: the hull says where, not
+/// when.
+pub fn hull_alpha_scene(
+    cells: &[DatasetPoint],
+    side: [f64; 3],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<Scene> {
+    if cells.is_empty() {
+        return Err(Error::usage("the visual hull kept no cell to start from"));
+    }
+    let n = cells.len().clamp(
+        options.start_kernels.max(1),
+        HULL_MAX_START.max(options.start_kernels),
+    );
+    let volume = cells.len() as f64 * side[0] * side[1] * side[2];
+    let spacing = (volume / n as f64).cbrt();
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let mut rng = seeded_rng(options.seed);
+    let kernels: Vec<Kernel> = (0..n)
+        .map(|k| {
+            let cell = &cells[k * cells.len() / n];
+            let jitter: [f64; 3] = std::array::from_fn(|a| (rng.random::<f64>() - 0.5) * side[a]);
+            let [x, y, z] = std::array::from_fn(|a| cell.position[a] + jitter[a]);
+            let mut kernel = Kernel::new(
+                [x, y, z, rng.random_range(bounds.time[0]..=bounds.time[1])],
+                [
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    0.5 * spacing,
+                    options.start_time_scale * time_range,
+                ],
+                cell.colour.map(f64::from),
+            );
+            kernel.rotation = random_rotation(&mut rng);
+            kernel
+        })
+        .collect();
+    Scene::from_kernels(&kernels, background, "<visual hull start>")?.into_alpha(
+        vec![options.start_opacity; n],
+        options.sh_count,
+        vec![[0.0; 3]; n * options.sh_count],
+        "<visual hull start>",
+    )
+}
+
 /// The length scales the rates are relative to: the box's diagonal and the time range.
 fn extents(bounds: &SpaceTimeBox) -> (f64, f64) {
     let diagonal = (0..3)

@@ -6,6 +6,7 @@ pub mod adam;
 pub mod adaptive;
 pub mod alpha;
 pub mod defaults;
+pub mod hull;
 pub mod init;
 pub mod loss;
 pub mod plan;

@@ -178,6 +178,13 @@ impl FitPlan {
     /// Checks the values no type rules out: rates ≥ 0, fractions in range, a finite box.
     pub fn validate(&self) -> Result<()> {
         self.render.validate()?;
+        self.validate_rates()?;
+        self.validate_start()
+    }
+
+    /// Rates and the adaptive rounds' thresholds: finite, ≥ 0, rates at most [`MAX_RATE`];
+    /// the rounds' window inside the run; a final rate factor > 0.
+    fn validate_rates(&self) -> Result<()> {
         let r = &self.rates;
         for (field, value) in [
             ("lr_mean", r.mean),
@@ -209,6 +216,35 @@ impl FitPlan {
                 ));
             }
         }
+        for (field, value) in [
+            ("densify_from", self.rounds.from),
+            ("densify_until", self.rounds.until),
+        ] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err(Error::setting(
+                    &[field],
+                    format!("`{field}` {value} must be in [0, 1]"),
+                ));
+            }
+        }
+        let f = self.final_rate_factor;
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::setting(
+                &["lr_final"],
+                format!("`lr_final` {f} must be finite and > 0"),
+            ));
+        }
+        if !self.rounds.min_improvement.is_finite() {
+            return Err(Error::setting(
+                &["min_improvement"],
+                "`min_improvement` must be finite",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The start: background, kernel count, amplitude, batch, box and scales in range.
+    fn validate_start(&self) -> Result<()> {
         if let Some(background) = self.background
             && background
                 .iter()
@@ -222,17 +258,6 @@ impl FitPlan {
                 ),
             ));
         }
-        for (field, value) in [
-            ("densify_from", self.rounds.from),
-            ("densify_until", self.rounds.until),
-        ] {
-            if !(0.0..=1.0).contains(&value) {
-                return Err(Error::setting(
-                    &[field],
-                    format!("`{field}` {value} must be in [0, 1]"),
-                ));
-            }
-        }
         if self.start_kernels > MAX_START_KERNELS {
             return Err(Error::setting(
                 &["start_kernels"],
@@ -240,19 +265,6 @@ impl FitPlan {
                     "`start_kernels` {} is more than {MAX_START_KERNELS}",
                     self.start_kernels
                 ),
-            ));
-        }
-        let f = self.final_rate_factor;
-        if !(f.is_finite() && f > 0.0) {
-            return Err(Error::setting(
-                &["lr_final"],
-                format!("`lr_final` {f} must be finite and > 0"),
-            ));
-        }
-        if !self.rounds.min_improvement.is_finite() {
-            return Err(Error::setting(
-                &["min_improvement"],
-                "`min_improvement` must be finite",
             ));
         }
         if let Some(a) = self.init_amplitude

@@ -4,15 +4,18 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::fit::alpha::{
-    AlphaFitOptions, alpha_bounds, fit_alpha, point_cloud_alpha_scene, random_alpha_scene,
+    AlphaFitOptions, alpha_bounds, fit_alpha, hull_alpha_scene, point_cloud_alpha_scene,
+    random_alpha_scene,
 };
+use crate::fit::hull::{HULL_GRID, flat_background, visual_hull};
+use crate::fit::init::SpaceTimeBox;
 use crate::fit::loss::psnr;
 use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
-use crate::model::{Blend, Result, Silent, Up};
+use crate::model::{Blend, Result, Scene, Silent, Up};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
 
@@ -285,6 +288,32 @@ fn finish_fit(
     })
 }
 
+/// The alpha fit's start when the dataset has no point cloud: the visual hull of the
+/// training views where their background is flat ([`crate::fit::hull`]), else kernels at
+/// random in the cameras' box.
+fn start_from_images(
+    dataset: &crate::model::Dataset,
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    colour: [f64; 3],
+    options: &AlphaFitOptions,
+    progress: &mut dyn FitProgress,
+) -> Result<Scene> {
+    if flat_background(&dataset.train, background) {
+        let (cells, side) = visual_hull(&dataset.train, background, bounds);
+        if !cells.is_empty() {
+            progress.note(&format!(
+                "starting from the visual hull of the training views ({} of {} cells kept)",
+                cells.len(),
+                HULL_GRID.pow(3)
+            ));
+            return hull_alpha_scene(&cells, side, bounds, background, options);
+        }
+    }
+    progress.note("starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from)");
+    random_alpha_scene(bounds, background, colour, options)
+}
+
 /// The alpha fit of SPEC §8 ([`crate::fit::alpha`]): a random start in the cameras' box (or
 /// the given alpha scene), over the given background or the median of the training images'
 /// border pixels.
@@ -313,7 +342,7 @@ fn fit_alpha_dataset(
                 ));
                 point_cloud_alpha_scene(points, &bounds, background, options)?
             }
-            _ => random_alpha_scene(&bounds, background, colour, options)?,
+            _ => start_from_images(dataset, &bounds, background, colour, options, progress)?,
         },
         Init::Random(n) => random_alpha_scene(
             &bounds,

@@ -76,3 +76,65 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
     assert!(heldout > 24.0, "held-out {heldout:.2} dB");
     assert!(fitted.opacities.iter().all(|o| (0.0..=1.0).contains(o)));
 }
+
+/// The start from the images ([`splat4d::fit::hull`]) against the random start, on the same
+/// occluding data (over a flat black background), the same steps and kernel budget: the
+/// hull holds every kernel of the scene, and the fit from it ends at least as well.
+#[test]
+fn a_visual_hull_start_holds_the_scene_and_fits_at_least_as_well_as_a_random_one() {
+    use splat4d::fit::alpha::hull_alpha_scene;
+    use splat4d::fit::hull::{flat_background, visual_hull};
+    let scene = occluding_scene();
+    let spec = DatasetSpec {
+        views: 10,
+        times: 6,
+        width: 40,
+        height: 40,
+        ..DatasetSpec::default()
+    };
+    let options = RenderOptions::default();
+    let dataset = render_dataset(&scene, &spec, &options, || {}).unwrap();
+    let bounds = alpha_bounds(&dataset.train).unwrap();
+    assert!(flat_background(&dataset.train, [0.0; 3]));
+    let (cells, side) = visual_hull(&dataset.train, [0.0; 3], &bounds);
+    // The slabs sweep through depth and the blob moves: each kernel's path at the middle
+    // time lies in the voted hull (within a cell).
+    for k in 0..scene.len() {
+        let centre: [f64; 3] = std::array::from_fn(|a| scene.means[k][a]);
+        let near = cells
+            .iter()
+            .any(|c| (0..3).all(|a| (c.position[a] - centre[a]).abs() <= side[a]));
+        assert!(near, "kernel {k} at {centre:?} is outside the hull");
+    }
+    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 600,
+        start_kernels: 300,
+        sh_count: 0,
+        eval_every: 0,
+        ..DEFAULT_ALPHA
+    };
+    let heldout = |mut start: Scene| {
+        let records = fit_alpha(
+            &mut start,
+            &bounds,
+            &dataset.train,
+            &dataset.test,
+            &fit_options,
+            |_| {},
+        )
+        .unwrap();
+        (records.last().unwrap().heldout_psnr.unwrap(), start.len())
+    };
+    let random = heldout(random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap());
+    let hull = heldout(hull_alpha_scene(&cells, side, &bounds, [0.0; 3], &fit_options).unwrap());
+    eprintln!(
+        "hull: {} of {} cells; fit from random start {:.2} dB ({} kernels), from the hull {:.2} dB ({} kernels)",
+        cells.len(),
+        splat4d::fit::hull::HULL_GRID.pow(3),
+        random.0,
+        random.1,
+        hull.0,
+        hull.1
+    );
+    assert!(hull.0 > random.0 - 0.5, "hull {hull:?}, random {random:?}");
+}
