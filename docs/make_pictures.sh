@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates the pictures of README's first screen into docs/images/, from commands of this
 # repository only (no image tools needed: README sets the pictures side by side).
+# The viewer's screenshot (view.png) needs a browser and is remade only with SPLAT4D_SHOT=1.
 #
 #   bash docs/make_pictures.sh        # from anywhere; about 3-4 min on 2 cores (the seed
 #                                     # study ~2.5 min, the occluding fit ~15-25 s), after
@@ -39,5 +40,14 @@ done
 # 3. The seed study (what `cargo run --release` runs): PSNR per time from the held-out cameras.
 "$bin" report --out "$work/report"
 cp "$work/report/psnr_per_time.png" "$images/seed_psnr_per_time.png"
+
+# 4. The viewer (docs/images/view.png), only when asked (SPLAT4D_SHOT=1) and a Chromium is on
+#    PATH: the ignored test of tests/it/view.rs drives it headless on the fitted occluding
+#    scene with its dataset (about 1 min more, with the test build).
+if [ "${SPLAT4D_SHOT:-0}" = 1 ]; then
+  SPLAT4D_SHOT_SCENE="$work/occluding_fit.json" SPLAT4D_SHOT_VIEWS="$work/occluding_set" \
+    SPLAT4D_SHOT_OUT="$images/view.png" \
+    cargo test --release --test it view::readme_screenshot -- --ignored
+fi
 
 echo "pictures written to $images/: look at each before committing"

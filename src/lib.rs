@@ -49,6 +49,7 @@
 //! | scenes | [`scenes`] | synthetic and toy scenes, camera paths and framing, synthetic datasets; node animation, motion sampling and surfels (the glTF import's math, on plain data) |
 //! | io | [`io`] | every file format (reading, checking, handing plain data over); atomic writes |
 //! | report | [`report`] | the seed experiment, metrics, charts, markdown, bench tables |
+//! | view | [`view`] | the viewer's server: the page, its WebSockets, the render thread |
 //! | tasks | [`tasks`] | one call per subcommand: read, compute, write, summarise |
 //!
 //! The binary (`src/main.rs`, `src/cli/`) only parses flags into a task's request, and shows
@@ -87,6 +88,7 @@ pub mod reference;
 pub mod report;
 pub mod scenes;
 pub mod tasks;
+pub mod view;
 
 pub use backward::Gradients;
 pub use model::{Blend, Camera, Error, ErrorKind, Image, Kernel, Result, Scene};

@@ -96,6 +96,10 @@ pub struct FitArgs {
     /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
     #[arg(long)]
     log: Option<PathBuf>,
+    /// Watch the fit in a web browser: serve `splat4d view`'s page on this loopback port
+    /// (8080 when given alone), with the current model every few seconds and the loss chart.
+    #[arg(long, num_args = 0..=1, default_missing_value = "8080", value_name = "PORT")]
+    view: Option<u16>,
     /// Learning rate of the spatial means.
     #[arg(long, value_parser = super::args::finite, default_value_t = FitPlan::default().rates.mean)]
     lr_mean: f64,
@@ -249,6 +253,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         out: args.out.clone(),
         log: args.log.clone(),
         threads: args.render.threads(),
+        view: args.view,
     };
     super::with_progress(|bars| fit_dataset(&request, bars))
 }

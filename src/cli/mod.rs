@@ -17,6 +17,7 @@ mod render;
 mod report;
 mod toy;
 mod video;
+mod view;
 mod volume;
 
 use clap::{Parser, Subcommand};
@@ -73,6 +74,9 @@ enum Command {
     ExportPly(export_ply::ExportPlyArgs),
     /// Render videos along camera paths: orbits at fixed times, a spiral, or a path file.
     Video(video::VideoArgs),
+    /// Look at a scene in a web browser: orbit, scrub time, compare with a dataset's views,
+    /// place camera paths.
+    View(view::ViewArgs),
     /// Measure forward-render speed, with the error against the f64 reference.
     Bench(bench::BenchArgs),
     /// Run the seed paper's experiment (toy data → dataset → fits → baselines → ablation →
@@ -96,6 +100,7 @@ pub fn run(cli: Cli) -> splat4d::Result<()> {
         Some(Command::Report(args)) => report::run(&args),
         Some(Command::Video(args)) => video::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::View(args)) => view::run(&args),
         Some(Command::ExportPly(args)) => export_ply::run(&args),
         Some(Command::ImportGltf(args)) => import_gltf::run(&args),
     }

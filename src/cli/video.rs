@@ -52,7 +52,9 @@ pub struct VideoArgs {
     /// (a scene fitted from a dataset carries its cameras' mean up), else `y`.
     #[arg(long, allow_hyphen_values = true)]
     up: Option<Up>,
-    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`.
+    /// A path file: `[{"camera": {camera JSON}, "time": t}, ...]`, or nerfstudio's
+    /// `camera_path.json` (its cameras, or `fps × seconds` frames through its keyframes;
+    /// perspective cameras only).
     #[arg(long)]
     path: Option<PathBuf>,
     /// Output folder.
@@ -64,9 +66,10 @@ pub struct VideoArgs {
     /// Vertical field of view of orbits and spirals, degrees.
     #[arg(long, value_parser = super::args::finite, default_value_t = 40.0)]
     fov: f64,
-    /// Frames per second of the GIF and MP4.
-    #[arg(long, default_value_t = 25, value_parser = clap::value_parser!(u32).range(1..=100))]
-    fps: u32,
+    /// Frames per second of the GIF and MP4 (default 25; a nerfstudio path file's own `fps`
+    /// for its video).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100))]
+    fps: Option<u32>,
     /// Do not write GIFs.
     #[arg(long)]
     no_gif: bool,
@@ -114,10 +117,11 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             fov_y_degrees: args.fov,
         },
         video: VideoOptions {
-            fps: args.fps,
+            fps: args.fps.unwrap_or(25),
             gif: !args.no_gif,
             mp4: !args.no_mp4,
         },
+        fps_given: args.fps.is_some(),
         options: args.render.options(),
         threads: args.render.threads(),
     };

@@ -268,14 +268,14 @@ fn extents(bounds: &SpaceTimeBox) -> (f64, f64) {
 
 /// Fits the alpha scene `scene` in place to `train`, evaluating on `heldout`; `bounds` is
 /// the space-time box the rates and density rules are relative to. Calls `on_step` after
-/// each step and returns every step's record.
+/// each step (its record and the scene) and returns every step's record.
 pub fn fit_alpha(
     scene: &mut Scene,
     bounds: &SpaceTimeBox,
     train: &[View],
     heldout: &[View],
     options: &AlphaFitOptions,
-    mut on_step: impl FnMut(&StepRecord),
+    mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
     if train.is_empty() {
         return Err(Error::Usage("no training views".into()));
@@ -378,7 +378,7 @@ pub fn fit_alpha(
             heldout_psnr,
             kernels: scene.len(),
         };
-        on_step(&record);
+        on_step(&record, scene);
         records.push(record);
     }
     Ok(records)

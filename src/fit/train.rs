@@ -181,14 +181,14 @@ pub fn heldout_psnr_at(
 }
 
 /// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
-/// step. Returns every step's record. With `options.adaptive` the scene's kernels change
+/// step with its record and the scene. Returns every step's record. With `options.adaptive` the scene's kernels change
 /// between steps (densify and prune); otherwise only their parameters do.
 pub fn fit(
     scene: &mut Scene,
     train: &[View],
     heldout: &[View],
     options: &FitOptions,
-    mut on_step: impl FnMut(&StepRecord),
+    mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
     if train.is_empty() {
         return Err(Error::Usage("no training views".into()));
@@ -280,7 +280,7 @@ pub fn fit(
             heldout_psnr,
             kernels: scene.len(),
         };
-        on_step(&record);
+        on_step(&record, scene);
         records.push(record);
     }
     Ok(records)

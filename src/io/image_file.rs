@@ -65,22 +65,27 @@ pub fn encode_image<W: Write + Seek>(
     match (kind, depth) {
         (ImageKind::Exr, _) => write_exr(image, out).map_err(image::ImageError::IoError),
         (ImageKind::Png, BitDepth::Eight) => {
-            let data = image
-                .pixels
-                .iter()
-                .map(|&c| quantize(c, 255) as u8)
-                .collect();
+            let data = quantize_all(&image.pixels, 255, |v| v as u8);
             let buf: ImageBuffer<Rgb<u8>, Vec<u8>> =
                 ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
             buf.write_to(out, ImageFormat::Png)
         }
         (ImageKind::Png, BitDepth::Sixteen) => {
-            let data = image.pixels.iter().map(|&c| quantize(c, 65535)).collect();
+            let data = quantize_all(&image.pixels, 65535, |v| v);
             let buf: ImageBuffer<Rgb<u16>, Vec<u16>> =
                 ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
             buf.write_to(out, ImageFormat::Png)
         }
     }
+}
+
+/// [`quantize`] of every channel, in a loop the compiler vectorises (no call, no branch).
+fn quantize_all<T: Copy + Default>(pixels: &[f32], max: u16, store: impl Fn(u16) -> T) -> Vec<T> {
+    let mut out = vec![T::default(); pixels.len()];
+    for (o, &c) in out.iter_mut().zip(pixels) {
+        *o = store(quantize(c, max));
+    }
+    out
 }
 
 /// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
@@ -177,7 +182,15 @@ fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()>
 pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     let kind = ImageKind::from_path(path)?;
     // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie.
-    if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
+    // Blocks of 64 checked without an early exit vectorise; the position only on failure.
+    let all_finite = image
+        .pixels
+        .chunks(64)
+        .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
+    if let Some(k) = (!all_finite)
+        .then(|| image.pixels.iter().position(|v| !v.is_finite()))
+        .flatten()
+    {
         let pixel = k / 3;
         let width = image.width.max(1) as usize;
         return Err(Error::Numeric(format!(
@@ -275,7 +288,15 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
     let (image, transparent) = composite(&decoded, background);
-    if let Some(k) = image.pixels.iter().position(|v| !v.is_finite()) {
+    // Blocks of 64 checked without an early exit vectorise; the position only on failure.
+    let all_finite = image
+        .pixels
+        .chunks(64)
+        .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
+    if let Some(k) = (!all_finite)
+        .then(|| image.pixels.iter().position(|v| !v.is_finite()))
+        .flatten()
+    {
         let pixel = k / 3;
         let width = image.width as usize;
         return Err(Error::invalid(

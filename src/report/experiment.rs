@@ -410,9 +410,13 @@ fn fit_adaptive(
         mut scene, options, ..
     } = plan.prepare(Init::Auto, &dataset.train)?;
     let start = Instant::now();
-    fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
-        progress.tick()
-    })?;
+    fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| progress.tick(),
+    )?;
     Ok((scene, start.elapsed().as_secs_f64()))
 }
 
@@ -476,7 +480,7 @@ fn synthetic_model_size(
         &dataset.train,
         &dataset.val,
         &fit_options(config.adaptive_steps, config.seed, model_rates()),
-        |_| progress.tick(),
+        |_, _| progress.tick(),
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
     let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
@@ -512,9 +516,13 @@ fn fit_4d(
     )?;
     let start = Instant::now();
     let options = fit_options(config.model_steps, config.seed, model_rates());
-    let log = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {
-        progress.tick()
-    })?;
+    let log = fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| progress.tick(),
+    )?;
     Ok((scene, log, start.elapsed().as_secs_f64()))
 }
 
@@ -644,7 +652,7 @@ fn fit_frame_baselines(
             &views,
             &[],
             &fit_options(config.frame_steps, config.seed, frame_rates()),
-            |_| progress.tick(),
+            |_, _| progress.tick(),
         )?;
         scenes.push(scene);
     }

@@ -2,6 +2,9 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use crate::fit::alpha::{
     AlphaFitOptions, alpha_bounds, fit_alpha, hull_alpha_scene, point_cloud_alpha_scene,
@@ -18,6 +21,8 @@ use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Result, Scene, Silent, Up};
 use crate::render::RenderContext;
 use crate::tasks::with_threads;
+use crate::view::live::StepPoint;
+use crate::view::{Live, Server, Showing};
 
 /// `splat4d fit`.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,6 +49,8 @@ pub struct FitRequest {
     pub log: Option<PathBuf>,
     /// Worker threads (`None`: one per core).
     pub threads: Option<usize>,
+    /// Serve the viewer on this loopback port while the fit runs.
+    pub view: Option<u16>,
 }
 
 /// What [`fit_dataset`] did: the fit and the PSNR per split.
@@ -159,6 +166,11 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         }
     }
     check_fit_memory(request)?;
+    // A busy port is refused before the dataset is read.
+    let server = request
+        .view
+        .map(|port| Server::bind("127.0.0.1", port))
+        .transpose()?;
     let options = DatasetOptions {
         background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
         downscale: request.downscale,
@@ -200,7 +212,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     }
     if blend == Blend::Alpha {
         progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
-        return fit_alpha_dataset(request, &dataset, init, up, progress);
+        return fit_alpha_dataset(request, &dataset, init, up, server, progress);
     }
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
@@ -217,6 +229,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     } else {
         &dataset.val
     };
+    let viewer = server.map(|server| {
+        FitViewer::start(server, &scene, &dataset, &plan.render, plan.steps, progress)
+    });
     progress.start(plan.steps);
     let mut last_heldout = None;
     let records = with_threads(request.threads, || {
@@ -225,14 +240,18 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             &dataset.train,
             heldout,
             &prepared.options,
-            |record| {
+            |record, scene| {
                 if record.heldout_psnr.is_some() {
                     last_heldout = record.heldout_psnr;
                 }
                 progress.step(record, last_heldout);
+                if let Some(viewer) = &viewer {
+                    viewer.step(record, scene);
+                }
             },
         )
     })??;
+    drop(viewer);
     scene.up = up;
     scene.time_range = data_time_range(&dataset);
     scene.framing = data_framing(&dataset);
@@ -322,6 +341,7 @@ fn fit_alpha_dataset(
     dataset: &crate::model::Dataset,
     init: Init,
     up: Option<Up>,
+    server: Option<Server>,
     progress: &mut dyn FitProgress,
 ) -> Result<FitSummary> {
     let options = &request.alpha;
@@ -359,6 +379,16 @@ fn fit_alpha_dataset(
     } else {
         &dataset.val
     };
+    let viewer = server.map(|server| {
+        FitViewer::start(
+            server,
+            &scene,
+            dataset,
+            &options.render,
+            options.steps,
+            progress,
+        )
+    });
     progress.start(options.steps);
     let mut last_heldout = None;
     let records = with_threads(request.threads, || {
@@ -368,14 +398,18 @@ fn fit_alpha_dataset(
             &dataset.train,
             heldout,
             options,
-            |record| {
+            |record, scene| {
                 if record.heldout_psnr.is_some() {
                     last_heldout = record.heldout_psnr;
                 }
                 progress.step(record, last_heldout);
+                if let Some(viewer) = &viewer {
+                    viewer.step(record, scene);
+                }
             },
         )
     })??;
+    drop(viewer);
     scene.up = up.or(scene.up);
     scene.time_range = data_time_range(dataset);
     scene.framing = data_framing(dataset);
@@ -387,6 +421,83 @@ fn fit_alpha_dataset(
         &options.render,
         options.steps,
     )
+}
+
+/// How often a running fit hands its viewer a copy of its scene.
+const VIEW_SNAPSHOT_EVERY: Duration = Duration::from_secs(3);
+/// The share of the time the viewer of a running fit may render (the fit keeps the rest).
+const VIEW_DUTY: f64 = 0.05;
+
+/// The viewer of a running fit ([`crate::view`]): served on its own thread, handed a
+/// snapshot of the scene every [`VIEW_SNAPSHOT_EVERY`]; stops when dropped.
+struct FitViewer {
+    live: Arc<Live>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl FitViewer {
+    fn start(
+        server: Server,
+        scene: &Scene,
+        dataset: &crate::model::Dataset,
+        render: &crate::render::RenderOptions,
+        steps: usize,
+        progress: &mut dyn FitProgress,
+    ) -> FitViewer {
+        let live = Arc::new(Live::new(steps, VIEW_SNAPSHOT_EVERY));
+        let views: Vec<_> = dataset
+            .train
+            .iter()
+            .chain(&dataset.val)
+            .chain(&dataset.test)
+            .cloned()
+            .collect();
+        // Framed on what the cameras look at, over the data's times (as the fitted scene).
+        let mut start = scene.clone();
+        start.framing = data_framing(dataset);
+        start.time_range = data_time_range(dataset);
+        let showing = Showing {
+            title: "fit".into(),
+            scene: Arc::new(start),
+            views: Arc::new(views),
+            options: *render,
+            live: Some(Arc::clone(&live)),
+            duty: VIEW_DUTY,
+        };
+        progress.note(&format!("viewing the fit at {}", server.url()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            // Serving ends only when stopped; its errors have no reader once the fit runs.
+            let _ = server.run(&showing, &flag);
+        });
+        FitViewer {
+            live,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    fn step(&self, record: &StepRecord, scene: &Scene) {
+        let point = StepPoint {
+            step: record.step,
+            seconds: record.seconds,
+            loss: record.train_loss,
+            heldout_psnr: record.heldout_psnr,
+            kernels: record.kernels,
+        };
+        self.live.step(point, || scene.clone());
+    }
+}
+
+impl Drop for FitViewer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
 }
 
 /// The sphere the training cameras look at ([`crate::fit::init::box_from_cameras`]: the

@@ -14,6 +14,7 @@
 //! | [`scene_files::export_ply`] | `export-ply` |
 //! | [`volume::write_volumes`] | `volume` |
 //! | [`video::write_videos`] | `video` |
+//! | [`view::view_scene`] | `view` |
 //! | [`bench::bench`] | `bench` |
 //! | [`report::write_report`] | `report`, and `splat4d` alone |
 //!
@@ -26,15 +27,59 @@ pub mod render;
 pub mod report;
 pub mod scene_files;
 pub mod video;
+pub mod view;
 pub mod volume;
 
 use crate::model::{Error, Result};
+
+/// Work below this many pixel-kernel units (`pixels × (1 + kernels)`) runs on the calling
+/// thread when no thread count was asked for: starting a pool costs more than it saves.
+pub const SMALL_WORK: f64 = 2e6;
+
+/// The threads for work of `units` ([`SMALL_WORK`]): the ones asked for, else one for
+/// small work, else the global pool.
+#[must_use]
+pub fn threads_for(asked: Option<usize>, units: f64) -> Option<usize> {
+    asked.or((units < SMALL_WORK).then_some(1))
+}
+
+thread_local! {
+    /// This thread as a one-thread pool, built on first use and kept (rayon cannot take a
+    /// thread back out of a pool that uses it).
+    static THIS_THREAD: std::cell::OnceCell<Option<rayon::ThreadPool>> =
+        const { std::cell::OnceCell::new() };
+}
+
+/// `work` on a pool whose one thread is the calling thread (or, where rayon cannot make
+/// one, on a pool of one started thread).
+fn on_this_thread<T: Send>(work: impl FnOnce() -> T + Send) -> Result<T> {
+    let local = THIS_THREAD.with(|cell| {
+        cell.get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .use_current_thread()
+                .build()
+                .ok()
+        })
+        .as_ref()
+        .map(|pool| pool.current_thread_index().is_some())
+    });
+    if local == Some(true) {
+        return Ok(work());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| Error::usage(format!("cannot start a worker thread: {e}")))?;
+    Ok(pool.install(work))
+}
 
 /// Most worker threads a task starts.
 pub const MAX_THREADS: usize = 1024;
 
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool (one thread per
-/// core) when `None`. Results do not depend on the thread count.
+/// core) when `None`. One thread is the calling thread itself (no thread is started: a
+/// small command pays nothing for a pool). Results do not depend on the thread count.
 pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(work()),
@@ -42,6 +87,7 @@ pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + 
             &["threads"],
             format!("`threads` {n} must be between 1 and {MAX_THREADS}"),
         )),
+        Some(1) => on_this_thread(work),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)

@@ -17,7 +17,7 @@ use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Camera, Error, Result, Scene};
 use crate::overlay::draw_overlay;
 use crate::render::{RenderContext, RenderOptions};
-use crate::tasks::with_threads;
+use crate::tasks::{threads_for, with_threads};
 
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -168,7 +168,8 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     let (scene, camera) = view.load()?;
     check_render_memory(&camera, &scene)?;
     let mut context = RenderContext::new();
-    let stats = with_threads(view.threads, || {
+    let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
+    let stats = with_threads(threads_for(view.threads, units), || {
         context.render(&scene, &camera, view.time, &view.options)
     })??;
     if request.overlay {

@@ -49,6 +49,9 @@ pub struct VideoRequest {
     pub lens: Lens,
     /// Frame rate and which files to write.
     pub video: VideoOptions,
+    /// Whether `video.fps` was asked for; otherwise a path file's own `fps` is used for its
+    /// video.
+    pub fps_given: bool,
     /// Rendering options.
     pub options: RenderOptions,
     /// Worker threads (`None`: one per core).
@@ -87,8 +90,11 @@ impl fmt::Display for VideoSummary {
     }
 }
 
+/// A named camera path, with its own frame rate when its file gives one.
+type NamedPath = (String, Vec<PathFrame>, Option<u32>);
+
 /// The named camera paths of `request`.
-fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathFrame>)>> {
+fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     let lens = &request.lens;
     let up = request.up.or(scene.up).unwrap_or_default();
     let circle = |spec: &CircleSpec, times: &[f64]| match spec {
@@ -112,6 +118,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
             videos.push((
                 format!("orbit_t{tau:.2}"),
                 orbit(&circle(spec, &[tau]), lens, tau)?,
+                None,
             ));
         }
     }
@@ -120,6 +127,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         videos.push((
             "spiral".into(),
             spiral(&circle(spec, &sweep), lens, [t0, t1])?,
+            None,
         ));
     }
     if let Some(path) = &request.path {
@@ -129,9 +137,10 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
         let name = crate::io::output::sanitize_label(&name, "path");
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
-        let cameras = load_any_path(path)?;
-        let sweep = even_times([t0, t1], cameras.len());
-        let frames = cameras
+        let file = load_any_path(path)?;
+        let sweep = even_times([t0, t1], file.cameras.len());
+        let frames = file
+            .cameras
             .iter()
             .zip(sweep)
             .map(|(c, t)| PathFrame {
@@ -139,12 +148,17 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<(String, Vec<PathF
                 time: c.time.unwrap_or(t),
             })
             .collect();
-        videos.push((name, frames));
+        // The file's frame rate (nerfstudio's `fps`) unless one was asked for.
+        let fps = file
+            .fps
+            .filter(|_| !request.fps_given)
+            .map(|f| (f.round() as u32).clamp(1, 100));
+        videos.push((name, frames, fps));
     }
     // Names that can never leave the folder or clash: orbits at times that round to one label,
     // a path file named like the spiral.
-    let names: Vec<String> = videos.iter().map(|(name, _)| name.clone()).collect();
-    for ((name, _), unique) in videos.iter_mut().zip(unique_names(&names)) {
+    let names: Vec<String> = videos.iter().map(|(name, ..)| name.clone()).collect();
+    for ((name, ..), unique) in videos.iter_mut().zip(unique_names(&names)) {
         *name = unique;
     }
     Ok(videos)
@@ -199,39 +213,37 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         &format!("{}×{} frames", request.lens.width, request.lens.height),
     )?;
     let videos = paths(request, &scene)?;
-    let names: Vec<&str> = videos.iter().map(|(name, _)| name.as_str()).collect();
+    let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
     check_outputs(request, &names)?;
-    progress.start("frames", videos.iter().map(|(_, f)| f.len()).sum());
+    progress.start("frames", videos.iter().map(|(_, f, _)| f.len()).sum());
     let mut context = RenderContext::new();
     // One scene, many frames: each frame visits only the kernels alive at its time.
     let index = TemporalIndex::new(&scene, request.options.cutoff);
     let mut written = Vec::new();
     let mut camera_paths = Vec::new();
-    for (name, frames) in &videos {
+    for (name, frames, fps) in &videos {
+        let video = VideoOptions {
+            fps: fps.unwrap_or(request.video.fps),
+            ..request.video
+        };
         let files = with_threads(request.threads, || {
-            write_video(
-                frames.len(),
-                &request.out,
-                name,
-                &request.video,
-                |k, image| {
-                    let frame = &frames[k];
-                    context.render_indexed(
-                        &scene,
-                        &index,
-                        &frame.camera,
-                        frame.time,
-                        &request.options,
-                    )?;
-                    image.clone_from(context.image());
-                    progress.tick();
-                    Ok(())
-                },
-            )
+            write_video(frames.len(), &request.out, name, &video, |k, image| {
+                let frame = &frames[k];
+                context.render_indexed(
+                    &scene,
+                    &index,
+                    &frame.camera,
+                    frame.time,
+                    &request.options,
+                )?;
+                image.clone_from(context.image());
+                progress.tick();
+                Ok(())
+            })
         })??;
         // The cameras as nerfstudio's camera path, so other renderers can follow them.
         let camera_path = request.out.join(format!("{name}.camera_path.json"));
-        save_nerfstudio_path(frames, request.video.fps, &camera_path)?;
+        save_nerfstudio_path(frames, video.fps, &camera_path)?;
         written.push(files);
         camera_paths.push(camera_path);
     }

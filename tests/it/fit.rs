@@ -43,7 +43,14 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
         final_rate_factor: 0.01,
         ..FitOptions::default()
     };
-    let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
+    let records = fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| {},
+    )
+    .unwrap();
     let error: f64 = (0..3)
         .map(|c| (scene.means[0][c] - 0.5).abs())
         .fold(0.0, f64::max);
@@ -92,7 +99,7 @@ fn a_diverging_fit_stops_with_an_error() {
         ..FitOptions::default()
     };
     scene.amplitudes[0] = [0.5; 3];
-    let error = fit(&mut scene, &dataset.train, &[], &options, |_| {})
+    let error = fit(&mut scene, &dataset.train, &[], &options, |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(
@@ -121,7 +128,14 @@ fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
     let PreparedFit {
         mut scene, options, ..
     } = plan.prepare(Init::Auto, &dataset.train).unwrap();
-    let records = fit(&mut scene, &dataset.train, &dataset.val, &options, |_| {}).unwrap();
+    let records = fit(
+        &mut scene,
+        &dataset.train,
+        &dataset.val,
+        &options,
+        |_, _| {},
+    )
+    .unwrap();
     assert_eq!(records.last().unwrap().kernels, scene.len());
     let mut context = RenderContext::new();
     let test_psnr = psnr(evaluate(&scene, &dataset.test, &options.render, &mut context).unwrap());

@@ -63,7 +63,7 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
         &dataset.train,
         &dataset.test,
         &fit_options,
-        |_| {},
+        |_, _| {},
     )
     .unwrap();
     let heldout = records.last().unwrap().heldout_psnr.unwrap();
@@ -120,7 +120,7 @@ fn a_visual_hull_start_holds_the_scene_and_fits_at_least_as_well_as_a_random_one
             &dataset.train,
             &dataset.test,
             &fit_options,
-            |_| {},
+            |_, _| {},
         )
         .unwrap();
         (records.last().unwrap().heldout_psnr.unwrap(), start.len())

@@ -23,6 +23,7 @@ const LAYERS: &[&[&str]] = &[
     &["scenes"],
     &["io"],
     &["report"],
+    &["view"],
     &["tasks"],
 ];
 

@@ -63,5 +63,7 @@ mod temporal_index;
 mod tiles;
 /// Videos: frames, GIFs, the MP4 path through a stand-in ffmpeg.
 mod video;
+/// `splat4d view` in headless Chromium: drawing, orbiting, scrubbing, comparing, speed.
+mod view;
 /// Eq. 1 volumes against the f64 evaluation.
 mod volume;

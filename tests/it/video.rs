@@ -318,7 +318,7 @@ fn video_without_a_path_flag_orbits_the_scene_at_its_times() {
 
 /// nerfstudio's `camera_path.json` both ways: `video` writes the cameras it rendered beside
 /// each video, `video --path` reads that file (and files like it, with or without a time per
-/// camera) and renders the same frames; a file with only the viewer's keyframes is refused.
+/// camera) and renders the same frames; a file with neither cameras nor keyframes is refused.
 #[test]
 fn nerfstudio_camera_paths_are_written_and_read() {
     let dir = tempfile::tempdir().unwrap();
@@ -422,7 +422,7 @@ fn nerfstudio_camera_paths_are_written_and_read() {
         .collect();
     assert_eq!(times.len(), 5);
     assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
-    // Only the viewer's keyframes: refused, saying what to export.
+    // Neither cameras nor keyframes: refused, naming both.
     std::fs::write(
         d.join("keys.json"),
         serde_json::json!({"render_width": 40, "render_height": 30, "keyframes": []}).to_string(),
@@ -449,4 +449,107 @@ fn nerfstudio_camera_paths_are_written_and_read() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
+}
+
+/// A keyframes-only nerfstudio file (what its viewer saves before rendering, and what
+/// `splat4d view` saves): `fps × seconds` frames through the keyframes, the first exactly
+/// keyframe 0's view and time, the last the last keyframe's, at the file's frame rate;
+/// fisheye and equirectangular paths are refused naming the type.
+#[test]
+fn keyframes_only_paths_render_fps_times_seconds_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let lens = Lens {
+        width: 40,
+        height: 30,
+        fov_y_degrees: 40.0,
+    };
+    let circle = Circle {
+        centre: [0.5, 0.5, 0.5],
+        radius: 4.0,
+        elevation_degrees: 20.0,
+        frames: 4,
+        up: Default::default(),
+    };
+    let keys = orbit(&circle, &lens, 0.5).unwrap();
+    let keyframe = |k: usize, time: f64, fov: f64| {
+        serde_json::json!({
+            "matrix": keys[k].camera.opengl_camera_to_world().iter().flatten().collect::<Vec<_>>(),
+            "fov": fov, "aspect": 40.0 / 30.0, "time": time,
+        })
+    };
+    let file = serde_json::json!({
+        "camera_type": "perspective", "render_width": 40, "render_height": 30,
+        "fps": 10, "seconds": 0.7, "smoothness_value": 0.5, "is_cycle": false,
+        "keyframes": [keyframe(0, 0.2, 40.0), keyframe(1, 0.5, 50.0), keyframe(2, 0.8, 40.0)],
+    });
+    std::fs::write(d.join("keys.json"), file.to_string()).unwrap();
+    let args = [
+        "video",
+        "--scene",
+        "blob.json",
+        "--path",
+        "keys.json",
+        "--out",
+        "v",
+        "--no-mp4",
+    ];
+    let output = splat4d(&args, d, None);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("v/keys.camera_path.json")).unwrap())
+            .unwrap();
+    let cameras = written["camera_path"].as_array().unwrap();
+    assert_eq!(cameras.len(), 7, "10 fps × 0.7 s");
+    assert_eq!(written["fps"], 10, "the file's frame rate");
+    let times: Vec<f64> = cameras
+        .iter()
+        .map(|c| c["render_time"].as_f64().unwrap())
+        .collect();
+    assert_eq!(times[0], 0.2);
+    assert!(
+        (times[6] - 0.8).abs() < 1e-12 && (times[3] - 0.5).abs() < 1e-12,
+        "{times:?}"
+    );
+    assert!((cameras[3]["fov"].as_f64().unwrap() - 50.0).abs() < 1e-9);
+    // Frame 0 is keyframe 0's view at its time.
+    let first = load_image(&d.join("v/keys/frame_0000.png"), [0.0; 3]).unwrap();
+    let expected = render(&blob(), &keys[0].camera, 0.2, &RenderOptions::default()).unwrap();
+    let worst = first
+        .pixels
+        .iter()
+        .zip(&expected.pixels)
+        .map(|(a, b)| quantize(*a, 255).abs_diff(quantize(*b, 255)))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "frame 0 against keyframe 0: {worst}");
+    assert!(d.join("v/keys/frame_0006.png").exists() && !d.join("v/keys/frame_0007.png").exists());
+    for kind in ["fisheye", "equirectangular"] {
+        let mut other = file.clone();
+        other["camera_type"] = kind.into();
+        std::fs::write(d.join("other.json"), other.to_string()).unwrap();
+        let args = [
+            "video",
+            "--scene",
+            "blob.json",
+            "--path",
+            "other.json",
+            "--out",
+            "o",
+            "--no-gif",
+            "--no-mp4",
+        ];
+        let output = splat4d(&args, d, None);
+        let message = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{message}");
+        assert!(
+            message.contains(kind) && message.contains("camera_type"),
+            "{message}"
+        );
+    }
 }
