@@ -62,53 +62,6 @@ thread_local! {
         std::cell::RefCell::new(CompositeScratch::default());
 }
 
-/// The forward's prepared tiles, kept for the backward of the same frame so that a
-/// training step sets each tile up once. A tile is kept when its row entries fit its share
-/// of [`TileCache::BUDGET`] (a rule on the tile alone: deterministic, whatever the thread
-/// count); the backward prepares the others again, to the same values.
-///
-/// SPEC §8 (the compositing's backward); kept by
-/// `RenderContext::keep_tiles_for_backward`.
-#[derive(Default)]
-pub struct TileCache {
-    tiles: Vec<CompositeScratch>,
-    kept: Vec<bool>,
-}
-
-impl std::fmt::Debug for TileCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let kept = self.kept.iter().filter(|&&k| k).count();
-        write!(
-            f,
-            "TileCache {{ {kept} of {} tiles kept }}",
-            self.kept.len()
-        )
-    }
-}
-
-impl TileCache {
-    /// Bytes of row entries the cache may hold over a whole frame (256 MiB).
-    pub const BUDGET: usize = 256 << 20;
-
-    /// Empties the cache for a frame of `tiles` tiles.
-    fn start_frame(&mut self, tiles: usize) {
-        self.tiles.resize_with(tiles, CompositeScratch::default);
-        self.kept.clear();
-        self.kept.resize(tiles, false);
-    }
-
-    /// The prepared tile `t`, if the forward kept it.
-    pub(crate) fn tile(&self, t: usize) -> Option<&CompositeScratch> {
-        (self.kept.get(t) == Some(&true)).then(|| &self.tiles[t])
-    }
-
-    /// Whether `scratch` (one prepared tile of a frame of `tiles` tiles) fits its share.
-    fn fits(scratch: &CompositeScratch, tiles: usize) -> bool {
-        let entries: usize = scratch.tile.halves.iter().map(Vec::len).sum();
-        entries * std::mem::size_of::<RowEntry>() <= Self::BUDGET / tiles.max(1)
-    }
-}
-
 /// Fills `scratch` for tile `t`: [`prepare_tile`], then the opacity of each tile kernel.
 #[inline(always)]
 pub(crate) fn prepare_alpha_tile(
@@ -177,39 +130,6 @@ pub fn composite_on(
     image: &mut Image,
     stops: &mut Vec<PixelStop>,
 ) -> u64 {
-    let outputs = Outputs {
-        forms,
-        image,
-        stops,
-        cache: None,
-    };
-    composite_frame(path, proj, bins, background, exp, outputs)
-}
-
-/// Where a composited frame goes: the row forms (scratch), the image, each pixel's stop
-/// and, when given, the prepared tiles kept for the backward.
-pub(crate) struct Outputs<'a> {
-    pub(crate) forms: &'a mut Vec<RowForm>,
-    pub(crate) image: &'a mut Image,
-    pub(crate) stops: &'a mut Vec<PixelStop>,
-    pub(crate) cache: Option<&'a mut TileCache>,
-}
-
-/// [`composite_on`], keeping the prepared tiles in `outputs.cache` when it is given.
-pub(crate) fn composite_frame(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    outputs: Outputs,
-) -> u64 {
-    let Outputs {
-        forms,
-        image,
-        stops,
-        mut cache,
-    } = outputs;
     assert!(
         SimdPath::available().contains(&path),
         "this CPU cannot run the {path} path"
@@ -230,33 +150,18 @@ pub(crate) fn composite_frame(
     }
     stops.clear();
     stops.resize(w * h, PixelStop::default());
-    if let Some(cache) = cache.as_deref_mut() {
-        cache.start_frame(bins.tile_count());
-    }
     if w == 0 || h == 0 {
         return 0;
     }
     let background = background.map(f64::from);
     let forms: &[RowForm] = forms;
     let tiles_x = bins.tiles_x as usize;
-    // Per tile row, its run of the cache (empty runs when nothing is kept).
-    let cache_rows: Vec<(&mut [CompositeScratch], &mut [bool])> = match cache {
-        Some(cache) => cache
-            .tiles
-            .chunks_mut(tiles_x)
-            .zip(cache.kept.chunks_mut(tiles_x))
-            .collect(),
-        None => (0..bins.tiles_y)
-            .map(|_| (&mut [][..], &mut [][..]))
-            .collect(),
-    };
     image
         .pixels
         .par_chunks_mut(3 * w * ROW)
         .zip(stops.par_chunks_mut(w * ROW))
-        .zip(cache_rows)
         .enumerate()
-        .map(|(ty, ((band, band_stops), (cached, kept)))| {
+        .map(|(ty, (band, band_stops))| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
                 let mut pairs = 0;
@@ -268,11 +173,6 @@ pub(crate) fn composite_frame(
                         stops: band_stops,
                     };
                     pairs += tile_on(path, exp, bins, t, background, scratch, out);
-                    // Keep the tile by swapping buffers: no copy.
-                    if !cached.is_empty() && TileCache::fits(scratch, bins.tile_count()) {
-                        std::mem::swap(scratch, &mut cached[tx]);
-                        kept[tx] = true;
-                    }
                 }
                 pairs
             })

@@ -18,12 +18,11 @@ use crate::backward::raster::rasterize_backward;
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
 use crate::colour::{order_by_depth, shade};
-use crate::composite::{Outputs, TileCache, composite_frame};
+use crate::composite::composite;
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result};
 use crate::model::scene::{Blend, Scene};
 use crate::project::{ProjectedKernels, project};
-use crate::raster::SimdPath;
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
 use crate::{
@@ -128,9 +127,6 @@ pub struct RenderContext {
     depth_keys: Vec<(f64, u32, u32)>,
     /// Alpha frames: each pixel's final transmittance and stop, for the backward.
     pub(crate) pixel_stops: Vec<crate::composite::PixelStop>,
-    /// Alpha frames, when [`Self::keep_tiles_for_backward`] asked for it: the forward's
-    /// prepared tiles, for the backward of the same frame.
-    pub(crate) tile_cache: Option<TileCache>,
     image: Image,
 }
 
@@ -139,13 +135,6 @@ impl RenderContext {
     #[must_use]
     pub fn new() -> Self {
         RenderContext::default()
-    }
-
-    /// Keeps (or stops keeping) each alpha frame's prepared tiles for the backward of the
-    /// same frame, up to [`TileCache::BUDGET`] bytes: a training step then sets each tile
-    /// up once instead of twice. Images and gradients are the same either way.
-    pub fn keep_tiles_for_backward(&mut self, keep: bool) {
-        self.tile_cache = keep.then(TileCache::default);
     }
 
     /// Renders `scene` through `camera` at time `tau`. The scene and camera must be valid
@@ -222,18 +211,14 @@ impl RenderContext {
                 &mut self.row_forms,
                 &mut self.image,
             ),
-            Blend::Alpha => composite_frame(
-                SimdPath::detect(),
+            Blend::Alpha => composite(
                 &self.projected,
                 &self.bins,
                 background,
                 options.exp,
-                Outputs {
-                    forms: &mut self.row_forms,
-                    image: &mut self.image,
-                    stops: &mut self.pixel_stops,
-                    cache: self.tile_cache.as_mut(),
-                },
+                &mut self.row_forms,
+                &mut self.image,
+                &mut self.pixel_stops,
             ),
         };
         RenderStats {
@@ -284,7 +269,6 @@ impl RenderContext {
                 &self.bins,
                 &self.row_forms,
                 &self.pixel_stops,
-                self.tile_cache.as_ref(),
                 scene.background.map(|b| b as f32),
                 v_image,
                 options.exp,

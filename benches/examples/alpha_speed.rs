@@ -19,12 +19,10 @@ fn median(mut times: Vec<f64>) -> f64 {
     times[times.len() / 2]
 }
 
-/// Forward and backward milliseconds of `scene`, the context keeping the forward's tiles
-/// for the backward (as the fits do) when `keep_tiles`.
-fn measure(scene: &Scene, camera: &splat4d::Camera, keep_tiles: bool) -> (f64, f64) {
+/// Forward and backward milliseconds of `scene`.
+fn measure(scene: &Scene, camera: &splat4d::Camera) -> (f64, f64) {
     let options = RenderOptions::default();
     let mut context = RenderContext::new();
-    context.keep_tiles_for_backward(keep_tiles);
     context.render(scene, camera, 0.3, &options).unwrap();
     let target = context.image().clone();
     context.render(scene, camera, TAU, &options).unwrap();
@@ -65,20 +63,14 @@ fn main() {
     let alpha = bench_scene(n, 42)
         .into_alpha(vec![0.5; n], 0, Vec::new(), "<bench>")
         .unwrap();
-    let (add_forward, add_backward) = pool.install(|| measure(&additive, &camera, false));
-    let (alpha_forward, alpha_backward) = pool.install(|| measure(&alpha, &camera, false));
-    let (kept_forward, kept_backward) = pool.install(|| measure(&alpha, &camera, true));
+    let (add_forward, add_backward) = pool.install(|| measure(&additive, &camera));
+    let (alpha_forward, alpha_backward) = pool.install(|| measure(&alpha, &camera));
     println!("{n} kernels at {w}x{h}, {threads} threads (median of {FRAMES} warm frames)");
     println!("additive: forward {add_forward:.1} ms, backward {add_backward:.1} ms");
     println!("alpha:    forward {alpha_forward:.1} ms, backward {alpha_backward:.1} ms");
     println!(
-        "alpha, tiles kept for the backward: forward {kept_forward:.1} ms, backward {kept_backward:.1} ms"
-    );
-    println!(
-        "alpha forward / additive forward = {:.2}; alpha backward / alpha forward = {:.2}; \
-         kept tiles: backward / forward = {:.2}",
+        "alpha forward / additive forward = {:.2}; alpha backward / alpha forward = {:.2}",
         alpha_forward / add_forward,
-        alpha_backward / alpha_forward,
-        kept_backward / kept_forward
+        alpha_backward / alpha_forward
     );
 }

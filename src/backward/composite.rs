@@ -28,8 +28,7 @@ use rayon::prelude::*;
 
 use crate::backward::raster::{ScreenGradients, reduce};
 use crate::composite::{
-    CompositeScratch, MAX_ALPHA, PixelStop, TileCache, clamped_alpha, entry_lanes,
-    prepare_alpha_tile,
+    CompositeScratch, MAX_ALPHA, PixelStop, clamped_alpha, entry_lanes, prepare_alpha_tile,
 };
 use crate::project::ProjectedKernels;
 use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
@@ -39,8 +38,7 @@ use crate::tiles::TileBins;
 /// `Σ w Δv²`, `Σ ∂L/∂α̂ G`.
 pub(crate) type AlphaPartial = [f64; 9];
 
-/// Scratch of one worker: a tile's set-up (when the forward did not keep it) and its
-/// kernels' sums.
+/// Scratch of one worker: a tile's set-up and its kernels' sums.
 #[derive(Default)]
 struct Scratch {
     composite: CompositeScratch,
@@ -58,16 +56,14 @@ thread_local! {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major) of the alpha frame last composited
-/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame, and the tiles it kept
-/// in `cache`, if any) into `out` (one entry per projected kernel, reset first) and returns
-/// `∂L/∂b`. `partials` is scratch.
+/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame) into `out` (one entry
+/// per projected kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward(
     proj: &ProjectedKernels,
     bins: &TileBins,
     forms: &[RowForm],
     stops: &[PixelStop],
-    cache: Option<&TileCache>,
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -80,7 +76,6 @@ pub fn composite_backward(
         bins,
         forms,
         stops,
-        cache,
         background,
         v_image,
         exp,
@@ -97,7 +92,6 @@ pub(crate) fn composite_backward_on(
     bins: &TileBins,
     forms: &[RowForm],
     stops: &[PixelStop],
-    cache: Option<&TileCache>,
     background: [f32; 3],
     v_image: &[f32],
     exp: ExpMode,
@@ -138,14 +132,11 @@ pub(crate) fn composite_backward_on(
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
                 let Scratch { composite, sums } = scratch;
-                let tile = match cache.and_then(|cache| cache.tile(t)) {
-                    Some(kept) => kept,
-                    None => {
-                        prepare_alpha_tile(proj, bins, forms, t, composite);
-                        composite
-                    }
+                prepare_alpha_tile(proj, bins, forms, t, composite);
+                let scratch = TileWork {
+                    tile: composite,
+                    sums,
                 };
-                let scratch = TileWork { tile, sums };
                 match (path, exp) {
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: checked above that the CPU has the path's features.
@@ -386,7 +377,6 @@ mod tests {
             )
             .unwrap();
         let mut context = RenderContext::new();
-        context.keep_tiles_for_backward(true);
         let options = RenderOptions::default();
         context.render(&scene, &camera, 0.4, &options).unwrap();
         let v_image: Vec<f32> = (0..context.image().pixels.len())
@@ -395,7 +385,7 @@ mod tests {
         let mut forms = Vec::new();
         crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
         let stops = context.pixel_stops.clone();
-        let gradients = |path, cache| {
+        let gradients = |path| {
             let mut out = ScreenGradients::default();
             let v_background = composite_backward_on(
                 path,
@@ -403,7 +393,6 @@ mod tests {
                 &context.bins,
                 &forms,
                 &stops,
-                cache,
                 [0.2, 0.3, 0.4],
                 &v_image,
                 ExpMode::Poly,
@@ -412,7 +401,7 @@ mod tests {
             );
             (out, v_background)
         };
-        let (portable, portable_background) = gradients(SimdPath::Baseline, None);
+        let (portable, portable_background) = gradients(SimdPath::Baseline);
         assert!(
             portable.v_opacities.iter().filter(|v| **v != 0.0).count() > 1000,
             "most kernels get an opacity gradient"
@@ -427,19 +416,13 @@ mod tests {
             }
             bits
         };
-        // The forward kept every tile of this small frame; the backward from them is the
-        // backward that prepares each tile again.
-        let cache = context.tile_cache.as_ref().unwrap();
-        assert!((0..context.bins.tile_count()).all(|t| cache.tile(t).is_some()));
         for &path in SimdPath::available() {
-            for cache in [None, Some(cache)] {
-                let (vector, vector_background) = gradients(path, cache);
-                assert!(bits(&portable) == bits(&vector), "{path} differs");
-                assert_eq!(
-                    portable_background.map(f64::to_bits),
-                    vector_background.map(f64::to_bits)
-                );
-            }
+            let (vector, vector_background) = gradients(path);
+            assert!(bits(&portable) == bits(&vector), "{path} differs");
+            assert_eq!(
+                portable_background.map(f64::to_bits),
+                vector_background.map(f64::to_bits)
+            );
         }
     }
 }

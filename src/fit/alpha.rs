@@ -202,16 +202,11 @@ pub fn point_cloud_alpha_scene(
     )
 }
 
-/// Most kernels a start from the visual hull makes (cells taken evenly through the kept
-/// ones beyond it).
-pub const HULL_MAX_START: usize = 10_000;
-
-/// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them: at
-/// least `options.start_kernels` kernels (cells taken again when fewer were kept) and at
-/// most [`HULL_MAX_START`], each placed at random in its cell (seeded), with a spatial σ of
-/// half the spacing the kernels have through the kept volume, a random time mean and σt
-/// `start_time_scale` of the time range, as the random start has: the hull says where, not
-/// when.
+/// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them:
+/// `options.start_kernels` kernels, as the random start has, taken evenly through the kept
+/// cells (again when fewer were kept), each placed at random in its cell (seeded), with a
+/// spatial σ of half the spacing the kernels have through the kept volume, a random time
+/// mean and σt `start_time_scale` of the time range: the hull says where, not when.
 pub fn hull_alpha_scene(
     cells: &[DatasetPoint],
     side: [f64; 3],
@@ -222,10 +217,7 @@ pub fn hull_alpha_scene(
     if cells.is_empty() {
         return Err(Error::usage("the visual hull kept no cell to start from"));
     }
-    let n = cells.len().clamp(
-        options.start_kernels.max(1),
-        HULL_MAX_START.max(options.start_kernels),
-    );
+    let n = options.start_kernels.max(1);
     let volume = cells.len() as f64 * side[0] * side[1] * side[2];
     let spacing = (volume / n as f64).cbrt();
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
@@ -287,7 +279,6 @@ pub fn fit_alpha(
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
     let mut context = RenderContext::new();
-    context.keep_tiles_for_backward(true);
     let mut grads = Gradients::for_scene(scene);
     let width = stride(scene.sh_count);
     let mut moments = Moments {
