@@ -394,138 +394,16 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
     pairs
 }
 
-/// The alpha blend's ceiling probe: the ideal inner loop of a front-to-back compositor on
-/// this CPU, with the renderer's precision (SPEC §8: `G` in f32 by the fast exp, `α̂`, `T`
-/// and the colour in f64), to measure [`composite`] against (`splat4d bench --blend
-/// alpha`). One row of 16 pixels whose colour and transmittance stay in registers while
-/// every one of `kernels` kernels passes over it (`q = Qxx t² + row_q`, `α̂ = min(0.99,
-/// o G)`, `C += colour α̂ T`, `T ← T (1 - α̂)`); the kernels' constants sit in L1; no
-/// binning, no pair test, no stop, no memory traffic. Every lane counts as a pair. Compiled
-/// for `path` like the renderer. Returns the pairs composited and a checksum (so that the
-/// work cannot be optimised away).
-///
-/// # Panics
-/// When the CPU lacks `path`'s instructions.
-#[must_use]
-pub fn alpha_ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f64) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
-    // Kernels of a few pixels near the row, q in the exp's useful range, opacities that
-    // keep T well above f64's smallest normal over a pass.
-    let constants: Vec<ProbeKernel> = (0..kernels.max(1))
-        .map(|k| {
-            let x = k as f32;
-            ProbeKernel {
-                t0: -7.5 + (x * 0.37) % 3.0,
-                qxx: 0.02 + (x * 0.013) % 0.1,
-                row_q: (x * 0.21) % 2.0,
-                opacity: 0.02 + f64::from((x * 0.11) % 0.2),
-                colour: [0.3 + f64::from((x * 0.07) % 0.5), 0.2, 0.1],
-            }
-        })
-        .collect();
-    let checksum = match path {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: checked above.
-        SimdPath::Avx512 => unsafe { alpha_ceiling_avx512(&constants, passes) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: checked above.
-        SimdPath::Avx2 => unsafe { alpha_ceiling_avx2(&constants, passes) },
-        _ => alpha_ceiling_loop(&constants, passes),
-    };
-    ((constants.len() * passes * ROW) as u64, checksum)
-}
-
-/// One kernel of [`alpha_ceiling_probe`].
-struct ProbeKernel {
-    t0: f32,
-    qxx: f32,
-    row_q: f32,
-    opacity: f64,
-    colour: [f64; 3],
-}
-
-/// [`alpha_ceiling_loop`] compiled for AVX-512.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
-fn alpha_ceiling_avx512(constants: &[ProbeKernel], passes: usize) -> f64 {
-    alpha_ceiling_loop(constants, passes)
-}
-
-/// [`alpha_ceiling_loop`] compiled for AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn alpha_ceiling_avx2(constants: &[ProbeKernel], passes: usize) -> f64 {
-    alpha_ceiling_loop(constants, passes)
-}
-
-/// The loop of [`alpha_ceiling_probe`]: branch-free over the 16 lanes (vectorised by the
-/// compiler on each path).
-#[inline(always)]
-fn alpha_ceiling_loop(constants: &[ProbeKernel], passes: usize) -> f64 {
-    let mut checksum = 0.0;
-    for _ in 0..passes {
-        let mut colour = [[0.0_f64; ROW]; 3];
-        let mut transmittance = [1.0_f64; ROW];
-        for kernel in constants {
-            let mut g = [0.0_f32; ROW];
-            for (i, g) in g.iter_mut().enumerate() {
-                let t = kernel.t0 + i as f32;
-                *g = crate::raster::fast_exp_neg_half(kernel.qxx * t * t + kernel.row_q);
-            }
-            for i in 0..ROW {
-                let alpha = clamped_alpha(kernel.opacity, g[i]);
-                let weight = alpha * transmittance[i];
-                for (channel, &value) in colour.iter_mut().zip(&kernel.colour) {
-                    channel[i] += value * weight;
-                }
-                transmittance[i] *= 1.0 - alpha;
-            }
-        }
-        checksum += colour.iter().flatten().sum::<f64>() + transmittance.iter().sum::<f64>();
-    }
-    checksum
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::render::{RenderContext, RenderOptions};
 
     #[test]
-    fn the_alpha_ceiling_probe_counts_every_lane_and_agrees_across_paths() {
-        let sums: Vec<f64> = SimdPath::available()
-            .iter()
-            .map(|&path| {
-                let (pairs, checksum) = alpha_ceiling_probe(path, 37, 3);
-                assert_eq!(pairs, 37 * 3 * 16, "{path}");
-                assert!(checksum.is_finite() && checksum > 0.0, "{path}: {checksum}");
-                checksum
-            })
-            .collect();
-        // The same operations on every path: the same bits.
-        assert!(
-            sums.iter().all(|s| s.to_bits() == sums[0].to_bits()),
-            "{sums:?}"
-        );
-    }
-
-    #[test]
     fn the_avx2_lanes_composite_what_the_portable_ones_do_bit_for_bit() {
         let camera = crate::scenes::synthetic::bench_camera(97, 61);
         let n = 3000;
-        let scene = crate::scenes::synthetic::bench_scene(n, 5)
-            .into_alpha(
-                (0..n)
-                    .map(|i| 0.2 + 0.8 * ((i * 37) % 101) as f64 / 100.0)
-                    .collect(),
-                0,
-                Vec::new(),
-                "<test>",
-            )
-            .unwrap();
+        let scene = crate::scenes::synthetic::varied_alpha_bench_scene(n, 5, 0.2);
         let mut context = RenderContext::new();
         let options = RenderOptions::default();
         context.render(&scene, &camera, 0.5, &options).unwrap();

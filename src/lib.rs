@@ -44,11 +44,12 @@
 //! | | [`colour`], [`composite`] | alpha scenes (SPEC §8): SH colour and depth order per kernel; front-to-back compositing per pixel |
 //! | | [`backward`] | the exact gradient (SPEC §6, §8), the stages mirrored in reverse |
 //! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |
-//! | reference | [`reference`](mod@reference) | the f64 twin of every stage, and the dense baseline |
+//! | reference | [`reference`](mod@reference) | the f64 twin of every stage, the dense baseline, and the renderer's error bound |
+//! | bench | [`bench`](mod@bench) | measurement: the ceiling probes of both blends, timing with the error against the reference, the speed-against-error sweep, their tables |
 //! | fit | [`fit`] | loss, Adam, initial scenes, adaptive density, the training loop, and [`fit::plan`]: every fit default |
 //! | scenes | [`scenes`] | synthetic and toy scenes, camera paths and framing, synthetic datasets; node animation, motion sampling and surfels (the glTF import's math, on plain data) |
 //! | io | [`io`] | every file format (reading, checking, handing plain data over); atomic writes |
-//! | report | [`report`] | the seed experiment, metrics, charts, markdown, bench tables |
+//! | report | [`report`] | the seed experiment, metrics, charts, markdown |
 //! | view | [`view`] | the viewer's server: the page, its WebSockets, the render thread |
 //! | tasks | [`tasks`] | one call per subcommand: read, compute, write, summarise |
 //!
@@ -82,6 +83,7 @@ pub mod slice;
 pub mod tiles;
 pub mod volume;
 
+pub mod bench;
 pub mod fit;
 pub mod io;
 pub mod reference;

@@ -30,7 +30,7 @@
 //! path (AVX-512, AVX2+FMA, baseline x86-64), chosen at run time ([`SimdPath`]). No fused
 //! operation is formed in f32, the one in the f64 accumulation rounds like `acc + a G`
 //! because `a G` is exact, and every conversion is exact, so all paths give the same image
-//! bit for bit (tested on every path the CPU has). [`ceiling_probe`] is the ideal loop the
+//! bit for bit (tested on every path the CPU has). [`crate::bench::ceiling_probe`] is the ideal loop the
 //! renderer is measured against.
 
 use std::fmt;
@@ -331,20 +331,49 @@ pub(crate) struct TileScratch {
     pub(crate) halves: [Vec<RowEntry>; 2 * ROW],
 }
 
-thread_local! {
-    /// One scratch per worker thread, kept between tiles and frames.
-    static SCRATCH: std::cell::RefCell<TileScratch> = std::cell::RefCell::new(TileScratch::default());
+/// The forward's per-tile scratch, owned by the render context and kept between frames: a
+/// stack of `TileScratch`es from which each band of tiles takes one while it runs (as many
+/// as bands ran at once, so one per worker thread), its buffers keeping their capacity.
+#[derive(Default)]
+pub struct TileScratchPool {
+    free: std::sync::Mutex<Vec<TileScratch>>,
+}
+
+impl fmt::Debug for TileScratchPool {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let free = self.free.lock().map_or(0, |free| free.len());
+        write!(f, "TileScratchPool {{ {free} scratches }}")
+    }
+}
+
+impl TileScratchPool {
+    /// Runs `work` with a scratch of the pool (a fresh one when all are in use).
+    fn with<R>(&self, work: impl FnOnce(&mut TileScratch) -> R) -> R {
+        let taken = self
+            .free
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .pop();
+        let mut scratch = taken.unwrap_or_default();
+        let result = work(&mut scratch);
+        self.free
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(scratch);
+        result
+    }
 }
 
 /// Sums the binned kernels into `image` (resized to the bins' size) over `background`,
-/// evaluating the Gaussian as `exp` says, on the widest [`SimdPath`] the CPU has. `forms` is
-/// scratch for [`row_forms`]. Returns the number of (pixel, kernel) pairs summed.
+/// evaluating the Gaussian as `exp` says, on the widest [`SimdPath`] the CPU has. `forms` and
+/// `scratch` are scratch for [`row_forms`] and the tiles. Returns the number of (pixel,
+/// kernel) pairs summed.
 pub fn rasterize(
     proj: &ProjectedKernels,
     bins: &TileBins,
     background: [f32; 3],
     exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+    (forms, scratch): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
     rasterize_on(
@@ -353,7 +382,7 @@ pub fn rasterize(
         bins,
         background,
         exp,
-        forms,
+        (forms, scratch),
         image,
     )
 }
@@ -368,7 +397,7 @@ pub fn rasterize_on(
     bins: &TileBins,
     background: [f32; 3],
     exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+    (forms, pool): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
     assert!(
@@ -401,8 +430,7 @@ pub fn rasterize_on(
         .par_chunks_mut(3 * w * ROW)
         .enumerate()
         .map(|(ty, band)| {
-            SCRATCH.with(|cell| {
-                let scratch = &mut *cell.borrow_mut();
+            pool.with(|scratch| {
                 let mut pairs = 0;
                 for tx in 0..bins.tiles_x as usize {
                     let t = ty * bins.tiles_x as usize + tx;
@@ -700,64 +728,6 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
     pairs
 }
 
-/// The ceiling probe: the ideal inner loop of an additive tile rasterizer on this CPU, to
-/// measure the renderer against (`splat4d bench --ceiling`). One row of 16 pixels, three
-/// channels of f32 accumulators kept in registers while every one of `kernels` kernels
-/// passes over it (`q = Qxx t² + row_q`, the degree-5 polynomial exp, `acc += a G`); the
-/// kernels' constants sit in L1; no binning, no test, no memory traffic. Every lane counts as
-/// a pair. Compiled for `path` like the renderer. Returns the pairs evaluated and a checksum
-/// (so that the work cannot be optimised away).
-///
-/// # Panics
-/// When the CPU lacks `path`'s instructions.
-#[must_use]
-pub fn ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f32) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
-    // Kernels of a few pixels, centred near the row, with q in the exp's useful range.
-    let constants: Vec<[f32; 6]> = (0..kernels.max(1))
-        .map(|k| {
-            let x = k as f32;
-            [
-                -7.5 + (x * 0.37) % 3.0,
-                0.02 + (x * 0.013) % 0.1,
-                (x * 0.21) % 2.0,
-                0.3 + (x * 0.07) % 0.5,
-                0.2,
-                0.1,
-            ]
-        })
-        .collect();
-    let checksum = match path {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: checked above.
-        SimdPath::Avx2 | SimdPath::Avx512 => unsafe { avx2::ceiling(&constants, passes) },
-        _ => ceiling_portable(&constants, passes),
-    };
-    ((constants.len() * passes * ROW) as u64, checksum)
-}
-
-/// The portable [`ceiling_probe`] loop.
-fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
-    let mut checksum = 0.0;
-    for _ in 0..passes {
-        let mut acc = [[0.0_f32; 3]; ROW];
-        for &[t0, qxx, row_q, r, g, b] in constants {
-            for (i, pixel) in acc.iter_mut().enumerate() {
-                let t = t0 + i as f32;
-                let value = fast_exp_neg_half(qxx * t * t + row_q);
-                pixel[0] += r * value;
-                pixel[1] += g * value;
-                pixel[2] += b * value;
-            }
-        }
-        checksum += acc.iter().flatten().sum::<f32>();
-    }
-    checksum
-}
-
 /// The half-row loop with AVX2 intrinsics: the operations of [`sum_half_row`] in the same
 /// order, 8 lanes at a time, so the result is the same bit for bit: the f32 part forms no
 /// fused multiply-add, and the f64 accumulation `acc + a G` uses one only because `a G` is
@@ -796,37 +766,6 @@ pub(crate) mod avx2 {
         let n_int = _mm256_sub_epi32(_mm256_castps_si256(shifted), _mm256_castps_si256(shift));
         let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(n_int, _mm256_set1_epi32(127)));
         _mm256_mul_ps(p, _mm256_castsi256_ps(scale))
-    }
-
-    /// [`super::ceiling_probe`]'s loop: 16 lanes as two registers, f32 accumulators.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) fn ceiling(constants: &[[f32; 6]], passes: usize) -> f32 {
-        let iota_lo = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-        let iota_hi = _mm256_add_ps(iota_lo, _mm256_set1_ps(8.0));
-        let mut checksum = 0.0;
-        for _ in 0..passes {
-            let mut acc = [_mm256_setzero_ps(); 6];
-            for &[t0, qxx, row_q, r, g, b] in constants {
-                let (qxx, row_q) = (_mm256_set1_ps(qxx), _mm256_set1_ps(row_q));
-                let amplitude = [_mm256_set1_ps(r), _mm256_set1_ps(g), _mm256_set1_ps(b)];
-                for (h, iota) in [iota_lo, iota_hi].into_iter().enumerate() {
-                    let t = _mm256_add_ps(iota, _mm256_set1_ps(t0));
-                    let q = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(qxx, t), t), row_q);
-                    let value = exp_neg_half(q);
-                    for c in 0..3 {
-                        acc[2 * c + h] =
-                            _mm256_add_ps(acc[2 * c + h], _mm256_mul_ps(amplitude[c], value));
-                    }
-                }
-            }
-            let mut lanes = [0.0_f32; 8];
-            for a in acc {
-                // SAFETY: `lanes` holds 8 floats.
-                unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), a) };
-                checksum += lanes.iter().sum::<f32>();
-            }
-        }
-        checksum
     }
 
     /// The lane numbers 0..8 and the mask of the first `lanes` of them (inside the image).
@@ -968,6 +907,7 @@ mod tests {
             context.render(&scene, &camera, 0.5, &options).unwrap();
             let (proj, bins) = (&context.projected, &context.bins);
             let mut forms = Vec::new();
+            let pool = TileScratchPool::default();
             let mut first: Option<(Image, u64)> = None;
             for &path in paths {
                 let mut image = Image::default();
@@ -977,7 +917,7 @@ mod tests {
                     bins,
                     [0.1, 0.2, 0.3],
                     exp,
-                    &mut forms,
+                    (&mut forms, &pool),
                     &mut image,
                 );
                 assert!(pairs > 0);
@@ -997,21 +937,6 @@ mod tests {
                     }
                 }
             }
-        }
-    }
-
-    #[test]
-    fn the_ceiling_probe_counts_every_lane_and_agrees_across_paths() {
-        let mut sums = Vec::new();
-        for &path in SimdPath::available() {
-            let (pairs, checksum) = ceiling_probe(path, 37, 3);
-            assert_eq!(pairs, 37 * 3 * 16, "{path}");
-            assert!(checksum.is_finite() && checksum > 0.0, "{path}: {checksum}");
-            sums.push(checksum);
-        }
-        // f32 sums in another order: equal to rounding.
-        for s in &sums {
-            assert!((s / sums[0] - 1.0).abs() < 1e-5, "{sums:?}");
         }
     }
 

@@ -123,6 +123,8 @@ pub struct RenderContext {
     /// Buffers of the backward pass.
     pub backward: BackwardBuffers,
     row_forms: Vec<crate::raster::RowForm>,
+    /// The additive raster's per-tile scratch.
+    tile_scratch: crate::raster::TileScratchPool,
     /// Scratch of the depth order (alpha scenes).
     depth_keys: Vec<(f64, u32, u32)>,
     /// Alpha frames: each pixel's final transmittance and stop, for the backward.
@@ -208,7 +210,7 @@ impl RenderContext {
                 &self.bins,
                 background,
                 options.exp,
-                &mut self.row_forms,
+                (&mut self.row_forms, &self.tile_scratch),
                 &mut self.image,
             ),
             Blend::Alpha => composite(

@@ -14,7 +14,7 @@ target/release/examples/bench_scene_file 10000 512 512 "$dir/s10k.ply" "$dir/c51
 ceilings=$("$bin" bench --ceiling 2>/dev/null)
 echo "$ceilings"
 for threads in 1 2; do
-  ceiling=$(echo "$ceilings" | grep "($(echo "$ceilings" | head -1 | sed 's/.*(\([a-z0-9]*\) path.*/\1/') path, $threads thread" | sed 's/.*: \([0-9.e+]*\) pairs.*/\1/')
+  ceiling=$(echo "$ceilings" | grep "^ceiling probe ($(echo "$ceilings" | head -1 | sed 's/.*(\([a-z0-9]*\) path.*/\1/') path, $threads thread" | sed 's/.*: \([0-9.e+]*\) pairs.*/\1/')
   for case in "s100k.ply c1080.json" "s10k.ply c512.json"; do
     set -- $case
     pairs=$("$bin" render --scene "$dir/$1" --camera "$dir/$2" --time 0.5 --out "$dir/o.exr" --threads "$threads" | sed 's/.* \([0-9]*\) pairs$/\1/')

@@ -366,16 +366,7 @@ mod tests {
         // 161 × 97: partial tiles on the right and at the bottom.
         let camera = crate::scenes::synthetic::bench_camera(161, 97);
         let n = 3000;
-        let scene = crate::scenes::synthetic::bench_scene(n, 11)
-            .into_alpha(
-                (0..n)
-                    .map(|i| 0.1 + 0.9 * ((i * 53) % 97) as f64 / 96.0)
-                    .collect(),
-                0,
-                Vec::new(),
-                "<test>",
-            )
-            .unwrap();
+        let scene = crate::scenes::synthetic::varied_alpha_bench_scene(n, 11, 0.1);
         let mut context = RenderContext::new();
         let options = RenderOptions::default();
         context.render(&scene, &camera, 0.4, &options).unwrap();

@@ -21,8 +21,8 @@ pub mod slice;
 
 pub use gradients::{mse, reference_loss_and_gradients};
 pub use pixels::{
-    BORDERLINE_BAND, PairMask, ReferenceImage, is_borderline, kernel_contribution, quadratic_form,
-    reference_at_pixels, render_reference,
+    BORDERLINE_BAND, ERROR_BOUND, ErrorBound, PairMask, ReferenceImage, is_borderline,
+    kernel_contribution, quadratic_form, reference_at_pixels, render_reference,
 };
 pub use project::{ReferenceKernel, reference_project};
 pub use slice::{ReferenceSlice, reference_slice};

@@ -6,7 +6,7 @@
 //! ```
 //!
 //! Besides the image it returns, per pixel, the sum of |contributions| (for the error bound
-//! `atol + rtol·Σ|a|`), the number of pairs summed, and the number of pairs in the band
+//! [`ERROR_BOUND`], `1e-6 + 2e-6·Σ|a|`), the number of pairs summed, and the number of pairs in the band
 //! `|q - qmax| ≤ 1e-4 max(1, qmax)` where SPEC §5 lets implementations differ.
 
 use glam::DVec2;
@@ -18,6 +18,39 @@ use crate::render::RenderOptions;
 
 /// Relative width of the cut-off band of SPEC §5 (precision).
 pub const BORDERLINE_BAND: f64 = 1e-4;
+
+/// The f32 renderer's documented error against this twin, per pixel and channel (SPEC §5,
+/// precision): `|fast - ref| ≤ absolute + relative·Σ|a|`, `Σ|a|` the sum of |contributions|
+/// at the pixel ([`ReferenceImage::abs_sum`]), pairs in the cut-off band aside.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorBound {
+    /// The absolute part.
+    pub absolute: f64,
+    /// The part relative to `Σ|a|`.
+    pub relative: f64,
+}
+
+impl ErrorBound {
+    /// The bound at a pixel whose contributions sum to `abs_sum` in absolute value.
+    #[must_use]
+    pub fn at(self, abs_sum: f64) -> f64 {
+        self.absolute + self.relative * abs_sum
+    }
+}
+
+impl std::fmt::Display for ErrorBound {
+    /// `1e-6 + 2e-6·Σ|a|`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:e} + {:e}·Σ|a|", self.absolute, self.relative)
+    }
+}
+
+/// The bound `1e-6 + 2e-6·Σ|a|`: the one the tests hold the renderer to and the benches
+/// report the error against.
+pub const ERROR_BOUND: ErrorBound = ErrorBound {
+    absolute: 1e-6,
+    relative: 2e-6,
+};
 
 /// Output of [`render_reference`].
 #[derive(Clone, Debug, Default)]

@@ -1,6 +1,6 @@
 //! Charts and figures for reports, drawn with plotters into an 8-bit RGB buffer (text with
 //! ab_glyph and the DejaVu Sans font shipped in `data/fonts/`, so no system font is needed)
-//! and written as PNG.
+//! and handed back as a [`Picture`] (the task writes it as PNG).
 
 use std::path::Path;
 use std::sync::Once;
@@ -9,7 +9,6 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::ViridisRGB;
 
-use crate::io::image_file::save_rgb8_png;
 use crate::model::error::{Error, Result};
 
 const FONT: &str = "sans-serif";
@@ -26,9 +25,10 @@ fn register_font() {
     });
 }
 
-fn chart_error(path: &Path, e: impl std::fmt::Display) -> Error {
+/// A drawing error of the chart to be written as `file`.
+fn chart_error(file: &str, e: impl std::fmt::Display) -> Error {
     Error::write(
-        path,
+        Path::new(file),
         "cannot draw the chart",
         std::io::Error::other(e.to_string()),
     )
@@ -49,34 +49,58 @@ fn colour(i: usize) -> RGBColor {
     COLOURS[i % COLOURS.len()]
 }
 
-/// The colour of a method, the same in every chart: the ground truth black, the 4D model
-/// blue, the frame baselines red and green; anything else by its index.
-fn colour_of(label: &str, i: usize) -> RGBColor {
-    match label {
-        l if l.starts_with("ground truth") => RGBColor(40, 40, 40),
-        l if l.starts_with("4D") => colour(0),
-        l if l.starts_with("frame 3D") => colour(1),
-        l if l.starts_with("interpolation") => colour(2),
-        _ => colour(3 + i),
+/// Which colour a series or a bar is drawn in, as the caller says: a method keeps its
+/// colour in every chart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Colour {
+    /// The ground truth: near-black.
+    Truth,
+    /// Entry `k` of the palette (a method's own, [`crate::report::methods::Method::palette_index`]).
+    Palette(usize),
+    /// By position `i` in the chart: the palette's entry `3 + i`, after the methods' three.
+    ByPosition,
+}
+
+/// The colour of the `i`-th series or bar.
+fn colour_of(colour_of_series: Colour, i: usize) -> RGBColor {
+    match colour_of_series {
+        Colour::Truth => RGBColor(40, 40, 40),
+        Colour::Palette(k) => colour(k),
+        Colour::ByPosition => colour(3 + i),
     }
 }
 
-/// Draws into a fresh `width × height` white buffer and writes it to `path`.
+/// A drawn chart: 8-bit RGB, row-major, for the task to write as PNG.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Picture {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `3 × width × height` bytes.
+    pub rgb: Vec<u8>,
+}
+
+/// Draws into a fresh `width × height` white buffer (`file` names it in errors).
 fn draw_png(
-    path: &Path,
+    file: &str,
     (width, height): (u32, u32),
     draw: impl FnOnce(
         &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
     ) -> std::result::Result<(), Box<dyn std::error::Error>>,
-) -> Result<()> {
+) -> Result<Picture> {
     register_font();
     let mut buffer = vec![255_u8; 3 * width as usize * height as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
-        draw(&root).map_err(|e| chart_error(path, e))?;
-        root.present().map_err(|e| chart_error(path, e))?;
+        draw(&root).map_err(|e| chart_error(file, e))?;
+        root.present().map_err(|e| chart_error(file, e))?;
     }
-    save_rgb8_png(path, width, height, &buffer)
+    Ok(Picture {
+        width,
+        height,
+        rgb: buffer,
+    })
 }
 
 /// One named polyline.
@@ -84,6 +108,8 @@ fn draw_png(
 pub struct Series {
     /// Legend entry.
     pub label: String,
+    /// Its colour.
+    pub colour: Colour,
     /// `(x, y)` points; non-finite points are skipped.
     pub points: Vec<(f64, f64)>,
     /// Draw a marker at every point.
@@ -149,12 +175,12 @@ fn padded_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 
 /// A line chart of `series` with a legend.
 pub fn line_chart(
-    path: &Path,
+    file: &str,
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[Series],
-) -> Result<()> {
+) -> Result<Picture> {
     let finite = |s: &Series| {
         s.points
             .iter()
@@ -173,11 +199,11 @@ pub fn line_chart(
             .flat_map(|s| finite(s).into_iter().map(|p| p.1)),
     );
     // The legend in its own column right of the plot, never over the data.
-    draw_png(path, (1000, 500), |root| {
+    draw_png(file, (1000, 500), |root| {
         let (plot, legend) = root.split_horizontally(790);
         let mut chart = axes(&plot, title, (x_label, xs), (y_label, ys))?;
         for (i, s) in series.iter().enumerate() {
-            let c = colour_of(&s.label, i);
+            let c = colour_of(s.colour, i);
             let points = finite(s);
             chart.draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))?;
             if s.markers {
@@ -191,8 +217,13 @@ pub fn line_chart(
     })
 }
 
-/// A bar per `(label, value)`, in order, each with its name and value above it.
-pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]) -> Result<()> {
+/// A bar per `(label, value, colour)`, in order, each with its name and value above it.
+pub fn bar_chart(
+    file: &str,
+    title: &str,
+    y_label: &str,
+    bars: &[(String, f64, Colour)],
+) -> Result<Picture> {
     let top = bars
         .iter()
         .map(|b| b.1)
@@ -201,7 +232,7 @@ pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]
         * 1.25;
     let top = if top > 0.0 { top } else { 1.0 };
     let n = bars.len();
-    draw_png(path, (800, 450), |root| {
+    draw_png(file, (800, 450), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption(title, (FONT, 22))
             .margin(12)
@@ -219,7 +250,7 @@ pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]
         chart.draw_series(bars.iter().enumerate().map(|(i, b)| {
             Rectangle::new(
                 [(i as f64 + 0.15, 0.0), (i as f64 + 0.85, b.1.max(0.0))],
-                colour_of(&b.0, i).filled(),
+                colour_of(b.2, i).filled(),
             )
         }))?;
         // Text hangs below its anchor: the name two lines above the bar, the value one.
@@ -243,16 +274,16 @@ pub fn bar_chart(path: &Path, title: &str, y_label: &str, bars: &[(String, f64)]
 
 /// Labelled points `(label, x, y)`.
 pub fn scatter_chart(
-    path: &Path,
+    file: &str,
     title: &str,
     x_label: &str,
     y_label: &str,
     points: &[(String, f64, f64)],
-) -> Result<()> {
+) -> Result<Picture> {
     let xs = padded_range(points.iter().map(|p| p.1).chain([0.0]));
     let ys = padded_range(points.iter().map(|p| p.2));
     let xs = xs.start..(xs.end + 0.25 * (xs.end - xs.start));
-    draw_png(path, (800, 500), |root| {
+    draw_png(file, (800, 500), |root| {
         let mut chart = axes(root, title, (x_label, xs), (y_label, ys))?;
         for (i, (label, x, y)) in points.iter().enumerate() {
             chart.draw_series([Circle::new((*x, *y), 6, colour(i).filled())])?;
@@ -284,12 +315,12 @@ pub struct SizePoint {
 /// one marker shape per dataset, and the legend beside the plot, not over it (no labels at
 /// the points, so none collide; the report's table beside the chart has the numbers).
 pub fn model_size_chart(
-    path: &Path,
+    file: &str,
     title: &str,
     datasets: &[&str],
     models: &[&str],
     points: &[SizePoint],
-) -> Result<()> {
+) -> Result<Picture> {
     let (lo, hi) = points
         .iter()
         .map(|p| p.parameters.max(1.0))
@@ -302,7 +333,7 @@ pub fn model_size_chart(
         (1.0, 10.0)
     };
     let ys = padded_range(points.iter().map(|p| p.psnr));
-    draw_png(path, (900, 500), |root| {
+    draw_png(file, (900, 500), |root| {
         let (plot, legend) = root.split_horizontally(690);
         let mut chart = ChartBuilder::on(&plot)
             .caption(title, (FONT, 22))
@@ -361,18 +392,18 @@ pub struct Panel<'a> {
 /// Panels side by side, each `res × res` scaled up, coloured with viridis over
 /// `[0, vmax]`, under `title`.
 pub fn panels_figure(
-    path: &Path,
+    file: &str,
     title: &str,
     res: usize,
     panels: &[Panel<'_>],
     vmax: f32,
-) -> Result<()> {
+) -> Result<Picture> {
     let scale = (256 / res.max(1)).max(1) as u32;
     let side = res as u32 * scale;
     let (gap, top, bottom, bar) = (16_u32, 40_u32, 34_u32, 90_u32);
     let width = gap + panels.len() as u32 * (side + gap) + bar;
     let height = top + side + bottom;
-    draw_png(path, (width, height), |root| {
+    draw_png(file, (width, height), |root| {
         root.draw(&Text::new(title.to_owned(), (gap as i32, 10), (FONT, 20)))?;
         for (p, panel) in panels.iter().enumerate() {
             let x0 = gap + p as u32 * (side + gap);
@@ -428,12 +459,12 @@ pub fn panels_figure(
 /// The xy, xz and yz slices of `volume` at time `tau` through its peak, labelled with
 /// their plane's coordinate, coloured over `[0, vmax]`.
 pub fn volume_slices_figure(
-    path: &Path,
+    file: &str,
     name: &str,
     tau: f64,
     volume: &crate::volume::Volume,
     vmax: f32,
-) -> Result<()> {
+) -> Result<Picture> {
     let g = &volume.grid;
     let peak = volume.peak_cell();
     let at = |a: usize| g.centre(a, peak[a]);
@@ -460,7 +491,7 @@ pub fn volume_slices_figure(
         g.min[0].min(g.min[1]).min(g.min[2]),
         g.max[0].max(g.max[1]).max(g.max[2])
     );
-    panels_figure(path, &title, g.res, &panels, vmax)
+    panels_figure(file, &title, g.res, &panels, vmax)
 }
 
 /// One point of a speed-against-error chart.
@@ -481,12 +512,12 @@ pub struct TradeOffPoint {
 /// Cost against log₁₀ error, one colour per entry of `series`, the Pareto front joined by a
 /// line and labelled.
 pub fn pareto_chart(
-    path: &Path,
+    file: &str,
     title: &str,
     (x_label, y_label): (&str, &str),
     series: &[String],
     points: &[TradeOffPoint],
-) -> Result<()> {
+) -> Result<Picture> {
     let drawable: Vec<&TradeOffPoint> = points
         .iter()
         .filter(|p| p.cost.is_finite() && p.error > 0.0 && p.error.is_finite())
@@ -501,7 +532,7 @@ pub fn pareto_chart(
         .map(|p| (p.cost, p.error.log10()))
         .collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    draw_png(path, (900, 560), |root| {
+    draw_png(file, (900, 560), |root| {
         // The errors are drawn at their log10, and the axis is labelled with the values.
         let mut chart = axes_labelled(
             root,

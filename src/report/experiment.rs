@@ -27,7 +27,7 @@ use crate::model::error::Result;
 use crate::model::scene::Scene;
 use crate::model::{Dataset, View};
 use crate::render::{RenderContext, RenderOptions};
-use crate::report::methods::{FrameModels, Method, temporal_roughness};
+use crate::report::methods::{FrameModels, Method, Predictor, temporal_roughness};
 use crate::scenes::dataset::{DatasetSpec, render_dataset};
 use crate::scenes::toy::{POINTS_CUTOFF, points_scene};
 use crate::volume::{Grid, Volume, evaluate_volume, scene_bounds};
@@ -138,9 +138,9 @@ impl ExperimentConfig {
 /// One method's results.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodResult {
-    /// Its name in tables and charts.
-    pub name: String,
-    /// Stored numbers ([`Method::parameter_count`]).
+    /// Which method.
+    pub method: Method,
+    /// Stored numbers ([`Predictor::parameter_count`]).
     pub parameters: usize,
     /// Seconds spent fitting.
     pub fit_seconds: f64,
@@ -164,7 +164,7 @@ pub struct ModelSizeRow {
     /// Which dataset (the seed paper's points, or the continuous seed blob).
     pub dataset: String,
     /// Which model.
-    pub method: String,
+    pub method: Method,
     /// Kernels at the end of the fit (per frame summed over frames for the baseline).
     pub kernels: usize,
     /// Stored numbers.
@@ -179,16 +179,16 @@ pub struct ModelSizeRow {
     pub fit_seconds: f64,
 }
 
-/// A fit of the model size section: name, mode, fitted scene and seconds.
-type Fitted = (&'static str, FitMode, Scene, f64);
+/// A fit of the model size section: method, mode, fitted scene and seconds.
+type Fitted = (Method, FitMode, Scene, f64);
 
 impl ModelSizeRow {
     /// The row of `fitted` on `dataset`, with its measured held-out PSNR and render time.
     fn of_fit(dataset: &str, fitted: &Fitted, heldout: Scores, render_ms: f64) -> Self {
-        let (name, mode, scene, fit_seconds) = fitted;
+        let (method, mode, scene, fit_seconds) = fitted;
         ModelSizeRow {
             dataset: dataset.into(),
-            method: (*name).into(),
+            method: *method,
             kernels: scene.len(),
             parameters: mode.parameters_per_kernel() * scene.len(),
             heldout_psnr: heldout.psnr,
@@ -212,11 +212,31 @@ pub struct AblationRow {
     pub roughness: f64,
 }
 
+/// Which scene a volume is of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VolumeOf {
+    /// The ground truth, the seed paper's points.
+    GroundTruth,
+    /// The fitted 4D model.
+    Model,
+}
+
+impl VolumeOf {
+    /// Its name in the report.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            VolumeOf::GroundTruth => "ground truth (points)",
+            VolumeOf::Model => "4D model",
+        }
+    }
+}
+
 /// One volume.
 #[derive(Clone, Debug)]
 pub struct VolumeResult {
     /// Which scene.
-    pub name: String,
+    pub of: VolumeOf,
     /// Time.
     pub tau: f64,
     /// The values.
@@ -264,7 +284,7 @@ pub struct Scores {
 }
 
 fn split_scores(
-    method: &Method<'_>,
+    method: &Predictor<'_>,
     views: &[View],
     options: &RenderOptions,
     context: &mut RenderContext,
@@ -285,7 +305,7 @@ fn split_scores(
 
 /// Scores of every split (train, val, test).
 fn all_splits(
-    method: &Method<'_>,
+    method: &Predictor<'_>,
     dataset: &crate::model::Dataset,
     options: &RenderOptions,
     context: &mut RenderContext,
@@ -322,7 +342,7 @@ struct SweepMetrics {
 }
 
 fn sweep_metrics(
-    method: &Method<'_>,
+    method: &Predictor<'_>,
     cameras: &[crate::Camera],
     sweep: &Sweep,
     options: &RenderOptions,
@@ -428,13 +448,13 @@ fn adaptive_fits(
     progress: &mut dyn Progress,
 ) -> Result<Vec<Fitted>> {
     let mut fits = Vec::new();
-    for (name, mode) in [
-        (ADAPTIVE_NAME, FitMode::Static),
-        (VELOCITY_NAME, FitMode::Velocity),
+    for (method, mode) in [
+        (Method::AdaptiveStatic, FitMode::Static),
+        (Method::AdaptiveVelocity, FitMode::Velocity),
     ] {
         let (scene, seconds) =
             fit_adaptive(dataset, mode, config.adaptive_steps, config.seed, progress)?;
-        fits.push((name, mode, scene, seconds));
+        fits.push((method, mode, scene, seconds));
     }
     Ok(fits)
 }
@@ -447,7 +467,7 @@ fn heldout_and_speed(
     context: &mut RenderContext,
 ) -> Result<(Scores, f64)> {
     let start = Instant::now();
-    let scores = split_scores(&Method::Model4d(scene), views, options, context)?;
+    let scores = split_scores(&Predictor::Model4d(scene), views, options, context)?;
     let ms = 1e3 * start.elapsed().as_secs_f64() / views.len().max(1) as f64;
     Ok((scores, ms))
 }
@@ -483,7 +503,7 @@ fn synthetic_model_size(
         |_, _| progress.tick(),
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
-    let mut fits = vec![(FIXED_NAME, FitMode::Paper, fixed, fixed_seconds)];
+    let mut fits = vec![(Method::FixedCount, FitMode::Paper, fixed, fixed_seconds)];
     fits.extend(adaptive_fits(config, &dataset, progress)?);
     for fitted in &fits {
         let (heldout, render_ms) =
@@ -492,13 +512,6 @@ fn synthetic_model_size(
     }
     Ok(rows)
 }
-
-/// Names of the model size section's methods.
-/// Name of the paper's fixed-count model in the model size section.
-pub const FIXED_NAME: &str = "4D fixed count (paper)";
-const ADAPTIVE_NAME: &str = "4D adaptive, static kernels";
-/// Name of the adaptive velocity fit in the model size section.
-pub const VELOCITY_NAME: &str = "4D adaptive, velocity kernels";
 
 fn fit_4d(
     config: &ExperimentConfig,
@@ -570,11 +583,15 @@ pub fn run_experiment(
     let (frames, frame_seconds) = fit_frame_baselines(config, &dataset, &bounds, progress)?;
     let methods = bench.evaluate_methods(
         [
-            ("4D (paper)", Method::Model4d(&model), model_seconds),
-            ("frame 3D", Method::FrameNearest(&frames), frame_seconds),
+            (Method::Paper4d, Predictor::Model4d(&model), model_seconds),
             (
-                "interpolation",
-                Method::FrameInterpolation(&frames),
+                Method::FrameNearest,
+                Predictor::FrameNearest(&frames),
+                frame_seconds,
+            ),
+            (
+                Method::FrameInterpolation,
+                Predictor::FrameInterpolation(&frames),
                 frame_seconds,
             ),
         ],
@@ -705,12 +722,12 @@ impl Evaluation<'_> {
     /// Every method's scores on the splits and the sweep.
     fn evaluate_methods(
         &mut self,
-        methods_to_run: [(&str, Method<'_>, f64); 3],
+        methods_to_run: [(Method, Predictor<'_>, f64); 3],
         progress: &mut dyn Progress,
     ) -> Result<Vec<MethodResult>> {
         progress.start("evaluate", methods_to_run.len());
         let mut methods = Vec::new();
-        for (name, method, fit_seconds) in methods_to_run {
+        for (id, method, fit_seconds) in methods_to_run {
             let (splits, ssims) =
                 all_splits(&method, self.dataset, &self.options, &mut self.context)?;
             let SweepMetrics {
@@ -720,7 +737,7 @@ impl Evaluation<'_> {
                 first_camera,
             } = self.sweep_metrics(&method)?;
             methods.push(MethodResult {
-                name: name.to_owned(),
+                method: id,
                 parameters: method.parameter_count(),
                 fit_seconds,
                 psnr_splits: splits,
@@ -735,7 +752,7 @@ impl Evaluation<'_> {
         Ok(methods)
     }
 
-    fn sweep_metrics(&mut self, method: &Method<'_>) -> Result<SweepMetrics> {
+    fn sweep_metrics(&mut self, method: &Predictor<'_>) -> Result<SweepMetrics> {
         sweep_metrics(
             method,
             &self.test_cameras,
@@ -761,7 +778,7 @@ impl Evaluation<'_> {
         for &sigma_t in &config.ablation_sigma_t {
             let [sx, sy, sz, _] = config.model_scale;
             let (scene, _, _) = fit_4d(config, dataset, bounds, [sx, sy, sz, sigma_t], progress)?;
-            let method = Method::Model4d(&scene);
+            let method = Predictor::Model4d(&scene);
             let (splits, ssims) = all_splits(&method, dataset, &self.options, &mut self.context)?;
             let roughness = self.sweep_metrics(&method)?.roughness;
             ablation.push(AblationRow {
@@ -789,30 +806,28 @@ impl Evaluation<'_> {
         progress.start("model size", 8 * config.adaptive_steps);
         let mut model_size = Vec::new();
         for method in methods {
-            if method.name == "4D (paper)" || method.name == "frame 3D" {
-                let kernels = if method.name == "frame 3D" {
-                    frames.scenes.iter().map(Scene::len).sum()
-                } else {
-                    model.len()
-                };
-                model_size.push(ModelSizeRow {
-                    dataset: "seed points".into(),
-                    method: if method.name == "4D (paper)" {
-                        FIXED_NAME.into()
-                    } else {
-                        "frame 3D (per-frame baseline)".into()
-                    },
-                    kernels,
-                    parameters: method.parameters,
-                    heldout_psnr: method.psnr_splits[2],
-                    heldout_ssim: method.ssim_splits[2],
-                    render_ms: method.render_ms,
-                    fit_seconds: method.fit_seconds,
-                });
-            }
+            // The paper's model and the per-frame scenes as rows of the section.
+            let (row_method, kernels) = match method.method {
+                Method::Paper4d => (Method::FixedCount, model.len()),
+                Method::FrameNearest => (
+                    Method::FrameBaseline,
+                    frames.scenes.iter().map(Scene::len).sum(),
+                ),
+                _ => continue,
+            };
+            model_size.push(ModelSizeRow {
+                dataset: "seed points".into(),
+                method: row_method,
+                kernels,
+                parameters: method.parameters,
+                heldout_psnr: method.psnr_splits[2],
+                heldout_ssim: method.ssim_splits[2],
+                render_ms: method.render_ms,
+                fit_seconds: method.fit_seconds,
+            });
         }
         for fitted in &adaptive_fits(config, dataset, progress)? {
-            let method = Method::Model4d(&fitted.2);
+            let method = Predictor::Model4d(&fitted.2);
             let heldout = split_scores(&method, &dataset.test, &self.options, &mut self.context)?;
             let render_ms = self.sweep_metrics(&method)?.render_ms;
             model_size.push(ModelSizeRow::of_fit(
@@ -857,15 +872,15 @@ fn volumes(
         res: config.volume_res.max(2),
     };
     let mut volumes = Vec::new();
-    for (name, scene, cutoff) in [
-        ("ground truth (points)", truth, 1e-6),
-        ("4D model", model, 1e-6),
+    for (of, scene, cutoff) in [
+        (VolumeOf::GroundTruth, truth, 1e-6),
+        (VolumeOf::Model, model, 1e-6),
     ] {
         for &tau in &config.volume_times {
             let begin = Instant::now();
             let volume = evaluate_volume(scene, tau, &grid, cutoff);
             volumes.push(VolumeResult {
-                name: name.to_owned(),
+                of,
                 tau,
                 volume,
                 seconds: begin.elapsed().as_secs_f64(),

@@ -1,18 +1,19 @@
-//! Writes an experiment's `report.md` and its charts (PNG) into one folder.
+//! An experiment's report as files for one folder: `report.md`, its charts and gallery
+//! pictures (PNG), the fits' animation and the fitted scene ([`report_files`]); the task
+//! writes them ([`crate::tasks::report`]).
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
 
 use crate::fit::loss::psnr;
-use crate::io::image_file::save_rgb8_png;
-use crate::io::video::{VideoOptions, write_video};
-use crate::io::write_bytes_atomically;
 use crate::model::Image;
 use crate::model::error::Result;
+use crate::model::scene::Scene;
 use crate::report::charts::{
-    Series, SizePoint, bar_chart, line_chart, model_size_chart, scatter_chart, volume_slices_figure,
+    Colour, Picture, Series, SizePoint, bar_chart, line_chart, model_size_chart, scatter_chart,
+    volume_slices_figure,
 };
-use crate::report::experiment::{ExperimentResults, ModelSizeRow};
+use crate::report::experiment::{ExperimentResults, ModelSizeRow, VolumeOf};
+use crate::report::methods::Method;
 
 /// The seed paper's maximum volume intensities at t = 0, 0.5, 1 (§5.2).
 pub const PAPER_VOLUME_MAXIMA: [(f64, f64); 3] = [(0.0, 1.14), (0.5, 1.80), (1.0, 1.38)];
@@ -35,24 +36,63 @@ fn file_stem(name: &str) -> String {
         .join("_")
 }
 
-/// Writes `out/report.md` and the charts; returns the report's path. The report reads as
+/// What a file of the report holds.
+#[derive(Clone, Debug)]
+pub enum Content {
+    /// Text: `report.md`.
+    Markdown(String),
+    /// A chart or a gallery picture, to be written as PNG.
+    Picture(Picture),
+    /// Frames of an animation, to be written as a folder of frames and a GIF of `name`.
+    Animation {
+        /// The frames, in order.
+        frames: Vec<Image>,
+        /// Frames per second.
+        fps: u32,
+    },
+    /// The fitted scene (scene JSON).
+    Scene(Box<Scene>),
+}
+
+/// One file of the report: its name in the report's folder and what it holds.
+#[derive(Clone, Debug)]
+pub struct ReportFile {
+    /// File name (for an animation, the name of its GIF and frame folder, no extension).
+    pub name: String,
+    /// What it holds.
+    pub content: Content,
+}
+
+impl ReportFile {
+    fn new(name: impl Into<String>, content: Content) -> Self {
+        ReportFile {
+            name: name.into(),
+            content,
+        }
+    }
+}
+
+/// The report's files, in the order to write them, `report.md` last. The report reads as
 /// its sections, in order: introduction, headline, gallery, charts, σt ablation and its
 /// optimum, model size, volumes, the fitted scene.
-pub fn write_report(results: &ExperimentResults, out: &Path, command: &str) -> Result<PathBuf> {
+pub fn report_files(results: &ExperimentResults, command: &str) -> Result<Vec<ReportFile>> {
+    let mut files = Vec::new();
     let mut md = introduction(results, command);
     md.push_str(&headline(results));
-    write_gallery(results, out, &mut md)?;
-    write_charts(results, out)?;
+    gallery(results, &mut files, &mut md);
+    charts(results, &mut files)?;
     md.push_str(&chart_sections());
     md.push_str(&ablation_section(results));
     write_sigma_t_optimum(&mut md, results);
-    write_model_size(&mut md, results, out)?;
-    md.push_str(&volumes_section(results, out)?);
-    crate::io::scene_file::save_scene(&results.model, &out.join("fitted_4d.json"))?;
+    model_size_section(&mut md, results, &mut files)?;
+    md.push_str(&volumes_section(results, &mut files)?);
+    files.push(ReportFile::new(
+        "fitted_4d.json",
+        Content::Scene(Box::new(results.model.clone())),
+    ));
     md.push_str(&fitted_scene_note());
-    let path = out.join("report.md");
-    write_bytes_atomically(&path, md.as_bytes())?;
-    Ok(path)
+    files.push(ReportFile::new("report.md", Content::Markdown(md)));
+    Ok(files)
 }
 
 /// The title, how the report was made, the data and the methods.
@@ -121,7 +161,7 @@ fn headline(results: &ExperimentResults) -> String {
         let _ = writeln!(
             w,
             "| {} | {} | {:.1} s | {a:.2} dB / {sa:.4} | {b:.2} dB / {sb:.4} | {t:.2} dB / {st:.4} | {:.2e} | {:.2} ms |",
-            m.name, m.parameters, m.fit_seconds, m.roughness, m.render_ms
+            m.method, m.parameters, m.fit_seconds, m.roughness, m.render_ms
         );
     }
     let _ = writeln!(
@@ -148,7 +188,7 @@ fn headline(results: &ExperimentResults) -> String {
     let _ = writeln!(w, "|---|---:|---:|---:|");
     for m in &results.methods {
         let [a, b, t] = m.psnr_splits.map(|p| 10f64.powf(-p / 10.0));
-        let _ = writeln!(w, "| {} | {a:.3e} | {b:.3e} | {t:.3e} |", m.name);
+        let _ = writeln!(w, "| {} | {a:.3e} | {b:.3e} | {t:.3e} |", m.method);
     }
     let _ = writeln!(w);
     if let Some(last) = results.fit_log.last() {
@@ -163,18 +203,29 @@ fn headline(results: &ExperimentResults) -> String {
 }
 
 /// The fit, per-time, roughness, speed and ablation charts.
-fn write_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
-    write_fit_charts(results, out)?;
-    write_method_charts(results, out)?;
-    write_ablation_charts(results, out)
+fn charts(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<()> {
+    fit_charts(results, files)?;
+    method_charts(results, files)?;
+    ablation_charts(results, files)
+}
+
+/// A chart drawn as `name` into `files`.
+fn push_chart(
+    files: &mut Vec<ReportFile>,
+    name: &str,
+    draw: impl FnOnce(&str) -> Result<Picture>,
+) -> Result<()> {
+    let picture = draw(name)?;
+    files.push(ReportFile::new(name, Content::Picture(picture)));
+    Ok(())
 }
 
 /// The 4D fit's PSNR against step and against seconds.
-fn write_fit_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
-    let chart = |name: &str| out.join(name);
+fn fit_charts(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<()> {
     let log = &results.fit_log;
     let train_step = Series {
         label: "batch (train)".into(),
+        colour: Colour::ByPosition,
         points: log
             .iter()
             .map(|r| (r.step as f64, psnr(r.train_loss)))
@@ -183,6 +234,7 @@ fn write_fit_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
     };
     let held_step = Series {
         label: "held-out times (val)".into(),
+        colour: Colour::ByPosition,
         points: log
             .iter()
             .filter_map(|r| r.heldout_psnr.map(|p| (r.step as f64, p)))
@@ -191,6 +243,7 @@ fn write_fit_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
     };
     let with_seconds = |s: &Series| Series {
         label: s.label.clone(),
+        colour: s.colour,
         points: s
             .points
             .iter()
@@ -198,79 +251,93 @@ fn write_fit_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
             .collect(),
         markers: s.markers,
     };
-    line_chart(
-        &chart("fit_vs_step.png"),
-        "4D fit: PSNR of the loss against step",
-        "Adam step",
-        "PSNR (dB)",
-        &[train_step.clone(), held_step.clone()],
-    )?;
-    line_chart(
-        &chart("fit_vs_seconds.png"),
-        "4D fit: PSNR of the loss against time",
-        "wall-clock seconds",
-        "PSNR (dB)",
-        &[with_seconds(&train_step), with_seconds(&held_step)],
-    )?;
+    push_chart(files, "fit_vs_step.png", |file| {
+        line_chart(
+            file,
+            "4D fit: PSNR of the loss against step",
+            "Adam step",
+            "PSNR (dB)",
+            &[train_step.clone(), held_step.clone()],
+        )
+    })?;
+    push_chart(files, "fit_vs_seconds.png", |file| {
+        line_chart(
+            file,
+            "4D fit: PSNR of the loss against time",
+            "wall-clock seconds",
+            "PSNR (dB)",
+            &[with_seconds(&train_step), with_seconds(&held_step)],
+        )
+    })?;
     Ok(())
 }
 
 /// Every method's PSNR per time, roughness, and speed against error.
-fn write_method_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
-    let chart = |name: &str| out.join(name);
+fn method_charts(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<()> {
     let per_time: Vec<Series> = results
         .methods
         .iter()
         .map(|m| Series {
-            label: m.name.clone(),
+            label: m.method.name().into(),
+            colour: Colour::Palette(m.method.palette_index()),
             points: m.psnr_per_time.clone(),
             markers: false,
         })
         .collect();
-    line_chart(
-        &chart("psnr_per_time.png"),
-        "PSNR per time from the test cameras",
-        "scene time τ",
-        "PSNR (dB)",
-        &per_time,
-    )?;
-    let mut bars: Vec<(String, f64)> =
-        vec![("ground truth".into(), results.ground_truth_roughness)];
-    bars.extend(
-        results
-            .methods
-            .iter()
-            .map(|m| (m.name.clone(), m.roughness)),
-    );
-    bar_chart(
-        &chart("roughness.png"),
-        "Temporal roughness (mean |consecutive difference|)",
-        "mean |consecutive difference| (linear intensity)",
-        &bars,
-    )?;
+    push_chart(files, "psnr_per_time.png", |file| {
+        line_chart(
+            file,
+            "PSNR per time from the test cameras",
+            "scene time τ",
+            "PSNR (dB)",
+            &per_time,
+        )
+    })?;
+    let mut bars: Vec<(String, f64, Colour)> = vec![(
+        "ground truth".into(),
+        results.ground_truth_roughness,
+        Colour::Truth,
+    )];
+    bars.extend(results.methods.iter().map(|m| {
+        (
+            m.method.name().into(),
+            m.roughness,
+            Colour::Palette(m.method.palette_index()),
+        )
+    }));
+    push_chart(files, "roughness.png", |file| {
+        bar_chart(
+            file,
+            "Temporal roughness (mean |consecutive difference|)",
+            "mean |consecutive difference| (linear intensity)",
+            &bars,
+        )
+    })?;
     let speed: Vec<(String, f64, f64)> = results
         .methods
         .iter()
-        .map(|m| (m.name.clone(), m.render_ms, m.psnr_splits[2]))
+        .map(|m| (m.method.name().into(), m.render_ms, m.psnr_splits[2]))
         .collect();
-    scatter_chart(
-        &chart("speed_vs_error.png"),
-        "Render time against held-out PSNR",
-        "ms per frame",
-        "PSNR, held-out views and times (dB)",
-        &speed,
-    )?;
+    push_chart(files, "speed_vs_error.png", |file| {
+        scatter_chart(
+            file,
+            "Render time against held-out PSNR",
+            "ms per frame",
+            "PSNR, held-out views and times (dB)",
+            &speed,
+        )
+    })?;
     Ok(())
 }
 
 /// The σt ablation's PSNR and roughness.
-fn write_ablation_charts(results: &ExperimentResults, out: &Path) -> Result<()> {
-    let chart = |name: &str| out.join(name);
+fn ablation_charts(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<()> {
     let ablation_psnr = ["train", "held-out times", "held-out views and times"]
         .iter()
         .enumerate()
         .map(|(s, label)| Series {
             label: (*label).into(),
+            colour: Colour::ByPosition,
             points: results
                 .ablation
                 .iter()
@@ -279,16 +346,19 @@ fn write_ablation_charts(results: &ExperimentResults, out: &Path) -> Result<()> 
             markers: true,
         })
         .collect::<Vec<_>>();
-    line_chart(
-        &chart("ablation_psnr.png"),
-        "σt ablation: PSNR",
-        "σt (scene time units)",
-        "PSNR (dB)",
-        &ablation_psnr,
-    )?;
+    push_chart(files, "ablation_psnr.png", |file| {
+        line_chart(
+            file,
+            "σt ablation: PSNR",
+            "σt (scene time units)",
+            "PSNR (dB)",
+            &ablation_psnr,
+        )
+    })?;
     let ablation_rough = vec![
         Series {
             label: "4D model".into(),
+            colour: Colour::Palette(Method::Paper4d.palette_index()),
             points: results
                 .ablation
                 .iter()
@@ -298,6 +368,7 @@ fn write_ablation_charts(results: &ExperimentResults, out: &Path) -> Result<()> 
         },
         Series {
             label: "ground truth".into(),
+            colour: Colour::Truth,
             points: results
                 .ablation
                 .iter()
@@ -306,13 +377,15 @@ fn write_ablation_charts(results: &ExperimentResults, out: &Path) -> Result<()> 
             markers: false,
         },
     ];
-    line_chart(
-        &chart("ablation_roughness.png"),
-        "σt ablation: temporal roughness",
-        "σt (scene time units)",
-        "mean |consecutive difference| (linear intensity)",
-        &ablation_rough,
-    )?;
+    push_chart(files, "ablation_roughness.png", |file| {
+        line_chart(
+            file,
+            "σt ablation: temporal roughness",
+            "σt (scene time units)",
+            "mean |consecutive difference| (linear intensity)",
+            &ablation_rough,
+        )
+    })?;
 
     Ok(())
 }
@@ -360,8 +433,8 @@ fn ablation_section(results: &ExperimentResults) -> String {
     md
 }
 
-/// The volumes table and figures (written into `out`).
-fn volumes_section(results: &ExperimentResults, out: &Path) -> Result<String> {
+/// The volumes table, and the figures into `files`.
+fn volumes_section(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<String> {
     let c = &results.config;
     let mut md = String::new();
     let w = &mut md;
@@ -382,17 +455,12 @@ fn volumes_section(results: &ExperimentResults, out: &Path) -> Result<String> {
         .map(|v| v.volume.range().0)
         .fold(0.0, f32::max);
     for &tau in &c.volume_times {
-        let find = |name: &str| {
-            results
-                .volumes
-                .iter()
-                .find(|v| v.name.starts_with(name) && v.tau == tau)
-        };
+        let find = |of: VolumeOf| results.volumes.iter().find(|v| v.of == of && v.tau == tau);
         let paper = PAPER_VOLUME_MAXIMA
             .iter()
             .find(|p| p.0 == tau)
             .map_or("".into(), |p| format!("{}", p.1));
-        if let (Some(t), Some(m)) = (find("ground truth"), find("4D")) {
+        if let (Some(t), Some(m)) = (find(VolumeOf::GroundTruth), find(VolumeOf::Model)) {
             let ((th, tl), (mh, ml)) = (t.volume.range(), m.volume.range());
             let _ = writeln!(
                 w,
@@ -405,9 +473,11 @@ fn volumes_section(results: &ExperimentResults, out: &Path) -> Result<String> {
     let _ = writeln!(w);
     write_volume_overshoot(w, results);
     for v in &results.volumes {
-        let name = format!("volume_{}_t{:.2}.png", file_stem(&v.name), v.tau);
-        volume_slices_figure(&out.join(&name), &v.name, v.tau, &v.volume, vmax)?;
-        let _ = writeln!(w, "![{} at t = {}]({name})\n", v.name, v.tau);
+        let name = format!("volume_{}_t{:.2}.png", file_stem(v.of.name()), v.tau);
+        push_chart(files, &name, |file| {
+            volume_slices_figure(file, v.of.name(), v.tau, &v.volume, vmax)
+        })?;
+        let _ = writeln!(w, "![{} at t = {}]({name})\n", v.of.name(), v.tau);
     }
     Ok(md)
 }
@@ -424,7 +494,11 @@ fn fitted_scene_note() -> String {
 }
 
 /// The model size section: parameters against held-out PSNR, and the default it supports.
-fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> Result<()> {
+fn model_size_section(
+    w: &mut String,
+    results: &ExperimentResults,
+    files: &mut Vec<ReportFile>,
+) -> Result<()> {
     let c = &results.config;
     let b = &c.blob_dataset;
     let _ = writeln!(w, "## Model size: only the kernels a scene needs\n");
@@ -466,11 +540,9 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
             r.fit_seconds
         );
     }
-    write_model_size_chart(results, out)?;
+    model_size_figure(results, files)?;
     // Velocity kernels against the paper's fixed count, and whether any model beats them on
     // both parameters and PSNR (the Pareto front of each dataset).
-    let velocity = crate::report::experiment::VELOCITY_NAME;
-    let fixed = crate::report::experiment::FIXED_NAME;
     let mut comparisons = Vec::new();
     let mut velocity_on_front = true;
     for data in ["seed points", "seed blob", "three blobs"] {
@@ -479,8 +551,8 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
             .iter()
             .filter(|r| r.dataset == data)
             .collect();
-        let find = |name: &str| rows.iter().find(|r| r.method == name).copied();
-        if let (Some(v), Some(f)) = (find(velocity), find(fixed)) {
+        let find = |method: Method| rows.iter().find(|r| r.method == method).copied();
+        if let (Some(v), Some(f)) = (find(Method::AdaptiveVelocity), find(Method::FixedCount)) {
             comparisons.push(format!(
                 "{data}: {:+.2} dB with {:.0}× fewer parameters",
                 v.heldout_psnr - f.heldout_psnr,
@@ -512,7 +584,7 @@ fn write_model_size(w: &mut String, results: &ExperimentResults, out: &Path) -> 
 }
 
 /// The model size chart: parameters against held-out PSNR, by dataset and model.
-fn write_model_size_chart(results: &ExperimentResults, out: &Path) -> Result<()> {
+fn model_size_figure(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> Result<()> {
     let datasets = ["seed points", "seed blob", "three blobs"];
     let models = [
         "fixed count (paper)",
@@ -525,23 +597,25 @@ fn write_model_size_chart(results: &ExperimentResults, out: &Path) -> Result<()>
         .iter()
         .map(|r| SizePoint {
             dataset: datasets.iter().position(|d| *d == r.dataset).unwrap_or(0),
-            model: match r.method.as_str() {
-                m if m == crate::report::experiment::FIXED_NAME => 0,
-                m if m == crate::report::experiment::VELOCITY_NAME => 2,
-                m if m.starts_with("frame") => 3,
+            model: match r.method {
+                Method::FixedCount => 0,
+                Method::AdaptiveVelocity => 2,
+                Method::FrameBaseline | Method::FrameNearest => 3,
                 _ => 1,
             },
             parameters: r.parameters as f64,
             psnr: r.heldout_psnr,
         })
         .collect();
-    model_size_chart(
-        &out.join("model_size.png"),
-        "Parameters against held-out PSNR",
-        &datasets,
-        &models,
-        &points,
-    )
+    push_chart(files, "model_size.png", |file| {
+        model_size_chart(
+            file,
+            "Parameters against held-out PSNR",
+            &datasets,
+            &models,
+            &points,
+        )
+    })
 }
 
 /// Nearest-neighbour upscaling of the gallery's frames.
@@ -591,7 +665,7 @@ fn clipped_share(frames: &[&Image]) -> f64 {
 
 /// The gallery: per method, truth | render | error at four held-out times from a held-out
 /// camera, and an animation of the 4D fit beside the truth over the whole sweep.
-fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Result<()> {
+fn gallery(results: &ExperimentResults, files: &mut Vec<ReportFile>, w: &mut String) {
     let truth = &results.gallery_truth;
     let times = &results.gallery_times;
     if truth.is_empty()
@@ -600,7 +674,7 @@ fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Res
             .iter()
             .any(|m| m.gallery.len() != truth.len())
     {
-        return Ok(());
+        return;
     }
     let n = truth.len();
     let picks: Vec<usize> = (0..4).map(|k| (k * (n - 1)) / 3).collect();
@@ -620,7 +694,7 @@ fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Res
             .map(|m| format!(
                 ", {:.1} % of {}'s",
                 100.0 * clipped_share(&m.gallery.iter().collect::<Vec<_>>()),
-                m.name
+                m.method
             ))
             .collect::<String>()
     );
@@ -631,12 +705,13 @@ fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Res
     let _ = writeln!(w);
     let _ = writeln!(w, "|---|{}", "---|".repeat(picks.len()));
     for m in &results.methods {
-        let _ = write!(w, "| {} |", m.name);
+        let _ = write!(w, "| {} |", m.method);
         for &k in &picks {
-            let name = format!("gallery_{}_{k:03}.png", file_stem(&m.name));
-            let (width, height, bytes) = triptych(&truth[k], &m.gallery[k]);
-            save_rgb8_png(&out.join(&name), width, height, &bytes)?;
-            let _ = write!(w, " ![{} at τ = {:.2}]({name}) |", m.name, times[k]);
+            let name = format!("gallery_{}_{k:03}.png", file_stem(m.method.name()));
+            let (width, height, rgb) = triptych(&truth[k], &m.gallery[k]);
+            let picture = Picture { width, height, rgb };
+            files.push(ReportFile::new(name.clone(), Content::Picture(picture)));
+            let _ = write!(w, " ![{} at τ = {:.2}]({name}) |", m.method, times[k]);
         }
         let _ = writeln!(w);
     }
@@ -645,19 +720,11 @@ fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Res
         .chain(results.methods.iter().map(|m| m.gallery.as_slice()))
         .collect();
     let (fw, fh) = (truth[0].width as usize, truth[0].height as usize);
-    let files = write_video(
-        n,
-        out,
-        "fit_vs_truth",
-        &VideoOptions {
-            fps: 8,
-            gif: true,
-            mp4: false,
-        },
-        |k, image| {
-            // White gaps of 2 pixels between the columns.
-            let width = columns.len() * (fw + 2) - 2;
-            *image = Image::filled(width as u32, fh as u32, [1.0; 3]);
+    // White gaps of 2 pixels between the columns.
+    let width = columns.len() * (fw + 2) - 2;
+    let frames = (0..n)
+        .map(|k| {
+            let mut image = Image::filled(width as u32, fh as u32, [1.0; 3]);
             for (c, frames) in columns.iter().enumerate() {
                 for y in 0..fh {
                     let from = &frames[k].pixels[3 * y * fw..3 * (y + 1) * fw];
@@ -665,27 +732,24 @@ fn write_gallery(results: &ExperimentResults, out: &Path, w: &mut String) -> Res
                     image.pixels[at..at + 3 * fw].copy_from_slice(from);
                 }
             }
-            Ok(())
-        },
-    )?;
-    if let Some(gif) = files.gif {
-        let _ = writeln!(
-            w,
-            "\nOver the whole sweep ({} times, {:.2} to {:.2}), left to right: ground truth, {}:\n\n![the fits over time]({})\n",
-            n,
-            times[0],
-            times[n - 1],
-            results
-                .methods
-                .iter()
-                .map(|m| m.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            gif.file_name()
-                .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
-        );
-    }
-    Ok(())
+            image
+        })
+        .collect();
+    let name = "fit_vs_truth";
+    files.push(ReportFile::new(name, Content::Animation { frames, fps: 8 }));
+    let _ = writeln!(
+        w,
+        "\nOver the whole sweep ({} times, {:.2} to {:.2}), left to right: ground truth, {}:\n\n![the fits over time]({name}.gif)\n",
+        n,
+        times[0],
+        times[n - 1],
+        results
+            .methods
+            .iter()
+            .map(|m| m.method.name())
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
 }
 
 /// Where the σt ablation peaks, and why, from its own numbers.
@@ -727,24 +791,19 @@ fn write_sigma_t_optimum(w: &mut String, results: &ExperimentResults) {
 
 /// The model's volume against the truth's, beside their renders' brightness: why they may differ.
 fn write_volume_overshoot(w: &mut String, results: &ExperimentResults) {
-    let Some(model) = results.methods.iter().find(|m| m.name.starts_with("4D")) else {
+    let Some(model) = results.methods.iter().find(|m| m.method == Method::Paper4d) else {
         return;
     };
     let times = &results.gallery_times;
     let mut lines = Vec::new();
     for &tau in &results.config.volume_times {
-        let find = |name: &str| {
-            results
-                .volumes
-                .iter()
-                .find(|v| v.name.starts_with(name) && v.tau == tau)
-        };
+        let find = |of: VolumeOf| results.volumes.iter().find(|v| v.of == of && v.tau == tau);
         let Some(k) = (0..times.len())
             .min_by(|&a, &b| (times[a] - tau).abs().total_cmp(&(times[b] - tau).abs()))
         else {
             return;
         };
-        let (Some(t), Some(m)) = (find("ground truth"), find("4D")) else {
+        let (Some(t), Some(m)) = (find(VolumeOf::GroundTruth), find(VolumeOf::Model)) else {
             continue;
         };
         let peak = |image: &Image| image.pixels.iter().copied().fold(0.0_f32, f32::max);

@@ -1,4 +1,5 @@
-//! The methods compared by the seed experiment (paper §4.2), behind one rendering interface:
+//! The methods compared by the seed experiment (paper §4.2): each named once ([`Method`]),
+//! and rendered behind one interface ([`Predictor`]):
 //!
 //! - **4D**: one scene of 4D kernels, rendered at τ (SPEC §2–5);
 //! - **frame 3D**: one static scene per training time (kernels constant in time), fitted on
@@ -53,9 +54,66 @@ impl FrameModels {
     }
 }
 
-/// A method to evaluate.
+/// What every method of the report is, named once: its text in tables, legends and file
+/// names ([`Method::name`]) and its colour in every chart ([`Method::palette_index`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// The paper's 4D model, the headline comparison.
+    Paper4d,
+    /// The nearest per-frame scene.
+    FrameNearest,
+    /// The linear blend of the two neighbouring per-frame renders.
+    FrameInterpolation,
+    /// The model size section's fixed-count 4D model (the paper's).
+    FixedCount,
+    /// The model size section's adaptive fit with static kernels.
+    AdaptiveStatic,
+    /// The model size section's adaptive fit with velocity kernels.
+    AdaptiveVelocity,
+    /// The model size section's per-frame baseline.
+    FrameBaseline,
+}
+
+impl Method {
+    /// Its name in tables, charts and file names.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Paper4d => "4D (paper)",
+            Method::FrameNearest => "frame 3D",
+            Method::FrameInterpolation => "interpolation",
+            Method::FixedCount => "4D fixed count (paper)",
+            Method::AdaptiveStatic => "4D adaptive, static kernels",
+            Method::AdaptiveVelocity => "4D adaptive, velocity kernels",
+            Method::FrameBaseline => "frame 3D (per-frame baseline)",
+        }
+    }
+
+    /// Its entry in the charts' palette, the same in every chart: every 4D model 0, the
+    /// per-frame scenes 1, the interpolation 2 (other series take the entries after these).
+    #[must_use]
+    pub fn palette_index(self) -> usize {
+        match self {
+            Method::Paper4d
+            | Method::FixedCount
+            | Method::AdaptiveStatic
+            | Method::AdaptiveVelocity => 0,
+            Method::FrameNearest | Method::FrameBaseline => 1,
+            Method::FrameInterpolation => 2,
+        }
+    }
+}
+
+impl std::fmt::Display for Method {
+    /// [`Method::name`], padded as the format asks.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
+    }
+}
+
+/// How a method predicts an image, behind one rendering interface.
 #[derive(Clone, Copy, Debug)]
-pub enum Method<'a> {
+pub enum Predictor<'a> {
     /// The 4D model.
     Model4d(&'a Scene),
     /// Nearest per-frame scene.
@@ -64,7 +122,7 @@ pub enum Method<'a> {
     FrameInterpolation(&'a FrameModels),
 }
 
-impl Method<'_> {
+impl Predictor<'_> {
     /// Renders the method's prediction at `(camera, tau)` into `out`.
     pub fn render(
         &self,
@@ -75,16 +133,16 @@ impl Method<'_> {
         out: &mut Image,
     ) -> Result<()> {
         match *self {
-            Method::Model4d(scene) => {
+            Predictor::Model4d(scene) => {
                 context.render(scene, camera, tau, options)?;
                 out.clone_from(context.image());
             }
-            Method::FrameNearest(frames) => {
+            Predictor::FrameNearest(frames) => {
                 let k = frames.nearest(tau);
                 context.render(&frames.scenes[k], camera, frames.times[k], options)?;
                 out.clone_from(context.image());
             }
-            Method::FrameInterpolation(frames) => {
+            Predictor::FrameInterpolation(frames) => {
                 let (k, alpha) = frames.bracket(tau);
                 context.render(&frames.scenes[k], camera, frames.times[k], options)?;
                 out.clone_from(context.image());
@@ -105,12 +163,12 @@ impl Method<'_> {
     #[must_use]
     pub fn parameter_count(&self) -> usize {
         match *self {
-            Method::Model4d(scene) => {
+            Predictor::Model4d(scene) => {
                 let moving = scene.velocities.iter().any(|v| *v != [0.0; 3]);
                 let rotated = scene.rotations.iter().any(|q| *q != [1.0, 0.0, 0.0, 0.0]);
                 scene.len() * (11 + if moving { 3 } else { 0 } + if rotated { 4 } else { 0 })
             }
-            Method::FrameNearest(frames) | Method::FrameInterpolation(frames) => {
+            Predictor::FrameNearest(frames) | Predictor::FrameInterpolation(frames) => {
                 frames.scenes.iter().map(|s| 9 * s.len()).sum()
             }
         }

@@ -1,6 +1,5 @@
 //! Experiments and their reports: the seed paper's study, metrics and charts.
 
-pub mod bench;
 pub mod charts;
 pub mod experiment;
 pub mod markdown;

@@ -166,3 +166,19 @@ pub fn sphere_cameras(
     }
     Ok(cameras)
 }
+
+/// [`bench_scene`] as an alpha scene (SPEC §8) whose opacities vary over `[low, 1]` with the
+/// kernel index (no SH): the scene the SIMD-path tests of the compositor use.
+#[must_use]
+pub fn varied_alpha_bench_scene(n: usize, seed: u64, low: f64) -> Scene {
+    bench_scene(n, seed)
+        .into_alpha(
+            (0..n)
+                .map(|i| (low + (1.0 - low) * ((i * 53) % 97) as f64 / 96.0).min(1.0))
+                .collect(),
+            0,
+            Vec::new(),
+            "<varied alpha bench scene>",
+        )
+        .expect("bench kernels and opacities in [0, 1] make a valid alpha scene")
+}

@@ -4,16 +4,18 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::bench::{
+    BenchSettings, Ceiling, Probe, Renderer, SWEEP_ROUNDS, SweepGrid, SweepPoint, bench_render,
+    ceiling_lines, fill_efficiencies, fill_speedups, format_table, measure_ceiling, sweep,
+    sweep_table,
+};
 use crate::io::camera_file::load_camera;
+use crate::io::image_file::save_rgb8_png;
 use crate::io::scene_file::load_scene;
 use crate::io::write_bytes_atomically;
 use crate::model::{Blend, Camera, Error, Progress, Result, Scene};
-use crate::raster::SimdPath;
+use crate::reference::ERROR_BOUND;
 use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
-use crate::report::bench::{
-    BenchSettings, Method, SWEEP_ROUNDS, SweepGrid, SweepPoint, bench_render, fill_efficiencies,
-    fill_speedups, format_table, measure_ceiling, sweep, sweep_table,
-};
 use crate::report::charts::{TradeOffPoint, pareto_chart};
 use crate::scenes::paths::{Lens, framing_distance};
 use crate::scenes::synthetic::{bench_camera, bench_scene};
@@ -45,7 +47,7 @@ pub struct BenchRequest {
     /// Sweep speed against error on the first scene, writing `sweep.md` and `sweep.png`
     /// to `out`.
     pub sweep: bool,
-    /// Only measure the ceiling probe ([`crate::raster::ceiling_probe`]).
+    /// Only measure the ceiling probes of both blends ([`crate::bench::ceiling`]).
     pub ceiling: bool,
     /// Output folder of the sweep.
     pub out: PathBuf,
@@ -148,33 +150,28 @@ fn bench_scenes(request: &BenchRequest) -> Result<Vec<(String, Scene, Camera)>> 
     Ok(scenes)
 }
 
-/// Measures the renderer as `request` asks.
-/// The ceiling probe's pairs per second for each thread count.
-fn ceilings(threads: &[usize], progress: &mut dyn Progress) -> Result<Vec<(usize, f64)>> {
-    progress.start("ceiling", threads.len());
+/// Each of `probes` on each of `threads`, in that order.
+fn ceilings(
+    probes: &[Probe],
+    threads: &[usize],
+    progress: &mut dyn Progress,
+) -> Result<Vec<Ceiling>> {
+    progress.start("ceiling", probes.len() * threads.len());
     let mut ceilings = Vec::new();
-    for &t in threads {
-        ceilings.push((t, measure_ceiling(t)?));
-        progress.tick();
+    for &probe in probes {
+        for &t in threads {
+            ceilings.push(Ceiling {
+                probe,
+                threads: t,
+                pairs_per_second: measure_ceiling(probe, t)?,
+            });
+            progress.tick();
+        }
     }
     Ok(ceilings)
 }
 
-/// One line per thread count: the ceiling and the SIMD path it ran on.
-fn ceiling_lines(ceilings: &[(usize, f64)]) -> String {
-    ceilings
-        .iter()
-        .map(|(threads, rate)| {
-            format!(
-                "ceiling probe ({} path, {threads} thread{}): {rate:.3e} pairs/s",
-                SimdPath::detect(),
-                if *threads == 1 { "" } else { "s" }
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
+/// Measures the renderer as `request` asks.
 pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<BenchSummary> {
     request.options.validate()?;
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
@@ -184,7 +181,7 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
         None => vec![1],
     };
     if request.ceiling {
-        let ceilings = ceilings(&threads, progress)?;
+        let ceilings = ceilings(&Probe::ALL, &threads, progress)?;
         return Ok(BenchSummary {
             text: ceiling_lines(&ceilings),
         });
@@ -227,7 +224,7 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
                 scene,
                 camera,
                 &settings(t),
-                Method::Tiles,
+                Renderer::Tiles,
             )?);
             progress.tick();
             if dense_for(scene, camera) {
@@ -236,21 +233,33 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
                     scene,
                     camera,
                     &settings(t),
-                    Method::Dense,
+                    Renderer::Dense,
                 )?);
                 progress.tick();
             }
         }
     }
     fill_speedups(&mut rows);
-    let ceilings = ceilings(&threads, progress)?;
+    // Each row against its own blend's probe: only the probes of the blends measured.
+    let probes: Vec<Probe> = Probe::ALL
+        .into_iter()
+        .filter(|&p| scenes.iter().any(|(_, s, _)| Probe::of(s.blend) == p))
+        .collect();
+    let ceilings = ceilings(&probes, &threads, progress)?;
     fill_efficiencies(&mut rows, &ceilings);
     let text = format!(
-        "{}\n{}\nColumns: ceiling = pairs/s over the ceiling probe's on the same threads in this run; \
+        "{}\n{}\nColumns: ceiling = pairs/s over the {} on the same threads in this run; \
          max-err, mean-err = |render - f64 reference| at {} seeded pixels; /bound = largest ratio \
-         to 1e-6 + 2e-6·Σ|a|; speed-up = dense ms / tiles ms.",
+         to {ERROR_BOUND}; speed-up = dense ms / tiles ms.",
         format_table(&rows).trim_end(),
         ceiling_lines(&ceilings),
+        match probes[..] {
+            [Probe::Alpha] => "alpha ceiling probe's",
+            [Probe::Additive, Probe::Alpha] => {
+                "ceiling probe's of the row's blend (additive or alpha)"
+            }
+            _ => "ceiling probe's",
+        },
         request.samples
     );
     Ok(BenchSummary { text })
@@ -275,7 +284,7 @@ fn write_sweep(
          Error: |render - exact| at {} seeded pixels, exact = f64 reference without truncation \
          (ε = 0) at the default dilation {DEFAULT_DILATION}. /bound: the implementation's error \
          against the f64 reference with the point's own options, as a ratio to \
-         1e-6 + 2e-6·Σ|a|. ★: on the Pareto front of (ms/frame, max error).\n\n",
+         {ERROR_BOUND}. ★: on the Pareto front of (ms/frame, max error).\n\n",
         camera.width, camera.height, request.time, request.samples
     );
     write_bytes_atomically(
@@ -323,8 +332,8 @@ fn write_sweep(
         })
         .collect();
     let chart = out.join("sweep.png");
-    pareto_chart(
-        &chart,
+    let picture = pareto_chart(
+        "sweep.png",
         &format!(
             "Speed against error: {name}, {}x{}, {threads} threads",
             camera.width, camera.height
@@ -333,6 +342,7 @@ fn write_sweep(
         &series,
         &chart_points,
     )?;
+    save_rgb8_png(&chart, picture.width, picture.height, &picture.rgb)?;
     Ok(format!(
         "{}\nwrote {} and {}",
         table.trim_end(),

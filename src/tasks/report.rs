@@ -4,9 +4,13 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::io::image_file::save_rgb8_png;
+use crate::io::scene_file::save_scene;
+use crate::io::video::{VideoOptions, write_video};
+use crate::io::write_bytes_atomically;
 use crate::model::{Progress, Result};
 use crate::report::experiment::{ExperimentConfig, ExperimentResults, run_experiment};
-use crate::report::markdown;
+use crate::report::markdown::{Content, ReportFile, report_files};
 
 /// What [`write_report`] wrote: the path of `report.md` and the results behind it.
 #[derive(Clone, Debug)]
@@ -29,7 +33,7 @@ impl fmt::Display for ReportSummary {
             writeln!(
                 f,
                 "{:<16} {:>8} {:>8.1} {a:>9.2} dB {b:>9.2} dB {t:>9.2} dB {:>11.2e}",
-                m.name, m.parameters, m.fit_seconds, m.roughness
+                m.method, m.parameters, m.fit_seconds, m.roughness
             )?;
         }
         writeln!(
@@ -55,6 +59,33 @@ pub fn write_report(
     progress: &mut dyn Progress,
 ) -> Result<ReportSummary> {
     let results = run_experiment(config, progress)?;
-    let path = markdown::write_report(&results, out, command)?;
-    Ok(ReportSummary { path, results })
+    for file in report_files(&results, command)? {
+        write_file(out, &file)?;
+    }
+    Ok(ReportSummary {
+        path: out.join("report.md"),
+        results,
+    })
+}
+
+/// Writes one of the report's files into `out`.
+fn write_file(out: &Path, file: &ReportFile) -> Result<()> {
+    let path = out.join(&file.name);
+    match &file.content {
+        Content::Markdown(text) => write_bytes_atomically(&path, text.as_bytes()),
+        Content::Picture(p) => save_rgb8_png(&path, p.width, p.height, &p.rgb),
+        Content::Scene(scene) => save_scene(scene, &path),
+        Content::Animation { frames, fps } => {
+            let options = VideoOptions {
+                fps: *fps,
+                gif: true,
+                mp4: false,
+            };
+            write_video(frames.len(), out, &file.name, &options, |k, image| {
+                image.clone_from(&frames[k]);
+                Ok(())
+            })?;
+            Ok(())
+        }
+    }
 }

@@ -4,6 +4,7 @@ use std::fmt;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::io::image_file::save_rgb8_png;
 use crate::io::scene_file::load_scene;
 use crate::model::Blend;
 use crate::model::{Error, Result};
@@ -120,7 +121,9 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
     let mut rows = Vec::new();
     for ((tau, volume, seconds), file) in volumes.iter().zip(&files) {
         let path = request.out.join(format!("{file}.png"));
-        volume_slices_figure(&path, &name, *tau, volume, vmax)?;
+        let file = format!("{file}.png");
+        let figure = volume_slices_figure(&file, &name, *tau, volume, vmax)?;
+        save_rgb8_png(&path, figure.width, figure.height, &figure.rgb)?;
         let (hi, lo) = volume.range();
         rows.push((*tau, hi, lo, *seconds));
     }

@@ -653,6 +653,23 @@ fn commands_honour_an_alpha_scene() {
         "alpha",
     ]);
     assert!(bench.contains("bench-2000-alpha"), "{bench}");
+    // The row's ceiling share is against the alpha probe of the same run, the only probe
+    // shown: share = pairs/s over its pairs/s (to the printed digits).
+    let row: Vec<&str> = bench
+        .lines()
+        .find(|l| l.starts_with("bench-2000-alpha"))
+        .unwrap()
+        .split_whitespace()
+        .collect();
+    let pairs_per_second: f64 = row[7].parse().unwrap();
+    let share: f64 = row[8].trim_end_matches('%').parse().unwrap();
+    let probe = crate::common::probe_rate(&bench, "alpha ceiling probe", 1);
+    assert!(!bench.contains("\nceiling probe ("), "{bench}");
+    let expected = 100.0 * pairs_per_second / probe;
+    assert!(
+        (share - expected).abs() <= 0.05 + 1e-3 * expected,
+        "{share}% shown, {expected}% from the alpha probe: {bench}"
+    );
 }
 
 /// Mutated alpha and 3DGS PLYs are read or refused as input errors, never a panic.

@@ -748,13 +748,12 @@ fn bench_runs_builtin_scenes_by_size() {
     let output = splat4d(&["bench", "--ceiling", "--threads", "1"], dir.path());
     assert!(output.status.success(), "{}", stderr(&output));
     let stdout = String::from_utf8_lossy(&output.stdout);
-    let rate: f64 = stdout
-        .split("1 thread): ")
-        .nth(1)
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|r| r.parse().ok())
-        .unwrap_or_else(|| panic!("{stdout}"));
+    // Both blends' probes, each on its own line.
+    let rate = crate::common::probe_rate(&stdout, "ceiling probe", 1);
     assert!(rate > 1e7, "{stdout}");
+    let alpha_rate = crate::common::probe_rate(&stdout, "alpha ceiling probe", 1);
+    assert!(alpha_rate > 1e7, "{stdout}");
+    assert_eq!(stdout.lines().count(), 2, "{stdout}");
     let output = splat4d(&["bench", "--scene", "no-such-scene.json"], dir.path());
     assert_eq!(output.status.code(), Some(2));
     assert!(stderr(&output).contains("no-such-scene.json"));

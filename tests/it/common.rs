@@ -1,14 +1,20 @@
-//! Helpers shared by the integration tests: seeded hard scenes and the error bound.
+//! Helpers shared by the integration tests: seeded hard scenes, the error bound, and the
+//! executable run with a time limit.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
 
 use rand::RngExt;
 use splat4d::model::random::{log_uniform, random_rotation, seeded_rng};
 use splat4d::reference::ReferenceImage;
 use splat4d::{Camera, Image, Kernel, Scene};
 
-/// Absolute part of the f32 bound: `|fast - ref| ≤ ATOL + RTOL Σ|a| + ε·(1 + 1e-2)·borderline`.
-pub const ATOL: f64 = 1e-6;
+/// Absolute part of the f32 bound: `|fast - ref| ≤ ATOL + RTOL Σ|a| + ε·(1 + 1e-2)·borderline`
+/// ([`splat4d::reference::ERROR_BOUND`], `1e-6 + 2e-6·Σ|a|`, plus the cut-off band).
+pub const ATOL: f64 = splat4d::reference::ERROR_BOUND.absolute;
 /// Relative part of the bound, against the sum of |contributions| at the pixel.
-pub const RTOL: f64 = 2e-6;
+pub const RTOL: f64 = splat4d::reference::ERROR_BOUND.relative;
 
 /// A camera with an off-centre principal point and unequal focal lengths.
 pub fn test_camera(width: u32, height: u32) -> Camera {
@@ -351,4 +357,82 @@ pub fn data(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("data")
         .join(name)
+}
+
+/// Runs the executable with a time limit (a hang is a failure, not a stuck test).
+pub fn run_limited<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splat4d"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(20) {
+            child.kill().unwrap();
+            panic!("{args:?} ran for more than 20 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// Runs `splat4d dataset` on the blob (`views` cameras × 2 times, 8×8) into `dir/out`.
+pub fn run_blob_dataset(dir: &Path, views: &str, out: &str) -> std::process::Output {
+    let blob = data("blob.json");
+    let args = [
+        "dataset",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--views",
+        views,
+        "--times",
+        "2",
+        "--size",
+        "8x8",
+        "--out",
+        out,
+    ];
+    run_limited(&args, dir)
+}
+
+/// Renders the blob as a small dataset (`views` cameras × 2 times, 8×8) into `dir/ds`.
+pub fn blob_dataset(dir: &Path, views: &str) {
+    let output = run_blob_dataset(dir, views, "ds");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Runs the executable (with the time limit of [`run_limited`]) and asserts that it ends
+/// with status `code`, a message containing `needle` and no panic.
+pub fn refused_quickly<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(
+    args: &[S],
+    cwd: &Path,
+    code: i32,
+    needle: &str,
+) {
+    let output = run_limited(args, cwd);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(code), "{args:?}: {stderr}");
+    assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+}
+
+/// The pairs per second `splat4d bench` printed for `probe` (`ceiling probe`, `alpha ceiling
+/// probe`) on `threads` threads: its line `<probe> (<path> path, <threads> thread[s]): <rate>
+/// pairs/s`.
+pub fn probe_rate(stdout: &str, probe: &str, threads: usize) -> f64 {
+    let threads = format!(", {threads} thread");
+    stdout
+        .lines()
+        .find(|l| l.starts_with(&format!("{probe} (")) && l.contains(&threads))
+        .and_then(|l| l.split("): ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no {probe} line for{threads}: {stdout}"))
 }

@@ -1,6 +1,7 @@
 //! The D-NeRF / Blender dataset layout: what is written reads back as the same cameras,
 //! times and images; other tools' RGBA PNGs are composited over the background.
 
+use crate::common::{data, refused_quickly, run_blob_dataset};
 use splat4d::RenderOptions;
 use splat4d::io::dataset::{DatasetOptions, SPLITS, load_dataset, write_split};
 use splat4d::scenes::dataset::{DatasetSpec, frame_count, render_dataset};
@@ -135,4 +136,52 @@ fn rgba_pngs_of_other_datasets_are_composited_over_the_background() {
     let m = view.camera.world_to_camera;
     assert_eq!(m[2], [0.0, 0.0, -1.0, 4.0]);
     assert!((view.camera.fx - 1.0 / (0.5_f64 * 0.6911112070083618).tan()).abs() < 1e-12);
+}
+
+// Limits through the executable (from the former limits.rs): refused quickly, with a
+// message and exit status, never a panic, a hang or an unbounded allocation.
+
+#[test]
+fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let dataset = |views: &str, out: &str| run_blob_dataset(d, views, out);
+    assert!(dataset("6", "ds").status.success());
+    let count = |split: &str| std::fs::read_dir(d.join("ds").join(split)).unwrap().count();
+    assert_eq!(count("train"), 12);
+    // Again with fewer views: the new dataset replaces the old one whole (no stale frames).
+    assert!(dataset("4", "ds").status.success());
+    assert_eq!(count("train"), 8);
+    // Nothing else left beside it: no temporary folder, no old copy.
+    let names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["ds"]);
+    // A folder that is not a dataset is never replaced.
+    std::fs::create_dir(d.join("photos")).unwrap();
+    std::fs::write(d.join("photos/keep.txt"), "mine").unwrap();
+    refused_quickly(
+        &[
+            "dataset",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--views",
+            "2",
+            "--times",
+            "2",
+            "--size",
+            "8x8",
+            "--out",
+            "photos",
+        ],
+        d,
+        2,
+        "was not written by `splat4d dataset`",
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("photos/keep.txt")).unwrap(),
+        "mine"
+    );
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use crate::common::data;
+use crate::common::{blob_dataset, refused_quickly};
 
 fn run(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_splat4d"))
@@ -204,4 +205,91 @@ fn an_empty_frames_list_names_the_file_that_has_it() {
     let output = run(&["fit", "--views", "cap", "--out", "f.json"], d);
     let message = refused(&output, 2, &["transforms.json", "frames", "empty"]);
     assert!(!message.contains("transforms_train.json"), "{message}");
+}
+
+// Limits through the executable (from the former limits.rs): refused quickly, with a
+// message and exit status, never a panic, a hang or an unbounded allocation.
+
+#[test]
+fn non_finite_flags_are_refused_when_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_dataset(d, "4");
+    for flag in [
+        "--lr-mean=nan",
+        "--lr-final=-inf",
+        "--merge-tolerance=nan",
+        "--prune-below=inf",
+        "--init-amplitude=nan",
+    ] {
+        refused_quickly(
+            &[
+                "fit", "--views", "ds", "--steps", "3", "--out", "f.json", flag,
+            ],
+            d,
+            2,
+            "not finite",
+        );
+    }
+    refused_quickly(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--steps",
+            "3",
+            "--out",
+            "f.json",
+            "--lr-mean=-1",
+        ],
+        d,
+        2,
+        "--lr-mean",
+    );
+    refused_quickly(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--init",
+            "random:3",
+            "--box=-1e308,-1e308,-1e308,1e308,1e308,1e308",
+            "--steps",
+            "3",
+            "--out",
+            "f.json",
+        ],
+        d,
+        2,
+        "box",
+    );
+    assert!(!d.join("f.json").exists());
+}
+
+#[test]
+fn values_too_large_to_evaluate_are_a_numeric_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("huge.json"),
+        r#"{"kernels": [{"mean": [0, 0, 0, 0.5], "scale": [0.1, 0.1, 0.1, 1], "amplitude": [1e300, 1, 1]}]}"#,
+    )
+    .unwrap();
+    refused_quickly(
+        &[
+            "volume",
+            "--scene",
+            "huge.json",
+            "--res",
+            "8",
+            "--times",
+            "0.5",
+            "--out",
+            "v",
+        ],
+        d,
+        4,
+        "not finite",
+    );
+    assert!(!d.join("v").exists(), "no figure written");
 }

@@ -36,9 +36,8 @@ pub fn occluding_scene() -> Scene {
         .unwrap()
 }
 
-#[test]
-fn an_occluding_scene_is_recovered_from_a_random_start() {
-    let scene = occluding_scene();
+/// `scene` seen by 10 cameras at 6 times, 40×40, and the options it was rendered with.
+fn occluding_dataset(scene: &Scene) -> (splat4d::model::Dataset, RenderOptions) {
     let spec = DatasetSpec {
         views: 10,
         times: 6,
@@ -47,7 +46,16 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
         ..DatasetSpec::default()
     };
     let options = RenderOptions::default();
-    let dataset = render_dataset(&scene, &spec, &options, || {}).unwrap();
+    (
+        render_dataset(scene, &spec, &options, || {}).unwrap(),
+        options,
+    )
+}
+
+#[test]
+fn an_occluding_scene_is_recovered_from_a_random_start() {
+    let scene = occluding_scene();
+    let (dataset, options) = occluding_dataset(&scene);
     let bounds = alpha_bounds(&dataset.train).unwrap();
     let fit_options = splat4d::fit::alpha::AlphaFitOptions {
         steps: 600,
@@ -85,15 +93,7 @@ fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
     use splat4d::fit::alpha::hull_alpha_scene;
     use splat4d::fit::hull::{flat_background, visual_hull};
     let scene = occluding_scene();
-    let spec = DatasetSpec {
-        views: 10,
-        times: 6,
-        width: 40,
-        height: 40,
-        ..DatasetSpec::default()
-    };
-    let options = RenderOptions::default();
-    let dataset = render_dataset(&scene, &spec, &options, || {}).unwrap();
+    let (dataset, _) = occluding_dataset(&scene);
     let bounds = alpha_bounds(&dataset.train).unwrap();
     assert!(flat_background(&dataset.train, [0.0; 3]));
     let (cells, side) = visual_hull(&dataset.train, [0.0; 3], &bounds);

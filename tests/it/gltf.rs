@@ -8,8 +8,11 @@ use splat4d::io::gltf::Spacing;
 use splat4d::io::gltf::{import_scene, load_camera};
 
 const ADAPTIVE: Spacing = Spacing::Adaptive { tolerance: 1e-3 };
+use crate::common::run_limited;
 use splat4d::slice::{SlicedKernels, slice};
 use splat4d::{RenderOptions, render};
+use std::path::Path;
+use std::process::Command;
 
 fn sample(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -403,4 +406,206 @@ fn an_alpha_import_closes_its_surfaces() {
         additive_through > 0.99,
         "additive surfels add: {additive_through}"
     );
+}
+
+// Limits through the executable (from the former limits.rs): refused quickly, with a
+// message and exit status, never a panic, a hang or an unbounded allocation.
+
+/// A change to a glTF document.
+type Mutation = Box<dyn Fn(&mut serde_json::Value)>;
+
+#[test]
+fn gltf_files_that_break_the_crates_walkers_are_refused_with_their_json_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/BoxAnimated.gltf");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    let cases: Vec<(&str, Mutation, &str)> = vec![
+        (
+            "cycle",
+            Box::new(|g| g["nodes"][0]["children"] = serde_json::json!([1, 0])),
+            "nodes[0]",
+        ),
+        (
+            "two parents",
+            Box::new(|g| g["nodes"][3]["children"] = serde_json::json!([2])),
+            "two parents",
+        ),
+        (
+            "root and child",
+            Box::new(|g| g["nodes"][1]["children"] = serde_json::json!([2, 3])),
+            "a root of the scene",
+        ),
+        (
+            "dangling channel",
+            Box::new(|g| {
+                g["animations"][0]["channels"][0]["target"]["node"] = serde_json::json!(99)
+            }),
+            "target.node",
+        ),
+        (
+            "camera without object",
+            Box::new(|g| g["cameras"] = serde_json::json!([{"type": "perspective"}])),
+            "cameras[0]",
+        ),
+        (
+            "no accessors",
+            Box::new(|g| g["accessors"] = serde_json::json!([])),
+            "out of range",
+        ),
+        (
+            "float indices",
+            Box::new(|g| {
+                let i = g["meshes"][0]["primitives"][0]["indices"].as_u64().unwrap() as usize;
+                g["accessors"][i]["componentType"] = serde_json::json!(5126);
+            }),
+            "indices",
+        ),
+        (
+            "small stride",
+            Box::new(|g| {
+                let a = g["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+                    .as_u64()
+                    .unwrap() as usize;
+                let v = g["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
+                g["bufferViews"][v]["byteStride"] = serde_json::json!(4);
+            }),
+            "byteStride",
+        ),
+        (
+            "huge count",
+            Box::new(|g| g["accessors"][0]["count"] = serde_json::json!(1_000_000_000u64)),
+            "accessors[0]",
+        ),
+        (
+            "view past its buffer",
+            Box::new(|g| g["bufferViews"][0]["byteLength"] = serde_json::json!(100_000_000u64)),
+            "bufferViews[0]",
+        ),
+        (
+            "dangling material",
+            Box::new(|g| g["meshes"][0]["primitives"][0]["material"] = serde_json::json!(99)),
+            "material",
+        ),
+        (
+            "dangling skin",
+            Box::new(|g| g["nodes"][2]["skin"] = serde_json::json!(99)),
+            "skin",
+        ),
+    ];
+    for (name, mutate, needle) in cases {
+        let mut gltf = original.clone();
+        mutate(&mut gltf);
+        let path = d.join(format!("{}.gltf", name.replace(' ', "_")));
+        std::fs::write(&path, gltf.to_string()).unwrap();
+        let file = path.to_str().unwrap();
+        let output = run_limited(
+            &[
+                "import-gltf",
+                file,
+                "--kernels",
+                "50",
+                "--times",
+                "3",
+                "--out",
+                "m.json",
+            ],
+            d,
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(needle), "{name}: {stderr}");
+        let camera = format!("{file}#0");
+        let render = [
+            "render",
+            "--scene",
+            "m.json",
+            "--camera-from",
+            &camera,
+            "--time",
+            "0",
+            "--out",
+            "r.png",
+        ];
+        let output = run_limited(&render, d);
+        assert_ne!(
+            output.status.code(),
+            Some(101),
+            "{name}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    assert!(!d.join("m.json").exists());
+}
+
+#[test]
+fn gltf_buffers_are_read_only_from_regular_files_beside_the_model() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(source).unwrap()).unwrap();
+    // The embedded buffer as a file beside the model: read as before.
+    let uri = original["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let payload = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',').unwrap().1)
+        .unwrap();
+    std::fs::create_dir(d.join("models")).unwrap();
+    std::fs::write(d.join("models/box.bin"), &payload).unwrap();
+    let with_uri = |uri: &str| {
+        let mut gltf = original.clone();
+        gltf["buffers"][0]["uri"] = serde_json::json!(uri);
+        std::fs::write(d.join("models/m.gltf"), gltf.to_string()).unwrap();
+        run_limited(
+            &[
+                "import-gltf",
+                "models/m.gltf",
+                "--kernels",
+                "20",
+                "--out",
+                "m.json",
+            ],
+            d,
+        )
+    };
+    let output = with_uri("box.bin");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    std::fs::remove_file(d.join("m.json")).unwrap();
+    #[cfg(unix)]
+    assert!(
+        Command::new("mkfifo")
+            .arg(d.join("models/pipe"))
+            .status()
+            .unwrap()
+            .success()
+    );
+    // A symlink beside the model to a file outside it (a real path check, not a lexical one).
+    std::fs::write(d.join("secret.bin"), &payload).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(d.join("secret.bin"), d.join("models/link.bin")).unwrap();
+    for (uri, needle) in [
+        ("/etc/passwd", "absolute"),
+        ("../../../../etc/passwd", "leaves the model's folder"),
+        ("%2e%2e/%2e%2e/etc/passwd", "leaves the model's folder"),
+        ("/dev/zero", "absolute"),
+        ("sub/../../x.bin", "leaves the model's folder"),
+        ("pipe", "not a regular file"),
+        (".", "not a regular file"),
+        ("link.bin", "outside the model's folder"),
+    ] {
+        let output = with_uri(uri);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{uri}: {stderr}");
+        assert!(
+            stderr.contains(needle) && stderr.contains("buffer 0"),
+            "{uri}: {stderr}"
+        );
+    }
+    assert!(!d.join("m.json").exists());
 }

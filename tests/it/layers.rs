@@ -19,6 +19,7 @@ const LAYERS: &[&[&str]] = &[
     &["render"],
     &["overlay", "volume"],
     &["reference"],
+    &["bench"],
     &["fit"],
     &["scenes"],
     &["io"],

@@ -41,8 +41,6 @@ mod gradients;
 mod hard_cases;
 /// Every import in src/ respects the layer order of src/lib.rs.
 mod layers;
-/// Hostile flags and files: refused quickly, never a panic, hang or unbounded allocation.
-mod limits;
 /// Each fast stage against its f64 twin, and whole renders against independent vectors.
 mod matches_reference;
 /// The memory rule: estimates above the available memory or --max-memory are refused first.

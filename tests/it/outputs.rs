@@ -6,6 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use crate::common::data;
+use crate::common::{refused_quickly, run_limited};
 
 fn run(args: &[&str], cwd: &Path, path_env: Option<&str>) -> Output {
     let mut command = Command::new(env!("CARGO_BIN_EXE_splat4d"));
@@ -475,4 +476,223 @@ fn import_gltf_never_writes_over_its_buffer() {
         d,
         None,
     ));
+}
+
+// Limits through the executable (from the former limits.rs): refused quickly, with a
+// message and exit status, never a panic, a hang or an unbounded allocation.
+
+#[test]
+fn outputs_are_checked_before_the_work_and_never_replace_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let camera = data("blob_camera.json");
+    std::fs::copy(&blob, d.join("s.json")).unwrap();
+    let ok = run_limited(
+        &[
+            "dataset", "--scene", "s.json", "--views", "4", "--times", "2", "--size", "8x8",
+            "--out", "ds",
+        ],
+        d,
+    );
+    assert!(ok.status.success());
+    let before = std::fs::read(d.join("ds/transforms_train.json")).unwrap();
+    // A fit aimed at its dataset, at its start, or at an unwritable place: refused at once.
+    refused_quickly(
+        &["fit", "--views", "ds", "--out", "ds/transforms_train.json"],
+        d,
+        2,
+        "input",
+    );
+    refused_quickly(
+        &[
+            "fit", "--views", "ds", "--init", "s.json", "--out", "s.json",
+        ],
+        d,
+        2,
+        "input",
+    );
+    std::fs::write(d.join("file"), "x").unwrap();
+    refused_quickly(
+        &["fit", "--views", "ds", "--out", "file/f.json"],
+        d,
+        3,
+        "file/f.json",
+    );
+    refused_quickly(
+        &[
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "f.json",
+            "--log",
+            "file/log.jsonl",
+        ],
+        d,
+        3,
+        "log.jsonl",
+    );
+    refused_quickly(
+        &["fit", "--views", "ds", "--out", "f.txt"],
+        d,
+        2,
+        ".json or .ply",
+    );
+    assert_eq!(
+        std::fs::read(d.join("ds/transforms_train.json")).unwrap(),
+        before
+    );
+    // grad writes JSON, never over its target; export-ply never over its scene.
+    let png = d.join("ds/train/r_000.png");
+    let grad = [
+        "grad",
+        "--scene",
+        "s.json",
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--target",
+        png.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+    ];
+    refused_quickly(&grad, d, 2, ".json");
+    let ply = run_limited(&["toy", "--kind", "blob", "--out", "scene.ply"], d);
+    assert!(ply.status.success());
+    let before = std::fs::read(d.join("scene.ply")).unwrap();
+    refused_quickly(
+        &[
+            "export-ply",
+            "--scene",
+            "scene.ply",
+            "--time",
+            "0.5",
+            "--out",
+            "scene.ply",
+        ],
+        d,
+        2,
+        "input",
+    );
+    assert_eq!(
+        std::fs::read(d.join("scene.ply")).unwrap(),
+        before,
+        "the 4D scene is intact"
+    );
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf/Box.gltf");
+    std::fs::copy(&gltf, d.join("m.gltf")).unwrap();
+    refused_quickly(
+        &["import-gltf", "m.gltf", "--out", "m.gltf"],
+        d,
+        2,
+        ".json or .ply",
+    );
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn leftovers_of_killed_runs_are_removed_and_live_ones_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A run that was killed (no process 999999999 can exist: Linux pids stop at 2^22) and
+    // a run still going (this test's own process).
+    std::fs::write(d.join(".splat4d-999999999-a1b2c3"), vec![0u8; 1000]).unwrap();
+    std::fs::create_dir(d.join(".splat4d-999999999-dataset-x")).unwrap();
+    let live = format!(".splat4d-{}-d4e5f6", std::process::id());
+    std::fs::write(d.join(&live), "in progress").unwrap();
+    std::fs::write(d.join(".splat4d-notes"), "not ours to judge").unwrap();
+    let (blob, camera) = (data("blob.json"), data("blob_camera.json"));
+    let render = [
+        "render",
+        "--scene",
+        blob.to_str().unwrap(),
+        "--camera",
+        camera.to_str().unwrap(),
+        "--time",
+        "0.5",
+        "--out",
+        "r.png",
+    ];
+    assert!(run_limited(&render, d).status.success());
+    let mut names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let mut expected = vec![".splat4d-notes".to_owned(), live, "r.png".to_owned()];
+    expected.sort();
+    assert_eq!(names, expected);
+}
+
+/// Unmounts a tmpfs when dropped, also when the test fails.
+struct Mounted(std::path::PathBuf);
+
+impl Drop for Mounted {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// A real full disk: a 64 KiB tmpfs, nearly filled, takes a 512×512 EXR. The encoder used
+/// to hide the OS error ("Format error decoding OpenExr"); now the message says "disk full",
+/// the exit status is 3 (output) and nothing but the filler is left. Mounting needs root:
+/// elsewhere the test says so and checks nothing (the unit test
+/// `io::tests::a_full_disk_under_an_encoder_is_reported_as_a_full_disk` covers the message
+/// on every machine).
+#[test]
+fn a_full_disk_says_so_and_leaves_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let disk = tmp.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+        .arg(&disk)
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("cannot mount a tmpfs here (not root?): the full-disk run is skipped");
+        return;
+    }
+    let _unmount = Mounted(disk.clone());
+    std::fs::write(disk.join("filler"), vec![0_u8; 44 * 1024]).unwrap();
+    let mut camera: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("blob_camera.json")).unwrap()).unwrap();
+    camera["width"] = serde_json::json!(512);
+    camera["height"] = serde_json::json!(512);
+    let camera_path = tmp.path().join("camera.json");
+    std::fs::write(&camera_path, camera.to_string()).unwrap();
+    let scene = data("blob.json");
+    for out in ["a.exr", "a.png"] {
+        let output = run_limited(
+            &[
+                "render".as_ref(),
+                "--scene".as_ref(),
+                scene.as_os_str(),
+                "--camera".as_ref(),
+                camera_path.as_os_str(),
+                "--time".as_ref(),
+                "0.5".as_ref(),
+                "--out".as_ref(),
+                disk.join(out).as_os_str(),
+            ],
+            tmp.path(),
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        if output.status.success() {
+            // A PNG of a smooth blob may fit in what is left; then it must be whole.
+            assert!(std::fs::metadata(disk.join(out)).unwrap().len() > 0);
+            std::fs::remove_file(disk.join(out)).unwrap();
+            continue;
+        }
+        assert_eq!(output.status.code(), Some(3), "{out}: {stderr}");
+        assert!(stderr.contains("disk full"), "{out}: {stderr}");
+        let left: Vec<_> = std::fs::read_dir(&disk)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left, ["filler"], "{out}");
+    }
 }

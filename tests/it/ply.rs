@@ -230,9 +230,10 @@ fn bad_scene_plys_are_refused_clearly() {
 #[test]
 fn mutated_plys_never_panic() {
     let good = valid_bytes();
+    assert!(parse_scene_ply(&good, "fuzz.ply").is_ok());
     let mut rng = splat4d::model::random::seeded_rng(5);
     use rand::RngExt;
-    let mut refused = 0;
+    let (mut changed, mut refused) = (0, 0);
     for _ in 0..3000 {
         let mut bytes = good.clone();
         for _ in 0..rng.random_range(1..4) {
@@ -242,12 +243,23 @@ fn mutated_plys_never_panic() {
         if rng.random_range(0..4) == 0 {
             bytes.truncate(rng.random_range(0..bytes.len()));
         }
-        if parse_scene_ply(&bytes, "fuzz.ply").is_err() {
+        changed += usize::from(bytes != good);
+        if let Err(e) = parse_scene_ply(&bytes, "fuzz.ply") {
+            assert_eq!(e.kind(), splat4d::ErrorKind::Input, "{e}");
             refused += 1;
         }
     }
-    assert!(refused > 100, "mutations should be caught: {refused}");
+    println!("PLY: 3000 mutated inputs, {changed} changed, {refused} refused");
+    // Thresholds below the counts these seeds give: the mutated bytes reach the parser.
+    assert!(
+        changed >= PLY_CHANGED && refused >= PLY_REFUSED,
+        "{changed} changed, {refused} refused"
+    );
 }
+
+/// The least [`mutated_plys_never_panic`] accepts (measured: 2994 changed, 938 refused).
+const PLY_CHANGED: usize = 2950;
+const PLY_REFUSED: usize = 800;
 
 #[test]
 fn sh_rest_properties_for_degree_3_loaders() {

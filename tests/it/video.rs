@@ -4,6 +4,7 @@
 use std::path::Path;
 use std::process::Command;
 
+use crate::common::{data, run_limited};
 use image::AnimationDecoder;
 use splat4d::io::image_file::load_image;
 use splat4d::io::path_file::save_path;
@@ -552,4 +553,83 @@ fn keyframes_only_paths_render_fps_times_seconds_frames() {
             "{message}"
         );
     }
+}
+
+// Limits through the executable (from the former limits.rs): refused quickly, with a
+// message and exit status, never a panic, a hang or an unbounded allocation.
+
+#[test]
+fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let video = |orbit: &str, size: &str| {
+        let orbit = format!("--orbit={orbit}");
+        run_limited(
+            &[
+                "video",
+                "--scene",
+                blob.to_str().unwrap(),
+                &orbit,
+                "--times",
+                "0.5",
+                "--size",
+                size,
+                "--no-mp4",
+                "--out",
+                "v",
+            ],
+            d,
+        )
+    };
+    assert!(video("0.5,0.5,0.5,3,20,6", "16x12").status.success());
+    assert!(video("0.5,0.5,0.5,3,20,3", "16x12").status.success());
+    let frames = std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count();
+    assert_eq!(
+        frames, 4,
+        "no stale frames from the longer video (3 and the marker)"
+    );
+    let names: Vec<String> = std::fs::read_dir(d.join("v"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        names.iter().all(|n| !n.starts_with(".splat4d")),
+        "{names:?}"
+    );
+    // A GIF cannot hold a frame wider than 65 535 pixels: refused before any frame is kept.
+    let output = video("0.5,0.5,0.5,3,20,2", "70000x1");
+    assert_eq!(
+        output.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--no-gif"));
+    assert_eq!(
+        std::fs::read_dir(d.join("v/orbit_t0.50")).unwrap().count(),
+        4,
+        "the old video is intact"
+    );
+    // A folder of other files is never replaced.
+    std::fs::create_dir_all(d.join("w/orbit_t0.50")).unwrap();
+    std::fs::write(d.join("w/orbit_t0.50/notes.txt"), "mine").unwrap();
+    let output = run_limited(
+        &[
+            "video",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "8x8",
+            "--no-mp4",
+            "--out",
+            "w",
+        ],
+        d,
+    );
+    assert_eq!(output.status.code(), Some(2));
+    assert!(d.join("w/orbit_t0.50/notes.txt").exists());
 }
