@@ -38,6 +38,9 @@ pub const T_STOP: f64 = 1e-4 * (1.0 + 1e-5);
 
 /// What the backward needs of a composited pixel: its final transmittance and the number of
 /// its half row's entries it consumed (entries from `end` on add nothing to it).
+///
+/// SPEC §8: a pixel stops when its transmittance would fall below 1e-4; the backward
+/// walks back from here.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PixelStop {
     /// `T` after the last kernel it composited.

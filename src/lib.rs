@@ -1,6 +1,36 @@
 //! splat4d: dynamic scenes as 4D Gaussian kernels over (x, y, z, t), rendered and fitted on
 //! the CPU. The math is fixed by `SPEC.md` (shared with independent implementations).
 //!
+//! # Example: load a scene, render a frame, write it
+//!
+//! ```
+//! use splat4d::io::{camera_file::load_camera, image_file::{BitDepth, save_image}, scene_file::load_scene};
+//! use splat4d::{RenderOptions, render};
+//! # let dir = tempfile::tempdir().unwrap();
+//! # let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+//! // the seed paper's moving blob and a camera on its path (shipped in `data/`)
+//! let scene = load_scene(&root.join("data/blob.json"))?;
+//! let camera = load_camera(&root.join("data/blob_camera.json"))?;
+//! let image = render(&scene, &camera, 0.5, &RenderOptions::default())?;
+//! save_image(&image, &dir.path().join("blob.png"), BitDepth::Eight)?; // or .exr: float32, linear
+//! # assert!(dir.path().join("blob.png").exists());
+//! # Ok::<(), splat4d::Error>(())
+//! ```
+//!
+//! A scene can be built in code as well ([`Kernel`], [`Scene::from_kernels`], [`Camera::look_at`]);
+//! to render many frames reuse a [`RenderContext`] (it owns every stage's buffers):
+//!
+//! ```
+//! use splat4d::{Camera, Kernel, RenderOptions, Scene, render};
+//! let blob = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0, 1.0, 1.0]);
+//! let scene = Scene::from_kernels(&[blob], [0.0; 3], "<example>").unwrap();
+//! let camera = Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 64, 48).unwrap();
+//! let image = render(&scene, &camera, 0.0, &RenderOptions::default()).unwrap();
+//! assert!(image.pixel(32, 24)[0] > 0.9);
+//! ```
+//!
+//! The command line and its manual: `README.md` and `docs/` in the repository.
+//!
 //! # Layers
 //!
 //! Each layer imports only from the layers above it in this list (a test, `layers`, checks
@@ -38,14 +68,6 @@
 //!                                                                     report (metrics, charts, markdown)
 //! ```
 //!
-//! ```
-//! use splat4d::{Camera, Kernel, RenderOptions, Scene, render};
-//! let blob = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0, 1.0, 1.0]);
-//! let scene = Scene::from_kernels(&[blob], [0.0; 3], "<example>").unwrap();
-//! let camera = Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 64, 48).unwrap();
-//! let image = render(&scene, &camera, 0.0, &RenderOptions::default()).unwrap();
-//! assert!(image.pixel(32, 24)[0] > 0.9);
-//! ```
 
 pub mod model;
 pub mod parallel;

@@ -25,6 +25,8 @@ use crate::slice::SlicedKernels;
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
 /// `p` of every array is one projected kernel, in ascending scene order.
+///
+/// SPEC §4 (EWA projection) and §5 (the cut-off's `qmax`).
 #[derive(Clone, Debug, Default)]
 pub struct ProjectedKernels {
     /// Index into the [`SlicedKernels`] it came from.
@@ -105,6 +107,8 @@ impl ProjectedKernels {
 }
 
 /// One kernel's projection: everything the later stages (and the backward pass) need.
+///
+/// SPEC §4: the 2D mean, the screen covariance with the dilation added, its conic.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Projection {
     /// Camera-space centre `(x, y, z)`.

@@ -48,6 +48,8 @@ use crate::tiles::{TILE_SIZE, TileBins, padded_qmax};
 /// speed-against-error front (evaluated 8 lanes at a time with the rest of the loop, while
 /// `Std` calls libm once per lane: `Std` takes 1.6–1.8× the time), at the same error
 /// against the f64 reference's model.
+///
+/// SPEC §5 (precision: the per-pixel evaluation of `exp`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ExpMode {
     /// The standard library's `f32::exp` (libm, within 1 ulp), one call per pair.
@@ -127,6 +129,8 @@ pub(crate) fn gaussian<const FAST: bool>(q: f32) -> f32 {
 /// what the CPU has. Every path runs the same operations in the same order (no fused
 /// multiply-adds are formed, conversions are exact), so the image is the same bit for bit on
 /// every path; only the vector width differs.
+///
+/// Not part of SPEC: every path gives the same bits (SPEC §5's sum, evaluated identically).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SimdPath {
     /// Baseline x86-64 (SSE2) or any other architecture.
@@ -192,6 +196,8 @@ pub(crate) const LANES: usize = ROW / 2;
 
 /// Per projected kernel, the f64 constants of its rows (from [`ProjectedKernels`]; computed
 /// once per frame so that the per-(kernel, tile) setup needs no division or square root).
+///
+/// SPEC §5: the quadratic form `q` of each pixel row, from the conic of SPEC §4.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RowForm {
     /// `m2`.

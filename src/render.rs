@@ -80,6 +80,8 @@ impl RenderOptions {
 }
 
 /// What a frame cost: kernels alive after each stage and pairs summed.
+///
+/// Counts of SPEC §2 (alive at τ), §4 (projected) and §5 (pairs within the cut-off).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RenderStats {
     /// Kernels that survived temporal and amplitude culling.
@@ -93,6 +95,21 @@ pub struct RenderStats {
 }
 
 /// Owns the buffers of every stage; reuse it across frames.
+///
+/// SPEC §2–5 forward, §6 and §8 backward.
+///
+/// ```
+/// use splat4d::{Camera, Kernel, RenderContext, RenderOptions, Scene};
+/// let kernel = Kernel::new([0.0, 0.0, 0.0, 0.0], [0.2, 0.2, 0.2, 1.0], [1.0, 1.0, 1.0]);
+/// let scene = Scene::from_kernels(&[kernel], [0.0; 3], "<example>").unwrap();
+/// let camera = Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 32, 32).unwrap();
+/// let mut context = RenderContext::new();
+/// for time in [0.0, 0.5] {
+///     let stats = context.render(&scene, &camera, time, &RenderOptions::default()).unwrap();
+///     assert_eq!(stats.pairs > 0, true);
+///     assert!(context.image().pixel(16, 16)[0] > 0.5);
+/// }
+/// ```
 #[derive(Debug, Default)]
 pub struct RenderContext {
     /// Stage 1 output.

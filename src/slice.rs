@@ -26,6 +26,9 @@ use crate::parallel::{fill_in_parallel, indices_where};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
+///
+/// SPEC §2: the conditional 3D Gaussian at τ, its centre `mean.xyz + velocity (τ − t)` and
+/// amplitude scaled by the temporal weight.
 #[derive(Clone, Debug, Default)]
 pub struct SlicedKernels {
     /// Scene index of each sliced kernel, ascending.

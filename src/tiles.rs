@@ -48,6 +48,8 @@ pub fn pixel_span(centre: f64, half_width: f64, lo: u32, hi: u32) -> Option<(u32
 }
 
 /// Kernel lists per tile, as offsets into one flat array (CSR layout).
+///
+/// SPEC §5: a kernel is listed on every 16×16 tile its cut-off ellipse reaches.
 #[derive(Clone, Debug, Default)]
 pub struct TileBins {
     /// Image width in pixels.

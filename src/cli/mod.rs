@@ -4,6 +4,8 @@
 
 mod args;
 mod bench;
+#[cfg(test)]
+mod commands_reference;
 mod dataset;
 mod export_ply;
 mod fit;
@@ -42,7 +44,7 @@ fn with_progress<S: std::fmt::Display>(
 ///
 /// Without a subcommand, runs the seed paper's experiment and writes `out/report.md`.
 #[derive(Debug, Parser)]
-#[command(name = "splat4d", version, about, long_about = None)]
+#[command(name = "splat4d", version = env!("SPLAT4D_VERSION"), about, long_about = None)]
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,

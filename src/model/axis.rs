@@ -7,6 +7,15 @@
 use serde::{Deserialize, Serialize};
 
 /// A world axis with its sign: the up direction of orbits and spirals.
+///
+/// Not part of SPEC's math: a world's convention beside SPEC §3's camera axes. In a scene file
+/// it is the key `up` (`"z"`, `"-y"`, …).
+///
+/// ```
+/// use splat4d::model::Up;
+/// let (up, _side, _front) = Up::Z.basis();
+/// assert_eq!(up, [0.0, 0.0, 1.0]);
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum Up {

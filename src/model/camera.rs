@@ -35,6 +35,16 @@ pub const MAX_FOCAL_RATIO: f64 = 1e5;
 
 /// A validated pinhole camera. Build it with [`Camera::new`], [`Camera::look_at`],
 /// [`Camera::from_opengl_camera_to_world`], or read one with [`crate::io::camera_file`].
+///
+/// SPEC §3: OpenCV axes (x right, y down, z forward), `u = fx x/z + cx`, pixel centres at
+/// `i + ½`.
+///
+/// ```
+/// use splat4d::Camera;
+/// // eye, target, up, vertical field of view in degrees, width, height
+/// let camera = Camera::look_at([0.0, 0.0, -3.0], [0.0; 3], [0.0, 1.0, 0.0], 40.0, 64, 48).unwrap();
+/// assert_eq!((camera.width, camera.height), (64, 48));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {

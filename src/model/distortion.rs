@@ -35,6 +35,8 @@
 use crate::model::image::Image;
 
 /// Distortion coefficients of the OpenCV model (`k1 k2 p1 p2 k3`); zero is a pinhole.
+///
+/// Outside SPEC, whose camera is a pinhole (§3): photos are resampled into that pinhole at load.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Distortion {
     /// Radial coefficients `k1, k2, k3` (of r², r⁴, r⁶).
@@ -124,6 +126,8 @@ struct Tap {
 
 /// The resampling of photos of one camera (size, intrinsics, distortion) into its pinhole
 /// twin: one entry per output pixel, computed once (see the module doc).
+///
+/// Outside SPEC, whose camera is a pinhole (§3); the loss then weighs pixels (SPEC §6 with weights).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RemapTable {
     width: u32,

@@ -8,6 +8,8 @@
 use std::path::Path;
 
 /// What went wrong, in the terms a caller acts on.
+///
+/// The binary maps kinds to exit statuses (input and usage 2, output 3, numeric 4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ErrorKind {
     /// An input could not be read, is not well-formed, or holds an invalid value.
@@ -22,6 +24,8 @@ pub enum ErrorKind {
 }
 
 /// Errors of the splat4d library.
+///
+/// Every message names the file, the item and the field (`docs/reliability.md`).
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A file could not be read ([`ErrorKind::Input`]).
@@ -70,6 +74,12 @@ pub enum Error {
 }
 
 /// The library's result type.
+///
+/// ```
+/// fn kernels(path: &std::path::Path) -> splat4d::Result<usize> {
+///     Ok(splat4d::io::scene_file::load_scene(path)?.len())
+/// }
+/// ```
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {

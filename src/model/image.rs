@@ -3,6 +3,15 @@
 //! Pixel `(i, j)` is column `i`, row `j`, with its centre at `(i + 0.5, j + 0.5)` (SPEC §3).
 
 /// A linear RGB image, row-major, 3 interleaved f32 per pixel.
+///
+/// SPEC §5: linear values, no sRGB curve; pixel `(i, j)` has its centre at `(i + ½, j + ½)`
+/// (SPEC §3).
+///
+/// ```
+/// use splat4d::Image;
+/// let image = Image::filled(4, 3, [0.5, 0.25, 0.0]);
+/// assert_eq!(image.pixel(3, 2), [0.5, 0.25, 0.0]);
+/// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Image {
     /// Width in pixels.

@@ -2,6 +2,8 @@
 //! terminals: the command line shows a bar (or log lines when piped), tests stay silent.
 
 /// Progress of a long run: phases of known length.
+///
+/// Not part of SPEC: how long runs (fits, the report) tell a caller where they are.
 pub trait Progress: Send {
     /// A phase of `total` ticks begins.
     fn start(&mut self, phase: &str, total: usize);
@@ -13,6 +15,13 @@ pub trait Progress: Send {
 }
 
 /// Progress reported nowhere.
+///
+/// ```
+/// use splat4d::model::{Progress, Silent};
+/// let mut progress = Silent;
+/// progress.start("fit", 10);
+/// progress.tick();
+/// ```
 pub struct Silent;
 
 impl Progress for Silent {

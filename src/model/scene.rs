@@ -24,6 +24,14 @@ use super::Up;
 use crate::model::error::{Error, Result, check_finite};
 
 /// One 4D kernel, as read from or written to a file. The renderer works on [`Scene`].
+///
+/// SPEC §1: mean `(x, y, z, t)`, scales `(sx, sy, sz, st)`, rotation, velocity, amplitude.
+///
+/// ```
+/// use splat4d::Kernel;
+/// let mut kernel = Kernel::new([0.0, 0.0, 0.0, 0.5], [0.1, 0.1, 0.1, 1.0], [1.0, 1.0, 1.0]);
+/// kernel.velocity = [1.0, 0.0, 0.0]; // the slice centre moves along +x over time
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Kernel {
@@ -147,6 +155,15 @@ pub const SH_COUNTS: [usize; 4] = [0, 3, 8, 15];
 
 /// A scene: kernels as struct-of-arrays (index `i` of every array is kernel `i`) and a
 /// background colour added to every pixel.
+///
+/// SPEC §1 (the kernels), §5 (the background) and §8 (the alpha fields).
+///
+/// ```
+/// use splat4d::{Kernel, Scene};
+/// let kernel = Kernel::new([0.0, 0.0, 0.0, 0.5], [0.1, 0.1, 0.1, 1.0], [1.0, 0.5, 0.2]);
+/// let scene = Scene::from_kernels(&[kernel], [0.0; 3], "<example>").unwrap();
+/// assert_eq!(scene.len(), 1);
+/// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {
     /// `[x, y, z, t]` per kernel.

@@ -5,6 +5,8 @@ use crate::model::camera::Camera;
 use crate::model::image::Image;
 
 /// One image with its camera and time.
+///
+/// SPEC §6: the loss compares a render of `camera` at `time` with `image`.
 #[derive(Clone, Debug)]
 pub struct View {
     /// The camera that took it.
@@ -24,6 +26,8 @@ pub struct View {
 
 /// A point of the cloud a dataset ships (COLMAP `points3D`, nerfstudio `ply_file_path`), in
 /// the world of the dataset's cameras.
+///
+/// Not part of SPEC: a fit's possible start (`docs/formats.md`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DatasetPoint {
     /// World position.
@@ -33,6 +37,8 @@ pub struct DatasetPoint {
 }
 
 /// A dataset's splits.
+///
+/// SPEC §6 fits the `train` split; `docs/formats.md` lists the layouts read.
 #[derive(Clone, Debug, Default)]
 pub struct Dataset {
     /// Views to fit.

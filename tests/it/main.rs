@@ -19,6 +19,8 @@ mod dataset;
 mod dataset_variants;
 /// The same bits for every thread count.
 mod determinism;
+/// The manual against the executable: the commands reference, the version.
+mod docs;
 /// Nothing non-finite leaves with exit 0; absurd inputs are refused naming their field.
 mod finite_outputs;
 /// Fitting recovers known scenes; adaptive fits find the kernels they need.
