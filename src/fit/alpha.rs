@@ -28,7 +28,7 @@ use rand::seq::SliceRandom;
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::loss::view_mse_with_gradient;
-use crate::fit::train::{StepRecord, check_views, heldout_psnr_at};
+use crate::fit::train::{StepRecord, check_fit_inputs, heldout_psnr_at};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
@@ -115,6 +115,40 @@ struct Moments {
     steps: i32,
 }
 
+/// One kernel of a start: at `mean` (x, y, z, t), spatial σ `0.5 spacing`, temporal σ
+/// `time_scale`, `colour`, a random rotation from `rng`.
+fn start_kernel(
+    rng: &mut rand_chacha::ChaCha8Rng,
+    mean: [f64; 4],
+    spacing: f64,
+    time_scale: f64,
+    colour: [f64; 3],
+) -> Kernel {
+    let mut kernel = Kernel::new(
+        mean,
+        [0.5 * spacing, 0.5 * spacing, 0.5 * spacing, time_scale],
+        colour,
+    );
+    kernel.rotation = random_rotation(rng);
+    kernel
+}
+
+/// The alpha scene of a start's `kernels`: each at `options.start_opacity`, SH zero.
+fn alpha_start(
+    kernels: &[Kernel],
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+    origin: &str,
+) -> Result<Scene> {
+    let n = kernels.len();
+    Scene::from_kernels(kernels, background, origin)?.into_alpha(
+        vec![options.start_opacity; n],
+        options.sh_count,
+        vec![[0.0; 3]; n * options.sh_count],
+        origin,
+    )
+}
+
 /// A random start in the cameras' box: `options.start_kernels` kernels, seeded.
 pub fn random_alpha_scene(
     bounds: &SpaceTimeBox,
@@ -130,31 +164,17 @@ pub fn random_alpha_scene(
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let kernels: Vec<Kernel> = (0..n)
         .map(|_| {
-            let mut kernel = Kernel::new(
-                [
-                    rng.random_range(bounds.min[0]..=bounds.max[0]),
-                    rng.random_range(bounds.min[1]..=bounds.max[1]),
-                    rng.random_range(bounds.min[2]..=bounds.max[2]),
-                    rng.random_range(bounds.time[0]..=bounds.time[1]),
-                ],
-                [
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    options.start_time_scale * time_range,
-                ],
-                colour,
-            );
-            kernel.rotation = random_rotation(&mut rng);
-            kernel
+            let mean = [
+                rng.random_range(bounds.min[0]..=bounds.max[0]),
+                rng.random_range(bounds.min[1]..=bounds.max[1]),
+                rng.random_range(bounds.min[2]..=bounds.max[2]),
+                rng.random_range(bounds.time[0]..=bounds.time[1]),
+            ];
+            let time_scale = options.start_time_scale * time_range;
+            start_kernel(&mut rng, mean, spacing, time_scale, colour)
         })
         .collect();
-    Scene::from_kernels(&kernels, background, "<random alpha start>")?.into_alpha(
-        vec![options.start_opacity; n],
-        options.sh_count,
-        vec![[0.0; 3]; n * options.sh_count],
-        "<random alpha start>",
-    )
+    alpha_start(&kernels, background, options, "<random alpha start>")
 }
 
 /// A start from a dataset's point cloud (SPEC §8 kernels at the points, coloured by them):
@@ -175,31 +195,22 @@ pub fn point_cloud_alpha_scene(
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
     let mut rng = seeded_rng(options.seed);
+    let time_scale = options.start_time_scale.max(1.0) * time_range;
     let kernels: Vec<Kernel> = chosen
         .iter()
         .map(|p| {
             let [x, y, z] = p.position;
-            let mut kernel = Kernel::new(
+            let colour = p.colour.map(f64::from);
+            start_kernel(
+                &mut rng,
                 [x, y, z, centre_time],
-                [
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    options.start_time_scale.max(1.0) * time_range,
-                ],
-                p.colour.map(f64::from),
-            );
-            kernel.rotation = random_rotation(&mut rng);
-            kernel
+                spacing,
+                time_scale,
+                colour,
+            )
         })
         .collect();
-    let n = kernels.len();
-    Scene::from_kernels(&kernels, background, "<point cloud start>")?.into_alpha(
-        vec![options.start_opacity; n],
-        options.sh_count,
-        vec![[0.0; 3]; n * options.sh_count],
-        "<point cloud start>",
-    )
+    alpha_start(&kernels, background, options, "<point cloud start>")
 }
 
 /// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them:
@@ -227,26 +238,13 @@ pub fn hull_alpha_scene(
             let cell = &cells[k * cells.len() / n];
             let jitter: [f64; 3] = std::array::from_fn(|a| (rng.random::<f64>() - 0.5) * side[a]);
             let [x, y, z] = std::array::from_fn(|a| cell.position[a] + jitter[a]);
-            let mut kernel = Kernel::new(
-                [x, y, z, rng.random_range(bounds.time[0]..=bounds.time[1])],
-                [
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    0.5 * spacing,
-                    options.start_time_scale * time_range,
-                ],
-                cell.colour.map(f64::from),
-            );
-            kernel.rotation = random_rotation(&mut rng);
-            kernel
+            let t = rng.random_range(bounds.time[0]..=bounds.time[1]);
+            let time_scale = options.start_time_scale * time_range;
+            let colour = cell.colour.map(f64::from);
+            start_kernel(&mut rng, [x, y, z, t], spacing, time_scale, colour)
         })
         .collect();
-    Scene::from_kernels(&kernels, background, "<visual hull start>")?.into_alpha(
-        vec![options.start_opacity; n],
-        options.sh_count,
-        vec![[0.0; 3]; n * options.sh_count],
-        "<visual hull start>",
-    )
+    alpha_start(&kernels, background, options, "<visual hull start>")
 }
 
 /// The length scales the rates are relative to: the box's diagonal and the time range.
@@ -269,12 +267,7 @@ pub fn fit_alpha(
     options: &AlphaFitOptions,
     mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
-    if train.is_empty() {
-        return Err(Error::Usage("no training views".into()));
-    }
-    check_views(train)?;
-    check_views(heldout)?;
-    options.render.validate()?;
+    check_fit_inputs(train, heldout, &options.render)?;
     scene.validate("<alpha fit start>")?;
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);

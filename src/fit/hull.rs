@@ -31,8 +31,10 @@ pub const MIN_VIEWS: usize = 2;
 /// Share of the border pixels that must be the background for it to count as flat.
 pub const FLAT_SHARE: f64 = 0.9;
 
-/// Whether `pixel` (RGB) differs from `background` by more than the threshold.
-fn covers(pixel: &[f32], background: [f32; 3]) -> bool {
+/// Whether `pixel` (RGB) differs from `background` by more than [`FOREGROUND_THRESHOLD`] in
+/// some channel: the foreground test of the hull and of the start's colour
+/// ([`crate::fit::plan::start_amplitude`]).
+pub fn is_foreground(pixel: &[f32], background: [f32; 3]) -> bool {
     (0..3).any(|c| (pixel[c] - background[c]).abs() > FOREGROUND_THRESHOLD)
 }
 
@@ -42,16 +44,9 @@ fn covers(pixel: &[f32], background: [f32; 3]) -> bool {
 pub fn flat_background(views: &[View], background: [f64; 3]) -> bool {
     let b = background.map(|v| v as f32);
     let (mut flat, mut all) = (0_u64, 0_u64);
-    for view in views {
-        let (w, h) = (view.image.width as usize, view.image.height as usize);
-        let border = (0..w)
-            .flat_map(|x| [(x, 0), (x, h.saturating_sub(1))])
-            .chain((0..h).flat_map(|y| [(0, y), (w.saturating_sub(1), y)]));
-        for (x, y) in border {
-            let i = 3 * (y * w + x);
-            all += 1;
-            flat += u64::from(!covers(&view.image.pixels[i..i + 3], b));
-        }
+    for pixel in views.iter().flat_map(|view| view.image.border_pixels()) {
+        all += 1;
+        flat += u64::from(!is_foreground(&pixel, b));
     }
     all > 0 && flat as f64 >= FLAT_SHARE * all as f64
 }
@@ -100,7 +95,7 @@ fn vote(views: &[View], background: [f32; 3], centre: [f64; 3]) -> Option<Datase
         }
         seen += 1;
         let rgb = &view.image.pixels[3 * pixel..3 * pixel + 3];
-        if covers(rgb, background) {
+        if is_foreground(rgb, background) {
             covered += 1;
             for (sum, &c) in colour.iter_mut().zip(rgb) {
                 *sum += f64::from(c);

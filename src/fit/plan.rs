@@ -25,6 +25,7 @@
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
 pub use crate::fit::defaults::*;
+use crate::fit::hull::is_foreground;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::train::{FitMode, FitOptions};
 use crate::model::{Camera, Error, Result, Scene, View};
@@ -442,18 +443,9 @@ impl FitPlan {
 #[must_use]
 pub fn border_median(views: &[View]) -> [f64; 3] {
     let mut channels: [Vec<f32>; 3] = Default::default();
-    for view in views {
-        let image = &view.image;
-        let (w, h) = (image.width, image.height);
-        for j in 0..h {
-            for i in 0..w {
-                if i == 0 || j == 0 || i + 1 == w || j + 1 == h {
-                    let p = image.pixel(i, j);
-                    for c in 0..3 {
-                        channels[c].push(p[c]);
-                    }
-                }
-            }
+    for p in views.iter().flat_map(|view| view.image.border_pixels()) {
+        for c in 0..3 {
+            channels[c].push(p[c]);
         }
     }
     channels.map(|mut values| {
@@ -491,7 +483,7 @@ pub fn start_amplitude(views: &[View], background: [f64; 3]) -> [f64; 3] {
     let mut count = 0_u64;
     for view in views {
         for p in view.image.pixels.chunks_exact(3) {
-            if (0..3).any(|c| (p[c] - b[c]).abs() > FOREGROUND_THRESHOLD) {
+            if is_foreground(p, b) {
                 for c in 0..3 {
                     sum[c] += f64::from(p[c] - b[c]);
                 }

@@ -119,6 +119,21 @@ pub struct StepRecord {
     pub kernels: usize,
 }
 
+/// What every training loop checks first: some training views, every image the size of
+/// its camera, and valid render options.
+pub(crate) fn check_fit_inputs(
+    train: &[View],
+    heldout: &[View],
+    render: &RenderOptions,
+) -> Result<()> {
+    if train.is_empty() {
+        return Err(Error::Usage("no training views".into()));
+    }
+    check_views(train)?;
+    check_views(heldout)?;
+    render.validate()
+}
+
 /// Checks that every view's image has its camera's size.
 pub fn check_views(views: &[View]) -> Result<()> {
     for view in views {
@@ -190,12 +205,7 @@ pub fn fit(
     options: &FitOptions,
     mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
-    if train.is_empty() {
-        return Err(Error::Usage("no training views".into()));
-    }
-    check_views(train)?;
-    check_views(heldout)?;
-    options.render.validate()?;
+    check_fit_inputs(train, heldout, &options.render)?;
     let start = Instant::now();
     let mut context = RenderContext::new();
     let mut adam = Adam::new(scene.len(), options.adam);

@@ -34,6 +34,17 @@ impl Image {
         }
     }
 
+    /// The pixels of the image's border (first and last row and column), each once, row by
+    /// row.
+    pub fn border_pixels(&self) -> impl Iterator<Item = [f32; 3]> + '_ {
+        let (w, h) = (self.width, self.height);
+        (0..h).flat_map(move |j| {
+            (0..w)
+                .filter(move |&i| i == 0 || j == 0 || i + 1 == w || j + 1 == h)
+                .map(move |i| self.pixel(i, j))
+        })
+    }
+
     /// `[r, g, b]` of pixel `(i, j)`.
     #[must_use]
     pub fn pixel(&self, i: u32, j: u32) -> [f32; 3] {
