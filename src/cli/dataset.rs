@@ -37,6 +37,10 @@ pub struct DatasetArgs {
     /// Vertical field of view of the cameras, degrees.
     #[arg(long, value_parser = super::args::finite, default_value_t = 40.0)]
     fov: f64,
+    /// One camera per time, as D-NeRF's captures are: training camera i sees only time i
+    /// (`--views` must equal `--times`), no val split, each test camera at its own time.
+    #[arg(long)]
+    monocular: bool,
     #[command(flatten)]
     render: RenderFlags,
 }
@@ -52,6 +56,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
             time_range: args.time_range,
             fov_y_degrees: args.fov,
             seed: args.seed,
+            monocular: args.monocular,
         },
         out: args.out.clone(),
         exr: args.exr,

@@ -18,7 +18,12 @@
 //! largest `densify_fraction` (and above `densify_threshold`) are cloned when small (largest
 //! spatial σ below `percent_dense` of the box) or split in two along their largest axis when
 //! large (σ / 1.6 each, the children one σ apart); kernels whose opacity fell below
-//! `prune_opacity` are removed.
+//! `prune_opacity` are removed. A densified kernel that spans motion (σt above
+//! `time_split_fraction` of the time range, and |v| σt above its largest spatial σ) is split
+//! in time instead: two children at `t ± σt/2`, σt / 1.6 each, their means moved along the
+//! velocity so that both follow the parent's path. Every `opacity_reset_every` steps while
+//! the rounds run, every opacity is lowered to at most `reset_opacity` (and its Adam moments
+//! cleared): what the views need regains its opacity, the rest is pruned.
 
 use std::time::Instant;
 
@@ -28,6 +33,7 @@ use rand::seq::SliceRandom;
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::loss::view_mse_with_gradient;
+use crate::fit::stereo::SweptPoint;
 use crate::fit::train::{StepRecord, check_fit_inputs, heldout_psnr_at};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
@@ -100,6 +106,16 @@ pub struct AlphaFitOptions {
     pub percent_dense: f64,
     /// Kernels below this opacity are pruned.
     pub prune_opacity: f64,
+    /// Steps between opacity resets while density rounds run (0: never): every opacity is
+    /// lowered to at most `reset_opacity`, so that kernels the views do not need fade
+    /// below `prune_opacity` and are pruned (3DGS's reset).
+    pub opacity_reset_every: usize,
+    /// The opacity a reset lowers every kernel to, at most.
+    pub reset_opacity: f64,
+    /// A densified kernel whose σt exceeds this fraction of the time range, and which moves
+    /// further than its largest spatial σ within one σt, is split in time rather than in
+    /// space (the 4DGS papers' split in the time dimension).
+    pub time_split_fraction: f64,
 }
 
 /// Per-kernel numbers in Adam's layout: mean 3, t, velocity 3, ln s 4, quaternion 4,
@@ -211,6 +227,34 @@ pub fn point_cloud_alpha_scene(
         })
         .collect();
     alpha_start(&kernels, background, options, "<point cloud start>")
+}
+
+/// A start from plane-sweep points ([`crate::fit::stereo`]): at most `options.max_kernels`
+/// of them, taken evenly through the list, each a kernel at its point and time with a
+/// spatial σ of half its spacing, coloured by it, σt `start_time_scale` of the time range.
+pub fn swept_alpha_scene(
+    points: &[SweptPoint],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<Scene> {
+    if points.is_empty() {
+        return Err(Error::usage("the plane sweep kept no point to start from"));
+    }
+    let stride = points.len().div_ceil(options.max_kernels.max(1)).max(1);
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let time_scale = options.start_time_scale * time_range;
+    let mut rng = seeded_rng(options.seed);
+    let kernels: Vec<Kernel> = points
+        .iter()
+        .step_by(stride)
+        .map(|p| {
+            let [x, y, z] = p.position;
+            let colour = p.colour.map(f64::from);
+            start_kernel(&mut rng, [x, y, z, p.time], p.spacing, time_scale, colour)
+        })
+        .collect();
+    alpha_start(&kernels, background, options, "<plane-sweep start>")
 }
 
 /// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them:
@@ -341,8 +385,21 @@ pub fn fit_alpha(
             && step % options.densify_every == 0
             && progress >= options.densify_from
             && progress <= options.densify_until;
+        if options.opacity_reset_every > 0
+            && step % options.opacity_reset_every == 0
+            && progress <= options.densify_until
+            && step < options.steps
+        {
+            reset_opacities(scene, &mut moments, width, options.reset_opacity);
+        }
         if round {
-            let sources = densify_and_prune(scene, &screen_gradient, &seen, diagonal, options);
+            let sources = densify_and_prune(
+                scene,
+                &screen_gradient,
+                &seen,
+                [diagonal, time_range],
+                options,
+            );
             moments.remap(&sources, width);
             screen_gradient = vec![0.0; scene.len()];
             seen = vec![0; scene.len()];
@@ -493,6 +550,18 @@ fn check_parameters(scene: &Scene, step: usize) -> Result<()> {
     }
 }
 
+/// Lowers every opacity to at most `ceiling` and clears the opacity's Adam moments.
+fn reset_opacities(scene: &mut Scene, moments: &mut Moments, width: usize, ceiling: f64) {
+    for (i, opacity) in scene.opacities.iter_mut().enumerate() {
+        *opacity = opacity.min(ceiling);
+        moments.first[i * width + OPACITY_SLOT] = 0.0;
+        moments.second[i * width + OPACITY_SLOT] = 0.0;
+    }
+}
+
+/// Where the logit opacity sits in a kernel's Adam slots.
+const OPACITY_SLOT: usize = 15;
+
 /// One density round: prune transparent kernels, then clone or split the ones with the
 /// largest mean screen-space gradient. Returns, per kernel of the new scene, the old kernel
 /// whose Adam moments it keeps (`None`: fresh).
@@ -500,7 +569,7 @@ fn densify_and_prune(
     scene: &mut Scene,
     screen_gradient: &[f64],
     seen: &[u32],
-    diagonal: f64,
+    [diagonal, time_range]: [f64; 2],
     options: &AlphaFitOptions,
 ) -> Vec<Option<usize>> {
     let n = scene.len();
@@ -561,7 +630,24 @@ fn densify_and_prune(
         let largest = (0..3)
             .max_by(|&a, &b| kernel.scale[a].total_cmp(&kernel.scale[b]))
             .expect("three axes");
-        if kernel.scale[largest] > options.percent_dense * diagonal {
+        let speed = kernel.velocity.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let time_sigma = kernel.scale[3];
+        if time_sigma > options.time_split_fraction * time_range
+            && speed * time_sigma > kernel.scale[largest]
+        {
+            // Split in time: the children σt / 2 either side, σt / 1.6 each, on the path.
+            let mut child = kernel;
+            child.scale[3] /= 1.6;
+            for sign in [-0.5, 0.5] {
+                let mut placed = child;
+                let dt = sign * time_sigma;
+                placed.mean[3] += dt;
+                for a in 0..3 {
+                    placed.mean[a] += kernel.velocity[a] * dt;
+                }
+                push(placed, i, None, &mut next);
+            }
+        } else if kernel.scale[largest] > options.percent_dense * diagonal {
             // Split along the largest axis: the children one σ apart, σ / 1.6 each.
             let r = crate::slice::rotation_matrix(kernel.rotation);
             let sigma = kernel.scale[largest];

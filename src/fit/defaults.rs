@@ -111,6 +111,9 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     densify_threshold: 0.0,
     percent_dense: 0.01,
     prune_opacity: 0.05,
+    opacity_reset_every: 0,
+    reset_opacity: 0.01,
+    time_split_fraction: 0.05,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

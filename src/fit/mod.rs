@@ -10,4 +10,5 @@ pub mod hull;
 pub mod init;
 pub mod loss;
 pub mod plan;
+pub mod stereo;
 pub mod train;

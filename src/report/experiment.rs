@@ -79,6 +79,7 @@ impl Default for ExperimentConfig {
             time_range: [0.0, 1.0],
             fov_y_degrees: 40.0,
             seed: crate::scenes::toy::DEFAULT_SEED,
+            monocular: false,
         };
         ExperimentConfig {
             seed: crate::scenes::toy::DEFAULT_SEED,
@@ -90,6 +91,7 @@ impl Default for ExperimentConfig {
                 time_range: [0.0, 1.0],
                 fov_y_degrees: 40.0,
                 seed: crate::scenes::toy::DEFAULT_SEED,
+                monocular: false,
             },
             model_kernels: 300,
             model_scale: [0.1, 0.1, 0.1, 0.1],

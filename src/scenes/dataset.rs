@@ -4,6 +4,11 @@
 //!   evenly over the time range (both ends included);
 //! - val: the first (up to 4) training cameras at the midpoints between training times;
 //! - test: `max(2, views/4)` new cameras at those midpoints: unseen views at unseen times.
+//!
+//! A **monocular** dataset is laid out as D-NeRF's captures are, one camera per time:
+//! training camera i sees only time i (of `times` = `views` times spread evenly), there is
+//! no val split, and test camera j (of `max(2, views/4)`) sees time `t0 + (j + ½)/count ·
+//! (t1 - t0)`.
 
 use crate::model::error::{Error, Result};
 use crate::model::scene::Scene;
@@ -31,6 +36,8 @@ pub struct DatasetSpec {
     pub fov_y_degrees: f64,
     /// Seed of the cameras.
     pub seed: u64,
+    /// One camera per time (D-NeRF's layout): `views` must equal `times`.
+    pub monocular: bool,
 }
 
 impl Default for DatasetSpec {
@@ -43,6 +50,7 @@ impl Default for DatasetSpec {
             time_range: [0.0, 1.0],
             fov_y_degrees: 40.0,
             seed: 0,
+            monocular: false,
         }
     }
 }
@@ -70,6 +78,15 @@ impl DatasetSpec {
                 format!(
                     "`size` {}x{} must be at least 1×1 and at most 16384² pixels",
                     self.width, self.height
+                ),
+            ));
+        }
+        if self.monocular && self.views != self.times {
+            return Err(Error::setting(
+                &["monocular", "views", "times"],
+                format!(
+                    "a `monocular` dataset has one camera per time: `views` {} must equal `times` {}",
+                    self.views, self.times
                 ),
             ));
         }
@@ -192,6 +209,17 @@ pub fn render_views(
                 },
             )
         };
+    if spec.monocular {
+        for (camera, &time) in train_cameras.iter().zip(&train_times) {
+            render(camera, time, Split::Train)?;
+        }
+        let [t0, t1] = spec.time_range;
+        for (j, camera) in test_cameras.iter().enumerate() {
+            let time = t0 + (j as f64 + 0.5) / test_count as f64 * (t1 - t0);
+            render(camera, time, Split::Test)?;
+        }
+        return Ok(());
+    }
     for &time in &train_times {
         for camera in train_cameras {
             render(camera, time, Split::Train)?;
@@ -211,6 +239,9 @@ pub fn render_views(
 /// Frames [`render_dataset`] will render for `spec`.
 #[must_use]
 pub fn frame_count(spec: &DatasetSpec) -> usize {
+    if spec.monocular {
+        return spec.views.saturating_add((spec.views / 4).max(2));
+    }
     let mids = spec.times.saturating_sub(1).max(1);
     let per_mid = spec.views.min(4) + (spec.views / 4).max(2);
     spec.views

@@ -8,12 +8,13 @@ use std::time::Duration;
 
 use crate::fit::alpha::{
     AlphaFitOptions, alpha_bounds, fit_alpha, hull_alpha_scene, point_cloud_alpha_scene,
-    random_alpha_scene,
+    random_alpha_scene, swept_alpha_scene,
 };
 use crate::fit::hull::{HULL_GRID, flat_background, visual_hull};
 use crate::fit::init::SpaceTimeBox;
 use crate::fit::loss::psnr;
 use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
+use crate::fit::stereo::plane_sweep;
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
@@ -307,9 +308,13 @@ fn finish_fit(
     })
 }
 
+/// Fewer points than this from the plane sweep, and the fit starts at random instead.
+const MIN_SWEPT_POINTS: usize = 100;
+
 /// The alpha fit's start when the dataset has no point cloud: the visual hull of the
-/// training views where their background is flat ([`crate::fit::hull`]), else kernels at
-/// random in the cameras' box.
+/// training views where their background is flat ([`crate::fit::hull`]), else a plane sweep
+/// over neighbouring views ([`crate::fit::stereo`]), else kernels at random in the cameras'
+/// box.
 fn start_from_images(
     dataset: &crate::model::Dataset,
     bounds: &SpaceTimeBox,
@@ -329,7 +334,15 @@ fn start_from_images(
             return hull_alpha_scene(&cells, side, bounds, background, options);
         }
     }
-    progress.note("starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from)");
+    let points = plane_sweep(&dataset.train, bounds);
+    if points.len() >= MIN_SWEPT_POINTS {
+        progress.note(&format!(
+            "starting from a plane sweep over neighbouring training views ({} points)",
+            points.len()
+        ));
+        return swept_alpha_scene(&points, bounds, background, options);
+    }
+    progress.note("starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from, no depth the views agree on)");
     random_alpha_scene(bounds, background, colour, options)
 }
 

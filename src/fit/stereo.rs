@@ -1,0 +1,352 @@
+//! A start made from photos that have neither a flat background nor a point cloud (issue
+//! "fitting real captures", item 3): a **plane sweep** over neighbouring views.
+//!
+//! Each training view in turn is the *reference*. Its neighbours are the (at most
+//! [`NEIGHBOURS`]) other views whose optical axes are within [`MAX_AXIS_ANGLE_DEGREES`] of
+//! its own, nearest first, at a different centre. Images wider or taller than
+//! [`WORKING_SIDE`] pixels are box-filtered down first (the intrinsics divided alike).
+//! Depth hypotheses are [`PLANES`] fronto-parallel planes spread evenly in inverse depth
+//! from `d/3` to `6 d`, `d` the depth of the cameras' box centre. For a reference pixel p and
+//! a depth z the point `X = c + z R⁻¹ K⁻¹ (p, 1)` is projected into each neighbour and its
+//! colour read bilinearly; the pixel's cost at z is the mean over channels of
+//! `|I_ref(p) - I_n(X)|`, averaged over the better half of the neighbours that see X (an
+//! occluded neighbour should not veto), then averaged over a `(2 WINDOW + 1)²` window. A
+//! pixel's depth is the plane of least cost, kept when
+//!
+//! - that cost is below [`MAX_COST`],
+//! - it is distinct: below [`DISTINCT_RATIO`] times the least cost of the planes more than
+//!   two planes away (a textureless wall matches everywhere and says nothing),
+//! - and the reference window is textured (its colour's standard deviation above
+//!   [`MIN_TEXTURE`]).
+//!
+//! Kept pixels on a grid of stride `s` (chosen so that about [`POINT_BUDGET`] points come out
+//! over all views) become points: position X, the reference's colour, the view's time, and
+//! the spacing of the grid at that depth (`z s / fx`). The sweep is a start, not a model:
+//! the fit moves, prunes and densifies from there. Deterministic: views are swept
+//! independently (in parallel) and collected in order.
+
+use rayon::prelude::*;
+
+use crate::fit::init::SpaceTimeBox;
+use crate::model::camera::Camera;
+use crate::model::{Image, View};
+
+/// Neighbours per reference view.
+pub const NEIGHBOURS: usize = 4;
+/// Largest angle between a reference's optical axis and a neighbour's.
+pub const MAX_AXIS_ANGLE_DEGREES: f64 = 45.0;
+/// Depth planes.
+pub const PLANES: usize = 64;
+/// The cost window's half side, pixels.
+pub const WINDOW: usize = 2;
+/// Largest kept cost (mean absolute difference per channel).
+pub const MAX_COST: f32 = 0.05;
+/// A kept depth's cost is below this fraction of the best cost far from it.
+pub const DISTINCT_RATIO: f32 = 0.8;
+/// Smallest standard deviation of a kept reference window's colour.
+pub const MIN_TEXTURE: f32 = 0.01;
+/// Largest side the sweep works at, pixels.
+pub const WORKING_SIDE: u32 = 320;
+/// Points the sweep aims at over all views.
+pub const POINT_BUDGET: usize = 30_000;
+
+/// A point of the sweep: where, which colour, when, and the spacing of its neighbours.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SweptPoint {
+    /// World position.
+    pub position: [f64; 3],
+    /// The reference pixel's colour.
+    pub colour: [f32; 3],
+    /// The reference view's time.
+    pub time: f64,
+    /// The grid's spacing at the point's depth, world units.
+    pub spacing: f64,
+}
+
+/// The plane-sweep points of `views` (module doc); `bounds` gives the depth range.
+#[must_use]
+pub fn plane_sweep(views: &[View], bounds: &SpaceTimeBox) -> Vec<SweptPoint> {
+    let working: Vec<(Camera, Image)> = views.iter().map(working_copy).collect();
+    let pixels: usize = working.iter().map(|(c, _)| c.pixel_count()).sum();
+    // Stride so that about POINT_BUDGET of the pixels are sampled, before the tests thin them.
+    let stride = ((pixels as f64 / POINT_BUDGET as f64).sqrt().ceil() as usize).max(1);
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    (0..views.len())
+        .into_par_iter()
+        .map(|r| {
+            let neighbours = neighbours_of(r, &working);
+            if neighbours.is_empty() {
+                return Vec::new();
+            }
+            sweep_view(&working, r, &neighbours, centre, stride, views[r].time)
+        })
+        .collect::<Vec<_>>()
+        .concat()
+}
+
+/// The view's camera and image at most [`WORKING_SIDE`] on a side.
+fn working_copy(view: &View) -> (Camera, Image) {
+    let side = view.camera.width.max(view.camera.height);
+    let factor = side.div_ceil(WORKING_SIDE).max(1);
+    if factor == 1 {
+        return (view.camera, (*view.image).clone());
+    }
+    let mut camera = view.camera;
+    camera.width = view.camera.width / factor;
+    camera.height = view.camera.height / factor;
+    let f = f64::from(factor);
+    camera.fx /= f;
+    camera.fy /= f;
+    camera.cx /= f;
+    camera.cy /= f;
+    let mut image = Image::filled(camera.width, camera.height, [0.0; 3]);
+    let area = (factor * factor) as f32;
+    for j in 0..camera.height {
+        for i in 0..camera.width {
+            let mut sum = [0.0_f32; 3];
+            for dj in 0..factor {
+                for di in 0..factor {
+                    let p = view.image.pixel(i * factor + di, j * factor + dj);
+                    for c in 0..3 {
+                        sum[c] += p[c];
+                    }
+                }
+            }
+            let k = 3 * (j as usize * camera.width as usize + i as usize);
+            for (out, total) in image.pixels[k..k + 3].iter_mut().zip(sum) {
+                *out = total / area;
+            }
+        }
+    }
+    (camera, image)
+}
+
+/// The camera's optical axis in world space (the third row of Rc).
+fn axis(camera: &Camera) -> [f64; 3] {
+    let z = camera.rotation()[2];
+    let norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+    z.map(|v| v / norm)
+}
+
+/// Up to [`NEIGHBOURS`] views near view `r` that look the same way from elsewhere.
+fn neighbours_of(r: usize, working: &[(Camera, Image)]) -> Vec<usize> {
+    let reference = &working[r].0;
+    let (centre, dir) = (reference.centre(), axis(reference));
+    let cos_max = MAX_AXIS_ANGLE_DEGREES.to_radians().cos();
+    let mut candidates: Vec<(f64, usize)> = working
+        .iter()
+        .enumerate()
+        .filter(|&(n, _)| n != r)
+        .filter_map(|(n, (camera, _))| {
+            let other = camera.centre();
+            let distance = (0..3)
+                .map(|a| (other[a] - centre[a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let cos = (0..3).map(|a| axis(camera)[a] * dir[a]).sum::<f64>();
+            (cos >= cos_max && distance > 1e-9).then_some((distance, n))
+        })
+        .collect();
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    candidates.truncate(NEIGHBOURS);
+    candidates.into_iter().map(|(_, n)| n).collect()
+}
+
+/// The points view `r` contributes (module doc).
+fn sweep_view(
+    working: &[(Camera, Image)],
+    r: usize,
+    neighbours: &[usize],
+    centre: [f64; 3],
+    stride: usize,
+    time: f64,
+) -> Vec<SweptPoint> {
+    let (camera, image) = &working[r];
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let target_depth = camera.to_camera_space(centre)[2];
+    if target_depth.is_nan() || target_depth <= 0.0 {
+        return Vec::new();
+    }
+    let depths: Vec<f64> = (0..PLANES)
+        .map(|k| {
+            let (near, far) = (1.0 / (target_depth / 3.0), 1.0 / (6.0 * target_depth));
+            1.0 / (near + (far - near) * k as f64 / (PLANES - 1) as f64)
+        })
+        .collect();
+    let to_world = camera_to_world(camera);
+    let mut volume = vec![0.0_f32; PLANES * w * h];
+    for (k, &depth) in depths.iter().enumerate() {
+        let costs = plane_costs(working, camera, image, neighbours, &to_world, depth);
+        box_filter(&costs, w, h, &mut volume[k * w * h..(k + 1) * w * h]);
+    }
+    let mut points = Vec::new();
+    for j in (stride / 2..h).step_by(stride) {
+        for i in (stride / 2..w).step_by(stride) {
+            let p = j * w + i;
+            let Some(k) = chosen_plane(&volume, w * h, p) else {
+                continue;
+            };
+            if texture(image, w, h, i, j) < MIN_TEXTURE {
+                continue;
+            }
+            let depth = depths[k];
+            points.push(SweptPoint {
+                position: pixel_point(camera, &to_world, i, j, depth),
+                colour: image.pixel(i as u32, j as u32),
+                time,
+                spacing: depth * stride as f64 / camera.fx,
+            });
+        }
+    }
+    points
+}
+
+/// Rc⁻¹ (= Rcᵀ) and the centre: camera space to world.
+fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
+    let r = camera.rotation();
+    let transpose = std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]));
+    (transpose, camera.centre())
+}
+
+/// The world point at camera depth `depth` through pixel `(i, j)`'s centre.
+fn pixel_point(
+    camera: &Camera,
+    (rotation, centre): &([[f64; 3]; 3], [f64; 3]),
+    i: usize,
+    j: usize,
+    depth: f64,
+) -> [f64; 3] {
+    let x = (i as f64 + 0.5 - camera.cx) / camera.fx * depth;
+    let y = (j as f64 + 0.5 - camera.cy) / camera.fy * depth;
+    let local = [x, y, depth];
+    std::array::from_fn(|a| centre[a] + (0..3).map(|b| rotation[a][b] * local[b]).sum::<f64>())
+}
+
+/// Per reference pixel, the cost of the plane at `depth`: the mean over the better half of
+/// the neighbours that see the point of the mean absolute colour difference; a pixel no
+/// neighbour sees costs [`UNSEEN_COST`].
+fn plane_costs(
+    working: &[(Camera, Image)],
+    camera: &Camera,
+    image: &Image,
+    neighbours: &[usize],
+    to_world: &([[f64; 3]; 3], [f64; 3]),
+    depth: f64,
+) -> Vec<f32> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut costs = vec![UNSEEN_COST; w * h];
+    let mut found = Vec::with_capacity(neighbours.len());
+    for j in 0..h {
+        for i in 0..w {
+            let point = pixel_point(camera, to_world, i, j, depth);
+            let reference = image.pixel(i as u32, j as u32);
+            found.clear();
+            for &n in neighbours {
+                let (other, other_image) = &working[n];
+                let [u, v, z] = other.project_point(point);
+                if let Some(colour) = (z > 0.0).then(|| bilinear(other_image, u, v)).flatten() {
+                    let difference = (0..3)
+                        .map(|c| (colour[c] - reference[c]).abs())
+                        .sum::<f32>()
+                        / 3.0;
+                    found.push(difference);
+                }
+            }
+            if found.is_empty() {
+                continue;
+            }
+            found.sort_by(f32::total_cmp);
+            let used = found.len().div_ceil(2);
+            costs[j * w + i] = found[..used].iter().sum::<f32>() / used as f32;
+        }
+    }
+    costs
+}
+
+/// The cost of a pixel that no neighbour sees at a depth.
+const UNSEEN_COST: f32 = 1.0;
+
+/// `image` read bilinearly at pixel coordinates `(u, v)` (pixel centres at `+ ½`), `None`
+/// outside the pixel centres' hull.
+fn bilinear(image: &Image, u: f64, v: f64) -> Option<[f32; 3]> {
+    let (x, y) = (u - 0.5, v - 0.5);
+    let (w, h) = (f64::from(image.width), f64::from(image.height));
+    if !(x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0) {
+        return None;
+    }
+    let (i0, j0) = (x.floor() as u32, y.floor() as u32);
+    let (i1, j1) = (
+        (i0 + 1).min(image.width - 1),
+        (j0 + 1).min(image.height - 1),
+    );
+    let (fx, fy) = ((x - f64::from(i0)) as f32, (y - f64::from(j0)) as f32);
+    let [a, b, c, d] = [
+        image.pixel(i0, j0),
+        image.pixel(i1, j0),
+        image.pixel(i0, j1),
+        image.pixel(i1, j1),
+    ];
+    Some(std::array::from_fn(|k| {
+        (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+    }))
+}
+
+/// The mean of `costs` over the `(2 WINDOW + 1)²` window around each pixel (clipped at the
+/// edges), into `out`.
+fn box_filter(costs: &[f32], w: usize, h: usize, out: &mut [f32]) {
+    for j in 0..h {
+        for i in 0..w {
+            let (j0, j1) = (j.saturating_sub(WINDOW), (j + WINDOW).min(h - 1));
+            let (i0, i1) = (i.saturating_sub(WINDOW), (i + WINDOW).min(w - 1));
+            let mut sum = 0.0;
+            for jj in j0..=j1 {
+                sum += costs[jj * w + i0..=jj * w + i1].iter().sum::<f32>();
+            }
+            out[j * w + i] = sum / ((j1 - j0 + 1) * (i1 - i0 + 1)) as f32;
+        }
+    }
+}
+
+/// The plane of least cost at pixel `p` when it is low and distinct (module doc).
+fn chosen_plane(volume: &[f32], plane_size: usize, p: usize) -> Option<usize> {
+    let cost = |k: usize| volume[k * plane_size + p];
+    let best = (0..PLANES).min_by(|&a, &b| cost(a).total_cmp(&cost(b)))?;
+    let rival = (0..PLANES)
+        .filter(|&k| k.abs_diff(best) > 2)
+        .map(cost)
+        .fold(f32::INFINITY, f32::min);
+    (cost(best) < MAX_COST && cost(best) < DISTINCT_RATIO * rival).then_some(best)
+}
+
+/// The standard deviation of the colour (all channels) in the window around `(i, j)`.
+fn texture(image: &Image, w: usize, h: usize, i: usize, j: usize) -> f32 {
+    let (j0, j1) = (j.saturating_sub(WINDOW), (j + WINDOW).min(h - 1));
+    let (i0, i1) = (i.saturating_sub(WINDOW), (i + WINDOW).min(w - 1));
+    let (mut sum, mut square, mut count) = (0.0_f32, 0.0_f32, 0.0_f32);
+    for jj in j0..=j1 {
+        for ii in i0..=i1 {
+            for v in image.pixel(ii as u32, jj as u32) {
+                sum += v;
+                square += v * v;
+                count += 1.0;
+            }
+        }
+    }
+    let mean = sum / count;
+    (square / count - mean * mean).max(0.0).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_reads_pixel_centres_exactly_and_refuses_outside() {
+        let mut image = Image::filled(2, 2, [0.0; 3]);
+        image.pixels[3..6].copy_from_slice(&[1.0, 1.0, 1.0]);
+        assert_eq!(bilinear(&image, 1.5, 0.5), Some([1.0; 3]));
+        assert_eq!(bilinear(&image, 1.0, 0.5), Some([0.5; 3]));
+        assert_eq!(bilinear(&image, 0.4, 0.5), None);
+        assert_eq!(bilinear(&image, 1.6, 0.5), None);
+    }
+}
