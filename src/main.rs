@@ -10,6 +10,11 @@
 
 mod cli;
 
+/// Large blocks on transparent huge pages ([`cli::allocator`]): a fresh command's first
+/// frame takes one page fault per 2 MiB instead of one per 4 KiB.
+#[global_allocator]
+static ALLOCATOR: cli::allocator::HugePages = cli::allocator::HugePages;
+
 use std::process::ExitCode;
 
 use splat4d::ErrorKind;

@@ -2,6 +2,7 @@
 //! [`splat4d::tasks`] → its summary printed. One file per subcommand; no defaults or
 //! automatic choices live here (the fit's are in `splat4d::fit::plan`).
 
+pub mod allocator;
 mod args;
 mod bench;
 #[cfg(test)]
