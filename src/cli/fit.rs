@@ -74,7 +74,7 @@ pub struct FitArgs {
     /// initial scale; otherwise never split: the fit sizes the kernels).
     #[arg(long, value_parser = super::args::finite)]
     min_scale: Option<f64>,
-    /// Adam steps (default: 4000 additive, 3000 alpha).
+    /// Adam steps (default: 4000 additive, 6000 alpha).
     #[arg(long)]
     steps: Option<usize>,
     /// Output scene JSON.

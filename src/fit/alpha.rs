@@ -704,3 +704,84 @@ pub fn alpha_bounds(train: &[View]) -> Result<SpaceTimeBox> {
         });
     box_from_cameras(&cameras, [lo, hi])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::defaults::DEFAULT_ALPHA;
+
+    /// The defaults, with every visible kernel allowed to grow.
+    const GROW_ALL: AlphaFitOptions = AlphaFitOptions {
+        densify_fraction: 1.0,
+        ..DEFAULT_ALPHA
+    };
+
+    /// One alpha kernel with `velocity` and σt `time_sigma`, opacity 0.8.
+    fn one_kernel(velocity: [f64; 3], time_sigma: f64) -> Scene {
+        let mut kernel = Kernel::new(
+            [0.1, 0.2, 0.3, 0.5],
+            [0.01, 0.01, 0.01, time_sigma],
+            [0.5; 3],
+        );
+        kernel.velocity = velocity;
+        Scene::from_kernels(&[kernel], [0.0; 3], "<test>")
+            .unwrap()
+            .into_alpha(vec![0.8], 0, Vec::new(), "<test>")
+            .unwrap()
+    }
+
+    /// The slice centre of kernel `i` at `tau` (SPEC §2: `m + v (τ - t)`).
+    fn centre_at(scene: &Scene, i: usize, tau: f64) -> [f64; 3] {
+        std::array::from_fn(|a| {
+            scene.means[i][a] + scene.velocities[i][a] * (tau - scene.means[i][3])
+        })
+    }
+
+    #[test]
+    fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
+        let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
+        let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &GROW_ALL);
+        assert_eq!(sources, vec![None, None]);
+        assert_eq!(scene.len(), 2);
+        let times = [scene.means[0][3], scene.means[1][3]];
+        assert!((times[0] - 0.35).abs() < 1e-12 && (times[1] - 0.65).abs() < 1e-12);
+        for i in 0..2 {
+            assert!((scene.scales[i][3] - 0.3 / 1.6).abs() < 1e-12);
+            for tau in [0.0, 0.5, 1.0] {
+                let [a, b] = [
+                    centre_at(&scene, i, tau),
+                    centre_at(&one_kernel([1.0, 0.0, -0.5], 0.3), 0, tau),
+                ];
+                assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-12), "{a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
+        for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
+            let mut scene = one_kernel(velocity, time_sigma);
+            let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &GROW_ALL);
+            assert_eq!(sources, vec![Some(0), None]);
+            assert_eq!(scene.means[0], scene.means[1]);
+        }
+    }
+
+    #[test]
+    fn a_reset_lowers_opacities_and_clears_their_moments_only() {
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        let width = stride(0);
+        let mut moments = Moments {
+            first: vec![1.0; width],
+            second: vec![2.0; width],
+            steps: 3,
+        };
+        reset_opacities(&mut scene, &mut moments, width, 0.01);
+        assert_eq!(scene.opacities, vec![0.01]);
+        for k in 0..width {
+            let cleared = k == OPACITY_SLOT;
+            assert_eq!(moments.first[k] == 0.0, cleared);
+            assert_eq!(moments.second[k] == 0.0, cleared);
+        }
+    }
+}

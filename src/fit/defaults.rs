@@ -78,7 +78,7 @@ pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
-    steps: 3000,
+    steps: 6000,
     batch_size: 4,
     rates: AlphaRates {
         mean: 1.6e-4,
@@ -100,7 +100,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     },
     start_kernels: 2000,
     start_opacity: 0.1,
-    start_time_scale: 0.25,
+    start_time_scale: 0.1,
     sh_count: 3,
     sh_raise_every: 1000,
     max_kernels: 200_000,
@@ -110,8 +110,8 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     densify_fraction: 0.05,
     densify_threshold: 0.0,
     percent_dense: 0.01,
-    prune_opacity: 0.05,
-    opacity_reset_every: 0,
+    prune_opacity: 0.005,
+    opacity_reset_every: 2000,
     reset_opacity: 0.01,
     time_split_fraction: 0.05,
 };

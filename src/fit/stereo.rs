@@ -11,7 +11,8 @@
 //! colour read bilinearly; the pixel's cost at z is the mean over channels of
 //! `|I_ref(p) - I_n(X)|`, averaged over the better half of the neighbours that see X (an
 //! occluded neighbour should not veto), then averaged over a `(2 WINDOW + 1)²` window. A
-//! pixel's depth is the plane of least cost, kept when
+//! pixel's depth is the plane of least cost (refined to the vertex of the parabola through
+//! it and its two neighbours), kept when
 //!
 //! - that cost is below [`MAX_COST`],
 //! - it is distinct: below [`DISTINCT_RATIO`] times the least cost of the planes more than
@@ -19,8 +20,10 @@
 //! - and the reference window is textured (its colour's standard deviation above
 //!   [`MIN_TEXTURE`]).
 //!
-//! Kept pixels on a grid of stride `s` (chosen so that about [`POINT_BUDGET`] points come out
-//! over all views) become points: position X, the reference's colour, the view's time, and
+//! Every view gets a depth map so. Kept pixels on a grid of stride `s` (chosen so that
+//! about `budget` pixels are tested over all views) whose point at least one neighbour's
+//! depth map confirms (within [`AGREEMENT`] of the depth it found there: the geometric
+//! consistency test of multi-view stereo) become points: position X, the reference's colour, the view's time, and
 //! the spacing of the grid at that depth (`z s / fx`). The sweep is a start, not a model:
 //! the fit moves, prunes and densifies from there. Deterministic: views are swept
 //! independently (in parallel) and collected in order.
@@ -47,8 +50,6 @@ pub const DISTINCT_RATIO: f32 = 0.8;
 pub const MIN_TEXTURE: f32 = 0.01;
 /// Largest side the sweep works at, pixels.
 pub const WORKING_SIDE: u32 = 320;
-/// Points the sweep aims at over all views.
-pub const POINT_BUDGET: usize = 30_000;
 
 /// A point of the sweep: where, which colour, when, and the spacing of its neighbours.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,22 +64,33 @@ pub struct SweptPoint {
     pub spacing: f64,
 }
 
-/// The plane-sweep points of `views` (module doc); `bounds` gives the depth range.
+/// The plane-sweep points of `views` (module doc), about `budget` pixels tested; `bounds`
+/// gives the depth range.
 #[must_use]
-pub fn plane_sweep(views: &[View], bounds: &SpaceTimeBox) -> Vec<SweptPoint> {
+pub fn plane_sweep(views: &[View], bounds: &SpaceTimeBox, budget: usize) -> Vec<SweptPoint> {
     let working: Vec<(Camera, Image)> = views.iter().map(working_copy).collect();
     let pixels: usize = working.iter().map(|(c, _)| c.pixel_count()).sum();
-    // Stride so that about POINT_BUDGET of the pixels are sampled, before the tests thin them.
-    let stride = ((pixels as f64 / POINT_BUDGET as f64).sqrt().ceil() as usize).max(1);
+    // Stride so that about `budget` of the pixels are tested.
+    let stride = ((pixels as f64 / budget.max(1) as f64).sqrt().ceil() as usize).max(1);
     let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    let neighbours: Vec<Vec<usize>> = (0..views.len())
+        .map(|r| neighbours_of(r, &working))
+        .collect();
+    let depth_maps: Vec<Vec<f32>> = (0..views.len())
+        .into_par_iter()
+        .map(|r| depth_map(&working, r, &neighbours[r], centre))
+        .collect();
     (0..views.len())
         .into_par_iter()
         .map(|r| {
-            let neighbours = neighbours_of(r, &working);
-            if neighbours.is_empty() {
-                return Vec::new();
-            }
-            sweep_view(&working, r, &neighbours, centre, stride, views[r].time)
+            consistent_points(
+                &working,
+                &depth_maps,
+                r,
+                &neighbours[r],
+                stride,
+                views[r].time,
+            )
         })
         .collect::<Vec<_>>()
         .concat()
@@ -152,54 +164,96 @@ fn neighbours_of(r: usize, working: &[(Camera, Image)]) -> Vec<usize> {
     candidates.into_iter().map(|(_, n)| n).collect()
 }
 
-/// The points view `r` contributes (module doc).
-fn sweep_view(
+/// View `r`'s depth per pixel (NaN where the sweep keeps none; module doc).
+fn depth_map(
     working: &[(Camera, Image)],
     r: usize,
     neighbours: &[usize],
     centre: [f64; 3],
+) -> Vec<f32> {
+    let (camera, image) = &working[r];
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut depth = vec![f32::NAN; w * h];
+    let target_depth = camera.to_camera_space(centre)[2];
+    if neighbours.is_empty() || target_depth.is_nan() || target_depth <= 0.0 {
+        return depth;
+    }
+    let (near, far) = (1.0 / (target_depth / 3.0), 1.0 / (6.0 * target_depth));
+    let inverse_depths: Vec<f64> = (0..PLANES)
+        .map(|k| near + (far - near) * k as f64 / (PLANES - 1) as f64)
+        .collect();
+    let to_world = camera_to_world(camera);
+    let mut volume = vec![0.0_f32; PLANES * w * h];
+    for (k, &inverse) in inverse_depths.iter().enumerate() {
+        let costs = plane_costs(working, camera, image, neighbours, &to_world, 1.0 / inverse);
+        box_filter(&costs, w, h, &mut volume[k * w * h..(k + 1) * w * h]);
+    }
+    for j in 0..h {
+        for i in 0..w {
+            let p = j * w + i;
+            if let Some(k) = chosen_plane(&volume, w * h, p)
+                && texture(image, w, h, i, j) >= MIN_TEXTURE
+            {
+                depth[p] = refined_depth(&volume, w * h, p, k, &inverse_depths) as f32;
+            }
+        }
+    }
+    depth
+}
+
+/// The points of view `r` on a grid of `stride` whose depth at least one neighbour's depth
+/// map confirms: the point, seen from the neighbour, lies within [`AGREEMENT`] (relative)
+/// of the depth the neighbour found there.
+fn consistent_points(
+    working: &[(Camera, Image)],
+    depth_maps: &[Vec<f32>],
+    r: usize,
+    neighbours: &[usize],
     stride: usize,
     time: f64,
 ) -> Vec<SweptPoint> {
     let (camera, image) = &working[r];
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let target_depth = camera.to_camera_space(centre)[2];
-    if target_depth.is_nan() || target_depth <= 0.0 {
-        return Vec::new();
-    }
-    let depths: Vec<f64> = (0..PLANES)
-        .map(|k| {
-            let (near, far) = (1.0 / (target_depth / 3.0), 1.0 / (6.0 * target_depth));
-            1.0 / (near + (far - near) * k as f64 / (PLANES - 1) as f64)
-        })
-        .collect();
     let to_world = camera_to_world(camera);
-    let mut volume = vec![0.0_f32; PLANES * w * h];
-    for (k, &depth) in depths.iter().enumerate() {
-        let costs = plane_costs(working, camera, image, neighbours, &to_world, depth);
-        box_filter(&costs, w, h, &mut volume[k * w * h..(k + 1) * w * h]);
-    }
+    let confirmed = |point: [f64; 3]| {
+        neighbours.iter().any(|&n| {
+            let other = &working[n].0;
+            let [u, v, z] = other.project_point(point);
+            let (i, j) = (u.floor(), v.floor());
+            if !(z > 0.0 && i >= 0.0 && j >= 0.0) {
+                return false;
+            }
+            let (i, j) = (i as usize, j as usize);
+            if i >= other.width as usize || j >= other.height as usize {
+                return false;
+            }
+            let found = f64::from(depth_maps[n][j * other.width as usize + i]);
+            (found - z).abs() <= AGREEMENT * z
+        })
+    };
     let mut points = Vec::new();
     for j in (stride / 2..h).step_by(stride) {
         for i in (stride / 2..w).step_by(stride) {
-            let p = j * w + i;
-            let Some(k) = chosen_plane(&volume, w * h, p) else {
-                continue;
-            };
-            if texture(image, w, h, i, j) < MIN_TEXTURE {
+            let depth = f64::from(depth_maps[r][j * w + i]);
+            if depth.is_nan() {
                 continue;
             }
-            let depth = depths[k];
-            points.push(SweptPoint {
-                position: pixel_point(camera, &to_world, i, j, depth),
-                colour: image.pixel(i as u32, j as u32),
-                time,
-                spacing: depth * stride as f64 / camera.fx,
-            });
+            let position = pixel_point(camera, &to_world, i, j, depth);
+            if confirmed(position) {
+                points.push(SweptPoint {
+                    position,
+                    colour: image.pixel(i as u32, j as u32),
+                    time,
+                    spacing: depth * stride as f64 / camera.fx,
+                });
+            }
         }
     }
     points
 }
+
+/// How closely a neighbour's depth must agree with a point's, relative to the depth.
+pub const AGREEMENT: f64 = 0.02;
 
 /// Rc⁻¹ (= Rcᵀ) and the centre: camera space to world.
 fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
@@ -316,6 +370,31 @@ fn chosen_plane(volume: &[f32], plane_size: usize, p: usize) -> Option<usize> {
         .map(cost)
         .fold(f32::INFINITY, f32::min);
     (cost(best) < MAX_COST && cost(best) < DISTINCT_RATIO * rival).then_some(best)
+}
+
+/// The depth of plane `k` at pixel `p`, refined between its neighbours: the vertex of the
+/// parabola through the three costs, in inverse depth (the planes' spacing), at most half a
+/// plane away.
+fn refined_depth(
+    volume: &[f32],
+    plane_size: usize,
+    p: usize,
+    k: usize,
+    inverse_depths: &[f64],
+) -> f64 {
+    if k == 0 || k + 1 == PLANES {
+        return 1.0 / inverse_depths[k];
+    }
+    let cost = |k: usize| f64::from(volume[k * plane_size + p]);
+    let (before, at, after) = (cost(k - 1), cost(k), cost(k + 1));
+    let curvature = before - 2.0 * at + after;
+    let offset = if curvature > 0.0 {
+        (0.5 * (before - after) / curvature).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    };
+    let step = inverse_depths[k + 1] - inverse_depths[k];
+    1.0 / (inverse_depths[k] + offset * step)
 }
 
 /// The standard deviation of the colour (all channels) in the window around `(i, j)`.

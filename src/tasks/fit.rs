@@ -334,7 +334,7 @@ fn start_from_images(
             return hull_alpha_scene(&cells, side, bounds, background, options);
         }
     }
-    let points = plane_sweep(&dataset.train, bounds);
+    let points = plane_sweep(&dataset.train, bounds, options.start_kernels);
     if points.len() >= MIN_SWEPT_POINTS {
         progress.note(&format!(
             "starting from a plane sweep over neighbouring training views ({} points)",

@@ -140,3 +140,144 @@ fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
     // of each other, either way; README compares them at the defaults (`splat4d fit`).
     assert!(hull.0 > 30.0, "hull {hull:?}, random {random:?}");
 }
+
+/// A static textured scene with no flat background, as photos of a room are: a wall with a
+/// pattern and a patterned panel in front of it, every kernel static and opaque.
+fn textured_room() -> Scene {
+    let mut kernels = Vec::new();
+    let pattern = |x: f64, y: f64, tint: [f64; 3]| {
+        let cell = ((x * 10.0).floor() as i64 * 7 + (y * 10.0).floor() as i64 * 13).rem_euclid(5);
+        let shade = 0.3 + 0.15 * cell as f64;
+        tint.map(|c| c * shade)
+    };
+    let mut add = |mean: [f64; 3], side: f64, colour: [f64; 3]| {
+        kernels.push(Kernel::new(
+            [mean[0], mean[1], mean[2], 0.0],
+            [side, side, 0.005, 1e30],
+            colour,
+        ));
+    };
+    let spacing = 0.05;
+    for i in 0..80 {
+        for j in 0..60 {
+            let (x, y) = (-2.0 + spacing * i as f64, -1.5 + spacing * j as f64);
+            add([x, y, -1.0], 0.7 * spacing, pattern(x, y, [0.9, 0.8, 0.5]));
+        }
+    }
+    for i in 0..16 {
+        for j in 0..16 {
+            let (x, y) = (-0.4 + spacing * i as f64, -0.4 + spacing * j as f64);
+            add(
+                [x, y, 0.2],
+                0.7 * spacing,
+                pattern(x + 0.33, y, [0.3, 0.6, 1.0]),
+            );
+        }
+    }
+    let n = kernels.len();
+    Scene::from_kernels(&kernels, [0.0; 3], "<room>")
+        .unwrap()
+        .into_alpha(vec![0.99; n], 0, Vec::new(), "<room>")
+        .unwrap()
+}
+
+/// Photos of [`textured_room`] from an arc of cameras in front of it: `count` views at
+/// 64×48, every `held_out`-th kept aside.
+fn room_photos(scene: &Scene, count: usize) -> Vec<splat4d::model::View> {
+    let mut context = RenderContext::new();
+    (0..count)
+        .map(|k| {
+            let angle = (-30.0 + 60.0 * k as f64 / (count - 1) as f64).to_radians();
+            let eye = [
+                3.0 * angle.sin(),
+                0.15 * ((k % 3) as f64 - 1.0),
+                3.0 * angle.cos(),
+            ];
+            let camera =
+                splat4d::Camera::look_at(eye, [0.0, 0.0, -0.4], [0.0, 1.0, 0.0], 45.0, 64, 48)
+                    .unwrap();
+            context
+                .render(scene, &camera, 0.0, &RenderOptions::default())
+                .unwrap();
+            splat4d::model::View {
+                camera,
+                time: 0.0,
+                image: context.image().clone().into(),
+                name: format!("room_{k}"),
+                weights: None,
+            }
+        })
+        .collect()
+}
+
+/// The start for photos without a flat background ([`splat4d::fit::stereo`]): the plane
+/// sweep's points lie on the room's surfaces, and a fit from them beats the random start
+/// on held-out photos at the same steps.
+#[test]
+fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
+    use splat4d::fit::alpha::swept_alpha_scene;
+    use splat4d::fit::hull::flat_background;
+    use splat4d::fit::stereo::plane_sweep;
+    let scene = textured_room();
+    let mut photos = room_photos(&scene, 16);
+    let heldout: Vec<_> = (0..photos.len())
+        .rev()
+        .filter(|k| k % 5 == 2)
+        .map(|k| photos.remove(k))
+        .collect();
+    let train = photos;
+    assert!(!flat_background(&train, [0.0; 3]));
+    let bounds = alpha_bounds(&train).unwrap();
+    let points = plane_sweep(&train, &bounds, 4000);
+    // Each point's distance to the nearer of the two surfaces (the panel only where it is).
+    let off: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let [x, y, z] = p.position;
+            let wall = (z + 1.0).abs();
+            let panel = if x.abs() <= 0.42 && y.abs() <= 0.42 {
+                (z - 0.2).abs()
+            } else {
+                f64::INFINITY
+            };
+            wall.min(panel)
+        })
+        .collect();
+    let near = off.iter().filter(|&&d| d < 0.1).count();
+    let mut sorted = off.clone();
+    sorted.sort_by(f64::total_cmp);
+    eprintln!(
+        "quantiles {:?}",
+        [0.1, 0.25, 0.5, 0.75, 0.9].map(|q| sorted[(q * (sorted.len() - 1) as f64) as usize])
+    );
+    eprintln!(
+        "plane sweep: {} points, {near} within 0.1 of a surface (camera distance 3)",
+        points.len()
+    );
+    assert!(points.len() >= 300, "{} points", points.len());
+    assert!(
+        near as f64 >= 0.8 * points.len() as f64,
+        "{near} of {}",
+        points.len()
+    );
+
+    let options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 300,
+        start_kernels: points.len(),
+        sh_count: 0,
+        eval_every: 0,
+        ..DEFAULT_ALPHA
+    };
+    let heldout_psnr = |mut start: Scene| {
+        let records =
+            fit_alpha(&mut start, &bounds, &train, &heldout, &options, |_, _| {}).unwrap();
+        records.last().unwrap().heldout_psnr.unwrap()
+    };
+    let swept = heldout_psnr(swept_alpha_scene(&points, &bounds, [0.0; 3], &options).unwrap());
+    let random = heldout_psnr(random_alpha_scene(&bounds, [0.0; 3], [0.4; 3], &options).unwrap());
+    eprintln!("held out after 300 steps: swept start {swept:.2} dB, random start {random:.2} dB");
+    assert!(
+        swept > random + 3.0,
+        "swept {swept:.2} dB, random {random:.2} dB"
+    );
+}
