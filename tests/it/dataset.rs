@@ -185,3 +185,50 @@ fn a_dataset_appears_whole_and_replaces_only_a_dataset() {
         "mine"
     );
 }
+
+/// `--monocular` (D-NeRF's layout): one camera per training time, no val split, each test
+/// camera new and at a time of its own; a spec whose views and times differ is refused
+/// naming both.
+#[test]
+fn a_monocular_dataset_has_one_camera_per_time() {
+    let scene =
+        splat4d::io::scene_file::scene_from_json(include_str!("../../data/blob.json"), "blob")
+            .unwrap();
+    let spec = DatasetSpec {
+        views: 8,
+        times: 8,
+        width: 24,
+        height: 24,
+        monocular: true,
+        ..DatasetSpec::default()
+    };
+    let written = render_dataset(&scene, &spec, &RenderOptions::default(), || {}).unwrap();
+    assert_eq!(
+        (written.train.len(), written.val.len(), written.test.len()),
+        (8, 0, 2)
+    );
+    assert_eq!(written.train.len() + written.test.len(), frame_count(&spec));
+    let mut times: Vec<f64> = written.train.iter().map(|v| v.time).collect();
+    times.dedup();
+    assert_eq!(times.len(), 8, "{times:?}");
+    let centres: Vec<[f64; 3]> = written.train.iter().map(|v| v.camera.centre()).collect();
+    for (i, a) in centres.iter().enumerate() {
+        for b in &centres[i + 1..] {
+            assert_ne!(a, b);
+        }
+    }
+    let test_times: Vec<f64> = written.test.iter().map(|v| v.time).collect();
+    assert_eq!(test_times, vec![0.25, 0.75]);
+    let message = render_dataset(
+        &scene,
+        &DatasetSpec { times: 5, ..spec },
+        &RenderOptions::default(),
+        || {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        message.contains("`views` 8 must equal `times` 5"),
+        "{message}"
+    );
+}
