@@ -79,8 +79,11 @@ pub struct AlphaFitOptions {
     pub seed: u64,
     /// Rendering options.
     pub render: RenderOptions,
-    /// Kernels of a random start.
+    /// Kernels of a random, hull or plane-sweep start.
     pub start_kernels: usize,
+    /// Most points of a dataset's point cloud a start takes (evenly through the list): the
+    /// bound on a fit's first steps' cost when a capture ships a dense cloud.
+    pub max_start_points: usize,
     /// Opacity of a random start's kernels.
     pub start_opacity: f64,
     /// σt of a random start's kernels, as a fraction of the time range.
@@ -194,27 +197,30 @@ pub fn random_alpha_scene(
 }
 
 /// A start from a dataset's point cloud (SPEC §8 kernels at the points, coloured by them):
-/// at most `options.max_kernels` points, taken evenly through the list; spatial σ half the
-/// spacing the points would have spread through the box, σt `start_time_scale` of the time
-/// range, centred in time.
+/// at most `options.max_start_points` (and `max_kernels`) points, taken evenly through the
+/// list; each kernel's spatial
+/// σ is half the mean distance to its three nearest chosen points (3DGS's start, which
+/// follows the cloud's density: sparse background, dense surfaces), σt `start_time_scale`
+/// of the time range, centred in time.
 pub fn point_cloud_alpha_scene(
     points: &[DatasetPoint],
     bounds: &SpaceTimeBox,
     background: [f64; 3],
     options: &AlphaFitOptions,
 ) -> Result<Scene> {
-    let stride = points.len().div_ceil(options.max_kernels.max(1)).max(1);
+    let most = options.max_start_points.min(options.max_kernels).max(1);
+    let stride = points.len().div_ceil(most).max(1);
     let chosen: Vec<&DatasetPoint> = points.iter().step_by(stride).collect();
-    let n = chosen.len().max(1);
-    let extent: [f64; 3] = std::array::from_fn(|a| bounds.max[a] - bounds.min[a]);
-    let spacing = (extent[0] * extent[1] * extent[2] / n as f64).cbrt();
+    let positions: Vec<[f64; 3]> = chosen.iter().map(|p| p.position).collect();
+    let spacings = neighbour_spacings(&positions);
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
     let mut rng = seeded_rng(options.seed);
     let time_scale = options.start_time_scale.max(1.0) * time_range;
     let kernels: Vec<Kernel> = chosen
         .iter()
-        .map(|p| {
+        .zip(&spacings)
+        .map(|(p, &spacing)| {
             let [x, y, z] = p.position;
             let colour = p.colour.map(f64::from);
             start_kernel(
@@ -228,6 +234,105 @@ pub fn point_cloud_alpha_scene(
         .collect();
     alpha_start(&kernels, background, options, "<point cloud start>")
 }
+
+/// Per point, the mean distance to its [`SPACING_NEIGHBOURS`] nearest other points (fewer
+/// when there are fewer; the cloud's mean spacing for a point with none, or for coincident
+/// ones), found on a grid of cells about as wide as the cloud's mean spacing, searched
+/// [`MAX_RINGS`] cells out (a point with fewer neighbours there counts the rest that far).
+fn neighbour_spacings(points: &[[f64; 3]]) -> Vec<f64> {
+    let n = points.len();
+    let (lo, hi) = points.iter().fold(
+        ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        |(lo, hi), p| {
+            (
+                std::array::from_fn(|a| lo[a].min(p[a])),
+                std::array::from_fn(|a| hi[a].max(p[a])),
+            )
+        },
+    );
+    let extent: [f64; 3] = std::array::from_fn(|a| (hi[a] - lo[a]).max(0.0));
+    let diagonal = extent.iter().map(|e| e * e).sum::<f64>().sqrt();
+    // The spacing n points would have spread through the cloud's box (thin axes ignored).
+    let fallback = {
+        let volume: f64 = extent.iter().map(|&e| e.max(1e-3 * diagonal)).product();
+        let s = (volume / n.max(1) as f64).cbrt();
+        if s.is_finite() && s > 0.0 { s } else { 1.0 }
+    };
+    if n < 2 {
+        return vec![fallback; n];
+    }
+    let cell = fallback;
+    let cells: [usize; 3] = std::array::from_fn(|a| ((extent[a] / cell) as usize + 1).min(1 << 10));
+    let index = |p: &[f64; 3]| -> [usize; 3] {
+        std::array::from_fn(|a| (((p[a] - lo[a]) / cell) as usize).min(cells[a] - 1))
+    };
+    let mut grid: std::collections::HashMap<[usize; 3], Vec<usize>> =
+        std::collections::HashMap::new();
+    for (i, p) in points.iter().enumerate() {
+        grid.entry(index(p)).or_default().push(i);
+    }
+    let rings = cells.iter().copied().max().unwrap_or(1).min(MAX_RINGS);
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let home = index(p);
+            let mut nearest: Vec<f64> = Vec::with_capacity(4 * SPACING_NEIGHBOURS);
+            for ring in 0..=rings {
+                // The cells at Chebyshev distance `ring` from home.
+                let r = ring as i64;
+                for dx in -r..=r {
+                    for dy in -r..=r {
+                        for dz in -r..=r {
+                            if dx.abs().max(dy.abs()).max(dz.abs()) != r {
+                                continue;
+                            }
+                            let key = [dx, dy, dz];
+                            let at: Option<[usize; 3]> = (0..3)
+                                .map(|a| usize::try_from(home[a] as i64 + key[a]).ok())
+                                .collect::<Option<Vec<_>>>()
+                                .map(|v| [v[0], v[1], v[2]]);
+                            let Some(members) = at.and_then(|at| grid.get(&at)) else {
+                                continue;
+                            };
+                            for &j in members {
+                                if j != i {
+                                    let d = (0..3)
+                                        .map(|a| (points[j][a] - p[a]).powi(2))
+                                        .sum::<f64>()
+                                        .sqrt();
+                                    nearest.push(d);
+                                }
+                            }
+                        }
+                    }
+                }
+                nearest.sort_by(f64::total_cmp);
+                nearest.truncate(SPACING_NEIGHBOURS);
+                // Every point within `ring · cell` has been seen: done once the k-th is that near.
+                if nearest.len() == SPACING_NEIGHBOURS
+                    && nearest[SPACING_NEIGHBOURS - 1] <= ring as f64 * cell
+                {
+                    break;
+                }
+            }
+            // An isolated point (fewer neighbours within the rings searched) is at least
+            // that far from the rest.
+            nearest.resize(SPACING_NEIGHBOURS, (rings as f64 * cell).max(fallback));
+            let mean = nearest.iter().sum::<f64>() / SPACING_NEIGHBOURS as f64;
+            if mean.is_finite() && mean > 0.0 {
+                mean
+            } else {
+                fallback
+            }
+        })
+        .collect()
+}
+
+/// Neighbours whose mean distance sets a point-cloud kernel's size.
+const SPACING_NEIGHBOURS: usize = 3;
+/// Rings of grid cells searched around a point for its neighbours (the search's bound).
+const MAX_RINGS: usize = 4;
 
 /// A start from plane-sweep points ([`crate::fit::stereo`]): at most `options.max_kernels`
 /// of them, taken evenly through the list, each a kernel at its point and time with a
@@ -765,6 +870,42 @@ mod tests {
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }
+    }
+
+    #[test]
+    fn point_cloud_spacing_is_the_mean_distance_to_the_three_nearest() {
+        // A dense 10×10 grid of spacing 0.01 on a plane and one far point.
+        let mut points: Vec<[f64; 3]> = (0..100)
+            .map(|k| [0.01 * (k % 10) as f64, 0.01 * (k / 10) as f64, 0.0])
+            .collect();
+        points.push([5.0, 5.0, 5.0]);
+        let spacings = neighbour_spacings(&points);
+        // An inner grid point: three neighbours at 0.01.
+        assert!((spacings[55] - 0.01).abs() < 1e-12, "{}", spacings[55]);
+        // A corner: 0.01, 0.01, 0.01·√2.
+        let corner = (0.02 + 0.01 * 2f64.sqrt()) / 3.0;
+        assert!((spacings[0] - corner).abs() < 1e-12, "{}", spacings[0]);
+        // The far point is far from everything, and counted so.
+        assert!(spacings[100] > 0.1, "{}", spacings[100]);
+        assert!(spacings.iter().all(|s| s.is_finite() && *s > 0.0));
+        // Brute force agrees for every grid point.
+        for (i, p) in points.iter().enumerate().take(100) {
+            let mut d: Vec<f64> = points
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| (0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f64>().sqrt())
+                .collect();
+            d.sort_by(f64::total_cmp);
+            let mean = d[..3].iter().sum::<f64>() / 3.0;
+            assert!(
+                (spacings[i] - mean).abs() < 1e-12,
+                "{i}: {} {mean}",
+                spacings[i]
+            );
+        }
+        assert_eq!(neighbour_spacings(&[[1.0; 3]]).len(), 1);
+        assert!(neighbour_spacings(&[]).is_empty());
     }
 
     #[test]

@@ -108,6 +108,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
         exp: crate::raster::ExpMode::Poly,
     },
     start_kernels: 2000,
+    max_start_points: 3000,
     start_opacity: 0.1,
     start_time_scale: 0.25,
     sh_count: 3,
