@@ -279,33 +279,16 @@ fn neighbour_spacings(points: &[[f64; 3]]) -> Vec<f64> {
             let home = index(p);
             let mut nearest: Vec<f64> = Vec::with_capacity(4 * SPACING_NEIGHBOURS);
             for ring in 0..=rings {
-                // The cells at Chebyshev distance `ring` from home.
-                let r = ring as i64;
-                for dx in -r..=r {
-                    for dy in -r..=r {
-                        for dz in -r..=r {
-                            if dx.abs().max(dy.abs()).max(dz.abs()) != r {
-                                continue;
-                            }
-                            let key = [dx, dy, dz];
-                            let at: Option<[usize; 3]> = (0..3)
-                                .map(|a| usize::try_from(home[a] as i64 + key[a]).ok())
-                                .collect::<Option<Vec<_>>>()
-                                .map(|v| [v[0], v[1], v[2]]);
-                            let Some(members) = at.and_then(|at| grid.get(&at)) else {
-                                continue;
-                            };
-                            for &j in members {
-                                if j != i {
-                                    let d = (0..3)
-                                        .map(|a| (points[j][a] - p[a]).powi(2))
-                                        .sum::<f64>()
-                                        .sqrt();
-                                    nearest.push(d);
-                                }
-                            }
-                        }
-                    }
+                for at in cells_at_ring(home, ring) {
+                    let Some(members) = grid.get(&at) else {
+                        continue;
+                    };
+                    nearest.extend(members.iter().filter(|&&j| j != i).map(|&j| {
+                        (0..3)
+                            .map(|a| (points[j][a] - p[a]).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                    }));
                 }
                 nearest.sort_by(f64::total_cmp);
                 nearest.truncate(SPACING_NEIGHBOURS);
@@ -327,6 +310,22 @@ fn neighbour_spacings(points: &[[f64; 3]]) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+/// The grid cells at Chebyshev distance `ring` from `home` (those with a negative index
+/// left out; indices past the grid simply hold no points).
+fn cells_at_ring(home: [usize; 3], ring: usize) -> impl Iterator<Item = [usize; 3]> {
+    let r = ring as i64;
+    let offsets = move || -r..=r;
+    offsets()
+        .flat_map(move |dx| offsets().flat_map(move |dy| offsets().map(move |dz| [dx, dy, dz])))
+        .filter(move |d| d.iter().map(|v| v.abs()).max() == Some(r))
+        .filter_map(move |d| {
+            let cell: Vec<usize> = (0..3)
+                .map(|a| usize::try_from(home[a] as i64 + d[a]).ok())
+                .collect::<Option<_>>()?;
+            Some([cell[0], cell[1], cell[2]])
+        })
 }
 
 /// Neighbours whose mean distance sets a point-cloud kernel's size.
@@ -490,11 +489,7 @@ pub fn fit_alpha(
             && step % options.densify_every == 0
             && progress >= options.densify_from
             && progress <= options.densify_until;
-        if options.opacity_reset_every > 0
-            && step % options.opacity_reset_every == 0
-            && progress <= options.densify_until
-            && step < options.steps
-        {
+        if reset_due(step, progress, options) {
             reset_opacities(scene, &mut moments, width, options.reset_opacity);
         }
         if round {
@@ -655,6 +650,31 @@ fn check_parameters(scene: &Scene, step: usize) -> Result<()> {
     }
 }
 
+/// The two children of a split in time: σt / 2 either side of the parent's time mean,
+/// σt / 1.6 each, their means moved along the velocity so that both follow its path.
+fn split_in_time(kernel: Kernel) -> [Kernel; 2] {
+    let time_sigma = kernel.scale[3];
+    [-0.5, 0.5].map(|sign| {
+        let mut child = kernel;
+        child.scale[3] /= 1.6;
+        let dt = sign * time_sigma;
+        child.mean[3] += dt;
+        for a in 0..3 {
+            child.mean[a] += kernel.velocity[a] * dt;
+        }
+        child
+    })
+}
+
+/// Whether the opacities are reset after `step` (at `progress` of the run): every
+/// `opacity_reset_every` steps while the density rounds run, never at the last step.
+fn reset_due(step: usize, progress: f64, options: &AlphaFitOptions) -> bool {
+    options.opacity_reset_every > 0
+        && step % options.opacity_reset_every == 0
+        && progress <= options.densify_until
+        && step < options.steps
+}
+
 /// Lowers every opacity to at most `ceiling` and clears the opacity's Adam moments.
 fn reset_opacities(scene: &mut Scene, moments: &mut Moments, width: usize, ceiling: f64) {
     for (i, opacity) in scene.opacities.iter_mut().enumerate() {
@@ -740,17 +760,8 @@ fn densify_and_prune(
         if time_sigma > options.time_split_fraction * time_range
             && speed * time_sigma > kernel.scale[largest]
         {
-            // Split in time: the children σt / 2 either side, σt / 1.6 each, on the path.
-            let mut child = kernel;
-            child.scale[3] /= 1.6;
-            for sign in [-0.5, 0.5] {
-                let mut placed = child;
-                let dt = sign * time_sigma;
-                placed.mean[3] += dt;
-                for a in 0..3 {
-                    placed.mean[a] += kernel.velocity[a] * dt;
-                }
-                push(placed, i, None, &mut next);
+            for child in split_in_time(kernel) {
+                push(child, i, None, &mut next);
             }
         } else if kernel.scale[largest] > options.percent_dense * diagonal {
             // Split along the largest axis: the children one σ apart, σ / 1.6 each.
@@ -813,13 +824,14 @@ pub fn alpha_bounds(train: &[View]) -> Result<SpaceTimeBox> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::defaults::DEFAULT_ALPHA;
 
     /// The defaults, with every visible kernel allowed to grow.
-    const GROW_ALL: AlphaFitOptions = AlphaFitOptions {
-        densify_fraction: 1.0,
-        ..DEFAULT_ALPHA
-    };
+    fn grow_all() -> AlphaFitOptions {
+        AlphaFitOptions {
+            densify_fraction: 1.0,
+            ..AlphaFitOptions::default()
+        }
+    }
 
     /// One alpha kernel with `velocity` and σt `time_sigma`, opacity 0.8.
     fn one_kernel(velocity: [f64; 3], time_sigma: f64) -> Scene {
@@ -845,7 +857,7 @@ mod tests {
     #[test]
     fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &GROW_ALL);
+        let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &grow_all());
         assert_eq!(sources, vec![None, None]);
         assert_eq!(scene.len(), 2);
         let times = [scene.means[0][3], scene.means[1][3]];
@@ -866,7 +878,7 @@ mod tests {
     fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
         for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
             let mut scene = one_kernel(velocity, time_sigma);
-            let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &GROW_ALL);
+            let sources = densify_and_prune(&mut scene, &[1.0], &[1], [1.0, 1.0], &grow_all());
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }

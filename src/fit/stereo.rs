@@ -111,26 +111,7 @@ fn working_copy(view: &View) -> (Camera, Image) {
     camera.fy /= f;
     camera.cx /= f;
     camera.cy /= f;
-    let mut image = Image::filled(camera.width, camera.height, [0.0; 3]);
-    let area = (factor * factor) as f32;
-    for j in 0..camera.height {
-        for i in 0..camera.width {
-            let mut sum = [0.0_f32; 3];
-            for dj in 0..factor {
-                for di in 0..factor {
-                    let p = view.image.pixel(i * factor + di, j * factor + dj);
-                    for c in 0..3 {
-                        sum[c] += p[c];
-                    }
-                }
-            }
-            let k = 3 * (j as usize * camera.width as usize + i as usize);
-            for (out, total) in image.pixels[k..k + 3].iter_mut().zip(sum) {
-                *out = total / area;
-            }
-        }
-    }
-    (camera, image)
+    (camera, view.image.downscaled(factor))
 }
 
 /// The camera's optical axis in world space (the third row of Rc).

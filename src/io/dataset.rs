@@ -337,36 +337,6 @@ fn intrinsics(
     ])
 }
 
-/// The mean of each `n × n` block (a box filter); the image shrinks to `⌊w/n⌋ × ⌊h/n⌋`.
-#[must_use]
-pub fn downscale(image: &Image, n: u32) -> Image {
-    if n == 1 {
-        return image.clone();
-    }
-    let (w, h) = (image.width / n, image.height / n);
-    let mut pixels = Vec::with_capacity(3 * w as usize * h as usize);
-    let inv = 1.0 / f64::from(n * n);
-    for j in 0..h {
-        for i in 0..w {
-            let mut sum = [0.0_f64; 3];
-            for dj in 0..n {
-                for di in 0..n {
-                    let p = image.pixel(n * i + di, n * j + dj);
-                    for c in 0..3 {
-                        sum[c] += f64::from(p[c]);
-                    }
-                }
-            }
-            pixels.extend(sum.map(|s| (s * inv) as f32));
-        }
-    }
-    Image {
-        width: w,
-        height: h,
-        pixels,
-    }
-}
-
 /// The weighted box filter: per `n × n` block, the mean weight and the weighted mean colour
 /// (the plain mean where every weight is 0).
 #[must_use]
@@ -504,7 +474,7 @@ fn prepare_photo(
     // its decode.
     let (image, weights) = match mask {
         None if n == 1 => (image, None),
-        None => (Arc::new(downscale(&image, n)), None),
+        None => (Arc::new(image.downscaled(n)), None),
         Some(m) => {
             let (image, weights) = if n == 1 {
                 (image, m)

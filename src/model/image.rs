@@ -51,6 +51,37 @@ impl Image {
         let k = 3 * (j as usize * self.width as usize + i as usize);
         [self.pixels[k], self.pixels[k + 1], self.pixels[k + 2]]
     }
+
+    /// The mean of each `n × n` block (a box filter, summed in f64); the image shrinks to
+    /// `⌊w/n⌋ × ⌊h/n⌋`.
+    #[must_use]
+    pub fn downscaled(&self, n: u32) -> Image {
+        if n == 1 {
+            return self.clone();
+        }
+        let (w, h) = (self.width / n, self.height / n);
+        let mut pixels = Vec::with_capacity(3 * w as usize * h as usize);
+        let inv = 1.0 / f64::from(n * n);
+        for j in 0..h {
+            for i in 0..w {
+                let mut sum = [0.0_f64; 3];
+                for dj in 0..n {
+                    for di in 0..n {
+                        let p = self.pixel(n * i + di, n * j + dj);
+                        for c in 0..3 {
+                            sum[c] += f64::from(p[c]);
+                        }
+                    }
+                }
+                pixels.extend(sum.map(|s| (s * inv) as f32));
+            }
+        }
+        Image {
+            width: w,
+            height: h,
+            pixels,
+        }
+    }
 }
 
 /// The stored value of a linear channel in a file of `max + 1` levels (SPEC §5):
