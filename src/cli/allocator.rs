@@ -199,14 +199,14 @@ mod tests {
             // SAFETY: layouts are valid and non-zero; each pointer is used with its size.
             unsafe {
                 let mut ptr = a.alloc(layout);
-                assert!(!ptr.is_null() && ptr as usize % align == 0);
+                assert!(!ptr.is_null() && (ptr as usize).is_multiple_of(align));
                 for i in 0..sizes[0] {
                     *ptr.add(i) = (i % 251) as u8;
                 }
                 let mut size = sizes[0];
                 for &next in &sizes[1..] {
                     ptr = a.realloc(ptr, Layout::from_size_align(size, align).unwrap(), next);
-                    assert!(!ptr.is_null() && ptr as usize % align == 0);
+                    assert!(!ptr.is_null() && (ptr as usize).is_multiple_of(align));
                     for i in 0..size.min(next).min(sizes[0]) {
                         assert_eq!(*ptr.add(i), (i % 251) as u8);
                     }

@@ -85,7 +85,7 @@ impl AdaptiveOptions {
     #[must_use]
     pub fn round_after(&self, step: usize, steps: usize) -> bool {
         self.every > 0
-            && step % self.every == 0
+            && step.is_multiple_of(self.every)
             && step < steps
             && (step as f64) >= self.from * steps as f64
             && (step as f64) <= self.until * steps as f64

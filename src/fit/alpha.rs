@@ -670,7 +670,7 @@ fn split_in_time(kernel: Kernel) -> [Kernel; 2] {
 /// `opacity_reset_every` steps while the density rounds run, never at the last step.
 fn reset_due(step: usize, progress: f64, options: &AlphaFitOptions) -> bool {
     options.opacity_reset_every > 0
-        && step % options.opacity_reset_every == 0
+        && step.is_multiple_of(options.opacity_reset_every)
         && progress <= options.densify_until
         && step < options.steps
 }

@@ -188,7 +188,7 @@ pub fn heldout_psnr_at(
     render: &RenderOptions,
     context: &mut RenderContext,
 ) -> Result<Option<f64>> {
-    let evaluate_now = step == steps || (eval_every > 0 && step % eval_every == 0);
+    let evaluate_now = step == steps || (eval_every > 0 && step.is_multiple_of(eval_every));
     if !evaluate_now || heldout.is_empty() {
         return Ok(None);
     }

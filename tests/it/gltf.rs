@@ -334,10 +334,10 @@ fn a_glb_imports_like_its_gltf() {
         .unwrap();
     json["buffers"][0].as_object_mut().unwrap().remove("uri");
     let mut json_bytes = json.to_string().into_bytes();
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
