@@ -470,6 +470,21 @@ pub(crate) fn prepare_tile(
     t: usize,
     scratch: &mut TileScratch,
 ) {
+    prepare_tile_lists::<false>(bins, forms, t, scratch);
+}
+
+/// [`prepare_tile`] with one list per half row (`WHOLE_ROWS` false: `halves[2 r + h]`) or
+/// one per row (`WHOLE_ROWS` true: `halves[r]`, the entries of the kernels whose padded
+/// ellipse reaches a pixel centre of either half; the AVX-512 forward's 16-lane rows).
+/// A row list is the union of its two half lists in the same order, so summing it gives the
+/// same bits: a lane that no half list holds is never a pair, and adds an exact zero.
+#[inline(always)]
+pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
+    bins: &TileBins,
+    forms: &[RowForm],
+    t: usize,
+    scratch: &mut TileScratch,
+) {
     let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
     scratch.kernels.clear();
     scratch.entry_of.clear();
@@ -552,6 +567,13 @@ pub(crate) fn prepare_tile(
                 kernel,
             };
             let row = (first_row - ty0) as usize + r;
+            if WHOLE_ROWS {
+                if reaches0[r] | reaches1[r] {
+                    scratch.halves[row].push(entry);
+                    used = true;
+                }
+                continue;
+            }
             if reaches0[r] {
                 scratch.halves[2 * row].push(entry);
                 used = true;
@@ -606,16 +628,18 @@ fn tile_on(
     }
 }
 
-/// [`tile`] compiled for AVX-512 (the half rows use the AVX2 loop).
+/// The tile with AVX-512: [`prepare_tile_lists`] by whole rows, then [`avx512::sum_tile`]
+/// (16 lanes a row).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
 fn tile_avx512<const FAST: bool>(
     frame: &Frame,
     t: usize,
     scratch: &mut TileScratch,
     band: &mut [f32],
 ) -> u64 {
-    tile::<FAST, true>(frame, t, scratch, band)
+    prepare_tile_lists::<true>(frame.bins, frame.forms, t, scratch);
+    avx512::sum_tile::<FAST>(frame.bins, t, frame.background, scratch, band)
 }
 
 /// [`tile`] compiled for AVX2 and FMA.
@@ -865,6 +889,128 @@ pub(crate) mod avx2 {
             unsafe {
                 _mm256_storeu_pd(acc[c].as_mut_ptr(), lo[c]);
                 _mm256_storeu_pd(acc[c].as_mut_ptr().add(4), hi[c]);
+            }
+        }
+        pairs
+    }
+}
+
+/// The forward's rows with AVX-512: a whole tile row (16 lanes) is the vector, and each row
+/// list ([`prepare_tile_lists`] with whole rows) passes over six f64 accumulators of 8 lanes.
+/// The operations per lane are [`avx2::sum_half_row`]'s in the same order (the same `t`, `q`,
+/// test, polynomial and f64 products), so the image is the same bit for bit.
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx512 {
+    use std::arch::x86_64::*;
+
+    use super::{ROW, TileKernel, TileScratch};
+    use crate::tiles::TileBins;
+
+    /// [`super::avx2::exp_neg_half`] on 16 lanes, the same operations.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(crate) fn exp_neg_half(q: __m512) -> __m512 {
+        let x = _mm512_max_ps(
+            _mm512_mul_ps(_mm512_set1_ps(-0.5), q),
+            _mm512_set1_ps(-87.0),
+        );
+        let shift = _mm512_set1_ps(12_582_912.0);
+        let shifted = _mm512_add_ps(
+            _mm512_mul_ps(x, _mm512_set1_ps(std::f32::consts::LOG2_E)),
+            shift,
+        );
+        let n = _mm512_sub_ps(shifted, shift);
+        let r = _mm512_sub_ps(
+            _mm512_sub_ps(x, _mm512_mul_ps(n, _mm512_set1_ps(0.693_145_75))),
+            _mm512_mul_ps(n, _mm512_set1_ps(1.428_606_8e-6)),
+        );
+        let step = |c: f32, p: __m512| _mm512_add_ps(_mm512_set1_ps(c), _mm512_mul_ps(r, p));
+        let p = step(0.041_915_03, _mm512_set1_ps(0.008_291_717));
+        let p = step(0.166_676_63, p);
+        let p = step(0.499_989, p);
+        let p = step(0.999_999_64, p);
+        let p = step(1.000_000_1, p);
+        let n_int = _mm512_sub_epi32(_mm512_castps_si512(shifted), _mm512_castps_si512(shift));
+        let scale = _mm512_slli_epi32::<23>(_mm512_add_epi32(n_int, _mm512_set1_epi32(127)));
+        _mm512_mul_ps(p, _mm512_castsi512_ps(scale))
+    }
+
+    /// `exp(-½ q)` on 16 lanes as [`super::gaussian`] evaluates it.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    fn gaussian<const FAST: bool>(q: __m512) -> __m512 {
+        if FAST {
+            return exp_neg_half(q);
+        }
+        let mut values = [0.0_f32; ROW];
+        // SAFETY: `values` holds 16 floats.
+        unsafe { _mm512_storeu_ps(values.as_mut_ptr(), q) };
+        let values = values.map(|q| (-0.5 * q).exp());
+        // SAFETY: as above.
+        unsafe { _mm512_loadu_ps(values.as_ptr()) }
+    }
+
+    /// Sums the prepared tile `t` row by row into `band`: per row, six accumulators (three
+    /// channels, two halves of 8 f64 lanes) start at the background and take every entry of
+    /// the row's list; the row is then rounded to f32 and written in place.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(super) fn sum_tile<const FAST: bool>(
+        bins: &TileBins,
+        t: usize,
+        background: [f64; 3],
+        scratch: &TileScratch,
+        band: &mut [f32],
+    ) -> u64 {
+        let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+        let width = bins.width as usize;
+        let lanes = (tx1 - tx0) as usize;
+        let iota = _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        );
+        // Lanes past the image's right edge never count.
+        let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
+        let mut pairs = 0_u64;
+        let mut acc = [[0.0_f64; ROW]; 3];
+        for row in 0..(ty1 - ty0) as usize {
+            let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
+            let mut hi = lo;
+            for entry in &scratch.halves[row] {
+                let kernel: &TileKernel = &scratch.kernels[entry.kernel as usize];
+                // As `RowEntry::lane` with `first` 0: t = (lane + (0 - offset)) + t_anchor.
+                let t = _mm512_add_ps(
+                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - entry.offset)),
+                    _mm512_set1_ps(entry.t_anchor),
+                );
+                let q = _mm512_add_ps(
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
+                    _mm512_set1_ps(entry.row_q),
+                );
+                let hit =
+                    _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
+                pairs += u64::from(hit.count_ones());
+                let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
+                let g_lo = _mm512_cvtps_pd(_mm512_castps512_ps256(g));
+                let g_hi = _mm512_cvtps_pd(_mm512_extractf32x8_ps::<1>(g));
+                // `a G` is exact in f64, so the fused multiply-add rounds as `acc + a G`.
+                for c in 0..3 {
+                    let a = _mm512_set1_pd(kernel.amplitude[c]);
+                    lo[c] = _mm512_fmadd_pd(a, g_lo, lo[c]);
+                    hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
+                }
+            }
+            for c in 0..3 {
+                // SAFETY: each channel holds 16 doubles: 8 in `lo`, 8 in `hi`.
+                unsafe {
+                    _mm512_storeu_pd(acc[c].as_mut_ptr(), lo[c]);
+                    _mm512_storeu_pd(acc[c].as_mut_ptr().add(8), hi[c]);
+                }
+            }
+            let out = &mut band[3 * (row * width + tx0 as usize)..][..3 * lanes];
+            for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+                for c in 0..3 {
+                    pixel[c] = acc[c][i] as f32;
+                }
             }
         }
         pairs

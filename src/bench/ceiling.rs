@@ -150,7 +150,10 @@ pub fn ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f32
     let checksum = match path {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: checked above.
-        SimdPath::Avx2 | SimdPath::Avx512 => unsafe { avx2::ceiling(&constants, passes) },
+        SimdPath::Avx512 => unsafe { avx512::ceiling(&constants, passes) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: checked above.
+        SimdPath::Avx2 => unsafe { avx2::ceiling(&constants, passes) },
         _ => ceiling_portable(&constants, passes),
     };
     ((constants.len() * passes * ROW) as u64, checksum)
@@ -208,6 +211,42 @@ mod avx2 {
                 // SAFETY: `lanes` holds 8 floats.
                 unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), a) };
                 checksum += lanes.iter().sum::<f32>();
+            }
+        }
+        checksum
+    }
+}
+
+/// [`ceiling_probe`]'s loop with AVX-512: the whole 16-pixel row is one register, as in the
+/// renderer's AVX-512 rows.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use std::arch::x86_64::*;
+
+    use crate::raster::avx512::exp_neg_half;
+
+    /// [`super::ceiling_probe`]'s loop: 16 lanes in one register, f32 accumulators.
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(super) fn ceiling(constants: &[[f32; 6]], passes: usize) -> f32 {
+        let iota = _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        );
+        let mut checksum = 0.0;
+        for _ in 0..passes {
+            let mut acc = [_mm512_setzero_ps(); 3];
+            for &[t0, qxx, row_q, r, g, b] in constants {
+                let t = _mm512_add_ps(iota, _mm512_set1_ps(t0));
+                let q = _mm512_add_ps(
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(qxx), t), t),
+                    _mm512_set1_ps(row_q),
+                );
+                let value = exp_neg_half(q);
+                for (acc, a) in acc.iter_mut().zip([r, g, b]) {
+                    *acc = _mm512_add_ps(*acc, _mm512_mul_ps(_mm512_set1_ps(a), value));
+                }
+            }
+            for a in acc {
+                checksum += _mm512_reduce_add_ps(a);
             }
         }
         checksum
