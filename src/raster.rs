@@ -510,6 +510,12 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
     let max = |a: f64, b: f64| if a > b { a } else { b };
     let min = |a: f64, b: f64| if a < b { a } else { b };
     let entries = bins.tile_entries(t);
+    // A list takes at most one entry per kernel of the tile: with that room made first, an
+    // entry is written at the end of every list its row might join and kept by advancing
+    // the length when it does (no branch per row).
+    for half in &mut scratch.halves {
+        half.reserve(entries.len());
+    }
     for (n, &p) in entries.iter().enumerate() {
         // Kernels are met in scene order, scattered in memory: ask for a later one's record
         // now (a hint only; no effect on results).
@@ -558,6 +564,18 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
         }
         let kernel = scratch.kernels.len() as u32;
         let mut used = false;
+        let mut append = |list: &mut Vec<RowEntry>, entry: RowEntry, keep: bool| {
+            let len = list.len();
+            debug_assert!(len < list.capacity());
+            // SAFETY: the list has room for one entry per kernel of the tile (reserved above)
+            // and takes at most one of this kernel; the new length covers only written
+            // entries.
+            unsafe {
+                list.as_mut_ptr().add(len).write(entry);
+                list.set_len(len + usize::from(keep));
+            }
+            used |= keep;
+        };
         for r in 0..(end_row - first_row) as usize {
             let entry = RowEntry {
                 t_anchor: t_anchor[r],
@@ -568,19 +586,10 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
             };
             let row = (first_row - ty0) as usize + r;
             if WHOLE_ROWS {
-                if reaches0[r] | reaches1[r] {
-                    scratch.halves[row].push(entry);
-                    used = true;
-                }
-                continue;
-            }
-            if reaches0[r] {
-                scratch.halves[2 * row].push(entry);
-                used = true;
-            }
-            if reaches1[r] {
-                scratch.halves[2 * row + 1].push(entry);
-                used = true;
+                append(&mut scratch.halves[row], entry, reaches0[r] | reaches1[r]);
+            } else {
+                append(&mut scratch.halves[2 * row], entry, reaches0[r]);
+                append(&mut scratch.halves[2 * row + 1], entry, reaches1[r]);
             }
         }
         if used {
@@ -938,7 +947,7 @@ pub(crate) mod avx512 {
     /// `exp(-½ q)` on 16 lanes as [`super::gaussian`] evaluates it.
     #[inline]
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-    fn gaussian<const FAST: bool>(q: __m512) -> __m512 {
+    pub(crate) fn gaussian<const FAST: bool>(q: __m512) -> __m512 {
         if FAST {
             return exp_neg_half(q);
         }

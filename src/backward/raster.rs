@@ -15,9 +15,12 @@
 //! huge while `t` stays short, so moments of `(t, Δv)` keep their precision where moments of
 //! `(Δu, Δv)` would cancel in f32 before being multiplied by `Q`. Each tile walks the
 //! forward's per-half-row entries ([`crate::raster`]: the same pairs, the same `t` and `q`)
-//! and accumulates, per kernel, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` lane by lane
-//! over the tile's rows (f32, at most 16 terms a lane), then over the 8 lanes in f64, into one
-//! partial per (tile, kernel) entry. The entries are reduced in entry order (tile-major) in
+//! and accumulates, per kernel, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` pixel column by
+//! pixel column over the tile's rows (f32, at most 16 terms a column), then over the 16
+//! columns in f64, into one partial per (tile, kernel) entry. The AVX-512 path walks the
+//! forward's whole-row lists (16 lanes a row, [`crate::raster::prepare_tile_lists`]): a
+//! column adds the same terms in the same order, and the lanes of a half the kernel does not
+//! reach add exact zeros. The entries are reduced in entry order (tile-major) in
 //! f64: no atomics, and the result does not depend on the thread count or the SIMD path (the
 //! AVX2 loop performs the portable loop's operations in the same order).
 
@@ -25,7 +28,7 @@ use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
 use crate::raster::{
-    ExpMode, HalfRow, LANES, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
+    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
     prepare_tile,
 };
 use crate::tiles::TileBins;
@@ -106,16 +109,16 @@ pub(crate) fn rasterize_backward_on(
 }
 
 /// Scratch of one worker: the tile's row entries (as the forward builds them) and, per
-/// kernel of the tile, its eight moments lane by lane.
+/// kernel of the tile, its eight moments column by column.
 #[derive(Default)]
 struct BackwardScratch {
     tile: TileScratch,
     moments: Vec<Moments>,
 }
 
-/// Per lane of a half row, the eight sums of one kernel over the tile's rows:
+/// Per pixel column of the tile, the eight sums of one kernel over the tile's rows:
 /// `Σ ∂L/∂C_c G` (3), `Σ w t`, `Σ w t²`, `Σ Δv w`, `Σ Δv w t`, `Σ Δv² w`.
-type Moments = [[f32; LANES]; 8];
+type Moments = [[f32; ROW]; 8];
 
 thread_local! {
     static SCRATCH: std::cell::RefCell<BackwardScratch> =
@@ -137,12 +140,22 @@ fn backward_tile_on(
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `SimdPath::detect` found the features.
-        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Poly) => unsafe {
+        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            avx512::backward_tile::<true>(bins, forms, v_image, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx512, ExpMode::Std) => unsafe {
+            avx512::backward_tile::<false>(bins, forms, v_image, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Poly) => unsafe {
             backward_tile_avx2::<true>(bins, forms, v_image, t, run, scratch);
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx2 | SimdPath::Avx512, ExpMode::Std) => unsafe {
+        (SimdPath::Avx2, ExpMode::Std) => unsafe {
             backward_tile_avx2::<false>(bins, forms, v_image, t, run, scratch);
         },
         (_, ExpMode::Poly) => backward_tile::<true, false>(bins, forms, v_image, t, run, scratch),
@@ -165,8 +178,8 @@ fn backward_tile_avx2<const FAST: bool>(
 }
 
 /// Accumulates tile `t`'s entries into `run` (one partial per entry): the forward's row
-/// entries, half row by half row; each kernel's moments are summed lane by lane over the
-/// tile's rows (f32, at most 16 terms a lane), then over the lanes in f64.
+/// entries, half row by half row; each kernel's moments are summed column by column over
+/// the tile's rows (f32, at most 16 terms a column), then over the columns in f64.
 #[inline(always)]
 fn backward_tile<const FAST: bool, const AVX2: bool>(
     bins: &TileBins,
@@ -179,9 +192,7 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
     prepare_tile(bins, forms, t, &mut scratch.tile);
     let tile = &scratch.tile;
     scratch.moments.clear();
-    scratch
-        .moments
-        .resize(tile.kernels.len(), [[0.0; LANES]; 8]);
+    scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
     let rect = bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
     let width = bins.width as usize;
@@ -229,7 +240,13 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
             );
         }
     }
-    for (moments, &n) in scratch.moments.iter().zip(&tile.entry_of) {
+    store_partials(scratch, run);
+}
+
+/// Each tile kernel's moments, summed over the columns in f64, into its entry's partial.
+#[inline(always)]
+fn store_partials(scratch: &BackwardScratch, run: &mut [[f32; 8]]) {
+    for (moments, &n) in scratch.moments.iter().zip(&scratch.tile.entry_of) {
         run[n as usize] =
             std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32);
     }
@@ -237,6 +254,8 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
 
 /// One half row's entries into their kernels' moments (lane `i` is tile pixel `first + i`;
 /// lanes at or past `lanes` are outside the image and add zero).
+// `i` indexes the lane's ∂L/∂C and, offset by the half's column, the moments.
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 fn half_row<const FAST: bool>(
     entries: &[RowEntry],
@@ -251,18 +270,21 @@ fn half_row<const FAST: bool>(
         let a = kernel.amplitude.map(|a| a as f32);
         let (dv, dv2) = (entry.dv, entry.dv * entry.dv);
         let m = &mut moments[entry.kernel as usize];
+        // Lane i is the tile's pixel column `first + i`.
+        let column = first as usize;
         for i in 0..LANES {
             let (t, g, _) = entry.lane::<FAST>(kernel, first, lanes, i);
             let w = (v[0][i] * a[0] + v[1][i] * a[1] + v[2][i] * a[2]) * g;
             let wt = w * t;
-            m[0][i] += v[0][i] * g;
-            m[1][i] += v[1][i] * g;
-            m[2][i] += v[2][i] * g;
-            m[3][i] += wt;
-            m[4][i] += wt * t;
-            m[5][i] += dv * w;
-            m[6][i] += dv * wt;
-            m[7][i] += dv2 * w;
+            let k = column + i;
+            m[0][k] += v[0][i] * g;
+            m[1][k] += v[1][i] * g;
+            m[2][k] += v[2][i] * g;
+            m[3][k] += wt;
+            m[4][k] += wt * t;
+            m[5][k] += dv * w;
+            m[6][k] += dv * wt;
+            m[7][k] += dv2 * w;
         }
     }
 }
@@ -321,13 +343,112 @@ mod avx2 {
             ];
             let m = &mut moments[entry.kernel as usize];
             for (sum, term) in m.iter_mut().zip(terms) {
-                // SAFETY: each moment holds 8 floats.
+                // SAFETY: each moment holds 16 floats, from column `first` (0 or 8) on 8.
                 unsafe {
-                    let p = sum.as_mut_ptr();
+                    let p = sum.as_mut_ptr().add(first as usize);
                     _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), term));
                 }
             }
         }
+    }
+}
+
+/// The backward tile with AVX-512: the forward's whole-row lists, 16 lanes a row.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use std::arch::x86_64::*;
+
+    use super::{BackwardScratch, ROW, store_partials};
+    use crate::raster::{RowForm, avx512::gaussian, prepare_tile_lists};
+    use crate::tiles::TileBins;
+
+    /// [`super::backward_tile`] by whole rows: per entry the operations of
+    /// [`super::half_row`] on 16 lanes, into the kernel's 16 columns.
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(super) fn backward_tile<const FAST: bool>(
+        bins: &TileBins,
+        forms: &[RowForm],
+        v_image: &[f32],
+        t: usize,
+        run: &mut [[f32; 8]],
+        scratch: &mut BackwardScratch,
+    ) {
+        prepare_tile_lists::<true>(bins, forms, t, &mut scratch.tile);
+        let tile = &scratch.tile;
+        scratch.moments.clear();
+        scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
+        let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+        let lanes = (tx1 - tx0) as usize;
+        let width = bins.width as usize;
+        let iota = _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        );
+        // Lanes past the image's right edge never count.
+        let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
+        for row in 0..(ty1 - ty0) as usize {
+            // ∂L/∂C of the row, channel by channel; zero past the image's edge.
+            let mut v = [[0.0_f32; ROW]; 3];
+            let start = 3 * ((ty0 as usize + row) * width + tx0 as usize);
+            for (i, pixel) in v_image[start..start + 3 * lanes]
+                .chunks_exact(3)
+                .enumerate()
+            {
+                for c in 0..3 {
+                    v[c][i] = pixel[c];
+                }
+            }
+            // SAFETY: each channel holds 16 floats.
+            let v = v.map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
+            for entry in &tile.halves[row] {
+                let kernel = &tile.kernels[entry.kernel as usize];
+                let a = kernel.amplitude.map(|a| _mm512_set1_ps(a as f32));
+                // As `RowEntry::lane` with `first` 0.
+                let t = _mm512_add_ps(
+                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - entry.offset)),
+                    _mm512_set1_ps(entry.t_anchor),
+                );
+                let q = _mm512_add_ps(
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
+                    _mm512_set1_ps(entry.row_q),
+                );
+                let hit =
+                    _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
+                if hit == 0 {
+                    // Every term is zero: adding them would change nothing (sums start at +0).
+                    continue;
+                }
+                let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
+                let w = _mm512_mul_ps(
+                    _mm512_add_ps(
+                        _mm512_add_ps(_mm512_mul_ps(v[0], a[0]), _mm512_mul_ps(v[1], a[1])),
+                        _mm512_mul_ps(v[2], a[2]),
+                    ),
+                    g,
+                );
+                let wt = _mm512_mul_ps(w, t);
+                let dv = _mm512_set1_ps(entry.dv);
+                let dv2 = _mm512_set1_ps(entry.dv * entry.dv);
+                let terms = [
+                    _mm512_mul_ps(v[0], g),
+                    _mm512_mul_ps(v[1], g),
+                    _mm512_mul_ps(v[2], g),
+                    wt,
+                    _mm512_mul_ps(wt, t),
+                    _mm512_mul_ps(dv, w),
+                    _mm512_mul_ps(dv, wt),
+                    _mm512_mul_ps(dv2, w),
+                ];
+                let m = &mut scratch.moments[entry.kernel as usize];
+                for (sum, term) in m.iter_mut().zip(terms) {
+                    // SAFETY: each moment holds 16 floats.
+                    unsafe {
+                        let p = sum.as_mut_ptr();
+                        _mm512_storeu_ps(p, _mm512_add_ps(_mm512_loadu_ps(p), term));
+                    }
+                }
+            }
+        }
+        store_partials(scratch, run);
     }
 }
 
