@@ -153,8 +153,12 @@ pub fn composite_on(
     if w == 0 || h == 0 {
         return 0;
     }
-    let background = background.map(f64::from);
-    let forms: &[RowForm] = forms;
+    let frame = AlphaFrame {
+        proj,
+        bins,
+        forms,
+        background: background.map(f64::from),
+    };
     let tiles_x = bins.tiles_x as usize;
     image
         .pixels
@@ -167,17 +171,24 @@ pub fn composite_on(
                 let mut pairs = 0;
                 for tx in 0..tiles_x {
                     let t = ty * tiles_x + tx;
-                    prepare_alpha_tile(proj, bins, forms, t, scratch);
                     let out = Band {
                         pixels: band,
                         stops: band_stops,
                     };
-                    pairs += tile_on(path, exp, bins, t, background, scratch, out);
+                    pairs += tile_on(path, exp, &frame, t, scratch, out);
                 }
                 pairs
             })
         })
         .sum()
+}
+
+/// What every tile of an alpha frame shares.
+struct AlphaFrame<'a> {
+    proj: &'a ProjectedKernels,
+    bins: &'a TileBins,
+    forms: &'a [RowForm],
+    background: [f64; 3],
 }
 
 /// The image rows of one tile row, and their pixels' stops.
@@ -190,35 +201,34 @@ pub(crate) struct Band<'a> {
 fn tile_on(
     path: SimdPath,
     exp: ExpMode,
-    bins: &TileBins,
+    frame: &AlphaFrame,
     t: usize,
-    background: [f64; 3],
-    scratch: &CompositeScratch,
+    scratch: &mut CompositeScratch,
     band: Band,
 ) -> u64 {
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `composite_on` checked that the CPU has the path's features.
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
-            composite_tile_avx512::<true>(bins, t, background, scratch, band)
+            composite_tile_avx512::<true>(frame, t, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
         (SimdPath::Avx512, ExpMode::Std) => unsafe {
-            composite_tile_avx512::<false>(bins, t, background, scratch, band)
+            composite_tile_avx512::<false>(frame, t, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
         (SimdPath::Avx2, ExpMode::Poly) => unsafe {
-            composite_tile_avx2::<true>(bins, t, background, scratch, band)
+            composite_tile_avx2::<true>(frame, t, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
         (SimdPath::Avx2, ExpMode::Std) => unsafe {
-            composite_tile_avx2::<false>(bins, t, background, scratch, band)
+            composite_tile_avx2::<false>(frame, t, scratch, band)
         },
-        (_, ExpMode::Poly) => composite_tile::<true, false>(bins, t, background, scratch, band),
-        (_, ExpMode::Std) => composite_tile::<false, false>(bins, t, background, scratch, band),
+        (_, ExpMode::Poly) => composite_tile::<true, false>(frame, t, scratch, band),
+        (_, ExpMode::Std) => composite_tile::<false, false>(frame, t, scratch, band),
     }
 }
 
@@ -227,26 +237,24 @@ fn tile_on(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
 fn composite_tile_avx512<const FAST: bool>(
-    bins: &TileBins,
+    frame: &AlphaFrame,
     t: usize,
-    background: [f64; 3],
-    scratch: &CompositeScratch,
+    scratch: &mut CompositeScratch,
     band: Band,
 ) -> u64 {
-    composite_tile::<FAST, true>(bins, t, background, scratch, band)
+    composite_tile::<FAST, true>(frame, t, scratch, band)
 }
 
 /// [`composite_tile`] compiled for AVX2 and FMA (the same operations: the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn composite_tile_avx2<const FAST: bool>(
-    bins: &TileBins,
+    frame: &AlphaFrame,
     t: usize,
-    background: [f64; 3],
-    scratch: &CompositeScratch,
+    scratch: &mut CompositeScratch,
     band: Band,
 ) -> u64 {
-    composite_tile::<FAST, true>(bins, t, background, scratch, band)
+    composite_tile::<FAST, true>(frame, t, scratch, band)
 }
 
 /// The state of one half row after compositing: per lane the colour, the transmittance,
@@ -349,16 +357,23 @@ pub(crate) fn composite_half_row<const FAST: bool, const AVX2: bool>(
     state
 }
 
-/// Composites the prepared tile `t` half row by half row into `band` (the image rows of its
-/// tile row). Returns the pairs.
+/// Prepares tile `t` ([`prepare_alpha_tile`], inlined so that the set-up is compiled for the
+/// path too) and composites it half row by half row into `band` (the image rows of its tile
+/// row). Returns the pairs.
 #[inline(always)]
 fn composite_tile<const FAST: bool, const AVX2: bool>(
-    bins: &TileBins,
+    frame: &AlphaFrame,
     t: usize,
-    background: [f64; 3],
-    scratch: &CompositeScratch,
+    scratch: &mut CompositeScratch,
     band: Band,
 ) -> u64 {
+    let AlphaFrame {
+        proj,
+        bins,
+        forms,
+        background,
+    } = *frame;
+    prepare_alpha_tile(proj, bins, forms, t, scratch);
     let rect = bins.tile_rect(t);
     let width = bins.width as usize;
     let mut pairs = 0;

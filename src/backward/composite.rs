@@ -47,7 +47,7 @@ struct Scratch {
 
 /// One tile's backward: its set-up and where its kernels' sums go.
 struct TileWork<'a> {
-    tile: &'a CompositeScratch,
+    tile: &'a mut CompositeScratch,
     sums: &'a mut Vec<LaneSums>,
 }
 
@@ -112,7 +112,9 @@ pub(crate) fn composite_backward_on(
     assert_eq!(stops.len(), v_image.len() / 3, "the forward's pixel stops");
     let background = background.map(f64::from);
     let frame = Frame {
+        proj,
         bins,
+        forms,
         stops,
         v_image,
         background,
@@ -132,7 +134,6 @@ pub(crate) fn composite_backward_on(
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
                 let Scratch { composite, sums } = scratch;
-                prepare_alpha_tile(proj, bins, forms, t, composite);
                 let scratch = TileWork {
                     tile: composite,
                     sums,
@@ -176,7 +177,9 @@ pub(crate) fn composite_backward_on(
 
 /// What every tile of the frame's backward shares.
 struct Frame<'a> {
+    proj: &'a ProjectedKernels,
     bins: &'a TileBins,
+    forms: &'a [RowForm],
     stops: &'a [PixelStop],
     v_image: &'a [f32],
     background: [f64; 3],
@@ -229,6 +232,9 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         tile: composite,
         sums,
     } = scratch;
+    // Prepared here, so that the set-up is compiled for the path too.
+    prepare_alpha_tile(frame.proj, frame.bins, frame.forms, t, composite);
+    let composite = &*composite;
     let tile = &composite.tile;
     sums.clear();
     sums.resize(tile.kernels.len(), [[0.0; LANES]; 9]);
