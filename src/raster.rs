@@ -153,12 +153,27 @@ pub enum SimdPath {
 }
 
 impl SimdPath {
-    /// The widest path this CPU runs.
+    /// The widest path this CPU runs, or a narrower one named by the environment variable
+    /// `SPLAT4D_SIMD` (`baseline`, `avx2`, `avx512`: to measure the narrower paths on a
+    /// wider CPU; a path the CPU lacks, or another value, is ignored). Read once per
+    /// process.
     #[must_use]
     pub fn detect() -> Self {
-        *Self::available()
-            .last()
-            .expect("the baseline is always available")
+        static CHOSEN: std::sync::OnceLock<SimdPath> = std::sync::OnceLock::new();
+        *CHOSEN.get_or_init(|| {
+            let widest = *Self::available()
+                .last()
+                .expect("the baseline is always available");
+            std::env::var("SPLAT4D_SIMD")
+                .ok()
+                .and_then(|name| {
+                    Self::available()
+                        .iter()
+                        .find(|path| path.to_string() == name)
+                        .copied()
+                })
+                .unwrap_or(widest)
+        })
     }
 
     /// Every path this CPU runs, narrowest first (the tests compare them all). Detected
@@ -340,6 +355,8 @@ pub(crate) struct TileScratch {
     /// For each of `kernels`, its position in the tile's list (`TileBins::tile_entries`).
     pub(crate) entry_of: Vec<u32>,
     pub(crate) halves: [Vec<RowEntry>; 2 * ROW],
+    /// The AVX-512 loops' form of the tile.
+    pub(crate) whole_rows: TileBlocks,
 }
 
 /// The forward's per-tile scratch, owned by the render context and kept between frames: a
@@ -453,51 +470,64 @@ pub fn rasterize_on(
         .sum()
 }
 
-/// Fills `scratch` with tile `t`'s kernels and, per half row of the tile, the entries of the
-/// kernels whose padded ellipse reaches a pixel centre of that half row inside the tile (and
-/// its box). f64 throughout; no division or square root. Inlined into each path's compiled
-/// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
-/// path).
-///
-/// A measured hot loop kept in one body (103 lines): split into an inlined 16-row function
-/// and an inlined push of the rows, the forward render measured 4–11 % slower
-/// (`splat4d bench --scene 100k --size 1280x720 --no-dense --threads 1`, three alternating
-/// runs of each build in one session: 336/343/350 ms before, 373/358/368 ms after).
-#[inline(always)]
-pub(crate) fn prepare_tile(
-    bins: &TileBins,
-    forms: &[RowForm],
-    t: usize,
-    scratch: &mut TileScratch,
-) {
-    prepare_tile_lists::<false>(bins, forms, t, scratch);
+/// A tile's pixel geometry, for the per-kernel set-up.
+#[derive(Clone, Copy)]
+pub(crate) struct TileGeometry {
+    /// The tile's pixel rectangle `[x0, x1, y0, y1]`.
+    rect: [u32; 4],
+    /// Its left pixel edge, as f64.
+    x0: f64,
+    /// The last lane inside the image.
+    last_lane: f64,
+    /// Pixel centres of the first and last lane of each half of a tile row.
+    half_ends: [(f64, f64); 2],
 }
 
-/// [`prepare_tile`] with one list per half row (`WHOLE_ROWS` false: `halves[2 r + h]`) or
-/// one per row (`WHOLE_ROWS` true: `halves[r]`, the entries of the kernels whose padded
-/// ellipse reaches a pixel centre of either half; the AVX-512 forward's 16-lane rows).
-/// A row list is the union of its two half lists in the same order, so summing it gives the
-/// same bits: a lane that no half list holds is never a pair, and adds an exact zero.
-#[inline(always)]
-pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
-    bins: &TileBins,
-    forms: &[RowForm],
-    t: usize,
-    scratch: &mut TileScratch,
-) {
-    let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
-    scratch.kernels.clear();
-    scratch.entry_of.clear();
-    for half in &mut scratch.halves {
-        half.clear();
+impl TileGeometry {
+    #[inline(always)]
+    pub(crate) fn of(bins: &TileBins, t: usize) -> Self {
+        let rect @ [tx0, tx1, _, _] = bins.tile_rect(t);
+        let last_lane = f64::from(tx1 - tx0 - 1);
+        let x0 = f64::from(tx0);
+        TileGeometry {
+            rect,
+            x0,
+            last_lane,
+            half_ends: [
+                (x0 + 0.5, x0 + (LANES as f64 - 0.5).min(last_lane + 0.5)),
+                (x0 + LANES as f64 + 0.5, x0 + last_lane + 0.5),
+            ],
+        }
     }
-    let last_lane = f64::from(tx1 - tx0 - 1);
-    // Pixel centres of each half of the tile row.
-    let x0 = f64::from(tx0);
-    let half_ends = [
-        (x0 + 0.5, x0 + (LANES as f64 - 0.5).min(last_lane + 0.5)),
-        (x0 + LANES as f64 + 0.5, x0 + last_lane + 0.5),
-    ];
+}
+
+/// One kernel's constants on 16 consecutive rows of a tile, as the per-pixel loops read
+/// them ([`RowEntry`]'s fields by row; the AVX-512 loops read them here).
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
+pub(crate) struct RowBlock {
+    pub(crate) t_anchor: [f32; ROW],
+    pub(crate) offset: [f32; ROW],
+    pub(crate) row_q: [f32; ROW],
+    pub(crate) dv: [f32; ROW],
+}
+
+/// Which of a kernel's 16 rows (from [`kernel_rows`]) reach a pixel centre of the left and
+/// of the right half, and its rows `[first, end)` of the tile (absolute image rows).
+struct RowReach {
+    left: [bool; ROW],
+    right: [bool; ROW],
+    first_row: u32,
+    end_row: u32,
+}
+
+/// `form`'s constants on the 16 rows from image row `j0` of the tile `tile` into `block`,
+/// all at once and branch-free (vectorised); f64 throughout, no division or square root.
+/// Rows outside the kernel's box are computed too (the caller drops them).
+// `r` indexes the row offsets, the flags and the block's four arrays alike.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn kernel_rows(form: &RowForm, tile: &TileGeometry, j0: u32, block: &mut RowBlock) -> RowReach {
     const ROW_OFFSETS: [f64; ROW] = {
         let mut offsets = [0.0; ROW];
         let mut r = 0;
@@ -509,6 +539,62 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
     };
     let max = |a: f64, b: f64| if a > b { a } else { b };
     let min = |a: f64, b: f64| if a < b { a } else { b };
+    let [tx0, tx1, ty0, ty1] = tile.rect;
+    let (x0, last_lane, half_ends) = (tile.x0, tile.last_lane, tile.half_ends);
+    let [bx0, bx1, by0, by1] = form.bounds;
+    // Pixel centres of the tile within the kernel's box, per half row.
+    let (left, right) = (f64::from(bx0.max(tx0)) + 0.5, f64::from(bx1.min(tx1)) - 0.5);
+    let (from0, to0) = (max(half_ends[0].0, left), min(half_ends[0].1, right));
+    let (from1, to1) = (max(half_ends[1].0, left), min(half_ends[1].1, right));
+    let (open0, open1) = (from0 <= to0, from1 <= to1);
+    let [mx, my] = form.mean;
+    let j0 = f64::from(j0);
+    let mut reach = RowReach {
+        left: [false; ROW],
+        right: [false; ROW],
+        first_row: by0.max(ty0),
+        end_row: by1.min(ty1),
+    };
+    for r in 0..ROW {
+        let dv = (j0 + ROW_OFFSETS[r]) + 0.5 - my;
+        let row_q = dv * dv * form.inv_syy;
+        let room = form.q_reach - row_q;
+        // The chord of the row is centre ± √(room/Qxx): it reaches a pixel centre of a
+        // half row when the nearest one is within it.
+        let centre = mx - form.shear * dv;
+        let gap0 = max(max(from0 - centre, centre - to0), 0.0);
+        let gap1 = max(max(from1 - centre, centre - to1), 0.0);
+        reach.left[r] = open0 & (form.qxx * gap0 * gap0 <= room);
+        reach.right[r] = open1 & (form.qxx * gap1 * gap1 <= room);
+        let anchor = min(max(centre.floor() - x0, 0.0), last_lane);
+        block.t_anchor[r] = (x0 + anchor + 0.5 - centre) as f32;
+        block.offset[r] = anchor as f32;
+        block.row_q[r] = row_q as f32;
+        block.dv[r] = dv as f32;
+    }
+    reach
+}
+
+/// Fills `scratch` with tile `t`'s kernels and, per half row of the tile, the entries of the
+/// kernels whose padded ellipse reaches a pixel centre of that half row inside the tile (and
+/// its box). f64 throughout; no division or square root. Inlined into each path's compiled
+/// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
+/// path).
+/// The rows come from [`kernel_rows`] (shared with the AVX-512 set-up).
+#[inline(always)]
+pub(crate) fn prepare_tile(
+    bins: &TileBins,
+    forms: &[RowForm],
+    t: usize,
+    scratch: &mut TileScratch,
+) {
+    let tile = TileGeometry::of(bins, t);
+    let ty0 = tile.rect[2];
+    scratch.kernels.clear();
+    scratch.entry_of.clear();
+    for half in &mut scratch.halves {
+        half.clear();
+    }
     let entries = bins.tile_entries(t);
     // A list takes at most one entry per kernel of the tile: with that room made first, an
     // entry is written at the end of every list its row might join and kept by advancing
@@ -516,52 +602,14 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
     for half in &mut scratch.halves {
         half.reserve(entries.len());
     }
+    let mut block = RowBlock::default();
     for (n, &p) in entries.iter().enumerate() {
-        // Kernels are met in scene order, scattered in memory: ask for a later one's record
-        // now (a hint only; no effect on results).
-        #[cfg(target_arch = "x86_64")]
-        if let Some(&ahead) = entries.get(n + 8) {
-            // SAFETY: prefetching never faults; the pointer is in bounds anyway.
-            unsafe {
-                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-                _mm_prefetch::<_MM_HINT_T0>(forms.as_ptr().add(ahead as usize).cast());
-            }
-        }
+        prefetch_form(forms, entries, n);
         let form = &forms[p as usize];
-        let [bx0, bx1, by0, by1] = form.bounds;
-        // Pixel centres of the tile within the kernel's box, per half row.
-        let (left, right) = (f64::from(bx0.max(tx0)) + 0.5, f64::from(bx1.min(tx1)) - 0.5);
-        let (from0, to0) = (max(half_ends[0].0, left), min(half_ends[0].1, right));
-        let (from1, to1) = (max(half_ends[1].0, left), min(half_ends[1].1, right));
-        let (open0, open1) = (from0 <= to0, from1 <= to1);
-        let [mx, my] = form.mean;
-        let (first_row, end_row) = (by0.max(ty0), by1.min(ty1));
-        // All 16 rows at once, branch-free (vectorised), from the kernel's first row in the
-        // tile; rows past `end_row` are computed and ignored.
-        let j0 = f64::from(first_row);
-        let mut reaches0 = [false; ROW];
-        let mut reaches1 = [false; ROW];
-        let mut t_anchor = [0.0_f32; ROW];
-        let mut offset = [0.0_f32; ROW];
-        let mut row_q32 = [0.0_f32; ROW];
-        let mut dv32 = [0.0_f32; ROW];
-        for r in 0..ROW {
-            let dv = (j0 + ROW_OFFSETS[r]) + 0.5 - my;
-            let row_q = dv * dv * form.inv_syy;
-            let reach = form.q_reach - row_q;
-            // The chord of the row is centre ± √(reach/Qxx): it reaches a pixel centre of a
-            // half row when the nearest one is within it.
-            let centre = mx - form.shear * dv;
-            let gap0 = max(max(from0 - centre, centre - to0), 0.0);
-            let gap1 = max(max(from1 - centre, centre - to1), 0.0);
-            reaches0[r] = open0 & (form.qxx * gap0 * gap0 <= reach);
-            reaches1[r] = open1 & (form.qxx * gap1 * gap1 <= reach);
-            let anchor = min(max(centre.floor() - x0, 0.0), last_lane);
-            t_anchor[r] = (x0 + anchor + 0.5 - centre) as f32;
-            offset[r] = anchor as f32;
-            row_q32[r] = row_q as f32;
-            dv32[r] = dv as f32;
-        }
+        // The rows from the kernel's first row in the tile; rows past `end_row` are
+        // computed and ignored.
+        let first_row = form.bounds[2].max(ty0);
+        let reach = kernel_rows(form, &tile, first_row, &mut block);
         let kernel = scratch.kernels.len() as u32;
         let mut used = false;
         let mut append = |list: &mut Vec<RowEntry>, entry: RowEntry, keep: bool| {
@@ -576,21 +624,17 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
             }
             used |= keep;
         };
-        for r in 0..(end_row - first_row) as usize {
+        for r in 0..(reach.end_row - reach.first_row) as usize {
             let entry = RowEntry {
-                t_anchor: t_anchor[r],
-                offset: offset[r],
-                row_q: row_q32[r],
-                dv: dv32[r],
+                t_anchor: block.t_anchor[r],
+                offset: block.offset[r],
+                row_q: block.row_q[r],
+                dv: block.dv[r],
                 kernel,
             };
-            let row = (first_row - ty0) as usize + r;
-            if WHOLE_ROWS {
-                append(&mut scratch.halves[row], entry, reaches0[r] | reaches1[r]);
-            } else {
-                append(&mut scratch.halves[2 * row], entry, reaches0[r]);
-                append(&mut scratch.halves[2 * row + 1], entry, reaches1[r]);
-            }
+            let row = (reach.first_row - ty0) as usize + r;
+            append(&mut scratch.halves[2 * row], entry, reach.left[r]);
+            append(&mut scratch.halves[2 * row + 1], entry, reach.right[r]);
         }
         if used {
             scratch.kernels.push(form.pixel);
@@ -599,7 +643,40 @@ pub(crate) fn prepare_tile_lists<const WHOLE_ROWS: bool>(
     }
 }
 
-/// What every tile of a frame shares.
+/// Kernels are met in scene order, scattered in memory: asks for the record of the one 8
+/// places after `n` now (a hint only; no effect on results).
+#[inline(always)]
+fn prefetch_form(forms: &[RowForm], entries: &[u32], n: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(&ahead) = entries.get(n + 8) {
+        // SAFETY: prefetching never faults; the pointer is in bounds anyway.
+        unsafe {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            _mm_prefetch::<_MM_HINT_T0>(forms.as_ptr().add(ahead as usize).cast());
+        }
+    }
+}
+
+/// The AVX-512 loops' form of a prepared tile: per tile kernel its [`RowBlock`] (the tile's
+/// 16 rows) and, per row, the tile kernels whose padded ellipse reaches a pixel centre of
+/// that row, in list order — the whole-row lists of [`prepare_tile_lists`], held as indices
+/// so that a kernel's rows are written once, as a block, and the lists are built from the
+/// kernels' row masks 16 kernels at a time.
+#[derive(Default)]
+pub(crate) struct TileBlocks {
+    pub(crate) kernels: Vec<TileKernel>,
+    /// For each of `kernels`, its position in the tile's list (`TileBins::tile_entries`).
+    pub(crate) entry_of: Vec<u32>,
+    /// Per tile kernel, its rows (rows of the tile, 0 to 15).
+    pub(crate) blocks: Vec<RowBlock>,
+    /// Per tile kernel, bit `r` set when it is listed on row `r`; padded with zeros to a
+    /// multiple of 16.
+    masks: Vec<u32>,
+    /// Per row of the tile, its tile kernels in ascending order.
+    pub(crate) rows: [Vec<u32>; ROW],
+}
+
+/// What every tile of a frame shares./// What every tile of a frame shares.
 struct Frame<'a> {
     bins: &'a TileBins,
     forms: &'a [RowForm],
@@ -637,7 +714,7 @@ fn tile_on(
     }
 }
 
-/// The tile with AVX-512: [`prepare_tile_lists`] by whole rows, then [`avx512::sum_tile`]
+/// The tile with AVX-512: [`avx512::prepare_tile`] (whole rows), then [`avx512::sum_tile`]
 /// (16 lanes a row).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
@@ -647,8 +724,8 @@ fn tile_avx512<const FAST: bool>(
     scratch: &mut TileScratch,
     band: &mut [f32],
 ) -> u64 {
-    prepare_tile_lists::<true>(frame.bins, frame.forms, t, scratch);
-    avx512::sum_tile::<FAST>(frame.bins, t, frame.background, scratch, band)
+    avx512::prepare_tile(frame.bins, frame.forms, t, &mut scratch.whole_rows);
+    avx512::sum_tile::<FAST>(frame.bins, t, frame.background, &scratch.whole_rows, band)
 }
 
 /// [`tile`] compiled for AVX2 and FMA.
@@ -905,15 +982,94 @@ pub(crate) mod avx2 {
 }
 
 /// The forward's rows with AVX-512: a whole tile row (16 lanes) is the vector, and each row
-/// list ([`prepare_tile_lists`] with whole rows) passes over six f64 accumulators of 8 lanes.
+/// list ([`avx512::prepare_tile`]) passes over six f64 accumulators of 8 lanes.
 /// The operations per lane are [`avx2::sum_half_row`]'s in the same order (the same `t`, `q`,
 /// test, polynomial and f64 products), so the image is the same bit for bit.
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::{ROW, TileKernel, TileScratch};
+    use super::{ROW, RowBlock, RowForm, TileBlocks, TileGeometry, kernel_rows, prefetch_form};
     use crate::tiles::TileBins;
+
+    /// Prepares tile `t` by whole rows into `tiles`: per kernel its [`RowBlock`] of the
+    /// tile's 16 rows and its row mask (the rows whose padded chord reaches a pixel centre
+    /// of either half, within its box), then per row the list of kernels whose mask has
+    /// the row, 16 kernels at a time (compressed indices, in ascending order). A row's
+    /// list is the union of its two half lists of [`super::prepare_tile`] in the same
+    /// order, so summing it gives the same bits: a lane that no half list holds is never a
+    /// pair, and adds an exact zero.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(crate) fn prepare_tile(
+        bins: &TileBins,
+        forms: &[RowForm],
+        t: usize,
+        tiles: &mut TileBlocks,
+    ) {
+        let tile = TileGeometry::of(bins, t);
+        let [_, _, ty0, ty1] = tile.rect;
+        tiles.kernels.clear();
+        tiles.entry_of.clear();
+        tiles.masks.clear();
+        let entries = bins.tile_entries(t);
+        if tiles.blocks.len() < entries.len() {
+            tiles.blocks.resize(entries.len(), RowBlock::default());
+        }
+        for (n, &p) in entries.iter().enumerate() {
+            prefetch_form(forms, entries, n);
+            let form = &forms[p as usize];
+            // Written in the next free block, which the next kernel overwrites unless this
+            // one is kept.
+            let block = &mut tiles.blocks[tiles.kernels.len()];
+            let reach = kernel_rows(form, &tile, ty0, block);
+            // The rows reached, as a mask read in one load (reading the flags one by one
+            // stalled on the vector store that wrote them), within the kernel's rows.
+            // SAFETY: each array holds 16 bools, one byte each.
+            let (left, right) = unsafe {
+                (
+                    _mm_loadu_si128(reach.left.as_ptr().cast()),
+                    _mm_loadu_si128(reach.right.as_ptr().cast()),
+                )
+            };
+            let either = _mm_or_si128(left, right);
+            let reached = u32::from(_mm_test_epi8_mask(either, either));
+            let below = |row: u32| (1_u32 << (row - ty0)) - 1;
+            let mask = reached & below(reach.end_row) & !below(reach.first_row);
+            if mask != 0 {
+                tiles.kernels.push(form.pixel);
+                tiles.entry_of.push(n as u32);
+                tiles.masks.push(mask);
+            }
+        }
+        let count = tiles.masks.len();
+        tiles.masks.resize(count.next_multiple_of(ROW), 0);
+        let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        for (r, list) in tiles.rows[..(ty1 - ty0) as usize].iter_mut().enumerate() {
+            list.clear();
+            // Each chunk stores 16 indices and keeps those of its kernels on the row.
+            list.reserve(count + ROW);
+            let out = list.as_mut_ptr();
+            let bit = _mm512_set1_epi32(1 << r);
+            let mut len = 0;
+            for (c, chunk) in tiles.masks.chunks_exact(ROW).enumerate() {
+                // SAFETY: the chunk holds 16 u32.
+                let masks = unsafe { _mm512_loadu_si512(chunk.as_ptr().cast()) };
+                let on_row = _mm512_test_epi32_mask(masks, bit);
+                let indices = _mm512_add_epi32(iota, _mm512_set1_epi32((ROW * c) as i32));
+                // SAFETY: `len` ≤ 16 c, and the list has room for `count + 16` ≥ 16 (c + 1).
+                unsafe {
+                    _mm512_storeu_si512(
+                        out.add(len).cast(),
+                        _mm512_maskz_compress_epi32(on_row, indices),
+                    );
+                }
+                len += on_row.count_ones() as usize;
+            }
+            // SAFETY: the first `len` are written, each below `count`.
+            unsafe { list.set_len(len) };
+        }
+    }
 
     /// [`super::avx2::exp_neg_half`] on 16 lanes, the same operations.
     #[inline]
@@ -968,7 +1124,7 @@ pub(crate) mod avx512 {
         bins: &TileBins,
         t: usize,
         background: [f64; 3],
-        scratch: &TileScratch,
+        tiles: &TileBlocks,
         band: &mut [f32],
     ) -> u64 {
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
@@ -984,16 +1140,16 @@ pub(crate) mod avx512 {
         for row in 0..(ty1 - ty0) as usize {
             let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
             let mut hi = lo;
-            for entry in &scratch.halves[row] {
-                let kernel: &TileKernel = &scratch.kernels[entry.kernel as usize];
+            for &k in &tiles.rows[row] {
+                let (kernel, block) = (&tiles.kernels[k as usize], &tiles.blocks[k as usize]);
                 // As `RowEntry::lane` with `first` 0: t = (lane + (0 - offset)) + t_anchor.
                 let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - entry.offset)),
-                    _mm512_set1_ps(entry.t_anchor),
+                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - block.offset[row])),
+                    _mm512_set1_ps(block.t_anchor[row]),
                 );
                 let q = _mm512_add_ps(
                     _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
-                    _mm512_set1_ps(entry.row_q),
+                    _mm512_set1_ps(block.row_q[row]),
                 );
                 let hit =
                     _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));

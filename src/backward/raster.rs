@@ -240,13 +240,14 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
             );
         }
     }
-    store_partials(scratch, run);
+    store_partials(&scratch.moments, &scratch.tile.entry_of, run);
 }
 
-/// Each tile kernel's moments, summed over the columns in f64, into its entry's partial.
+/// Each tile kernel's moments, summed over the columns in f64, into its entry's partial
+/// (`entry_of`: each tile kernel's position in the tile's list).
 #[inline(always)]
-fn store_partials(scratch: &BackwardScratch, run: &mut [[f32; 8]]) {
-    for (moments, &n) in scratch.moments.iter().zip(&scratch.tile.entry_of) {
+fn store_partials(moments: &[Moments], entry_of: &[u32], run: &mut [[f32; 8]]) {
+    for (moments, &n) in moments.iter().zip(entry_of) {
         run[n as usize] =
             std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32);
     }
@@ -359,7 +360,8 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     use super::{BackwardScratch, ROW, store_partials};
-    use crate::raster::{RowForm, avx512::gaussian, prepare_tile_lists};
+    use crate::raster::RowForm;
+    use crate::raster::avx512::{gaussian, prepare_tile};
     use crate::tiles::TileBins;
 
     /// [`super::backward_tile`] by whole rows: per entry the operations of
@@ -373,8 +375,8 @@ mod avx512 {
         run: &mut [[f32; 8]],
         scratch: &mut BackwardScratch,
     ) {
-        prepare_tile_lists::<true>(bins, forms, t, &mut scratch.tile);
-        let tile = &scratch.tile;
+        prepare_tile(bins, forms, t, &mut scratch.tile.whole_rows);
+        let tile = &scratch.tile.whole_rows;
         scratch.moments.clear();
         scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
@@ -399,17 +401,17 @@ mod avx512 {
             }
             // SAFETY: each channel holds 16 floats.
             let v = v.map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
-            for entry in &tile.halves[row] {
-                let kernel = &tile.kernels[entry.kernel as usize];
+            for &k in &tile.rows[row] {
+                let (kernel, block) = (&tile.kernels[k as usize], &tile.blocks[k as usize]);
                 let a = kernel.amplitude.map(|a| _mm512_set1_ps(a as f32));
                 // As `RowEntry::lane` with `first` 0.
                 let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - entry.offset)),
-                    _mm512_set1_ps(entry.t_anchor),
+                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - block.offset[row])),
+                    _mm512_set1_ps(block.t_anchor[row]),
                 );
                 let q = _mm512_add_ps(
                     _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
-                    _mm512_set1_ps(entry.row_q),
+                    _mm512_set1_ps(block.row_q[row]),
                 );
                 let hit =
                     _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
@@ -426,8 +428,8 @@ mod avx512 {
                     g,
                 );
                 let wt = _mm512_mul_ps(w, t);
-                let dv = _mm512_set1_ps(entry.dv);
-                let dv2 = _mm512_set1_ps(entry.dv * entry.dv);
+                let dv = _mm512_set1_ps(block.dv[row]);
+                let dv2 = _mm512_set1_ps(block.dv[row] * block.dv[row]);
                 let terms = [
                     _mm512_mul_ps(v[0], g),
                     _mm512_mul_ps(v[1], g),
@@ -438,7 +440,7 @@ mod avx512 {
                     _mm512_mul_ps(dv, wt),
                     _mm512_mul_ps(dv2, w),
                 ];
-                let m = &mut scratch.moments[entry.kernel as usize];
+                let m = &mut scratch.moments[k as usize];
                 for (sum, term) in m.iter_mut().zip(terms) {
                     // SAFETY: each moment holds 16 floats.
                     unsafe {
@@ -448,7 +450,7 @@ mod avx512 {
                 }
             }
         }
-        store_partials(scratch, run);
+        store_partials(&scratch.moments, &tile.entry_of, run);
     }
 }
 

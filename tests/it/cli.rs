@@ -754,6 +754,30 @@ fn bench_runs_builtin_scenes_by_size() {
     let alpha_rate = crate::common::probe_rate(&stdout, "alpha ceiling probe", 1);
     assert!(alpha_rate > 1e7, "{stdout}");
     assert_eq!(stdout.lines().count(), 2, "{stdout}");
+    // SPLAT4D_SIMD names a narrower path for measuring it on a wider CPU; the baseline is
+    // on every CPU. A value that names no path leaves the widest.
+    for (name, expected) in [("baseline", "baseline"), ("no-such-path", "")] {
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_splat4d"))
+            .args(["bench", "--ceiling", "--threads", "1"])
+            .env("SPLAT4D_SIMD", name)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "{}", stderr(&output));
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let path = stdout
+            .lines()
+            .next()
+            .and_then(|l| l.split(" path").next())
+            .and_then(|l| l.rsplit('(').next())
+            .unwrap_or_default()
+            .to_string();
+        if expected.is_empty() {
+            assert_ne!(path, "", "{stdout}");
+        } else {
+            assert_eq!(path, expected, "{stdout}");
+        }
+    }
     let output = splat4d(&["bench", "--scene", "no-such-scene.json"], dir.path());
     assert_eq!(output.status.code(), Some(2));
     assert!(stderr(&output).contains("no-such-scene.json"));
