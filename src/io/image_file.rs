@@ -15,7 +15,7 @@ use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
 use crate::io::write_atomically;
 use crate::model::Image;
 use crate::model::error::{Error, Result};
-use crate::model::image::quantize;
+use crate::model::image::quantize_all;
 
 /// Bits per channel of an integer image file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -65,27 +65,18 @@ pub fn encode_image<W: Write + Seek>(
     match (kind, depth) {
         (ImageKind::Exr, _) => write_exr(image, out).map_err(image::ImageError::IoError),
         (ImageKind::Png, BitDepth::Eight) => {
-            let data = quantize_all(&image.pixels, 255, |v| v as u8);
+            let data: Vec<u8> = quantize_all(&image.pixels);
             let buf: ImageBuffer<Rgb<u8>, Vec<u8>> =
                 ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
             buf.write_to(out, ImageFormat::Png)
         }
         (ImageKind::Png, BitDepth::Sixteen) => {
-            let data = quantize_all(&image.pixels, 65535, |v| v);
+            let data: Vec<u16> = quantize_all(&image.pixels);
             let buf: ImageBuffer<Rgb<u16>, Vec<u16>> =
                 ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
             buf.write_to(out, ImageFormat::Png)
         }
     }
-}
-
-/// [`quantize`] of every channel, in a loop the compiler vectorises (no call, no branch).
-fn quantize_all<T: Copy + Default>(pixels: &[f32], max: u16, store: impl Fn(u16) -> T) -> Vec<T> {
-    let mut out = vec![T::default(); pixels.len()];
-    for (o, &c) in out.iter_mut().zip(pixels) {
-        *o = store(quantize(c, max));
-    }
-    out
 }
 
 /// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
@@ -387,6 +378,7 @@ fn jpeg_is_complete(bytes: &[u8]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::image::quantize;
 
     #[test]
     fn quantize_clamps_and_rounds_half_away_from_zero() {
