@@ -2,9 +2,11 @@
 //! animated GIF (`DIR/NAME.gif`, looping) and, when `ffmpeg` is on `PATH`, an MP4
 //! (`DIR/NAME.mp4`, H.264, yuv420p).
 //!
-//! Frames are asked for (rendered above this layer), written and appended to the GIF one at
-//! a time, in order, so memory does not grow with the length of the video. Every file is written atomically; the GIF and
-//! MP4 appear only once complete.
+//! Frames are asked for (rendered above this layer) one at a time, in order, and written
+//! (PNG, GIF frame) on a second thread while the next one renders — the PNG's quantisation
+//! and deflate no longer add to every frame's render — so memory holds two frames whatever
+//! the video's length. Every file is written atomically; the GIF and MP4 appear only once
+//! complete.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
