@@ -297,6 +297,14 @@ impl RenderContext {
     pub fn image(&self) -> &Image {
         &self.image
     }
+
+    /// Exchanges the last rendered image with `other`: a sequence of frames handed on (to a
+    /// writer, say) without a copy. The context keeps `other`'s buffer, whose pixels the next
+    /// render overwrites (every pixel is written each frame); until then [`Self::image`] is
+    /// `other`'s old content and [`Self::backward`] must not be called.
+    pub fn swap_image(&mut self, other: &mut Image) {
+        std::mem::swap(&mut self.image, other);
+    }
 }
 
 /// The checks of SPEC §4–5 on a frame's options and time.

@@ -15,7 +15,7 @@ use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
 use crate::io::write_atomically;
 use crate::model::Image;
 use crate::model::error::{Error, Result};
-use crate::model::image::quantize;
+use crate::model::image::{all_finite, quantize_all_checked};
 
 /// Bits per channel of an integer image file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,31 +61,53 @@ pub fn encode_image<W: Write + Seek>(
     depth: BitDepth,
     out: &mut W,
 ) -> image::ImageResult<()> {
-    let (w, h) = (image.width, image.height);
-    match (kind, depth) {
-        (ImageKind::Exr, _) => write_exr(image, out).map_err(image::ImageError::IoError),
-        (ImageKind::Png, BitDepth::Eight) => {
-            let data = quantize_all(&image.pixels, 255, |v| v as u8);
-            let buf: ImageBuffer<Rgb<u8>, Vec<u8>> =
-                ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
-            buf.write_to(out, ImageFormat::Png)
-        }
-        (ImageKind::Png, BitDepth::Sixteen) => {
-            let data = quantize_all(&image.pixels, 65535, |v| v);
-            let buf: ImageBuffer<Rgb<u16>, Vec<u16>> =
-                ImageBuffer::from_raw(w, h, data).expect("image size matches its pixels");
-            buf.write_to(out, ImageFormat::Png)
+    match kind {
+        ImageKind::Exr => write_exr(image, out).map_err(image::ImageError::IoError),
+        ImageKind::Png => encode_png(image, &Levels::of(image, depth).0, out),
+    }
+}
+
+/// A PNG's samples: every channel quantised ([`quantize_all`]).
+enum Levels {
+    Eight(Vec<u8>),
+    Sixteen(Vec<u16>),
+}
+
+impl Levels {
+    /// The levels of `image` at `depth`, and whether every channel is finite (one pass).
+    fn of(image: &Image, depth: BitDepth) -> (Self, bool) {
+        match depth {
+            BitDepth::Eight => {
+                let (levels, finite) = quantize_all_checked(&image.pixels);
+                (Levels::Eight(levels), finite)
+            }
+            BitDepth::Sixteen => {
+                let (levels, finite) = quantize_all_checked(&image.pixels);
+                (Levels::Sixteen(levels), finite)
+            }
         }
     }
 }
 
-/// [`quantize`] of every channel, in a loop the compiler vectorises (no call, no branch).
-fn quantize_all<T: Copy + Default>(pixels: &[f32], max: u16, store: impl Fn(u16) -> T) -> Vec<T> {
-    let mut out = vec![T::default(); pixels.len()];
-    for (o, &c) in out.iter_mut().zip(pixels) {
-        *o = store(quantize(c, max));
+/// Encodes the levels of `image` as an RGB PNG.
+fn encode_png<W: Write + Seek>(
+    image: &Image,
+    levels: &Levels,
+    out: &mut W,
+) -> image::ImageResult<()> {
+    let (w, h) = (image.width, image.height);
+    match levels {
+        Levels::Eight(data) => {
+            let buf: ImageBuffer<Rgb<u8>, &[u8]> = ImageBuffer::from_raw(w, h, data.as_slice())
+                .expect("image size matches its pixels");
+            buf.write_to(out, ImageFormat::Png)
+        }
+        Levels::Sixteen(data) => {
+            let buf: ImageBuffer<Rgb<u16>, &[u16]> = ImageBuffer::from_raw(w, h, data.as_slice())
+                .expect("image size matches its pixels");
+            buf.write_to(out, ImageFormat::Png)
+        }
     }
-    out
 }
 
 /// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
@@ -181,12 +203,16 @@ fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()>
 /// Writes `image` to `path` (format from the extension), atomically.
 pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     let kind = ImageKind::from_path(path)?;
-    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie.
-    // Blocks of 64 checked without an early exit vectorise; the position only on failure.
-    let all_finite = image
-        .pixels
-        .chunks(64)
-        .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
+    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie. A PNG's levels
+    // are computed in the same pass as the check (the pass is bound by reading the pixels).
+    let (levels, all_finite) = match kind {
+        ImageKind::Png => {
+            let (levels, finite) = Levels::of(image, depth);
+            (Some(levels), finite)
+        }
+        ImageKind::Exr => (None, all_finite(&image.pixels)),
+    };
+    // The position only on failure.
     if let Some(k) = (!all_finite)
         .then(|| image.pixels.iter().position(|v| !v.is_finite()))
         .flatten()
@@ -203,7 +229,11 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
         )));
     }
     write_atomically(path, |w| {
-        encode_image(image, kind, depth, w).map_err(std::io::Error::other)
+        match &levels {
+            Some(levels) => encode_png(image, levels, w),
+            None => encode_image(image, kind, depth, w),
+        }
+        .map_err(std::io::Error::other)
     })
 }
 
@@ -288,11 +318,8 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
         .decode()
         .map_err(|e| Error::malformed(&origin, format!("cannot decode image: {e}")))?;
     let (image, transparent) = composite(&decoded, background);
-    // Blocks of 64 checked without an early exit vectorise; the position only on failure.
-    let all_finite = image
-        .pixels
-        .chunks(64)
-        .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
+    // The position only on failure.
+    let all_finite = all_finite(&image.pixels);
     if let Some(k) = (!all_finite)
         .then(|| image.pixels.iter().position(|v| !v.is_finite()))
         .flatten()
@@ -387,6 +414,7 @@ fn jpeg_is_complete(bytes: &[u8]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::image::quantize;
 
     #[test]
     fn quantize_clamps_and_rounds_half_away_from_zero() {

@@ -2,12 +2,15 @@
 //! animated GIF (`DIR/NAME.gif`, looping) and, when `ffmpeg` is on `PATH`, an MP4
 //! (`DIR/NAME.mp4`, H.264, yuv420p).
 //!
-//! Frames are asked for (rendered above this layer), written and appended to the GIF one at
-//! a time, in order, so memory does not grow with the length of the video. Every file is written atomically; the GIF and
-//! MP4 appear only once complete.
+//! Frames are asked for (rendered above this layer) one at a time, in order, and written
+//! (PNG, GIF frame) on a second thread while the next one renders — the PNG's quantisation
+//! and deflate no longer add to every frame's render — so memory holds two frames whatever
+//! the video's length. Every file is written atomically; the GIF and MP4 appear only once
+//! complete.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::mpsc;
 
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
@@ -15,7 +18,7 @@ use image::{Delay, Frame, RgbaImage};
 use crate::io::image_file::{BitDepth, save_image};
 use crate::io::output::FolderWriter;
 use crate::io::write_atomically;
-use crate::model::image::quantize;
+use crate::model::image::quantize_all;
 use crate::model::{Error, Image, Result};
 
 /// Largest side of a GIF frame (the format stores sides in 16 bits).
@@ -58,24 +61,23 @@ impl Default for VideoOptions {
 }
 
 fn to_rgba8(image: &Image) -> RgbaImage {
-    let data = image
-        .pixels
+    let levels: Vec<u8> = quantize_all(&image.pixels);
+    let data = levels
         .chunks_exact(3)
-        .flat_map(|p| {
-            [
-                quantize(p[0], 255) as u8,
-                quantize(p[1], 255) as u8,
-                quantize(p[2], 255) as u8,
-                255,
-            ]
-        })
+        .flat_map(|p| [p[0], p[1], p[2], 255])
         .collect();
     RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
 }
 
 /// Writes `frame_count` frames into `dir/name/`, `dir/name.gif` and `dir/name.mp4`.
 /// `next_frame(k, image)` fills `image` with frame `k`; it is called once per frame, in
-/// order.
+/// order, on the calling thread.
+///
+/// Frame `k` is written (its PNG, its GIF frame) on a second thread while frame `k + 1` is
+/// rendered: the files are the same bytes as when written in turn, at the cost of one more
+/// frame in memory (the channel between the two holds none: the render waits until the
+/// writer takes its frame). The first error wins: a failed frame stops the writer, a failed
+/// write stops the renders; either way nothing is renamed into place.
 pub fn write_video(
     frame_count: usize,
     dir: &Path,
@@ -93,59 +95,47 @@ pub fn write_video(
     // its frames with an older video's, and a failed one leaves the old video as it was.
     // Only an earlier video's frames are ever replaced ([`crate::io::output`]).
     let folder = FolderWriter::new(&frames_dir, "video")?;
-    let mut image = Image::default();
-    let mut write_frame = |k: usize| -> Result<RgbaImage> {
-        next_frame(k, &mut image)?;
-        if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
-            return Err(Error::setting(
-                &["size", "gif"],
-                format!(
-                    "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller `size` or no GIF",
-                    image.width, image.height
-                ),
-            ));
-        }
-        save_image(
-            &image,
-            &folder.path().join(format!("frame_{k:04}.png")),
-            BitDepth::Eight,
-        )?;
-        Ok(to_rgba8(&image))
-    };
-    let gif = if options.gif {
-        let path = dir.join(format!("{name}.gif"));
-        let delay = Delay::from_numer_denom_ms(1000, options.fps);
-        let mut failure = None;
-        let written = write_atomically(&path, |w| {
-            let mut encoder = GifEncoder::new_with_speed(w, 10);
-            encoder
-                .set_repeat(Repeat::Infinite)
-                .map_err(std::io::Error::other)?;
+    let gif_path = options.gif.then(|| dir.join(format!("{name}.gif")));
+    std::thread::scope(|scope| {
+        let (to_writer, frames) = mpsc::sync_channel::<(usize, Image)>(0);
+        let (to_renderer, spare) = mpsc::channel::<Image>();
+        let writer = scope.spawn(|| {
+            write_frames(
+                frames,
+                to_renderer,
+                frame_count,
+                folder.path(),
+                gif_path.as_deref(),
+                options.fps,
+            )
+        });
+        let rendered = (|| {
             for k in 0..frame_count {
-                let rgba = match write_frame(k) {
-                    Ok(rgba) => rgba,
-                    Err(e) => {
-                        failure = Some(e);
-                        return Err(std::io::Error::other("a frame failed"));
-                    }
-                };
-                encoder
-                    .encode_frame(Frame::from_parts(rgba, 0, 0, delay))
-                    .map_err(std::io::Error::other)?;
+                let mut image = spare.try_recv().unwrap_or_default();
+                next_frame(k, &mut image)?;
+                if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
+                    return Err(Error::setting(
+                        &["size", "gif"],
+                        format!(
+                            "{}×{} frames do not fit a GIF (at most {MAX_GIF_SIDE} pixels a side): give a smaller `size` or no GIF",
+                            image.width, image.height
+                        ),
+                    ));
+                }
+                if to_writer.send((k, image)).is_err() {
+                    // The writer stopped on an error: it is returned below.
+                    break;
+                }
             }
             Ok(())
-        });
-        if let Some(e) = failure {
-            return Err(e);
-        }
-        written?;
-        Some(path)
-    } else {
-        for k in 0..frame_count {
-            write_frame(k)?;
-        }
-        None
-    };
+        })();
+        // No more frames: the writer finishes (or, short of frames, fails).
+        drop(to_writer);
+        let written = writer
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        rendered.and(written)
+    })?;
     folder.commit()?;
     let (mp4, mp4_note) = if options.mp4 {
         encode_mp4(&frames_dir, dir, name, options.fps)
@@ -154,7 +144,7 @@ pub fn write_video(
     };
     // An earlier run's GIF or MP4 of this name (the output check let it through only as
     // this command's own) would pass for one of these frames: it goes.
-    for (written, ext) in [(gif.is_some(), "gif"), (mp4.is_some(), "mp4")] {
+    for (written, ext) in [(gif_path.is_some(), "gif"), (mp4.is_some(), "mp4")] {
         let stale = dir.join(format!("{name}.{ext}"));
         if !written && stale.is_file() {
             std::fs::remove_file(&stale)
@@ -164,10 +154,69 @@ pub fn write_video(
     Ok(VideoFiles {
         frames_dir,
         frames: frame_count,
-        gif,
+        gif: gif_path,
         mp4,
         mp4_note,
     })
+}
+
+/// The writer's side of [`write_video`]: each frame received is written to
+/// `folder/frame_KKKK.png` and appended to the GIF at `gif` (when given), then handed back
+/// to the renderer for reuse. The GIF is renamed into place only once all `frame_count`
+/// frames are in; a renderer that stops early leaves no GIF.
+fn write_frames(
+    frames: mpsc::Receiver<(usize, Image)>,
+    spare: mpsc::Sender<Image>,
+    frame_count: usize,
+    folder: &Path,
+    gif: Option<&Path>,
+    fps: u32,
+) -> Result<()> {
+    let write_png = |k: usize, image: &Image| {
+        save_image(
+            image,
+            &folder.join(format!("frame_{k:04}.png")),
+            BitDepth::Eight,
+        )
+    };
+    let Some(gif) = gif else {
+        for (k, image) in frames {
+            write_png(k, &image)?;
+            // A renderer that has stopped takes no more frames back.
+            let _ = spare.send(image);
+        }
+        return Ok(());
+    };
+    let delay = Delay::from_numer_denom_ms(1000, fps);
+    let mut failure = None;
+    let written = write_atomically(gif, |w| {
+        let mut encoder = GifEncoder::new_with_speed(w, 10);
+        encoder
+            .set_repeat(Repeat::Infinite)
+            .map_err(std::io::Error::other)?;
+        let mut received = 0;
+        for (k, image) in &frames {
+            if let Err(e) = write_png(k, &image) {
+                failure = Some(e);
+                return Err(std::io::Error::other("a frame failed"));
+            }
+            let rgba = to_rgba8(&image);
+            let _ = spare.send(image);
+            encoder
+                .encode_frame(Frame::from_parts(rgba, 0, 0, delay))
+                .map_err(std::io::Error::other)?;
+            received += 1;
+        }
+        if received < frame_count {
+            // The renderer failed: its error is the one reported.
+            return Err(std::io::Error::other("the frames stopped early"));
+        }
+        Ok(())
+    });
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    written
 }
 
 /// Runs `ffmpeg` on the numbered frames, if it is on `PATH`.

@@ -209,7 +209,8 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
     let scene = load_scene(&request.scene)?;
     let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);
     crate::io::memory::check(
-        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        // A render's, and the frame written while the next one renders (f32 RGB).
+        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL + 12),
         &format!("{}×{} frames", request.lens.width, request.lens.height),
     )?;
     let videos = paths(request, &scene)?;
@@ -236,7 +237,9 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
                     frame.time,
                     &request.options,
                 )?;
-                image.clone_from(context.image());
+                // The frame goes to the writer; the context renders the next into `image`'s
+                // old buffer (the writer's spare, once it has handed one back).
+                context.swap_image(image);
                 progress.tick();
                 Ok(())
             })

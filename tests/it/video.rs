@@ -633,3 +633,76 @@ fn video_frames_replace_an_older_video_whole_and_oversized_gifs_are_refused_firs
     assert_eq!(output.status.code(), Some(2));
     assert!(d.join("w/orbit_t0.50/notes.txt").exists());
 }
+
+/// Frames are written on a second thread while the next renders: a failed render or a
+/// failed write stops both, returns that error (naming the frame file for a write) and
+/// leaves the earlier video as it was, with no partial frames, GIF or temporary files.
+#[test]
+fn a_failed_frame_or_write_leaves_the_earlier_video_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let listing = || {
+        let mut names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    let frame = |k: usize| splat4d::Image::filled(8, 6, [k as f32 / 10.0, 0.25, 0.5]);
+    for gif in [true, false] {
+        let options = splat4d::io::video::VideoOptions {
+            gif,
+            mp4: false,
+            ..Default::default()
+        };
+        let write = |fail_render: Option<usize>, nan_at: Option<usize>, ticks: &mut usize| {
+            splat4d::io::video::write_video(6, dir.path(), "o", &options, |k, image| {
+                *ticks += 1;
+                if fail_render == Some(k) {
+                    return Err(splat4d::Error::usage(format!("frame {k} failed")));
+                }
+                *image = frame(k);
+                if nan_at == Some(k) {
+                    image.pixels[4] = f32::NAN;
+                }
+                Ok(())
+            })
+        };
+        let mut ticks = 0;
+        write(None, None, &mut ticks).unwrap();
+        assert_eq!(ticks, 6);
+        let before = listing();
+        let frames_before = std::fs::read_dir(dir.path().join("o")).unwrap().count();
+        // A render that fails: its error, and the renders stop there.
+        let mut ticks = 0;
+        let error = write(Some(3), None, &mut ticks).unwrap_err().to_string();
+        assert!(error.contains("frame 3 failed"), "{error}");
+        assert_eq!(ticks, 4);
+        assert_eq!(listing(), before, "gif {gif}");
+        // A write that fails (a NaN pixel in frame 2): the error names its file; frame 3 was
+        // rendered while frame 2 was written, and no frame after it.
+        let mut ticks = 0;
+        let error = write(None, Some(2), &mut ticks).unwrap_err().to_string();
+        assert!(
+            error.contains("frame_0002.png") && error.contains("not finite"),
+            "{error}"
+        );
+        assert_eq!(ticks, 4);
+        assert_eq!(listing(), before, "gif {gif}");
+        assert_eq!(
+            std::fs::read_dir(dir.path().join("o")).unwrap().count(),
+            frames_before
+        );
+        // The frames of the first run are the ones on disk.
+        for k in 0..6 {
+            let written =
+                load_image(&dir.path().join(format!("o/frame_{k:04}.png")), [0.0; 3]).unwrap();
+            let expected: Vec<f32> = frame(k)
+                .pixels
+                .iter()
+                .map(|&c| f32::from(quantize(c, 255)) / 255.0)
+                .collect();
+            assert_eq!(written.pixels, expected, "frame {k}");
+        }
+    }
+}
