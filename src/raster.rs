@@ -507,7 +507,8 @@ impl TileGeometry {
 #[repr(C, align(64))]
 pub(crate) struct RowBlock {
     pub(crate) t_anchor: [f32; ROW],
-    pub(crate) offset: [f32; ROW],
+    /// Minus [`RowEntry::offset`] (exact): `t = (lane + shift) + t_anchor` takes it as it is.
+    pub(crate) shift: [f32; ROW],
     pub(crate) row_q: [f32; ROW],
     pub(crate) dv: [f32; ROW],
 }
@@ -568,7 +569,7 @@ fn kernel_rows(form: &RowForm, tile: &TileGeometry, j0: u32, block: &mut RowBloc
         reach.right[r] = open1 & (form.qxx * gap1 * gap1 <= room);
         let anchor = min(max(centre.floor() - x0, 0.0), last_lane);
         block.t_anchor[r] = (x0 + anchor + 0.5 - centre) as f32;
-        block.offset[r] = anchor as f32;
+        block.shift[r] = -(anchor as f32);
         block.row_q[r] = row_q as f32;
         block.dv[r] = dv as f32;
     }
@@ -627,7 +628,7 @@ pub(crate) fn prepare_tile(
         for r in 0..(reach.end_row - reach.first_row) as usize {
             let entry = RowEntry {
                 t_anchor: block.t_anchor[r],
-                offset: block.offset[r],
+                offset: -block.shift[r],
                 row_q: block.row_q[r],
                 dv: block.dv[r],
                 kernel,
@@ -1140,11 +1141,21 @@ pub(crate) mod avx512 {
         for row in 0..(ty1 - ty0) as usize {
             let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
             let mut hi = lo;
+            // Pairs per lane (a row list has fewer than 2³¹ entries).
+            let mut counts = _mm512_setzero_si512();
             for &k in &tiles.rows[row] {
-                let (kernel, block) = (&tiles.kernels[k as usize], &tiles.blocks[k as usize]);
-                // As `RowEntry::lane` with `first` 0: t = (lane + (0 - offset)) + t_anchor.
+                debug_assert!((k as usize) < tiles.kernels.len());
+                // SAFETY: the lists hold only indices of kept kernels, each with a block.
+                let (kernel, block) = unsafe {
+                    (
+                        tiles.kernels.get_unchecked(k as usize),
+                        tiles.blocks.get_unchecked(k as usize),
+                    )
+                };
+                // As `RowEntry::lane` with `first` 0: t = (lane + (0 - offset)) + t_anchor,
+                // and `0 - offset` is `shift` (the same value: `lane + -0` is `lane + 0`).
                 let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - block.offset[row])),
+                    _mm512_add_ps(iota, _mm512_set1_ps(block.shift[row])),
                     _mm512_set1_ps(block.t_anchor[row]),
                 );
                 let q = _mm512_add_ps(
@@ -1153,7 +1164,8 @@ pub(crate) mod avx512 {
                 );
                 let hit =
                     _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
-                pairs += u64::from(hit.count_ones());
+                // Each pair's lane counts one: minus the all-ones of its mask.
+                counts = _mm512_mask_sub_epi32(counts, hit, counts, _mm512_set1_epi32(-1));
                 let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
                 let g_lo = _mm512_cvtps_pd(_mm512_castps512_ps256(g));
                 let g_hi = _mm512_cvtps_pd(_mm512_extractf32x8_ps::<1>(g));
@@ -1164,6 +1176,7 @@ pub(crate) mod avx512 {
                     hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
                 }
             }
+            pairs += _mm512_reduce_add_epi32(counts) as u32 as u64;
             for c in 0..3 {
                 // SAFETY: each channel holds 16 doubles: 8 in `lo`, 8 in `hi`.
                 unsafe {

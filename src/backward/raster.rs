@@ -404,9 +404,9 @@ mod avx512 {
             for &k in &tile.rows[row] {
                 let (kernel, block) = (&tile.kernels[k as usize], &tile.blocks[k as usize]);
                 let a = kernel.amplitude.map(|a| _mm512_set1_ps(a as f32));
-                // As `RowEntry::lane` with `first` 0.
+                // As `RowEntry::lane` with `first` 0 (`0 - offset` is `shift`).
                 let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(0.0 - block.offset[row])),
+                    _mm512_add_ps(iota, _mm512_set1_ps(block.shift[row])),
                     _mm512_set1_ps(block.t_anchor[row]),
                 );
                 let q = _mm512_add_ps(
