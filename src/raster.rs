@@ -6,16 +6,20 @@
 //!
 //! in ascending kernel order, no sorting and no compositing.
 //!
-//! **Layout of the work.** Half a tile row (8 pixels) is the vector. Per tile, each listed
-//! kernel is set up once in f64, branch-free over the tile's 16 rows (no division or square
-//! root: the per-kernel constants come from [`row_forms`], once per frame), into per-half-row
-//! lists of entries: the rows whose chord of the padded ellipse
-//! ([`crate::tiles::padded_qmax`]) reaches a pixel centre of that half row. Then rows outer,
-//! kernels inner: three accumulators of 8 lanes (RGB) stay in registers **in f64** while every
-//! entry of the half row passes over them, and the half row is rounded to f32 and written
-//! straight into the image. Tile rows (bands of 16 image rows) run in parallel; every pixel
-//! adds the same terms in the same order whatever the number of threads. The backward
-//! ([`crate::backward::raster`]) walks the same entries.
+//! **Layout of the work.** A tile row is the vector: half of it (8 pixels) on the AVX2 and
+//! baseline paths, all 16 pixels on AVX-512. Per tile, each listed kernel is set up once in
+//! f64, branch-free over the tile's 16 rows ([`kernel_rows`]; no division or square root:
+//! the per-kernel constants come from [`row_forms`], once per frame), and joins the list of
+//! every row (or half row) whose chord of the padded ellipse ([`crate::tiles::padded_qmax`])
+//! reaches one of its pixel centres. The half-row paths copy each row's constants into
+//! [`RowEntry`]s (written at the end of every list and kept by advancing the length, no
+//! branch per row); the AVX-512 path keeps each kernel's 16 rows as one [`RowBlock`] and its
+//! rows as a bit mask, and builds each row's list of kernel indices 16 kernels at a time by
+//! compressing them. Then rows outer, kernels inner: per row, accumulators (RGB) stay in
+//! registers **in f64** while every entry of the row passes over them, and the row is rounded
+//! to f32 and written straight into the image. Tile rows (bands of 16 image rows) run in
+//! parallel; every pixel adds the same terms in the same order whatever the number of
+//! threads. The backward ([`crate::backward::raster`]) evaluates the same pairs.
 //!
 //! **Per pixel** (SPEC §5, precision): with `Δv` the row's offset from the centre, the
 //! quadratic form is `q = Qxx t² + Δv²/Σ2yy` with `t = Δu + k Δv` (see [`crate::project`]);
@@ -25,24 +29,29 @@
 //! `a_c · G` is an exact f64 product added to the f64 sum, so the error does not grow with
 //! the number of kernels on a pixel.
 //!
-//! **Paths.** The half-row loop is written twice, with AVX2 intrinsics and portably, with the
-//! same operations in the same order; the tile set-up is one portable loop compiled for each
-//! path (AVX-512, AVX2+FMA, baseline x86-64), chosen at run time ([`SimdPath`]). No fused
+//! **Paths.** The row loop is written three times, with AVX-512 intrinsics (16 lanes), AVX2
+//! intrinsics (8) and portably (8), with the same operations in the same order; the tile
+//! set-up is one portable loop compiled for each path (AVX-512, AVX2+FMA, baseline x86-64),
+//! chosen at run time ([`SimdPath`]; `SPLAT4D_SIMD` names a narrower one). No fused
 //! operation is formed in f32, the one in the f64 accumulation rounds like `acc + a G`
 //! because `a G` is exact, and every conversion is exact, so all paths give the same image
-//! bit for bit (tested on every path the CPU has). [`crate::bench::ceiling_probe`] is the ideal loop the
-//! renderer is measured against.
+//! bit for bit (tested on every path the CPU has): a whole row's list is the union of its
+//! two half lists in the same order, and the lanes of a half a kernel does not reach add
+//! exact zeros. [`crate::bench::ceiling_probe`] is the ideal loop the renderer is measured
+//! against, compiled for the same path (16 lanes a register on AVX-512).
 //!
-//! **Where the other half of the ceiling goes** (100k kernels at 1920×1080, instructions
-//! counted by callgrind on the AVX2 path; `docs/performance.md` has the method): a frame
-//! executes about 18.8 instructions per pair, 17.7 of them here: the half-row loop's
-//! intrinsics 8.8 (the probe has no mask, no pair count, f32 accumulators and its row's
-//! constants in registers), the tile set-up (`prepare_tile`'s 16-row f64 block and the
-//! pushes into the half-row lists) 4–7.5, the loop's control and the half rows' writes the
-//! rest; slicing, projection and binning a few percent. The work is bound by instructions,
-//! not memory (entries stay in each worker's scratch). Tile rows are the parallel unit: at
-//! 1080p the largest of the 68 is 2.5 % of the frame, so two threads finish within ~1 % of
-//! each other; many more threads would need the tile as the unit.
+//! **Where the rest of the ceiling goes** (100k kernels at 1920×1080, one thread, AVX-512,
+//! `perf record`; `docs/performance.md` has the method and the figures): about 62 % of a
+//! frame's time is the row loop, 17 % the tile set-up ([`avx512::prepare_tile`]), the rest
+//! slicing, projection, binning and the row forms. Per row entry the loop runs the probe's
+//! work for 16 lanes (`q`, the polynomial `exp`) plus what the probe has not: the pair test
+//! and count, the widening of `G` to f64 and six f64 multiply-adds where the probe has three
+//! f32 ones, and the loads of the row's constants; and a row entry holds on average 10.3
+//! pairs of its 16 lanes (the probe counts all 16). The work is bound by instructions and
+//! their latency, not memory (each tile's blocks and lists stay in its worker's cache). Tile
+//! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
+//! threads finish within ~1 % of each other; many more threads would need the tile as the
+//! unit.
 
 use std::fmt;
 use std::str::FromStr;
@@ -670,9 +679,9 @@ pub(crate) struct TileBlocks {
     pub(crate) entry_of: Vec<u32>,
     /// Per tile kernel, its rows (rows of the tile, 0 to 15).
     pub(crate) blocks: Vec<RowBlock>,
-    /// Per tile kernel, bit `r` set when it is listed on row `r`; padded with zeros to a
-    /// multiple of 16.
-    masks: Vec<u32>,
+    /// Per tile kernel, bit `r` set when it is listed on row `r` (padded with zeros to a
+    /// multiple of 16 when the lists are built).
+    pub(crate) masks: Vec<u32>,
     /// Per row of the tile, its tile kernels in ascending order.
     pub(crate) rows: [Vec<u32>; ROW],
 }
@@ -725,7 +734,7 @@ fn tile_avx512<const FAST: bool>(
     scratch: &mut TileScratch,
     band: &mut [f32],
 ) -> u64 {
-    avx512::prepare_tile(frame.bins, frame.forms, t, &mut scratch.whole_rows);
+    avx512::prepare_tile::<true>(frame.bins, frame.forms, t, &mut scratch.whole_rows);
     avx512::sum_tile::<FAST>(frame.bins, t, frame.background, &scratch.whole_rows, band)
 }
 
@@ -999,10 +1008,11 @@ pub(crate) mod avx512 {
     /// the row, 16 kernels at a time (compressed indices, in ascending order). A row's
     /// list is the union of its two half lists of [`super::prepare_tile`] in the same
     /// order, so summing it gives the same bits: a lane that no half list holds is never a
-    /// pair, and adds an exact zero.
+    /// pair, and adds an exact zero. Without `LISTS` the row lists are left as they were
+    /// (the backward walks each kernel's mask instead).
     #[inline]
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-    pub(crate) fn prepare_tile(
+    pub(crate) fn prepare_tile<const LISTS: bool>(
         bins: &TileBins,
         forms: &[RowForm],
         t: usize,
@@ -1042,6 +1052,9 @@ pub(crate) mod avx512 {
                 tiles.entry_of.push(n as u32);
                 tiles.masks.push(mask);
             }
+        }
+        if !LISTS {
+            return;
         }
         let count = tiles.masks.len();
         tiles.masks.resize(count.next_multiple_of(ROW), 0);

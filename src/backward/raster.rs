@@ -248,9 +248,15 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
 #[inline(always)]
 fn store_partials(moments: &[Moments], entry_of: &[u32], run: &mut [[f32; 8]]) {
     for (moments, &n) in moments.iter().zip(entry_of) {
-        run[n as usize] =
-            std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32);
+        run[n as usize] = partial_of(moments);
     }
+}
+
+/// One tile kernel's partial: each moment summed over the 16 columns in f64, in column
+/// order.
+#[inline(always)]
+fn partial_of(moments: &Moments) -> [f32; 8] {
+    std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32)
 }
 
 /// One half row's entries into their kernels' moments (lane `i` is tile pixel `first + i`;
@@ -354,18 +360,22 @@ mod avx2 {
     }
 }
 
-/// The backward tile with AVX-512: the forward's whole-row lists, 16 lanes a row.
+/// The backward tile with AVX-512, kernel by kernel: each tile kernel walks its own rows
+/// (from its row mask, ascending) with its eight moments in registers, 16 columns a
+/// register. A column adds the same terms in the same order as the rows-outer loops of the
+/// other paths (one term per row, rows ascending), so the sums are the same bits; the lanes
+/// of a half the kernel does not reach add exact zeros.
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::{BackwardScratch, ROW, store_partials};
+    use super::{BackwardScratch, Moments, ROW, partial_of};
     use crate::raster::RowForm;
     use crate::raster::avx512::{gaussian, prepare_tile};
     use crate::tiles::TileBins;
 
-    /// [`super::backward_tile`] by whole rows: per entry the operations of
-    /// [`super::half_row`] on 16 lanes, into the kernel's 16 columns.
+    /// [`super::backward_tile`] with AVX-512: per kernel and row the operations of
+    /// [`super::half_row`] on 16 lanes.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
     pub(super) fn backward_tile<const FAST: bool>(
         bins: &TileBins,
@@ -375,21 +385,14 @@ mod avx512 {
         run: &mut [[f32; 8]],
         scratch: &mut BackwardScratch,
     ) {
-        prepare_tile(bins, forms, t, &mut scratch.tile.whole_rows);
+        prepare_tile::<false>(bins, forms, t, &mut scratch.tile.whole_rows);
         let tile = &scratch.tile.whole_rows;
-        scratch.moments.clear();
-        scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let lanes = (tx1 - tx0) as usize;
         let width = bins.width as usize;
-        let iota = _mm512_setr_ps(
-            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
-        );
-        // Lanes past the image's right edge never count.
-        let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
-        for row in 0..(ty1 - ty0) as usize {
-            // ∂L/∂C of the row, channel by channel; zero past the image's edge.
-            let mut v = [[0.0_f32; ROW]; 3];
+        // ∂L/∂C of the tile's rows, channel by channel; zero past the image's edges.
+        let mut v = [[[0.0_f32; ROW]; 3]; ROW];
+        for (row, v) in v.iter_mut().enumerate().take((ty1 - ty0) as usize) {
             let start = 3 * ((ty0 as usize + row) * width + tx0 as usize);
             for (i, pixel) in v_image[start..start + 3 * lanes]
                 .chunks_exact(3)
@@ -399,11 +402,20 @@ mod avx512 {
                     v[c][i] = pixel[c];
                 }
             }
-            // SAFETY: each channel holds 16 floats.
-            let v = v.map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
-            for &k in &tile.rows[row] {
-                let (kernel, block) = (&tile.kernels[k as usize], &tile.blocks[k as usize]);
-                let a = kernel.amplitude.map(|a| _mm512_set1_ps(a as f32));
+        }
+        let iota = _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        );
+        // Lanes past the image's right edge never count.
+        let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
+        for (k, kernel) in tile.kernels.iter().enumerate() {
+            let block = &tile.blocks[k];
+            let a = kernel.amplitude.map(|a| _mm512_set1_ps(a as f32));
+            let mut sums = [_mm512_setzero_ps(); 8];
+            let mut rows = tile.masks[k];
+            while rows != 0 {
+                let row = rows.trailing_zeros() as usize;
+                rows &= rows - 1;
                 // As `RowEntry::lane` with `first` 0 (`0 - offset` is `shift`).
                 let t = _mm512_add_ps(
                     _mm512_add_ps(iota, _mm512_set1_ps(block.shift[row])),
@@ -419,6 +431,8 @@ mod avx512 {
                     // Every term is zero: adding them would change nothing (sums start at +0).
                     continue;
                 }
+                // SAFETY: each channel of the row holds 16 floats.
+                let v = v[row].map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
                 let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
                 let w = _mm512_mul_ps(
                     _mm512_add_ps(
@@ -440,17 +454,17 @@ mod avx512 {
                     _mm512_mul_ps(dv, wt),
                     _mm512_mul_ps(dv2, w),
                 ];
-                let m = &mut scratch.moments[k as usize];
-                for (sum, term) in m.iter_mut().zip(terms) {
-                    // SAFETY: each moment holds 16 floats.
-                    unsafe {
-                        let p = sum.as_mut_ptr();
-                        _mm512_storeu_ps(p, _mm512_add_ps(_mm512_loadu_ps(p), term));
-                    }
+                for (sum, term) in sums.iter_mut().zip(terms) {
+                    *sum = _mm512_add_ps(*sum, term);
                 }
             }
+            let mut moments: Moments = [[0.0; ROW]; 8];
+            for (column, sum) in moments.iter_mut().zip(sums) {
+                // SAFETY: each moment holds 16 floats.
+                unsafe { _mm512_storeu_ps(column.as_mut_ptr(), sum) };
+            }
+            run[tile.entry_of[k] as usize] = partial_of(&moments);
         }
-        store_partials(&scratch.moments, &tile.entry_of, run);
     }
 }
 
