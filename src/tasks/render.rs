@@ -165,27 +165,40 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         &["png", "exr"],
         &[&view.scene, &view.camera.file()],
     )?;
-    let (scene, camera) = view.load()?;
-    check_render_memory(&camera, &scene)?;
-    let mut context = RenderContext::new();
-    let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
-    let stats = with_threads(threads_for(view.threads, units), || {
-        context.render(&scene, &camera, view.time, &view.options)
-    })??;
-    if request.overlay {
-        let (w, h, rgb) = draw_overlay(&context)?;
-        save_rgb8_png(&request.out, w, h, &rgb)?;
-    } else {
-        save_image(context.image(), &request.out, request.depth)?;
+    // With `threads` given, loading and writing run on those threads too (a one-thread
+    // render starts no thread at all); without, the render's size decides (small work on
+    // this thread) and loading and writing use the global pool.
+    let run = || -> Result<RenderSummary> {
+        let (scene, camera) = view.load()?;
+        check_render_memory(&camera, &scene)?;
+        let mut context = RenderContext::new();
+        let stats = if view.threads.is_some() {
+            context.render(&scene, &camera, view.time, &view.options)?
+        } else {
+            let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
+            with_threads(threads_for(None, units), || {
+                context.render(&scene, &camera, view.time, &view.options)
+            })??
+        };
+        if request.overlay {
+            let (w, h, rgb) = draw_overlay(&context)?;
+            save_rgb8_png(&request.out, w, h, &rgb)?;
+        } else {
+            save_image(context.image(), &request.out, request.depth)?;
+        }
+        Ok(RenderSummary {
+            out: request.out.clone(),
+            size: (camera.width, camera.height),
+            time: view.time,
+            projected: stats.projected,
+            kernels: scene.len(),
+            pairs: stats.pairs,
+        })
+    };
+    match view.threads {
+        Some(_) => with_threads(view.threads, run)?,
+        None => run(),
     }
-    Ok(RenderSummary {
-        out: request.out.clone(),
-        size: (camera.width, camera.height),
-        time: view.time,
-        projected: stats.projected,
-        kernels: scene.len(),
-        pairs: stats.pairs,
-    })
 }
 
 /// `splat4d grad`.
