@@ -11,6 +11,7 @@ dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 target/release/examples/bench_scene_file 100000 1920 1080 "$dir/s100k.ply" "$dir/c1080.json"
 target/release/examples/bench_scene_file 10000 512 512 "$dir/s10k.ply" "$dir/c512.json"
+target/release/examples/bench_scene_file 100000 1920 1080 "$dir/a100k.ply" "$dir/c1080.json" 0.5
 ceilings=$("$bin" bench --ceiling 2>/dev/null)
 echo "$ceilings"
 for threads in 1 2; do
@@ -30,4 +31,16 @@ for threads in 1 2; do
 p, t, c = $pairs, $median, $ceiling
 print(f'{\"$1\":>10} {\"$threads\"} thread(s): median {t*1e3:.0f} ms, {p/1e6:.1f} M pairs, {p/t:.3e} pairs/s = {100*p/t/c:.1f}% of the ceiling')"
   done
+done
+# The alpha blend on the same 100k kernels at opacity 0.5, against the additive, 2 threads.
+for scene in s100k.ply a100k.ply; do
+  times=()
+  for _ in $(seq "$runs"); do
+    start=$(date +%s.%N)
+    "$bin" render --scene "$dir/$scene" --camera "$dir/c1080.json" --time 0.5 --out "$dir/o.exr" --threads 2 >/dev/null
+    end=$(date +%s.%N)
+    times+=("$(echo "$end - $start" | bc -l)")
+  done
+  median=$(printf '%s\n' "${times[@]}" | sort -g | sed -n "$(( (runs + 1) / 2 ))p")
+  echo "$scene 2 threads: median $(echo "$median * 1000" | bc -l | cut -d. -f1) ms"
 done
