@@ -8,12 +8,12 @@
 //!
 //! **Layout of the work.** A tile row is the vector: half of it (8 pixels) on the AVX2 and
 //! baseline paths, all 16 pixels on AVX-512. Per tile, each listed kernel is set up once in
-//! f64, branch-free over the tile's 16 rows ([`kernel_rows`]; no division or square root:
+//! f64, branch-free over the tile's 16 rows (`kernel_rows`; no division or square root:
 //! the per-kernel constants come from [`row_forms`], once per frame), and joins the list of
 //! every row (or half row) whose chord of the padded ellipse ([`crate::tiles::padded_qmax`])
 //! reaches one of its pixel centres. The half-row paths copy each row's constants into
-//! [`RowEntry`]s (written at the end of every list and kept by advancing the length, no
-//! branch per row); the AVX-512 path keeps each kernel's 16 rows as one [`RowBlock`] and its
+//! `RowEntry`s (written at the end of every list and kept by advancing the length, no
+//! branch per row); the AVX-512 path keeps each kernel's 16 rows as one `RowBlock` and its
 //! rows as a bit mask, and builds each row's list of kernel indices 16 kernels at a time by
 //! compressing them. Then rows outer, kernels inner: per row, accumulators (RGB) stay in
 //! registers **in f64** while every entry of the row passes over them, and the row is rounded
@@ -42,7 +42,7 @@
 //!
 //! **Where the rest of the ceiling goes** (100k kernels at 1920×1080, one thread, AVX-512,
 //! `perf record`; `docs/performance.md` has the method and the figures): about 62 % of a
-//! frame's time is the row loop, 17 % the tile set-up ([`avx512::prepare_tile`]), the rest
+//! frame's time is the row loop, 17 % the tile set-up (`avx512::prepare_tile`), the rest
 //! slicing, projection, binning and the row forms. Per row entry the loop runs the probe's
 //! work for 16 lanes (`q`, the polynomial `exp`) plus what the probe has not: the pair test
 //! and count, the widening of `G` to f64 and six f64 multiply-adds where the probe has three
@@ -999,7 +999,9 @@ pub(crate) mod avx2 {
 pub(crate) mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::{ROW, RowBlock, RowForm, TileBlocks, TileGeometry, kernel_rows, prefetch_form};
+    use super::{
+        ROW, RowBlock, RowForm, TileBlocks, TileGeometry, TileKernel, kernel_rows, prefetch_form,
+    };
     use crate::tiles::TileBins;
 
     /// Prepares tile `t` by whole rows into `tiles`: per kernel its [`RowBlock`] of the
@@ -1114,6 +1116,39 @@ pub(crate) mod avx512 {
         _mm512_mul_ps(p, _mm512_castsi512_ps(scale))
     }
 
+    /// The lane numbers 0..16.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    fn lane_numbers() -> __m512 {
+        _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        )
+    }
+
+    /// [`super::RowEntry::lane`] on the 16 lanes of tile row `row` of a kernel (its
+    /// [`RowBlock`]): `t`, `q` and the mask of the pairs (within `valid`, the lanes inside
+    /// the image). With `first` 0, `(lane + (0 - offset)) + t_anchor` is `(lane + shift) +
+    /// t_anchor` (the same value: `lane + -0` is `lane + 0`).
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(crate) fn row_lanes(
+        kernel: &TileKernel,
+        block: &RowBlock,
+        row: usize,
+        valid: __mmask16,
+    ) -> (__m512, __m512, __mmask16) {
+        let t = _mm512_add_ps(
+            _mm512_add_ps(lane_numbers(), _mm512_set1_ps(block.shift[row])),
+            _mm512_set1_ps(block.t_anchor[row]),
+        );
+        let q = _mm512_add_ps(
+            _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
+            _mm512_set1_ps(block.row_q[row]),
+        );
+        let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
+        (t, q, hit)
+    }
+
     /// `exp(-½ q)` on 16 lanes as [`super::gaussian`] evaluates it.
     #[inline]
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
@@ -1144,9 +1179,6 @@ pub(crate) mod avx512 {
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let width = bins.width as usize;
         let lanes = (tx1 - tx0) as usize;
-        let iota = _mm512_setr_ps(
-            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
-        );
         // Lanes past the image's right edge never count.
         let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
         let mut pairs = 0_u64;
@@ -1165,18 +1197,7 @@ pub(crate) mod avx512 {
                         tiles.blocks.get_unchecked(k as usize),
                     )
                 };
-                // As `RowEntry::lane` with `first` 0: t = (lane + (0 - offset)) + t_anchor,
-                // and `0 - offset` is `shift` (the same value: `lane + -0` is `lane + 0`).
-                let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(block.shift[row])),
-                    _mm512_set1_ps(block.t_anchor[row]),
-                );
-                let q = _mm512_add_ps(
-                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
-                    _mm512_set1_ps(block.row_q[row]),
-                );
-                let hit =
-                    _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
+                let (_, q, hit) = row_lanes(kernel, block, row, valid);
                 // Each pair's lane counts one: minus the all-ones of its mask.
                 counts = _mm512_mask_sub_epi32(counts, hit, counts, _mm512_set1_epi32(-1));
                 let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));

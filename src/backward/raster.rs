@@ -17,9 +17,10 @@
 //! forward's per-half-row entries ([`crate::raster`]: the same pairs, the same `t` and `q`)
 //! and accumulates, per kernel, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` pixel column by
 //! pixel column over the tile's rows (f32, at most 16 terms a column), then over the 16
-//! columns in f64, into one partial per (tile, kernel) entry. The AVX-512 path walks the
-//! forward's whole-row lists (16 lanes a row, [`crate::raster::prepare_tile_lists`]): a
-//! column adds the same terms in the same order, and the lanes of a half the kernel does not
+//! columns in f64, into one partial per (tile, kernel) entry. The AVX-512 path takes the
+//! forward's whole-row tile set-up (16 lanes a row, `raster::avx512::prepare_tile`) and walks
+//! each kernel's own rows with its moments in registers: a column adds the same terms in the
+//! same order (one per row, rows ascending), and the lanes of a half the kernel does not
 //! reach add exact zeros. The entries are reduced in entry order (tile-major) in
 //! f64: no atomics, and the result does not depend on the thread count or the SIMD path (the
 //! AVX2 loop performs the portable loop's operations in the same order).
@@ -371,7 +372,7 @@ mod avx512 {
 
     use super::{BackwardScratch, Moments, ROW, partial_of};
     use crate::raster::RowForm;
-    use crate::raster::avx512::{gaussian, prepare_tile};
+    use crate::raster::avx512::{gaussian, prepare_tile, row_lanes};
     use crate::tiles::TileBins;
 
     /// [`super::backward_tile`] with AVX-512: per kernel and row the operations of
@@ -403,9 +404,6 @@ mod avx512 {
                 }
             }
         }
-        let iota = _mm512_setr_ps(
-            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
-        );
         // Lanes past the image's right edge never count.
         let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
         for (k, kernel) in tile.kernels.iter().enumerate() {
@@ -416,17 +414,7 @@ mod avx512 {
             while rows != 0 {
                 let row = rows.trailing_zeros() as usize;
                 rows &= rows - 1;
-                // As `RowEntry::lane` with `first` 0 (`0 - offset` is `shift`).
-                let t = _mm512_add_ps(
-                    _mm512_add_ps(iota, _mm512_set1_ps(block.shift[row])),
-                    _mm512_set1_ps(block.t_anchor[row]),
-                );
-                let q = _mm512_add_ps(
-                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
-                    _mm512_set1_ps(block.row_q[row]),
-                );
-                let hit =
-                    _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
+                let (t, q, hit) = row_lanes(kernel, block, row, valid);
                 if hit == 0 {
                     // Every term is zero: adding them would change nothing (sums start at +0).
                     continue;

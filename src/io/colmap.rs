@@ -27,7 +27,8 @@
 //! Every count in a binary file is checked against the bytes it has left before anything
 //! is allocated for it; every error names the file, the item (camera id, image id, point,
 //! line) and the field. (The reader is written here: the one COLMAP crate found, `colmap`
-//! 0.1, is a young whole-SfM library needing a newer Rust than this crate's 1.85.)
+//! 0.1, is a young whole-SfM library that needed a newer Rust than this crate did when the
+//! reader was written.)
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
