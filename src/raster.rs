@@ -199,7 +199,10 @@ impl SimdPath {
         {
             if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
                 paths.push(SimdPath::Avx2);
-                if is_x86_feature_detected!("avx512f")
+                // The AVX-512 loops count pairs with POPCNT too (every AVX-512 CPU has it;
+                // a virtual machine may hide it).
+                if is_x86_feature_detected!("popcnt")
+                    && is_x86_feature_detected!("avx512f")
                     && is_x86_feature_detected!("avx512bw")
                     && is_x86_feature_detected!("avx512dq")
                     && is_x86_feature_detected!("avx512vl")
@@ -669,9 +672,9 @@ fn prefetch_form(forms: &[RowForm], entries: &[u32], n: usize) {
 
 /// The AVX-512 loops' form of a prepared tile: per tile kernel its [`RowBlock`] (the tile's
 /// 16 rows) and, per row, the tile kernels whose padded ellipse reaches a pixel centre of
-/// that row, in list order — the whole-row lists of [`prepare_tile_lists`], held as indices
-/// so that a kernel's rows are written once, as a block, and the lists are built from the
-/// kernels' row masks 16 kernels at a time.
+/// that row, in list order — the union of the row's two half lists of [`prepare_tile`], held
+/// as indices so that a kernel's rows are written once, as a block, and the lists are built
+/// from the kernels' row masks 16 kernels at a time.
 #[derive(Default)]
 pub(crate) struct TileBlocks {
     pub(crate) kernels: Vec<TileKernel>,
@@ -686,7 +689,7 @@ pub(crate) struct TileBlocks {
     pub(crate) rows: [Vec<u32>; ROW],
 }
 
-/// What every tile of a frame shares./// What every tile of a frame shares.
+/// What every tile of a frame shares.
 struct Frame<'a> {
     bins: &'a TileBins,
     forms: &'a [RowForm],
@@ -1025,6 +1028,11 @@ pub(crate) mod avx512 {
         tiles.kernels.clear();
         tiles.entry_of.clear();
         tiles.masks.clear();
+        // No list outlives its tile (the lists of rows past the image, or all of them
+        // without `LISTS`, stay empty).
+        for list in &mut tiles.rows {
+            list.clear();
+        }
         let entries = bins.tile_entries(t);
         if tiles.blocks.len() < entries.len() {
             tiles.blocks.resize(entries.len(), RowBlock::default());
@@ -1062,7 +1070,6 @@ pub(crate) mod avx512 {
         tiles.masks.resize(count.next_multiple_of(ROW), 0);
         let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
         for (r, list) in tiles.rows[..(ty1 - ty0) as usize].iter_mut().enumerate() {
-            list.clear();
             // Each chunk stores 16 indices and keeps those of its kernels on the row.
             list.reserve(count + ROW);
             let out = list.as_mut_ptr();
@@ -1186,7 +1193,7 @@ pub(crate) mod avx512 {
         for row in 0..(ty1 - ty0) as usize {
             let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
             let mut hi = lo;
-            // Pairs per lane (a row list has fewer than 2³¹ entries).
+            // Pairs per lane (summed exactly below while a row has fewer than 2³² pairs).
             let mut counts = _mm512_setzero_si512();
             for &k in &tiles.rows[row] {
                 debug_assert!((k as usize) < tiles.kernels.len());
@@ -1257,15 +1264,17 @@ mod tests {
     #[test]
     fn every_simd_path_gives_the_same_image_bit_for_bit() {
         use crate::render::{RenderContext, RenderOptions};
-        // 161 × 97: partial tiles on the right and at the bottom.
-        let camera = crate::scenes::synthetic::bench_camera(161, 97);
         let paths = SimdPath::available();
         eprintln!("paths on this CPU: {paths:?}");
-        for (n, cutoff, exp) in [
-            (3000, 1.0 / 255.0, ExpMode::Poly),
-            (300, 0.0, ExpMode::Poly),
-            (500, 1.0 / 255.0, ExpMode::Std),
+        // Partial tiles on the right (1 and 11 columns: a half with no lane, and one with
+        // some lanes past the edge) and at the bottom.
+        for ((w, h), n, cutoff, exp) in [
+            ((161, 97), 3000, 1.0 / 255.0, ExpMode::Poly),
+            ((171, 83), 3000, 1.0 / 255.0, ExpMode::Poly),
+            ((161, 97), 300, 0.0, ExpMode::Poly),
+            ((161, 97), 500, 1.0 / 255.0, ExpMode::Std),
         ] {
+            let camera = crate::scenes::synthetic::bench_camera(w, h);
             let scene = crate::scenes::synthetic::bench_scene(n, 5);
             let options = RenderOptions {
                 cutoff,
