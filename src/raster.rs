@@ -689,6 +689,28 @@ pub(crate) struct TileBlocks {
     pub(crate) rows: [Vec<u32>; ROW],
 }
 
+/// Rounds a row's channel planes (f64, pixel `i` at index `i` of each) to f32 into the
+/// interleaved RGB pixels of `out`, as many as `out` holds.
+#[inline(always)]
+pub(crate) fn write_planes<const N: usize>(planes: &[[f64; N]; 3], out: &mut [f32]) {
+    for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+        for c in 0..3 {
+            pixel[c] = planes[c][i] as f32;
+        }
+    }
+}
+
+/// Reads the interleaved RGB pixels of `pixels` into a row's channel planes (pixel `i` at
+/// index `i` of each); the planes' other entries are left as they are.
+#[inline(always)]
+pub(crate) fn read_planes<const N: usize>(pixels: &[f32], planes: &mut [[f32; N]; 3]) {
+    for (i, pixel) in pixels.chunks_exact(3).enumerate() {
+        for c in 0..3 {
+            planes[c][i] = pixel[c];
+        }
+    }
+}
+
 /// What every tile of a frame shares.
 struct Frame<'a> {
     bins: &'a TileBins,
@@ -853,11 +875,7 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
             )
         };
         let out = &mut band[3 * (row * width + rect[0] as usize + first)..][..3 * lanes];
-        for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
-            for c in 0..3 {
-                pixel[c] = acc[c][i] as f32;
-            }
-        }
+        write_planes(&acc, out);
     }
     pairs
 }
@@ -1004,6 +1022,7 @@ pub(crate) mod avx512 {
 
     use super::{
         ROW, RowBlock, RowForm, TileBlocks, TileGeometry, TileKernel, kernel_rows, prefetch_form,
+        write_planes,
     };
     use crate::tiles::TileBins;
 
@@ -1225,12 +1244,10 @@ pub(crate) mod avx512 {
                     _mm512_storeu_pd(acc[c].as_mut_ptr().add(8), hi[c]);
                 }
             }
-            let out = &mut band[3 * (row * width + tx0 as usize)..][..3 * lanes];
-            for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
-                for c in 0..3 {
-                    pixel[c] = acc[c][i] as f32;
-                }
-            }
+            write_planes(
+                &acc,
+                &mut band[3 * (row * width + tx0 as usize)..][..3 * lanes],
+            );
         }
         pairs
     }

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use crate::project::ProjectedKernels;
 use crate::raster::{
     ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile,
+    prepare_tile, read_planes,
 };
 use crate::tiles::TileBins;
 
@@ -207,14 +207,7 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         // ∂L/∂C of the half row, channel by channel; zero past the image's edge.
         let mut v = [[0.0_f32; LANES]; 3];
         let start = 3 * ((ty0 as usize + row) * width + tx0 as usize + first);
-        for (i, pixel) in v_image[start..start + 3 * lanes]
-            .chunks_exact(3)
-            .enumerate()
-        {
-            for c in 0..3 {
-                v[c][i] = pixel[c];
-            }
-        }
+        read_planes(&v_image[start..start + 3 * lanes], &mut v);
         let entries = &tile.halves[index];
         let (first_lane, lanes_f) = (first as f32, lanes as f32);
         if AVX2 {
@@ -370,7 +363,7 @@ mod avx2 {
 mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::{BackwardScratch, Moments, ROW, partial_of};
+    use super::{BackwardScratch, Moments, ROW, partial_of, read_planes};
     use crate::raster::RowForm;
     use crate::raster::avx512::{gaussian, prepare_tile, row_lanes};
     use crate::tiles::TileBins;
@@ -395,14 +388,7 @@ mod avx512 {
         let mut v = [[[0.0_f32; ROW]; 3]; ROW];
         for (row, v) in v.iter_mut().enumerate().take((ty1 - ty0) as usize) {
             let start = 3 * ((ty0 as usize + row) * width + tx0 as usize);
-            for (i, pixel) in v_image[start..start + 3 * lanes]
-                .chunks_exact(3)
-                .enumerate()
-            {
-                for c in 0..3 {
-                    v[c][i] = pixel[c];
-                }
-            }
+            read_planes(&v_image[start..start + 3 * lanes], v);
         }
         // Lanes past the image's right edge never count.
         let valid: __mmask16 = ((1_u32 << lanes) - 1) as __mmask16;
