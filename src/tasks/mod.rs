@@ -79,7 +79,8 @@ pub const MAX_THREADS: usize = 1024;
 
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool (one thread per
 /// core) when `None`. One thread is the calling thread itself (no thread is started: a
-/// small command pays nothing for a pool). Results do not depend on the thread count.
+/// small command pays nothing for a pool), and work already running on a pool of `threads`
+/// stays there (no second pool). Results do not depend on the thread count.
 pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(work()),
@@ -87,6 +88,9 @@ pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + 
             &["threads"],
             format!("`threads` {n} must be between 1 and {MAX_THREADS}"),
         )),
+        Some(n) if rayon::current_thread_index().is_some() && rayon::current_num_threads() == n => {
+            Ok(work())
+        }
         Some(1) => on_this_thread(work),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()

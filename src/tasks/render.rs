@@ -168,18 +168,14 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
     // With `threads` given, loading and writing run on those threads too (a one-thread
     // render starts no thread at all); without, the render's size decides (small work on
     // this thread) and loading and writing use the global pool.
-    let run = || -> Result<RenderSummary> {
+    with_threads(view.threads, || -> Result<RenderSummary> {
         let (scene, camera) = view.load()?;
         check_render_memory(&camera, &scene)?;
         let mut context = RenderContext::new();
-        let stats = if view.threads.is_some() {
-            context.render(&scene, &camera, view.time, &view.options)?
-        } else {
-            let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
-            with_threads(threads_for(None, units), || {
-                context.render(&scene, &camera, view.time, &view.options)
-            })??
-        };
+        let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
+        let stats = with_threads(threads_for(view.threads, units), || {
+            context.render(&scene, &camera, view.time, &view.options)
+        })??;
         if request.overlay {
             let (w, h, rgb) = draw_overlay(&context)?;
             save_rgb8_png(&request.out, w, h, &rgb)?;
@@ -194,11 +190,7 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
             kernels: scene.len(),
             pairs: stats.pairs,
         })
-    };
-    match view.threads {
-        Some(_) => with_threads(view.threads, run)?,
-        None => run(),
-    }
+    })?
 }
 
 /// `splat4d grad`.
