@@ -590,10 +590,7 @@ fn kernel_rows(form: &RowForm, tile: &TileGeometry, j0: u32, block: &mut RowBloc
 
 /// Fills `scratch` with tile `t`'s kernels and, per half row of the tile, the entries of the
 /// kernels whose padded ellipse reaches a pixel centre of that half row inside the tile (and
-/// its box). f64 throughout; no division or square root. Inlined into each path's compiled
-/// copy, so that its 16-row loop is vectorised there (the f64 results are the same on every
-/// path).
-/// The rows come from [`kernel_rows`] (shared with the AVX-512 set-up).
+/// its box): [`TileScratch::start`], then [`prepare_tile_range`] over the whole list.
 #[inline(always)]
 pub(crate) fn prepare_tile(
     bins: &TileBins,
@@ -601,22 +598,58 @@ pub(crate) fn prepare_tile(
     t: usize,
     scratch: &mut TileScratch,
 ) {
+    let kernels = bins.tile_entries(t).len();
+    scratch.start(kernels);
+    prepare_tile_range(bins, forms, t, 0..kernels, scratch);
+}
+
+impl TileScratch {
+    /// Empties the scratch for a tile of `kernels` list entries, each half row's list with
+    /// room for all of them.
+    #[inline(always)]
+    pub(crate) fn start(&mut self, kernels: usize) {
+        self.kernels.clear();
+        self.entry_of.clear();
+        // A list takes at most one entry per kernel of the tile: with that room made first,
+        // an entry is written at the end of every list its row might join and kept by
+        // advancing the length when it does (no branch per row).
+        for half in &mut self.halves {
+            half.clear();
+            half.reserve(kernels);
+        }
+    }
+}
+
+/// Appends the kernels at positions `range` of tile `t`'s list to `scratch` (started by
+/// [`TileScratch::start`] with the whole list's length): each joins the list of every half
+/// row its padded ellipse reaches at a pixel centre inside the tile (and its box). Ranges
+/// taken in order build the same lists as the whole list at once, so that a compositor can
+/// set up a tile's kernels a chunk at a time and stop when its pixels do. f64 throughout; no
+/// division or square root. Inlined into each path's compiled copy, so that its 16-row loop
+/// is vectorised there (the f64 results are the same on every path). The rows come from
+/// [`kernel_rows`] (shared with the AVX-512 set-up).
+#[inline(always)]
+pub(crate) fn prepare_tile_range(
+    bins: &TileBins,
+    forms: &[RowForm],
+    t: usize,
+    range: std::ops::Range<usize>,
+    scratch: &mut TileScratch,
+) {
     let tile = TileGeometry::of(bins, t);
     let ty0 = tile.rect[2];
-    scratch.kernels.clear();
-    scratch.entry_of.clear();
-    for half in &mut scratch.halves {
-        half.clear();
-    }
     let entries = bins.tile_entries(t);
-    // A list takes at most one entry per kernel of the tile: with that room made first, an
-    // entry is written at the end of every list its row might join and kept by advancing
-    // the length when it does (no branch per row).
-    for half in &mut scratch.halves {
-        half.reserve(entries.len());
-    }
+    // Each list takes at most one entry per kernel of the range: checked here once, so that
+    // the appends below need no check (`start` makes the room).
+    assert!(
+        scratch
+            .halves
+            .iter()
+            .all(|half| half.capacity() - half.len() >= range.len()),
+        "TileScratch::start reserves room for the tile's list"
+    );
     let mut block = RowBlock::default();
-    for (n, &p) in entries.iter().enumerate() {
+    for (n, &p) in entries.iter().enumerate().take(range.end).skip(range.start) {
         prefetch_form(forms, entries, n);
         let form = &forms[p as usize];
         // The rows from the kernel's first row in the tile; rows past `end_row` are
@@ -628,9 +661,9 @@ pub(crate) fn prepare_tile(
         let mut append = |list: &mut Vec<RowEntry>, entry: RowEntry, keep: bool| {
             let len = list.len();
             debug_assert!(len < list.capacity());
-            // SAFETY: the list has room for one entry per kernel of the tile (reserved above)
-            // and takes at most one of this kernel; the new length covers only written
-            // entries.
+            // SAFETY: the list had room for one entry per kernel of the range (asserted
+            // above) and takes at most one of this kernel; the new length covers only
+            // written entries.
             unsafe {
                 list.as_mut_ptr().add(len).write(entry);
                 list.set_len(len + usize::from(keep));

@@ -15,8 +15,10 @@
 //!
 //! and `w` goes to `m2` and `Σ2` through the additive raster's moments of `(t, Δv)` (see
 //! [`crate::backward::raster`]). The forward kept, per pixel, its final transmittance and
-//! the entry of its half row's list that stopped it ([`PixelStop`]); each half row's entries
-//! are walked from there back to the first, with the forward's lanes (the same `t`, `G` and
+//! the entry of its half row's list that stopped it ([`PixelStop`]); a tile's list is set
+//! up in the forward's chunks until every half row's list reaches its lanes' last stop (the
+//! kernels after it add nothing), and each half row's entries are walked from there back to
+//! the first, with the forward's lanes (the same `t`, `G` and
 //! pairs), rebuilding `T_i = T_{i+1} / (1 - α̂_i)` in f64 (at most a few clamped kernels
 //! before a stop: the division loses nothing measurable, tested against finite differences)
 //! and carrying `R_i = S_i / T_{i+1}` from the back, so that `S_i / (1 - α̂_i) = R_i T_i`
@@ -28,10 +30,11 @@ use rayon::prelude::*;
 
 use crate::backward::raster::{ScreenGradients, reduce};
 use crate::composite::{
-    CompositeScratch, MAX_ALPHA, PixelStop, clamped_alpha, entry_lanes, prepare_alpha_tile,
+    CompositeScratch, MAX_ALPHA, PixelStop, chunks, clamped_alpha, entry_lanes,
+    prepare_alpha_range, start_alpha_tile,
 };
 use crate::project::ProjectedKernels;
-use crate::raster::{ExpMode, HalfRow, LANES, RowForm, SimdPath, half_rows};
+use crate::raster::{ExpMode, HalfRow, LANES, ROW, RowForm, SimdPath, half_rows};
 use crate::tiles::TileBins;
 
 /// Per (tile, kernel) entry: `Σ ∂L/∂colour` (3), `Σ w t`, `Σ w t²`, `Σ w Δv`, `Σ w t Δv`,
@@ -232,15 +235,33 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         tile: composite,
         sums,
     } = scratch;
-    // Prepared here, so that the set-up is compiled for the path too.
-    prepare_alpha_tile(frame.proj, frame.bins, frame.forms, t, composite);
+    let rect = frame.bins.tile_rect(t);
+    let [tx0, _, ty0, _] = rect;
+    let width = frame.bins.width as usize;
+    // Set up here (so that the set-up is compiled for the path too), a chunk at a time as
+    // the forward did, until every half row's list reaches its lanes' last stop.
+    let mut needed = [0; 2 * ROW];
+    for half in half_rows(rect) {
+        let pixel = (ty0 as usize + half.row) * width + tx0 as usize + half.first;
+        let stops = &frame.stops[pixel..pixel + half.lanes];
+        needed[half.index] = stops
+            .iter()
+            .map(|stop| stop.end as usize)
+            .max()
+            .unwrap_or(0);
+    }
+    start_alpha_tile(frame.bins, t, composite);
+    for chunk in chunks(frame.bins.tile_entries(t).len()) {
+        prepare_alpha_range(frame.proj, frame.bins, frame.forms, t, chunk, composite);
+        let halves = &composite.tile.halves;
+        if halves.iter().zip(&needed).all(|(list, &n)| list.len() >= n) {
+            break;
+        }
+    }
     let composite = &*composite;
     let tile = &composite.tile;
     sums.clear();
     sums.resize(tile.kernels.len(), [[0.0; LANES]; 9]);
-    let rect = frame.bins.tile_rect(t);
-    let [tx0, _, ty0, _] = rect;
-    let width = frame.bins.width as usize;
     let mut v_background = [0.0; 3];
     for HalfRow {
         row,
