@@ -83,6 +83,34 @@ impl Gradients {
         self.v_background = [0.0; 3];
     }
 
+    /// Adds `other` (sized alike) field by field.
+    ///
+    /// # Panics
+    /// When the sizes differ.
+    pub fn add(&mut self, other: &Gradients) {
+        fn add_all<const N: usize>(total: &mut [[f64; N]], part: &[[f64; N]]) {
+            assert_eq!(total.len(), part.len(), "gradients sized alike");
+            for (total, part) in total.iter_mut().zip(part) {
+                for (total, part) in total.iter_mut().zip(part) {
+                    *total += part;
+                }
+            }
+        }
+        add_all(&mut self.v_means, &other.v_means);
+        add_all(&mut self.v_amplitudes, &other.v_amplitudes);
+        add_all(&mut self.v_velocities, &other.v_velocities);
+        add_all(&mut self.v_scales, &other.v_scales);
+        add_all(&mut self.v_rotations, &other.v_rotations);
+        add_all(&mut self.v_sh, &other.v_sh);
+        assert_eq!(self.v_opacities.len(), other.v_opacities.len());
+        for (total, part) in self.v_opacities.iter_mut().zip(&other.v_opacities) {
+            *total += part;
+        }
+        for (total, part) in self.v_background.iter_mut().zip(other.v_background) {
+            *total += part;
+        }
+    }
+
     /// Number of kernels.
     #[must_use]
     pub fn len(&self) -> usize {

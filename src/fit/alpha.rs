@@ -29,6 +29,7 @@ use std::time::Instant;
 
 use rand::RngExt;
 use rand::seq::SliceRandom;
+use rayon::prelude::*;
 
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
@@ -419,7 +420,13 @@ pub fn fit_alpha(
     scene.validate("<alpha fit start>")?;
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
-    let mut context = RenderContext::new();
+    // The batch's views run side by side, one per worker thread, each with its own frame
+    // buffers and gradients; their gradients are added in view order, the sum of the
+    // views one after the other, so the result does not depend on the thread count.
+    let batch = options.batch_size.clamp(1, train.len());
+    let mut slots: Vec<ViewSlot> = (0..rayon::current_num_threads().clamp(1, batch))
+        .map(|_| ViewSlot::new(scene))
+        .collect();
     let mut grads = Gradients::for_scene(scene);
     let width = stride(scene.sh_count);
     let mut moments = Moments {
@@ -430,39 +437,39 @@ pub fn fit_alpha(
 
     let mut screen_gradient = vec![0.0_f64; scene.len()];
     let mut seen = vec![0_u32; scene.len()];
-    let mut v_image = Vec::new();
     let mut rng = seeded_rng(options.seed ^ 0x5eed);
     let mut order: Vec<usize> = (0..train.len()).collect();
     let mut cursor = order.len();
     let mut records = Vec::with_capacity(options.steps);
-    let batch = options.batch_size.clamp(1, train.len());
+    let mut drawn = Vec::with_capacity(batch);
     for step in 1..=options.steps {
         grads.reset_for_scene(scene);
         let weight = 1.0 / batch as f64;
         let mut train_loss = 0.0;
+        drawn.clear();
         for _ in 0..batch {
             if cursor == order.len() {
                 order.shuffle(&mut rng);
                 cursor = 0;
             }
-            let view = &train[order[cursor]];
+            drawn.push(order[cursor]);
             cursor += 1;
-            context.render(scene, &view.camera, view.time, &options.render)?;
-            train_loss +=
-                weight * view_mse_with_gradient(context.image(), view, weight, &mut v_image);
-            context.backward(
-                scene,
-                &view.camera,
-                view.time,
-                &options.render,
-                &v_image,
-                &mut grads,
-            );
-            let screen = &context.backward.screen;
-            for (p, &k) in context.projected.kernel_from_proj.iter().enumerate() {
-                let [gx, gy] = screen.v_means[p];
-                screen_gradient[k as usize] += (gx * gx + gy * gy).sqrt() / weight;
-                seen[k as usize] += 1;
+        }
+        for views in drawn.chunks(slots.len()) {
+            let losses: Vec<Result<f64>> = slots
+                .par_iter_mut()
+                .zip(views)
+                .map(|(slot, &view)| slot.run(scene, &train[view], weight, &options.render))
+                .collect();
+            for (slot, loss) in slots.iter().zip(losses) {
+                train_loss += weight * loss?;
+                grads.add(&slot.grads);
+                let screen = &slot.context.backward.screen;
+                for (p, &k) in slot.context.projected.kernel_from_proj.iter().enumerate() {
+                    let [gx, gy] = screen.v_means[p];
+                    screen_gradient[k as usize] += (gx * gx + gy * gy).sqrt() / weight;
+                    seen[k as usize] += 1;
+                }
             }
         }
         if !train_loss.is_finite() {
@@ -510,7 +517,7 @@ pub fn fit_alpha(
             scene,
             heldout,
             &options.render,
-            &mut context,
+            &mut slots[0].context,
         )?;
         let record = StepRecord {
             step,
@@ -523,6 +530,47 @@ pub fn fit_alpha(
         records.push(record);
     }
     Ok(records)
+}
+
+/// One view of a step's batch: its frame buffers and its gradients.
+struct ViewSlot {
+    context: RenderContext,
+    grads: Gradients,
+    v_image: Vec<f32>,
+}
+
+impl ViewSlot {
+    fn new(scene: &Scene) -> Self {
+        ViewSlot {
+            context: RenderContext::new(),
+            grads: Gradients::for_scene(scene),
+            v_image: Vec::new(),
+        }
+    }
+
+    /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
+    /// MSE); returns the MSE.
+    fn run(
+        &mut self,
+        scene: &Scene,
+        view: &View,
+        weight: f64,
+        options: &RenderOptions,
+    ) -> Result<f64> {
+        self.grads.reset_for_scene(scene);
+        self.context
+            .render(scene, &view.camera, view.time, options)?;
+        let mse = view_mse_with_gradient(self.context.image(), view, weight, &mut self.v_image);
+        self.context.backward(
+            scene,
+            &view.camera,
+            view.time,
+            options,
+            &self.v_image,
+            &mut self.grads,
+        );
+        Ok(mse)
+    }
 }
 
 /// One Adam step on every field, in optimisation space. `spatial` are the mean, time and

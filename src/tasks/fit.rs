@@ -110,7 +110,7 @@ impl FitProgress for Silent {
 /// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
 /// RGB, and the largest is decoded once more while it is converted.
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
-    use crate::io::memory::{FIT_BYTES_PER_KERNEL, check};
+    use crate::io::memory::{FIT_BYTES_PER_KERNEL, VIEW_BYTES_PER_KERNEL, check};
     let (mut kept, mut largest, mut frames) = (0_u64, 0_u64, 0_usize);
     // Frames that name one file share its decoded image.
     let mut seen = std::collections::HashSet::new();
@@ -135,13 +135,17 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
         Some(Init::Auto) => request.plan.start_kernels.max(1),
         _ => 0,
     };
-    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget.
+    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget,
+    // and renders up to one view per worker thread at once.
+    let mut per_kernel = FIT_BYTES_PER_KERNEL;
     if request.blend != Some(Blend::Additive) {
         kernels = kernels.max(request.alpha.max_kernels);
+        let side_by_side = rayon::current_num_threads().clamp(1, request.alpha.batch_size.max(1));
+        per_kernel += VIEW_BYTES_PER_KERNEL * (side_by_side as u64 - 1);
     }
     check(
         kept.saturating_add(largest)
-            .saturating_add((kernels as u64).saturating_mul(FIT_BYTES_PER_KERNEL)),
+            .saturating_add((kernels as u64).saturating_mul(per_kernel)),
         &format!("fitting up to {kernels} kernels to {frames} frames"),
     )
 }
