@@ -9,6 +9,13 @@
 //! and decay exponentially to [`AlphaFitOptions::final_rate_factor`] of their start, the
 //! others stay constant (as the 3DGS and 4DGS papers schedule them).
 //!
+//! **A step** draws `batch_size` training views (a seeded shuffle, epoch by epoch) and renders
+//! them side by side, one per worker thread, each with its own frame buffers and gradients;
+//! the views' gradients are then added in view order. Every field of a view's gradient
+//! takes one term per kernel, so this is the sum the views would give one after the other,
+//! bit for bit, whatever the thread count. Small frames (a 100×100 view has 7 tile rows)
+//! keep both cores busy this way where splitting one frame's tiles could not.
+//!
 //! **SH degree** rises during the run: degree `d` of the scene's SH is fitted from step
 //! `d · sh_raise_every` (its coefficients start at zero and stay there until then).
 //!
