@@ -36,18 +36,18 @@ use std::time::Instant;
 
 use rand::RngExt;
 use rand::seq::SliceRandom;
-use rayon::prelude::*;
 
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::loss::view_mse_with_gradient;
 use crate::fit::stereo::SweptPoint;
-use crate::fit::train::{StepRecord, check_fit_inputs, heldout_psnr_at};
+use crate::fit::train::{
+    StepRecord, batch_gradients, check_fit_inputs, heldout_psnr_at, view_slots,
+};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
 use crate::model::{Camera, DatasetPoint, View};
-use crate::render::{RenderContext, RenderOptions};
+use crate::render::RenderOptions;
 
 /// Learning rates of the alpha fit, per group.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -431,9 +431,7 @@ pub fn fit_alpha(
     // buffers and gradients; their gradients are added in view order, the sum of the
     // views one after the other, so the result does not depend on the thread count.
     let batch = options.batch_size.clamp(1, train.len());
-    let mut slots: Vec<ViewSlot> = (0..rayon::current_num_threads().clamp(1, batch))
-        .map(|_| ViewSlot::new(scene))
-        .collect();
+    let mut slots = view_slots(scene, batch);
     let mut grads = Gradients::for_scene(scene);
     let width = stride(scene.sh_count);
     let mut moments = Moments {
@@ -452,7 +450,6 @@ pub fn fit_alpha(
     for step in 1..=options.steps {
         grads.reset_for_scene(scene);
         let weight = 1.0 / batch as f64;
-        let mut train_loss = 0.0;
         drawn.clear();
         for _ in 0..batch {
             if cursor == order.len() {
@@ -462,23 +459,22 @@ pub fn fit_alpha(
             drawn.push(order[cursor]);
             cursor += 1;
         }
-        for views in drawn.chunks(slots.len()) {
-            let losses: Vec<Result<f64>> = slots
-                .par_iter_mut()
-                .zip(views)
-                .map(|(slot, &view)| slot.run(scene, &train[view], weight, &options.render))
-                .collect();
-            for (slot, loss) in slots.iter().zip(losses) {
-                train_loss += weight * loss?;
-                grads.add(&slot.grads);
+        let train_loss = batch_gradients(
+            &mut slots,
+            scene,
+            train,
+            &drawn,
+            &options.render,
+            &mut grads,
+            |slot| {
                 let screen = &slot.context.backward.screen;
                 for (p, &k) in slot.context.projected.kernel_from_proj.iter().enumerate() {
                     let [gx, gy] = screen.v_means[p];
                     screen_gradient[k as usize] += (gx * gx + gy * gy).sqrt() / weight;
                     seen[k as usize] += 1;
                 }
-            }
-        }
+            },
+        )?;
         if !train_loss.is_finite() {
             return Err(Error::Numeric(format!(
                 "fitting diverged at step {step} (training loss {train_loss}): lower the learning rates"
@@ -537,47 +533,6 @@ pub fn fit_alpha(
         records.push(record);
     }
     Ok(records)
-}
-
-/// One view of a step's batch: its frame buffers and its gradients.
-struct ViewSlot {
-    context: RenderContext,
-    grads: Gradients,
-    v_image: Vec<f32>,
-}
-
-impl ViewSlot {
-    fn new(scene: &Scene) -> Self {
-        ViewSlot {
-            context: RenderContext::new(),
-            grads: Gradients::for_scene(scene),
-            v_image: Vec::new(),
-        }
-    }
-
-    /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
-    /// MSE); returns the MSE.
-    fn run(
-        &mut self,
-        scene: &Scene,
-        view: &View,
-        weight: f64,
-        options: &RenderOptions,
-    ) -> Result<f64> {
-        self.grads.reset_for_scene(scene);
-        self.context
-            .render(scene, &view.camera, view.time, options)?;
-        let mse = view_mse_with_gradient(self.context.image(), view, weight, &mut self.v_image);
-        self.context.backward(
-            scene,
-            &view.camera,
-            view.time,
-            options,
-            &self.v_image,
-            &mut self.grads,
-        );
-        Ok(mse)
-    }
 }
 
 /// One Adam step on every field, in optimisation space. `spatial` are the mean, time and

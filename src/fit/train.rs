@@ -9,6 +9,7 @@
 use std::time::Instant;
 
 use rand::seq::SliceRandom;
+use rayon::prelude::*;
 
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
@@ -195,6 +196,86 @@ pub fn heldout_psnr_at(
     Ok(Some(psnr(evaluate(scene, heldout, render, context)?)))
 }
 
+/// One view of a step's batch: its frame buffers and its gradients.
+pub(crate) struct ViewSlot {
+    pub(crate) context: RenderContext,
+    pub(crate) grads: Gradients,
+    v_image: Vec<f32>,
+}
+
+impl ViewSlot {
+    pub(crate) fn new(scene: &Scene) -> Self {
+        ViewSlot {
+            context: RenderContext::new(),
+            grads: Gradients::for_scene(scene),
+            v_image: Vec::new(),
+        }
+    }
+
+    /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
+    /// MSE); returns the MSE.
+    fn run(
+        &mut self,
+        scene: &Scene,
+        view: &View,
+        weight: f64,
+        options: &RenderOptions,
+    ) -> Result<f64> {
+        self.grads.reset_for_scene(scene);
+        self.context
+            .render(scene, &view.camera, view.time, options)?;
+        let mse = view_mse_with_gradient(self.context.image(), view, weight, &mut self.v_image);
+        self.context.backward(
+            scene,
+            &view.camera,
+            view.time,
+            options,
+            &self.v_image,
+            &mut self.grads,
+        );
+        Ok(mse)
+    }
+}
+
+/// The slots a fit renders a step's views in: one per worker thread, at most `batch`.
+pub(crate) fn view_slots(scene: &Scene, batch: usize) -> Vec<ViewSlot> {
+    (0..rayon::current_num_threads().clamp(1, batch))
+        .map(|_| ViewSlot::new(scene))
+        .collect()
+}
+
+/// Adds to `grads` the gradient of the batch's loss, the mean MSE of the training views
+/// `drawn` (indices into `train`), and returns that loss. The views run side by side in
+/// `slots`, each rendered and differentiated on its own; then, in view order, each view's
+/// gradient is added to `grads` and `each_view` sees its slot. Every field of a view's
+/// gradient takes one term per kernel, so this is the sum the views would give one after
+/// the other, bit for bit, whatever the number of slots (threads).
+pub(crate) fn batch_gradients(
+    slots: &mut [ViewSlot],
+    scene: &Scene,
+    train: &[View],
+    drawn: &[usize],
+    options: &RenderOptions,
+    grads: &mut Gradients,
+    mut each_view: impl FnMut(&ViewSlot),
+) -> Result<f64> {
+    let weight = 1.0 / drawn.len() as f64;
+    let mut loss = 0.0;
+    for views in drawn.chunks(slots.len()) {
+        let losses: Vec<Result<f64>> = slots
+            .par_iter_mut()
+            .zip(views)
+            .map(|(slot, &view)| slot.run(scene, &train[view], weight, options))
+            .collect();
+        for (slot, mse) in slots.iter().zip(losses) {
+            loss += weight * mse?;
+            grads.add(&slot.grads);
+            each_view(slot);
+        }
+    }
+    Ok(loss)
+}
+
 /// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
 /// step with its record and the scene. Returns every step's record. With `options.adaptive` the scene's kernels change
 /// between steps (densify and prune); otherwise only their parameters do.
@@ -207,40 +288,38 @@ pub fn fit(
 ) -> Result<Vec<StepRecord>> {
     check_fit_inputs(train, heldout, &options.render)?;
     let start = Instant::now();
-    let mut context = RenderContext::new();
     let mut adam = Adam::new(scene.len(), options.adam);
     let mut grads = Gradients::zeros(scene.len());
     let mut stats = DensityStats::new(scene.len());
-    let mut v_image = Vec::new();
     let mut rng = seeded_rng(options.seed);
     let mut order: Vec<usize> = (0..train.len()).collect();
     let mut cursor = order.len();
     let batch_size = options.batch_size.clamp(1, train.len());
+    // The batch's views run side by side, one per worker thread ([`batch_gradients`]).
+    let mut slots = view_slots(scene, batch_size);
+    let mut drawn = Vec::with_capacity(batch_size);
     // Grows with the steps actually run: a flag never decides an allocation up front.
     let mut records = Vec::with_capacity(options.steps.min(1 << 12));
     for step in 1..=options.steps {
         grads.reset(scene.len());
-        let mut batch_loss = 0.0;
+        drawn.clear();
         for _ in 0..batch_size {
             if cursor == order.len() {
                 order.shuffle(&mut rng);
                 cursor = 0;
             }
-            let view = &train[order[cursor]];
+            drawn.push(order[cursor]);
             cursor += 1;
-            context.render(scene, &view.camera, view.time, &options.render)?;
-            let weight = 1.0 / batch_size as f64;
-            batch_loss +=
-                weight * view_mse_with_gradient(context.image(), view, weight, &mut v_image);
-            context.backward(
-                scene,
-                &view.camera,
-                view.time,
-                &options.render,
-                &v_image,
-                &mut grads,
-            );
         }
+        let batch_loss = batch_gradients(
+            &mut slots,
+            scene,
+            train,
+            &drawn,
+            &options.render,
+            &mut grads,
+            |_| {},
+        )?;
         if !batch_loss.is_finite() {
             return Err(Error::Numeric(format!(
                 "fitting diverged at step {step}: the loss is {batch_loss}; lower the learning rates"
@@ -263,7 +342,12 @@ pub fn fit(
         if let Some(adaptive) = &options.adaptive {
             stats.accumulate(scene, &grads);
             if adaptive.round_after(step, options.steps) {
-                stats.record_loss(evaluate(scene, train, &options.render, &mut context)?);
+                stats.record_loss(evaluate(
+                    scene,
+                    train,
+                    &options.render,
+                    &mut slots[0].context,
+                )?);
                 let round = if adaptive.last_round_after(step, options.steps) {
                     adaptive.without_growth()
                 } else {
@@ -281,7 +365,7 @@ pub fn fit(
             scene,
             heldout,
             &options.render,
-            &mut context,
+            &mut slots[0].context,
         )?;
         let record = StepRecord {
             step,
