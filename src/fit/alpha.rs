@@ -10,11 +10,8 @@
 //! others stay constant (as the 3DGS and 4DGS papers schedule them).
 //!
 //! **A step** draws `batch_size` training views (a seeded shuffle, epoch by epoch) and renders
-//! them side by side, one per worker thread, each with its own frame buffers and gradients;
-//! the views' gradients are then added in view order. Every field of a view's gradient
-//! takes one term per kernel, so this is the sum the views would give one after the other,
-//! bit for bit, whatever the thread count. Small frames (a 100×100 view has 7 tile rows)
-//! keep both cores busy this way where splitting one frame's tiles could not.
+//! them side by side, one per worker thread, as the additive fit does
+//! ([`crate::fit::train::batch_gradients`]: the same bits whatever the thread count).
 //!
 //! **SH degree** rises during the run: degree `d` of the scene's SH is fitted from step
 //! `d · sh_raise_every` (its coefficients start at zero and stay there until then).
@@ -427,9 +424,7 @@ pub fn fit_alpha(
     scene.validate("<alpha fit start>")?;
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
-    // The batch's views run side by side, one per worker thread, each with its own frame
-    // buffers and gradients; their gradients are added in view order, the sum of the
-    // views one after the other, so the result does not depend on the thread count.
+    // The batch's views run side by side, one per worker thread ([`batch_gradients`]).
     let batch = options.batch_size.clamp(1, train.len());
     let mut slots = view_slots(scene, batch);
     let mut grads = Gradients::for_scene(scene);

@@ -5,6 +5,12 @@
 //! one Adam step with the scheduled learning rates: `lr_k = lr · final_factor^(k/(steps-1))`
 //! (exponential decay; `final_factor = 1` keeps them constant). Every `eval_every` steps and
 //! at the last, the mean MSE over the held-out views is measured.
+//!
+//! A batch's views run side by side, one per worker thread ([`batch_gradients`]), each
+//! rendered and differentiated in its own slot; their gradients are added in view order.
+//! Every field of a view's gradient takes one term per kernel, so the sum is the one the
+//! views give one after the other, bit for bit, whatever the thread count. Fits of small
+//! frames (a 64×64 view has 4 tile rows) keep every core busy this way.
 
 use std::time::Instant;
 

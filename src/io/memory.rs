@@ -14,7 +14,7 @@ static LIMIT: AtomicU64 = AtomicU64::new(u64::MAX);
 /// densification statistics, the sliced and projected copies and the tile lists' share.
 pub const FIT_BYTES_PER_KERNEL: u64 = 2048;
 
-/// Bytes per kernel of each further view an alpha fit renders side by side (one per worker
+/// Bytes per kernel of each further view a fit renders side by side (one per worker
 /// thread beyond the first): its sliced, projected and binned copies, tile lists and
 /// gradients.
 pub const VIEW_BYTES_PER_KERNEL: u64 = 1024;

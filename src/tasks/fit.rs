@@ -135,14 +135,15 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
         Some(Init::Auto) => request.plan.start_kernels.max(1),
         _ => 0,
     };
-    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget,
-    // and renders up to one view per worker thread at once.
-    let mut per_kernel = FIT_BYTES_PER_KERNEL;
+    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget.
+    // A fit renders up to one view of its batch per worker thread at once.
+    let mut batch = request.plan.batch_size;
     if request.blend != Some(Blend::Additive) {
         kernels = kernels.max(request.alpha.max_kernels);
-        let side_by_side = rayon::current_num_threads().clamp(1, request.alpha.batch_size.max(1));
-        per_kernel += VIEW_BYTES_PER_KERNEL * (side_by_side as u64 - 1);
+        batch = batch.max(request.alpha.batch_size);
     }
+    let side_by_side = rayon::current_num_threads().clamp(1, batch.max(1)) as u64;
+    let per_kernel = FIT_BYTES_PER_KERNEL + VIEW_BYTES_PER_KERNEL * (side_by_side - 1);
     check(
         kept.saturating_add(largest)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
