@@ -11,7 +11,7 @@
 //!
 //! **A step** draws `batch_size` training views (a seeded shuffle, epoch by epoch) and renders
 //! them side by side, one per worker thread, as the additive fit does
-//! ([`crate::fit::train::batch_gradients`]: the same bits whatever the thread count).
+//! (`fit::train::batch_gradients`: the same bits whatever the thread count).
 //!
 //! **SH degree** rises during the run: degree `d` of the scene's SH is fitted from step
 //! `d · sh_raise_every` (its coefficients start at zero and stay there until then).
@@ -424,7 +424,7 @@ pub fn fit_alpha(
     scene.validate("<alpha fit start>")?;
     let start = Instant::now();
     let (diagonal, time_range) = extents(bounds);
-    // The batch's views run side by side, one per worker thread ([`batch_gradients`]).
+    // The batch's views run side by side, one per worker thread (`batch_gradients`).
     let batch = options.batch_size.clamp(1, train.len());
     let mut slots = view_slots(scene, batch);
     let mut grads = Gradients::for_scene(scene);

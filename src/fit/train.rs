@@ -6,7 +6,7 @@
 //! (exponential decay; `final_factor = 1` keeps them constant). Every `eval_every` steps and
 //! at the last, the mean MSE over the held-out views is measured.
 //!
-//! A batch's views run side by side, one per worker thread ([`batch_gradients`]), each
+//! A batch's views run side by side, one per worker thread (`batch_gradients`), each
 //! rendered and differentiated in its own slot; their gradients are added in view order.
 //! Every field of a view's gradient takes one term per kernel, so the sum is the one the
 //! views give one after the other, bit for bit, whatever the thread count. Fits of small
@@ -301,7 +301,7 @@ pub fn fit(
     let mut order: Vec<usize> = (0..train.len()).collect();
     let mut cursor = order.len();
     let batch_size = options.batch_size.clamp(1, train.len());
-    // The batch's views run side by side, one per worker thread ([`batch_gradients`]).
+    // The batch's views run side by side, one per worker thread (`batch_gradients`).
     let mut slots = view_slots(scene, batch_size);
     let mut drawn = Vec::with_capacity(batch_size);
     // Grows with the steps actually run: a flag never decides an allocation up front.
