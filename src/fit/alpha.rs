@@ -32,13 +32,12 @@
 use std::time::Instant;
 
 use rand::RngExt;
-use rand::seq::SliceRandom;
 
 use crate::backward::Gradients;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::stereo::SweptPoint;
 use crate::fit::train::{
-    StepRecord, batch_gradients, check_fit_inputs, heldout_psnr_at, view_slots,
+    StepRecord, ViewDraws, batch_gradients, check_fit_inputs, heldout_psnr_at, view_slots,
 };
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
@@ -437,23 +436,13 @@ pub fn fit_alpha(
 
     let mut screen_gradient = vec![0.0_f64; scene.len()];
     let mut seen = vec![0_u32; scene.len()];
-    let mut rng = seeded_rng(options.seed ^ 0x5eed);
-    let mut order: Vec<usize> = (0..train.len()).collect();
-    let mut cursor = order.len();
+    let mut draws = ViewDraws::new(train.len(), options.seed ^ 0x5eed);
     let mut records = Vec::with_capacity(options.steps);
     let mut drawn = Vec::with_capacity(batch);
     for step in 1..=options.steps {
         grads.reset_for_scene(scene);
         let weight = 1.0 / batch as f64;
-        drawn.clear();
-        for _ in 0..batch {
-            if cursor == order.len() {
-                order.shuffle(&mut rng);
-                cursor = 0;
-            }
-            drawn.push(order[cursor]);
-            cursor += 1;
-        }
+        draws.next_batch(batch, &mut drawn);
         let train_loss = batch_gradients(
             &mut slots,
             scene,

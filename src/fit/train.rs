@@ -202,6 +202,38 @@ pub fn heldout_psnr_at(
     Ok(Some(psnr(evaluate(scene, heldout, render, context)?)))
 }
 
+/// The order a fit draws its training views in: a seeded shuffle per epoch.
+pub(crate) struct ViewDraws {
+    rng: rand_chacha::ChaCha8Rng,
+    order: Vec<usize>,
+    cursor: usize,
+}
+
+impl ViewDraws {
+    /// Draws from `views` views with the shuffles of `seed`.
+    pub(crate) fn new(views: usize, seed: u64) -> Self {
+        ViewDraws {
+            rng: seeded_rng(seed),
+            order: (0..views).collect(),
+            cursor: views,
+        }
+    }
+
+    /// The next `batch` views into `drawn` (emptied first); a new shuffle starts whenever
+    /// the last one is used up.
+    pub(crate) fn next_batch(&mut self, batch: usize, drawn: &mut Vec<usize>) {
+        drawn.clear();
+        for _ in 0..batch {
+            if self.cursor == self.order.len() {
+                self.order.shuffle(&mut self.rng);
+                self.cursor = 0;
+            }
+            drawn.push(self.order[self.cursor]);
+            self.cursor += 1;
+        }
+    }
+}
+
 /// One view of a step's batch: its frame buffers and its gradients.
 pub(crate) struct ViewSlot {
     pub(crate) context: RenderContext,
@@ -297,9 +329,7 @@ pub fn fit(
     let mut adam = Adam::new(scene.len(), options.adam);
     let mut grads = Gradients::zeros(scene.len());
     let mut stats = DensityStats::new(scene.len());
-    let mut rng = seeded_rng(options.seed);
-    let mut order: Vec<usize> = (0..train.len()).collect();
-    let mut cursor = order.len();
+    let mut draws = ViewDraws::new(train.len(), options.seed);
     let batch_size = options.batch_size.clamp(1, train.len());
     // The batch's views run side by side, one per worker thread (`batch_gradients`).
     let mut slots = view_slots(scene, batch_size);
@@ -308,15 +338,7 @@ pub fn fit(
     let mut records = Vec::with_capacity(options.steps.min(1 << 12));
     for step in 1..=options.steps {
         grads.reset(scene.len());
-        drawn.clear();
-        for _ in 0..batch_size {
-            if cursor == order.len() {
-                order.shuffle(&mut rng);
-                cursor = 0;
-            }
-            drawn.push(order[cursor]);
-            cursor += 1;
-        }
+        draws.next_batch(batch_size, &mut drawn);
         let batch_loss = batch_gradients(
             &mut slots,
             scene,
