@@ -436,3 +436,12 @@ pub fn probe_rate(stdout: &str, probe: &str, threads: usize) -> f64 {
         .and_then(|r| r.parse().ok())
         .unwrap_or_else(|| panic!("no {probe} line for{threads}: {stdout}"))
 }
+
+/// Runs `work` on a fresh pool of `threads` worker threads.
+pub fn on_threads<R: Send>(threads: usize, work: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(work)
+}

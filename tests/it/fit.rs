@@ -199,11 +199,7 @@ fn an_adaptive_fit_is_the_same_bits_for_any_thread_count() {
         ..FitPlan::default()
     };
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::common::on_threads(threads, || {
             let PreparedFit {
                 mut scene, options, ..
             } = plan.prepare(Init::Auto, &dataset.train).unwrap();

@@ -301,11 +301,7 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
         ..DEFAULT_ALPHA
     };
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::common::on_threads(threads, || {
             let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
             let records = fit_alpha(
                 &mut fitted,
