@@ -504,7 +504,7 @@ pub fn fit_alpha(
             scene,
             heldout,
             &options.render,
-            &mut slots[0].context,
+            &mut slots,
         )?;
         let record = StepRecord {
             step,

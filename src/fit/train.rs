@@ -185,21 +185,48 @@ pub fn evaluate(
     Ok(total / views.len().max(1) as f64)
 }
 
+/// Mean MSE of `scene` over `views`, as [`evaluate`] gives it (the same sum in view order,
+/// bit for bit), the views rendered side by side in `slots`.
+pub(crate) fn evaluate_in(
+    scene: &Scene,
+    views: &[View],
+    options: &RenderOptions,
+    slots: &mut [ViewSlot],
+) -> Result<f64> {
+    let mut total = 0.0;
+    for group in views.chunks(slots.len()) {
+        let errors: Vec<Result<f64>> = slots
+            .par_iter_mut()
+            .zip(group)
+            .map(|(slot, view)| {
+                slot.context
+                    .render(scene, &view.camera, view.time, options)?;
+                Ok(view_mse(slot.context.image(), view))
+            })
+            .collect();
+        for error in errors {
+            total += error?;
+        }
+    }
+    Ok(total / views.len().max(1) as f64)
+}
+
 /// The held-out PSNR after step `step` of `steps` when it is evaluated (every `eval_every`
-/// steps, and the last), else `None` (also without held-out views).
-pub fn heldout_psnr_at(
+/// steps, and the last), else `None` (also without held-out views); the views rendered in
+/// `slots` ([`evaluate_in`]).
+pub(crate) fn heldout_psnr_at(
     step: usize,
     (steps, eval_every): (usize, usize),
     scene: &Scene,
     heldout: &[View],
     render: &RenderOptions,
-    context: &mut RenderContext,
+    slots: &mut [ViewSlot],
 ) -> Result<Option<f64>> {
     let evaluate_now = step == steps || (eval_every > 0 && step.is_multiple_of(eval_every));
     if !evaluate_now || heldout.is_empty() {
         return Ok(None);
     }
-    Ok(Some(psnr(evaluate(scene, heldout, render, context)?)))
+    Ok(Some(psnr(evaluate_in(scene, heldout, render, slots)?)))
 }
 
 /// The order a fit draws its training views in: a seeded shuffle per epoch.
@@ -370,12 +397,7 @@ pub fn fit(
         if let Some(adaptive) = &options.adaptive {
             stats.accumulate(scene, &grads);
             if adaptive.round_after(step, options.steps) {
-                stats.record_loss(evaluate(
-                    scene,
-                    train,
-                    &options.render,
-                    &mut slots[0].context,
-                )?);
+                stats.record_loss(evaluate_in(scene, train, &options.render, &mut slots)?);
                 let round = if adaptive.last_round_after(step, options.steps) {
                     adaptive.without_growth()
                 } else {
@@ -393,7 +415,7 @@ pub fn fit(
             scene,
             heldout,
             &options.render,
-            &mut slots[0].context,
+            &mut slots,
         )?;
         let record = StepRecord {
             step,
