@@ -213,7 +213,9 @@ fn backward_tile_avx2<const FAST: bool>(
     backward_tile::<FAST, true>(frame, t, run, scratch)
 }
 
-/// Tile `t` (prepared in `scratch.composite`) into `run`, one partial per tile entry;
+/// Tile `t` (set up here in `scratch.composite`, as far as its pixels' stops reach) into
+/// `run`, one partial per tile kernel set up (the entries after them are left as the caller
+/// zeroed them: they add nothing);
 /// returns the tile's `Σ v T_final`.
 ///
 /// Per lane, walking a half row's entries back to front, with `R = S_i / T_{i+1}` (the

@@ -14,9 +14,9 @@ static LIMIT: AtomicU64 = AtomicU64::new(u64::MAX);
 /// densification statistics, the sliced and projected copies and the tile lists' share.
 pub const FIT_BYTES_PER_KERNEL: u64 = 2048;
 
-/// Bytes per kernel of each further view a fit renders side by side (one per worker
-/// thread beyond the first): its sliced, projected and binned copies, tile lists and
-/// gradients.
+/// Bytes per kernel of each view a fit renders at once (one per worker thread, up to the
+/// batch), beyond [`FIT_BYTES_PER_KERNEL`]: its own gradients, and its sliced, projected and
+/// binned copies and tile lists.
 pub const VIEW_BYTES_PER_KERNEL: u64 = 1024;
 
 /// Bytes a render holds per pixel: the f32 image, the raster's per-pixel work and the

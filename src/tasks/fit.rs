@@ -107,11 +107,15 @@ impl FitProgress for Silent {
 }
 
 /// Refuses, before the dataset is decoded, a fit whose images and kernels (the start, or an
-/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image file is kept once as linear
-/// RGB, and the largest is decoded once more while it is converted.
+/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image
+/// file is kept once as linear RGB, and the largest is decoded once more while it is
+/// converted; each view rendered at once (one per worker thread, up to the batch) holds its
+/// frame and its kernels' copies and gradients.
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
-    use crate::io::memory::{FIT_BYTES_PER_KERNEL, VIEW_BYTES_PER_KERNEL, check};
-    let (mut kept, mut largest, mut frames) = (0_u64, 0_u64, 0_usize);
+    use crate::io::memory::{
+        FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL, check,
+    };
+    let (mut kept, mut largest, mut largest_view, mut frames) = (0_u64, 0_u64, 0_u64, 0_usize);
     // Frames that name one file share its decoded image.
     let mut seen = std::collections::HashSet::new();
     for file in crate::io::dataset::dataset_files(&request.views) {
@@ -127,6 +131,7 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
             let n = u64::from(request.downscale.max(1));
             kept = kept.saturating_add(pixels / (n * n) * 12);
             largest = largest.max(pixels * 16);
+            largest_view = largest_view.max(pixels / (n * n));
             frames += 1;
         }
     }
@@ -136,16 +141,20 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
         _ => 0,
     };
     // An alpha fit (unless the additive one is asked for) may grow to its kernel budget.
-    // A fit renders up to one view of its batch per worker thread at once.
     let mut batch = request.plan.batch_size;
     if request.blend != Some(Blend::Additive) {
         kernels = kernels.max(request.alpha.max_kernels);
         batch = batch.max(request.alpha.batch_size);
     }
-    let side_by_side = rayon::current_num_threads().clamp(1, batch.max(1)) as u64;
-    let per_kernel = FIT_BYTES_PER_KERNEL + VIEW_BYTES_PER_KERNEL * (side_by_side - 1);
+    // The fit runs on `--threads` workers (or the global pool's), one view on each.
+    let threads = request.threads.unwrap_or_else(rayon::current_num_threads);
+    let side_by_side = threads.clamp(1, batch.max(1)) as u64;
+    let per_kernel = FIT_BYTES_PER_KERNEL + VIEW_BYTES_PER_KERNEL * side_by_side;
+    let frames_held =
+        side_by_side.saturating_mul(RENDER_BYTES_PER_PIXEL.saturating_mul(largest_view));
     check(
         kept.saturating_add(largest)
+            .saturating_add(frames_held)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
         &format!("fitting up to {kernels} kernels to {frames} frames"),
     )

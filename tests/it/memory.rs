@@ -148,3 +148,65 @@ fn report_sizes_are_checked_first_with_advice_it_can_follow() {
     );
     assert!(!d.join("r").exists());
 }
+
+/// A fit renders one view of its batch per worker thread at once, each with its own frame
+/// buffers, kernel copies and gradients: its estimate grows with `--threads` (up to the
+/// batch), so a bound that one thread's fit fits under refuses the same fit on four.
+#[test]
+fn a_fits_estimate_counts_the_views_it_renders_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = data("blob.json");
+    let made = run(
+        &[
+            "dataset",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--views",
+            "2",
+            "--times",
+            "2",
+            "--size",
+            "16x16",
+            "--out",
+            "ds",
+        ],
+        d,
+    );
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    // 100 000 kernels: 307 MB on one thread (2 + 1 KiB each), 614 MB on four (2 + 4 KiB).
+    let fit = |threads: &str| {
+        run(
+            &[
+                "fit",
+                "--views",
+                "ds",
+                "--blend",
+                "additive",
+                "--init",
+                "random:100000",
+                "--steps",
+                "1",
+                "--threads",
+                threads,
+                "--max-memory",
+                "450M",
+                "--out",
+                "f.json",
+            ],
+            d,
+        )
+    };
+    refused(&fit("4"), &["--max-memory", "fitting up to 100000 kernels"]);
+    assert!(!d.join("f.json").exists());
+    let one = fit("1");
+    assert!(
+        one.status.success(),
+        "{}",
+        String::from_utf8_lossy(&one.stderr)
+    );
+}
