@@ -393,22 +393,8 @@ pub(crate) fn composite_half_row<const FAST: bool, const AVX2: bool>(
     }
     // Worked on in a local (kept in registers), written back once.
     let mut local = *state;
-    composite_entries::<FAST, AVX2>(&mut local, entries, kernels, opacities, first, lanes);
-    *state = local;
-}
-
-/// [`composite_half_row`]'s loop.
-#[inline(always)]
-fn composite_entries<const FAST: bool, const AVX2: bool>(
-    state: &mut HalfRowState,
-    entries: &[RowEntry],
-    kernels: &[TileKernel],
-    opacities: &[f64],
-    first: f32,
-    lanes: f32,
-) {
-    let from = state.consumed;
-    state.consumed = entries.len();
+    let from = local.consumed;
+    local.consumed = entries.len();
     for (n, entry) in entries.iter().enumerate().skip(from) {
         let kernel = &kernels[entry.kernel as usize];
         let opacity = opacities[entry.kernel as usize];
@@ -416,30 +402,31 @@ fn composite_entries<const FAST: bool, const AVX2: bool>(
         let mut pairs = 0;
         let mut any_alive = false;
         for i in 0..LANES {
-            let live = hit[i] & state.alive[i];
+            let live = hit[i] & local.alive[i];
             let alpha = clamped_alpha(opacity, g[i]);
-            let t = state.transmittance[i];
+            let t = local.transmittance[i];
             let next = t * (1.0 - alpha);
             let stop = live & (next < T_STOP);
             let add = live & !stop;
             let weight = if add { alpha * t } else { 0.0 };
             for c in 0..3 {
-                state.colour[c][i] += kernel.amplitude[c] * weight;
+                local.colour[c][i] += kernel.amplitude[c] * weight;
             }
-            state.transmittance[i] = if add { next } else { t };
+            local.transmittance[i] = if add { next } else { t };
             if stop {
-                state.end[i] = n as u32;
+                local.end[i] = n as u32;
             }
-            state.alive[i] &= !stop;
-            any_alive |= state.alive[i];
+            local.alive[i] &= !stop;
+            any_alive |= local.alive[i];
             pairs += u64::from(live);
         }
-        state.pairs += pairs;
+        local.pairs += pairs;
         if !any_alive {
-            state.consumed = n + 1;
-            return;
+            local.consumed = n + 1;
+            break;
         }
     }
+    *state = local;
 }
 
 /// Composites tile `t` half row by half row into `band` (the image rows of its tile row),
@@ -461,16 +448,17 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
         background,
     } = *frame;
     let rect = bins.tile_rect(t);
-    let mut states: [Option<HalfRowState>; 2 * ROW] = std::array::from_fn(|_| None);
+    // Halves wholly past the image's edge keep a state with no lane.
+    let mut states = [HalfRowState::new(0); 2 * ROW];
     for half in half_rows(rect) {
-        states[half.index] = Some(HalfRowState::new(half.lanes));
+        states[half.index] = HalfRowState::new(half.lanes);
     }
     start_alpha_tile(bins, t, scratch);
     for chunk in chunks(bins.tile_entries(t).len()) {
         prepare_alpha_range(proj, bins, forms, t, chunk, scratch);
         let mut any_alive = false;
         for half in half_rows(rect) {
-            let state = states[half.index].as_mut().expect("a state per half row");
+            let state = &mut states[half.index];
             composite_half_row::<FAST, AVX2>(
                 state,
                 &scratch.tile.halves[half.index],
@@ -494,7 +482,7 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
         lanes,
     } in half_rows(rect)
     {
-        let state = states[index].as_ref().expect("a state per half row");
+        let state = &states[index];
         pairs += state.pairs;
         let ends = state.ends(scratch.tile.halves[index].len());
         let start = row * width + rect[0] as usize + first;
