@@ -12,7 +12,7 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
 
-use crate::io::write_atomically;
+use crate::io::{write_atomically, write_atomically_sized, write_bytes_atomically};
 use crate::model::Image;
 use crate::model::error::{Error, Result};
 use crate::model::image::{all_finite, quantize_all_checked};
@@ -110,19 +110,14 @@ fn encode_png<W: Write + Seek>(
     }
 }
 
-/// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
-/// y — the simplest layout of the format (OpenEXR file layout: magic and version, header
-/// attributes, line offset table, then per line its y, its byte count and the channels'
-/// samples in alphabetical order, B, G, R). Float renders hardly compress, so writing is a
-/// copy at memory speed; every reader of the format opens it (tested with the `exr` crate's).
-fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()> {
+/// An EXR file's header ([`write_exr`]) for a `w`×`h` image: its length does not depend
+/// on the pixels.
+fn exr_header(w: usize, h: usize) -> std::io::Result<Vec<u8>> {
     let too_large = || std::io::Error::other("the image is too large for an EXR file");
-    let (w, h) = (image.width as usize, image.height as usize);
     let (x_max, y_max) = (
         i32::try_from(w).map_err(|_| too_large())? - 1,
         i32::try_from(h).map_err(|_| too_large())? - 1,
     );
-    let line_bytes = i32::try_from(12 * w).map_err(|_| too_large())?;
     let mut header = Vec::with_capacity(400);
     header.extend_from_slice(&[0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0]);
     let mut attribute = |name: &str, kind: &str, value: &[u8]| {
@@ -157,6 +152,32 @@ fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()>
     attribute("screenWindowCenter", "v2f", &[0; 8]);
     attribute("screenWindowWidth", "float", &1.0_f32.to_le_bytes());
     header.push(0);
+    Ok(header)
+}
+
+/// The byte count of one EXR line's samples (three f32 a pixel).
+fn exr_line_bytes(w: usize) -> std::io::Result<i32> {
+    i32::try_from(12 * w)
+        .map_err(|_| std::io::Error::other("the image is too large for an EXR file"))
+}
+
+/// The length of the EXR file [`write_exr`] writes for `image`: the header, the line
+/// offsets (8 bytes a line), and per line 8 bytes of y and size and 12 per pixel.
+fn exr_file_bytes(image: &Image) -> std::io::Result<u64> {
+    let (w, h) = (image.width as usize, image.height as usize);
+    let header = exr_header(w, h)?.len() as u64;
+    Ok(header + h as u64 * (8 + 8 + 12 * w as u64))
+}
+
+/// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
+/// y — the simplest layout of the format (OpenEXR file layout: magic and version, header
+/// attributes, line offset table, then per line its y, its byte count and the channels'
+/// samples in alphabetical order, B, G, R). Float renders hardly compress, so writing is a
+/// copy at memory speed; every reader of the format opens it (tested with the `exr` crate's).
+fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()> {
+    let (w, h) = (image.width as usize, image.height as usize);
+    let line_bytes = exr_line_bytes(w)?;
+    let header = exr_header(w, h)?;
     out.write_all(&header)?;
     // One block per line: 8 bytes of y and size, then the samples.
     let first_block = (header.len() + 8 * h) as u64;
@@ -228,13 +249,21 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
             image.pixels[k]
         )));
     }
-    write_atomically(path, |w| {
-        match &levels {
-            Some(levels) => encode_png(image, levels, w),
-            None => encode_image(image, kind, depth, w),
+    // Both are written with their length known beforehand (`write_atomically_sized`): an
+    // EXR's follows from its size, a PNG is encoded in memory first (it is smaller than its
+    // levels).
+    match levels {
+        Some(levels) => {
+            let mut png = std::io::Cursor::new(Vec::new());
+            encode_png(image, &levels, &mut png)
+                .map_err(|e| Error::write(path, "cannot encode", std::io::Error::other(e)))?;
+            write_bytes_atomically(path, png.get_ref())
         }
-        .map_err(std::io::Error::other)
-    })
+        None => {
+            let bytes = exr_file_bytes(image).map_err(|e| Error::write(path, "cannot write", e))?;
+            write_atomically_sized(path, bytes, |w| write_exr(image, w))
+        }
+    }
 }
 
 /// Writes 8-bit RGB bytes (`3 width height`, row-major) as a PNG, atomically: for charts and
@@ -438,6 +467,9 @@ mod tests {
             image.pixels[0] = -0.0;
             let path = dir.path().join(format!("i{w}x{h}.exr"));
             save_image(&image, &path, BitDepth::Eight).unwrap();
+            // The length reserved before writing is the length written.
+            let written = std::fs::metadata(&path).unwrap().len();
+            assert_eq!(exr_file_bytes(&image).unwrap(), written, "{w}×{h}");
             // The exr crate's own reader, not the image crate's.
             let read = exr::prelude::read()
                 .no_deep_data()

@@ -218,9 +218,9 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         .map_err(|e| Error::write(out, "cannot write in its folder", e))
 }
 
-/// Writes `bytes` to `path` with [`write_atomically`].
+/// Writes `bytes` to `path` with [`write_atomically_sized`] (their length is known).
 pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically(path, |w| w.write_all(bytes))
+    write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(bytes))
 }
 
 /// Writes a file all at once or not at all: `write` fills a temporary file in the same
@@ -230,6 +230,54 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 /// ([`crate::model::ErrorKind`]).
 pub fn write_atomically(
     path: &Path,
+    write: impl FnOnce(&mut AtomicWriter) -> std::io::Result<()>,
+) -> Result<()> {
+    write_atomically_reserving(path, None, write)
+}
+
+/// [`write_atomically`] for a file whose length, `bytes`, is known before it is written:
+/// the temporary file's blocks are reserved first ([`reserve_blocks`]), so that renaming it
+/// over an earlier output is cheap. A wrong length only costs that saving.
+pub fn write_atomically_sized(
+    path: &Path,
+    bytes: u64,
+    write: impl FnOnce(&mut AtomicWriter) -> std::io::Result<()>,
+) -> Result<()> {
+    write_atomically_reserving(path, Some(bytes), write)
+}
+
+/// Reserves the first `bytes` of `file` on disk without changing its length (Linux:
+/// `fallocate(FALLOC_FL_KEEP_SIZE)`; a no-op elsewhere or where the file system cannot).
+///
+/// Why: file systems with delayed allocation (ext4, by default) write a file's data out
+/// when it is renamed over an existing file (ext4's `auto_da_alloc`), and the rename waits
+/// for that: measured on ext4, writing and renaming a 3 MiB image over an earlier one took
+/// ~3 ms, and 20 ms at 25 MiB (a 1080p EXR), against 0.5 and 6 ms with the blocks
+/// reserved first, when there is nothing left to allocate at the rename. What it changes:
+/// after a power loss within the few seconds before the kernel writes the file out, the
+/// new file may read as zeros where the heuristic would have had the old one or the new;
+/// no output is ever synced to disk, with or without it, and outputs stay atomic for every
+/// reader and every way the process can end.
+fn reserve_blocks(file: &std::fs::File, bytes: u64) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        if let Ok(length) = libc::off_t::try_from(bytes)
+            && length > 0
+        {
+            // SAFETY: `file` is an open file descriptor for the duration of the call. A
+            // failure (no space, a file system without it) is left to the writes to report.
+            unsafe { libc::fallocate(file.as_raw_fd(), libc::FALLOC_FL_KEEP_SIZE, 0, length) };
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (file, bytes);
+}
+
+/// [`write_atomically`], reserving `reserve` bytes of the temporary file first when given.
+fn write_atomically_reserving(
+    path: &Path,
+    reserve: Option<u64>,
     write: impl FnOnce(&mut AtomicWriter) -> std::io::Result<()>,
 ) -> Result<()> {
     refuse_folder(path)?;
@@ -249,6 +297,9 @@ pub fn write_atomically(
         .prefix(&temp_prefix())
         .tempfile_in(parent)
         .map_err(|e| Error::write(path, "cannot create a temporary file beside the output", e))?;
+    if let Some(bytes) = reserve {
+        reserve_blocks(temp.as_file(), bytes);
+    }
     let mut writer = FirstError::new(BufWriter::new(temp));
     write(&mut writer)
         .and_then(|()| writer.flush())
