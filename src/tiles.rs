@@ -86,7 +86,7 @@ struct Reach {
 }
 
 /// Kernels per chunk of the per-kernel passes.
-const CHUNK: usize = 4096;
+const CHUNK: usize = 1024;
 
 impl TileBins {
     /// Number of tiles.
