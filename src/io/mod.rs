@@ -236,8 +236,9 @@ pub fn write_atomically(
 }
 
 /// [`write_atomically`] for a file whose length, `bytes`, is known before it is written:
-/// the temporary file's blocks are reserved first ([`reserve_blocks`]), so that renaming it
-/// over an earlier output is cheap. A wrong length only costs that saving.
+/// the temporary file's blocks are reserved first (Linux: `fallocate` keeping its size), so
+/// that renaming it over an earlier output does not wait for the file system to write it out.
+/// A wrong length only costs that saving.
 pub fn write_atomically_sized(
     path: &Path,
     bytes: u64,
