@@ -445,18 +445,8 @@ pub fn rasterize_on(
         "this CPU cannot run the {path} path"
     );
     row_forms(proj, bins, forms);
-    let (w, h) = (bins.width as usize, bins.height as usize);
-    image.width = bins.width;
-    image.height = bins.height;
-    // Every pixel is written below. A first (or larger) frame takes fresh zeroed pages from
-    // the system, so that they are touched first by the parallel tile rows, not by a serial
-    // fill here.
-    if image.pixels.capacity() < 3 * w * h {
-        image.pixels = vec![0.0; 3 * w * h];
-    } else {
-        image.pixels.resize(3 * w * h, 0.0);
-    }
-    if w == 0 || h == 0 {
+    let w = bins.width as usize;
+    if !size_image(bins, image) {
         return 0;
     }
     let frame = Frame {
@@ -480,6 +470,44 @@ pub fn rasterize_on(
             })
         })
         .sum()
+}
+
+/// Sizes `image` for the frame of `bins`, its pixels to be written tile by tile; whether
+/// it has any. A first (or larger) frame takes fresh zeroed pages from the system, so that
+/// they are touched first by the parallel tile rows, not by a serial fill here.
+pub(crate) fn size_image(bins: &TileBins, image: &mut Image) -> bool {
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    image.width = bins.width;
+    image.height = bins.height;
+    if image.pixels.capacity() < 3 * w * h {
+        image.pixels = vec![0.0; 3 * w * h];
+    } else {
+        image.pixels.resize(3 * w * h, 0.0);
+    }
+    w > 0 && h > 0
+}
+
+/// Prepares tile `t` of a frame into `scratch` and sums it into `band` (the image rows of
+/// its tile row) with the loops compiled for `path` (which the CPU must have), as
+/// [`rasterize_on`] does; the set-up stays in `scratch` for a backward of the same tile
+/// ([`crate::backward::raster`]). Returns the pairs.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn forward_tile_on(
+    path: SimdPath,
+    exp: ExpMode,
+    bins: &TileBins,
+    forms: &[RowForm],
+    background: [f32; 3],
+    t: usize,
+    scratch: &mut TileScratch,
+    band: &mut [f32],
+) -> u64 {
+    let frame = Frame {
+        bins,
+        forms,
+        background: background.map(f64::from),
+    };
+    tile_on(path, exp, &frame, t, scratch, band)
 }
 
 /// A tile's pixel geometry, for the per-kernel set-up.

@@ -14,7 +14,7 @@
 
 use crate::backward::composite::composite_backward;
 use crate::backward::project::project_backward;
-use crate::backward::raster::rasterize_backward;
+use crate::backward::raster::{PixelGradient, rasterize_backward, rasterize_with_backward};
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
 use crate::colour::{order_by_depth, shade};
@@ -257,14 +257,7 @@ impl RenderContext {
                     &mut buffers.kernel_sums,
                     &mut buffers.screen,
                 );
-                // The background is added to every pixel: its gradient is the sum of ∂L/∂C.
-                let mut v_background = [0.0_f64; 3];
-                for pixel in v_image.chunks_exact(3) {
-                    for (sum, &v) in v_background.iter_mut().zip(pixel) {
-                        *sum += f64::from(v);
-                    }
-                }
-                v_background
+                background_gradient(v_image)
             }
             Blend::Alpha => composite_backward(
                 &self.projected,
@@ -278,6 +271,72 @@ impl RenderContext {
                 &mut buffers.screen,
             ),
         };
+        self.backward_from_screen(scene, camera, tau, options, v_background, grads);
+    }
+
+    /// [`Self::render`], then [`Self::backward`] of the loss whose `∂L/∂C` `gradient` gives
+    /// from the rendered pixels ([`PixelGradient`]), written to `v_image`: a training step's
+    /// render and backward. Additive scenes take one pass over the tiles, each set up once for
+    /// both ([`rasterize_with_backward`]); the image, `v_image` and the gradients are the
+    /// same bits as the two calls with `gradient` applied to the whole image between them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_and_backward(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        gradient: &PixelGradient,
+        v_image: &mut Vec<f32>,
+        grads: &mut Gradients,
+    ) -> Result<RenderStats> {
+        if scene.blend != Blend::Additive {
+            let stats = self.render(scene, camera, tau, options)?;
+            v_image.clear();
+            v_image.resize(self.image.pixels.len(), 0.0);
+            gradient(0, &self.image.pixels, v_image);
+            self.backward(scene, camera, tau, options, v_image, grads);
+            return Ok(stats);
+        }
+        check_frame(tau, options)?;
+        slice(scene, tau, options.cutoff, &mut self.sliced);
+        project(&self.sliced, camera, options.dilation, &mut self.projected);
+        bin(&self.projected, camera.width, camera.height, &mut self.bins);
+        let buffers = &mut self.backward;
+        let pairs = rasterize_with_backward(
+            &self.projected,
+            &self.bins,
+            scene.background.map(|b| b as f32),
+            options.exp,
+            &mut self.row_forms,
+            &mut self.image,
+            gradient,
+            v_image,
+            (&mut buffers.entry_partials, &mut buffers.kernel_sums),
+            &mut buffers.screen,
+        );
+        let v_background = background_gradient(v_image);
+        self.backward_from_screen(scene, camera, tau, options, v_background, grads);
+        Ok(RenderStats {
+            sliced: self.sliced.len(),
+            projected: self.projected.len(),
+            tile_entries: self.bins.proj_from_entry.len(),
+            pairs,
+        })
+    }
+
+    /// The backward's stages 2 and 1 from the screen-space gradients in
+    /// `self.backward.screen`, and the background's gradient: into `grads`.
+    fn backward_from_screen(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        v_background: [f64; 3],
+        grads: &mut Gradients,
+    ) {
+        let buffers = &mut self.backward;
         project_backward(
             &self.sliced,
             &self.projected,
@@ -305,6 +364,18 @@ impl RenderContext {
     pub fn swap_image(&mut self, other: &mut Image) {
         std::mem::swap(&mut self.image, other);
     }
+}
+
+/// The gradient of the background of an additive frame, which is added to every pixel: the
+/// sum of `∂L/∂C` over the pixels, per channel, in pixel order (f64).
+fn background_gradient(v_image: &[f32]) -> [f64; 3] {
+    let mut v_background = [0.0_f64; 3];
+    for pixel in v_image.chunks_exact(3) {
+        for (sum, &v) in v_background.iter_mut().zip(pixel) {
+            *sum += f64::from(v);
+        }
+    }
+    v_background
 }
 
 /// The checks of SPEC §4–5 on a frame's options and time.

@@ -29,8 +29,8 @@ use rayon::prelude::*;
 
 use crate::project::ProjectedKernels;
 use crate::raster::{
-    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile, read_planes,
+    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch,
+    forward_tile_on, half_rows, prepare_tile, read_planes, row_forms, size_image,
 };
 use crate::tiles::TileBins;
 
@@ -107,6 +107,193 @@ pub(crate) fn rasterize_backward_on(
         });
     });
     reduce(proj, bins, partials, sums, out);
+}
+
+/// A loss's gradient with respect to the rendered pixels, run by run: `gradient(k,
+/// rendered, v)` sets `v[i]`, `∂L/∂C` of channel `k + i` of the image (RGB, row-major),
+/// from its rendered value `rendered[i]` (the runs are one tile row's pixels, in any
+/// order). [`rasterize_with_backward`] calls it on each tile as soon as the tile is summed.
+pub type PixelGradient<'a> = dyn Fn(usize, &[f32], &mut [f32]) + Sync + 'a;
+
+/// The forward raster ([`crate::raster::rasterize`]) and [`rasterize_backward`] of one
+/// frame in one pass over its tiles: each tile is set up once, summed into `image`, its
+/// `∂L/∂C` computed by `gradient` into `v_image` (resized to the image's), and
+/// differentiated while its set-up is in cache. The image, `v_image` and `out` are the same
+/// bits as the forward, `gradient` over the whole image and the backward one after the
+/// other: every stage is the same code on the same set-up (the forward's `prepare_tile`).
+/// Returns the pairs.
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize_with_backward(
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    image: &mut crate::model::Image,
+    gradient: &PixelGradient,
+    v_image: &mut Vec<f32>,
+    (partials, sums): (&mut Vec<[f32; 8]>, &mut Vec<[f64; 8]>),
+    out: &mut ScreenGradients,
+) -> u64 {
+    rasterize_with_backward_on(
+        SimdPath::detect(),
+        proj,
+        bins,
+        background,
+        exp,
+        forms,
+        image,
+        gradient,
+        v_image,
+        (partials, sums),
+        out,
+    )
+}
+
+/// [`rasterize_with_backward`] on `path` (which the CPU must have).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rasterize_with_backward_on(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    image: &mut crate::model::Image,
+    gradient: &PixelGradient,
+    v_image: &mut Vec<f32>,
+    (partials, sums): (&mut Vec<[f32; 8]>, &mut Vec<[f64; 8]>),
+    out: &mut ScreenGradients,
+) -> u64 {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run {path}"
+    );
+    row_forms(proj, bins, forms);
+    let pixels = size_image(bins, image);
+    v_image.clear();
+    v_image.resize(image.pixels.len(), 0.0);
+    partials.clear();
+    partials.resize(bins.proj_from_entry.len(), [0.0; 8]);
+    let mut pairs = 0;
+    if pixels {
+        let (width, tiles_x) = (bins.width as usize, bins.tiles_x as usize);
+        // One disjoint run of partials per tile row: its tiles' entries are consecutive.
+        let mut band_runs = Vec::with_capacity(bins.tiles_y as usize);
+        let mut rest = partials.as_mut_slice();
+        for ty in 0..bins.tiles_y as usize {
+            let tiles = ty * tiles_x..(ty + 1) * tiles_x;
+            let entries = (bins.tile_offsets[tiles.end] - bins.tile_offsets[tiles.start]) as usize;
+            let (run, tail) = rest.split_at_mut(entries);
+            band_runs.push(run);
+            rest = tail;
+        }
+        let forms = forms.as_slice();
+        pairs = image
+            .pixels
+            .par_chunks_mut(3 * width * ROW)
+            .zip(v_image.par_chunks_mut(3 * width * ROW))
+            .zip(band_runs)
+            .enumerate()
+            .map(|(ty, ((band, v_band), mut runs))| {
+                SCRATCH.with(|cell| {
+                    let scratch = &mut *cell.borrow_mut();
+                    let mut pairs = 0;
+                    for t in ty * tiles_x..(ty + 1) * tiles_x {
+                        pairs += forward_tile_on(
+                            path,
+                            exp,
+                            bins,
+                            forms,
+                            background,
+                            t,
+                            &mut scratch.tile,
+                            band,
+                        );
+                        let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
+                        for row in 0..(ty1 - ty0) as usize {
+                            let at = 3 * (row * width + tx0 as usize);
+                            let run = at..at + 3 * (tx1 - tx0) as usize;
+                            let first = 3 * (ty0 as usize * width) + at;
+                            gradient(first, &band[run.clone()], &mut v_band[run]);
+                        }
+                        let (run, tail) =
+                            std::mem::take(&mut runs).split_at_mut(bins.tile_entries(t).len());
+                        runs = tail;
+                        backward_prepared_tile_on(
+                            path,
+                            exp,
+                            bins,
+                            v_band,
+                            ty0 as usize,
+                            t,
+                            run,
+                            scratch,
+                        );
+                    }
+                    pairs
+                })
+            })
+            .sum();
+    }
+    reduce(proj, bins, partials, sums, out);
+    pairs
+}
+
+/// [`backward_prepared_tile`] compiled for `path`.
+#[allow(clippy::too_many_arguments)]
+fn backward_prepared_tile_on(
+    path: SimdPath,
+    exp: ExpMode,
+    bins: &TileBins,
+    v: &[f32],
+    v_row: usize,
+    t: usize,
+    run: &mut [[f32; 8]],
+    scratch: &mut BackwardScratch,
+) {
+    match (path, exp) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: the caller checked that the CPU has the path's features.
+        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            avx512::backward_prepared_tile::<true>(bins, v, v_row, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx512, ExpMode::Std) => unsafe {
+            avx512::backward_prepared_tile::<false>(bins, v, v_row, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Poly) => unsafe {
+            backward_prepared_tile_avx2::<true>(bins, v, v_row, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Std) => unsafe {
+            backward_prepared_tile_avx2::<false>(bins, v, v_row, t, run, scratch);
+        },
+        (_, ExpMode::Poly) => {
+            backward_prepared_tile::<true, false>(bins, v, v_row, t, run, scratch);
+        }
+        (_, ExpMode::Std) => {
+            backward_prepared_tile::<false, false>(bins, v, v_row, t, run, scratch);
+        }
+    }
+}
+
+/// [`backward_prepared_tile`] compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_prepared_tile_avx2<const FAST: bool>(
+    bins: &TileBins,
+    v: &[f32],
+    v_row: usize,
+    t: usize,
+    run: &mut [[f32; 8]],
+    scratch: &mut BackwardScratch,
+) {
+    backward_prepared_tile::<FAST, true>(bins, v, v_row, t, run, scratch);
 }
 
 /// Scratch of one worker: the tile's row entries (as the forward builds them) and, per
@@ -191,12 +378,27 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
     scratch: &mut BackwardScratch,
 ) {
     prepare_tile(bins, forms, t, &mut scratch.tile);
+    backward_prepared_tile::<FAST, AVX2>(bins, v_image, 0, t, run, scratch);
+}
+
+/// [`backward_tile`] on a tile [`prepare_tile`] has set up in `scratch.tile` (by the
+/// forward of the same frame, say). `v` holds `∂L/∂C` of the image rows from `v_row` on.
+#[inline(always)]
+fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
+    bins: &TileBins,
+    v: &[f32],
+    v_row: usize,
+    t: usize,
+    run: &mut [[f32; 8]],
+    scratch: &mut BackwardScratch,
+) {
     let tile = &scratch.tile;
     scratch.moments.clear();
     scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
     let rect = bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
     let width = bins.width as usize;
+    let v_image = v;
     for HalfRow {
         row,
         index,
@@ -206,7 +408,7 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
     {
         // ∂L/∂C of the half row, channel by channel; zero past the image's edge.
         let mut v = [[0.0_f32; LANES]; 3];
-        let start = 3 * ((ty0 as usize + row) * width + tx0 as usize + first);
+        let start = 3 * ((ty0 as usize - v_row + row) * width + tx0 as usize + first);
         read_planes(&v_image[start..start + 3 * lanes], &mut v);
         let entries = &tile.halves[index];
         let (first_lane, lanes_f) = (first as f32, lanes as f32);
@@ -380,6 +582,22 @@ mod avx512 {
         scratch: &mut BackwardScratch,
     ) {
         prepare_tile::<false>(bins, forms, t, &mut scratch.tile.whole_rows);
+        backward_prepared_tile::<FAST>(bins, v_image, 0, t, run, scratch);
+    }
+
+    /// [`backward_tile`] on a tile whose blocks, masks and kernels are set up in
+    /// `scratch.tile.whole_rows` (by the forward's `prepare_tile::<true>`, say, which sets
+    /// up the same ones and the row lists besides). `v` holds `∂L/∂C` of the image rows
+    /// from `v_row` on.
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(super) fn backward_prepared_tile<const FAST: bool>(
+        bins: &TileBins,
+        v_image: &[f32],
+        v_row: usize,
+        t: usize,
+        run: &mut [[f32; 8]],
+        scratch: &mut BackwardScratch,
+    ) {
         let tile = &scratch.tile.whole_rows;
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let lanes = (tx1 - tx0) as usize;
@@ -387,7 +605,7 @@ mod avx512 {
         // ∂L/∂C of the tile's rows, channel by channel; zero past the image's edges.
         let mut v = [[[0.0_f32; ROW]; 3]; ROW];
         for (row, v) in v.iter_mut().enumerate().take((ty1 - ty0) as usize) {
-            let start = 3 * ((ty0 as usize + row) * width + tx0 as usize);
+            let start = 3 * ((ty0 as usize - v_row + row) * width + tx0 as usize);
             read_planes(&v_image[start..start + 3 * lanes], v);
         }
         // Lanes past the image's right edge never count.
@@ -502,6 +720,102 @@ mod tests {
     use crate::model::random::seeded_rng;
     use crate::render::{RenderContext, RenderOptions};
     use rand::RngExt;
+
+    #[test]
+    fn the_render_with_its_backward_is_the_render_then_the_backward_bit_for_bit() {
+        use crate::raster::{TileScratchPool, rasterize_on};
+        // Partial tiles on the right and at the bottom; an empty frame.
+        let scene = crate::scenes::synthetic::bench_scene(2000, 5);
+        for ((w, h), exp) in [
+            ((171, 83), ExpMode::Poly),
+            ((161, 97), ExpMode::Std),
+            ((0, 0), ExpMode::Poly),
+        ] {
+            let camera = crate::scenes::synthetic::bench_camera(w.max(1), h.max(1));
+            let camera = crate::model::Camera {
+                width: w,
+                height: h,
+                ..camera
+            };
+            let options = RenderOptions {
+                exp,
+                ..RenderOptions::default()
+            };
+            let mut context = RenderContext::new();
+            context.render(&scene, &camera, 0.5, &options).unwrap();
+            let (proj, bins) = (&context.projected, &context.bins);
+            let mut rng = seeded_rng(7);
+            let target: Vec<f32> = (0..3 * w * h).map(|_| rng.random_range(0.0..2.0)).collect();
+            // A gradient that depends on the pixel, its channel and its rendered value.
+            let gradient = |first: usize, rendered: &[f32], v: &mut [f32]| {
+                for (i, (v, &c)) in v.iter_mut().zip(rendered).enumerate() {
+                    *v = 0.7 * (c - target[first + i]) + 1e-3 * ((first + i) % 5) as f32;
+                }
+            };
+            let background = [0.25, -0.5, 0.0];
+            for &path in SimdPath::available() {
+                // One after the other.
+                let (mut forms, pool) = (Vec::new(), TileScratchPool::default());
+                let mut image = crate::model::Image::filled(0, 0, [0.0; 3]);
+                let pairs = rasterize_on(
+                    path,
+                    proj,
+                    bins,
+                    background,
+                    exp,
+                    (&mut forms, &pool),
+                    &mut image,
+                );
+                let mut v_image = vec![0.0; image.pixels.len()];
+                gradient(0, &image.pixels, &mut v_image);
+                let (mut partials, mut sums) = (Vec::new(), Vec::new());
+                let mut out = ScreenGradients::default();
+                rasterize_backward_on(
+                    path,
+                    proj,
+                    bins,
+                    &forms,
+                    &v_image,
+                    exp,
+                    &mut partials,
+                    &mut sums,
+                    &mut out,
+                );
+                // In one pass, with buffers holding another frame's values.
+                let mut fused_image = crate::model::Image::filled(3, 2, [9.0; 3]);
+                let mut fused_v = vec![5.0; 11];
+                let (mut fused_partials, mut fused_sums) = (vec![[3.0; 8]; 4], vec![[1.0; 8]; 2]);
+                let mut fused_out = ScreenGradients::default();
+                let fused_pairs = rasterize_with_backward_on(
+                    path,
+                    proj,
+                    bins,
+                    background,
+                    exp,
+                    &mut Vec::new(),
+                    &mut fused_image,
+                    &gradient,
+                    &mut fused_v,
+                    (&mut fused_partials, &mut fused_sums),
+                    &mut fused_out,
+                );
+                let bits = |values: &[f32]| values.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(fused_pairs, pairs, "{path}");
+                assert_eq!((fused_image.width, fused_image.height), (w, h));
+                assert_eq!(bits(&fused_image.pixels), bits(&image.pixels), "{path}");
+                assert_eq!(bits(&fused_v), bits(&v_image), "{path}");
+                assert_eq!(
+                    bits(fused_partials.as_flattened()),
+                    bits(partials.as_flattened()),
+                    "{path}"
+                );
+                assert_eq!(format!("{fused_out:?}"), format!("{out:?}"), "{path}");
+                if w > 0 {
+                    assert!(pairs > 0 && partials.iter().flatten().any(|&p| p != 0.0));
+                }
+            }
+        }
+    }
 
     #[test]
     fn every_simd_path_gives_the_same_gradients_bit_for_bit() {

@@ -91,32 +91,54 @@ pub fn view_mse(image: &Image, view: &View) -> f64 {
 }
 
 /// [`view_mse`] and its gradient `weight ∂loss/∂C` into `v_image` (resized), as
-/// [`mse_with_gradient`]; with pixel weights `w_p`, `∂loss/∂C = 2 w_p (C - C_gt) / (3 Σ w)`.
+/// [`mse_with_gradient`]; with pixel weights `w_p`, `∂loss/∂C = 2 w_p (C - C_gt) / (3 Σ w)`
+/// ([`view_mse_gradient`]).
 pub fn view_mse_with_gradient(
     image: &Image,
     view: &View,
     weight: f64,
     v_image: &mut Vec<f32>,
 ) -> f64 {
-    let Some(weights) = &view.weights else {
-        return mse_with_gradient(image, &view.image, weight, v_image);
-    };
-    let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
-    let scale = if total > 0.0 {
-        (weight * 2.0 / (3.0 * total)) as f32
-    } else {
-        0.0
-    };
     v_image.clear();
-    v_image.extend(
-        image
-            .pixels
-            .iter()
-            .zip(&view.image.pixels)
-            .enumerate()
-            .map(|(k, (&c, &t))| scale * weights[k / 3] * (c - t)),
-    );
-    weighted_mse(image, &view.image, weights)
+    v_image.resize(image.pixels.len(), 0.0);
+    view_mse_gradient(view, weight)(0, &image.pixels, v_image);
+    view_mse(image, view)
+}
+
+/// The gradient of `weight ×` [`view_mse`] with respect to the rendered pixels, channel
+/// run by channel run (a [`crate::backward::raster::PixelGradient`]): `gradient(k, c, v)`
+/// sets `v[i]` for channel `k + i` of the view's image from its rendered value `c[i]`, to
+/// `s (c - C_gt)` with `s = weight 2 / N` in f32 (as [`mse_with_gradient`]), or with pixel
+/// weights `s w_p (c - C_gt)` with `s = weight 2 / (3 Σ w)` (0 when every weight is 0).
+pub fn view_mse_gradient(view: &View, weight: f64) -> impl Fn(usize, &[f32], &mut [f32]) + Sync {
+    let target = &view.image.pixels;
+    let weights = view.weights.as_deref();
+    let scale = match weights {
+        None => (weight * 2.0 / target.len() as f64) as f32,
+        Some(weights) => {
+            let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
+            if total > 0.0 {
+                (weight * 2.0 / (3.0 * total)) as f32
+            } else {
+                0.0
+            }
+        }
+    };
+    move |first: usize, rendered: &[f32], v: &mut [f32]| {
+        let targets = &target[first..first + rendered.len()];
+        match weights {
+            None => {
+                for ((v, &c), &t) in v.iter_mut().zip(rendered).zip(targets) {
+                    *v = scale * (c - t);
+                }
+            }
+            Some(weights) => {
+                for (i, ((v, &c), &t)) in v.iter_mut().zip(rendered).zip(targets).enumerate() {
+                    *v = scale * weights[(first + i) / 3] * (c - t);
+                }
+            }
+        }
+    }
 }
 
 /// `10 log10(1 / mse)`, dB.

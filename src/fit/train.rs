@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, LearningRates};
 use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
-use crate::fit::loss::{psnr, view_mse, view_mse_with_gradient};
+use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::model::View;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
@@ -287,18 +287,18 @@ impl ViewSlot {
         options: &RenderOptions,
     ) -> Result<f64> {
         self.grads.reset_for_scene(scene);
-        self.context
-            .render(scene, &view.camera, view.time, options)?;
-        let mse = view_mse_with_gradient(self.context.image(), view, weight, &mut self.v_image);
-        self.context.backward(
+        // The render and its backward in one pass over the tiles (the same bits as
+        // `render`, `view_mse_with_gradient` and `backward`).
+        self.context.render_and_backward(
             scene,
             &view.camera,
             view.time,
             options,
-            &self.v_image,
+            &view_mse_gradient(view, weight),
+            &mut self.v_image,
             &mut self.grads,
-        );
-        Ok(mse)
+        )?;
+        Ok(view_mse(self.context.image(), view))
     }
 }
 

@@ -411,3 +411,73 @@ fn background_gradient_matches_finite_differences_and_the_f64_backward() {
         }
     }
 }
+
+/// A training step's render and backward in one pass (`RenderContext::render_and_backward`
+/// with `view_mse_gradient`, as the fits run it) gives the same image, `∂L/∂C` and
+/// gradients, bit for bit, as `render`, `view_mse_with_gradient` and `backward` one after
+/// the other: additive and alpha scenes, with and without pixel weights.
+#[test]
+fn a_training_steps_render_and_backward_in_one_pass_are_the_same_bits() {
+    use splat4d::RenderContext;
+    use splat4d::fit::loss::{view_mse, view_mse_gradient, view_mse_with_gradient};
+    use splat4d::scenes::synthetic::{bench_camera, bench_scene, varied_alpha_bench_scene};
+    let camera = bench_camera(133, 71);
+    let options = RenderOptions::default();
+    for (name, scene) in [
+        ("additive", bench_scene(1500, 3)),
+        ("alpha", varied_alpha_bench_scene(1500, 3, 0.2)),
+    ] {
+        let mut context = RenderContext::new();
+        context.render(&scene, &camera, 0.3, &options).unwrap();
+        let pixels = (camera.width * camera.height) as usize;
+        let weights: Vec<f32> = (0..pixels).map(|p| (p % 7) as f32 / 6.0).collect();
+        for weights in [None, Some(weights)] {
+            let view = splat4d::model::View {
+                camera,
+                time: 0.5,
+                image: std::sync::Arc::new(context.image().clone()),
+                name: "target".into(),
+                weights,
+            };
+            let weighted = view.weights.is_some();
+            // One after the other.
+            let mut apart = RenderContext::new();
+            apart.render(&scene, &camera, 0.6, &options).unwrap();
+            let mut v_image = Vec::new();
+            let loss = view_mse_with_gradient(apart.image(), &view, 0.5, &mut v_image);
+            let mut grads = Gradients::for_scene(&scene);
+            apart.backward(&scene, &camera, 0.6, &options, &v_image, &mut grads);
+            // In one pass, in a context that rendered another frame before.
+            let mut together = RenderContext::new();
+            together.render(&scene, &camera, 0.1, &options).unwrap();
+            let mut fused_v = vec![1.0; 5];
+            let mut fused_grads = Gradients::for_scene(&scene);
+            together
+                .render_and_backward(
+                    &scene,
+                    &camera,
+                    0.6,
+                    &options,
+                    &view_mse_gradient(&view, 0.5),
+                    &mut fused_v,
+                    &mut fused_grads,
+                )
+                .unwrap();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let case = format!("{name}, weighted {weighted}");
+            assert_eq!(
+                bits(&together.image().pixels),
+                bits(&apart.image().pixels),
+                "{case}"
+            );
+            assert_eq!(bits(&fused_v), bits(&v_image), "{case}");
+            assert_eq!(
+                view_mse(together.image(), &view).to_bits(),
+                loss.to_bits(),
+                "{case}"
+            );
+            assert!(loss > 0.0, "{case}");
+            assert_eq!(format!("{fused_grads:?}"), format!("{grads:?}"), "{case}");
+        }
+    }
+}
