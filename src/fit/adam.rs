@@ -13,6 +13,8 @@
 //! they stay positive and a rate is a relative change; they are frozen by default, as the
 //! seed paper fixes σ "for stability" (SPEC §6). Rotation is never changed.
 
+use rayon::prelude::*;
+
 use crate::backward::Gradients;
 use crate::model::scene::Scene;
 
@@ -116,28 +118,6 @@ impl Adam {
         self.second = second;
     }
 
-    /// Updates the moments of parameter `slot` with `grad`; returns the step to subtract.
-    fn update(
-        &mut self,
-        slot: usize,
-        grad: f64,
-        rate: f64,
-        correction1: f64,
-        correction2: f64,
-    ) -> f64 {
-        let AdamConfig {
-            beta1,
-            beta2,
-            epsilon,
-        } = self.config;
-        let m = beta1 * self.first[slot] + (1.0 - beta1) * grad;
-        let v = beta2 * self.second[slot] + (1.0 - beta2) * grad * grad;
-        self.first[slot] = m;
-        self.second[slot] = v;
-        rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
-    }
-
-    /// One update of `scene` with `grads` (sized for the scene).
     pub fn step(&mut self, scene: &mut Scene, grads: &Gradients, rates: &LearningRates) {
         assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
         assert_eq!(
@@ -146,56 +126,95 @@ impl Adam {
             "Adam state sized for the scene"
         );
         self.steps += 1;
-        let AdamConfig { beta1, beta2, .. } = self.config;
-        let correction1 = 1.0 - beta1.powi(self.steps);
-        let correction2 = 1.0 - beta2.powi(self.steps);
-        for i in 0..scene.len() {
-            let [x, y, z, t] = &mut scene.means[i];
-            let [r, g, b] = &mut scene.amplitudes[i];
-            let [vx, vy, vz] = &mut scene.velocities[i];
-            let params: [(&mut f64, f64, f64); 10] = [
-                (x, grads.v_means[i][0], rates.mean),
-                (y, grads.v_means[i][1], rates.mean),
-                (z, grads.v_means[i][2], rates.mean),
-                (t, grads.v_means[i][3], rates.time),
-                (r, grads.v_amplitudes[i][0], rates.amplitude),
-                (g, grads.v_amplitudes[i][1], rates.amplitude),
-                (b, grads.v_amplitudes[i][2], rates.amplitude),
-                (vx, grads.v_velocities[i][0], rates.velocity),
-                (vy, grads.v_velocities[i][1], rates.velocity),
-                (vz, grads.v_velocities[i][2], rates.velocity),
-            ];
-            for (k, (value, grad, rate)) in params.into_iter().enumerate() {
-                if rate == 0.0 {
-                    continue;
-                }
-                *value -= self.update(PARAMS * i + k, grad, rate, correction1, correction2);
-            }
-            if rates.scale != 0.0 {
-                for k in 0..4 {
-                    let s = &mut scene.scales[i][k];
-                    // In ln s: the gradient is s ∂L/∂s.
-                    let grad = *s * grads.v_scales[i][k];
-                    let step = self.update(
-                        PARAMS * i + 10 + k,
-                        grad,
-                        rates.scale,
-                        correction1,
-                        correction2,
-                    );
-                    *s *= (-step).exp();
-                }
-            }
-        }
+        let config = self.config;
+        let corrections = (
+            1.0 - config.beta1.powi(self.steps),
+            1.0 - config.beta2.powi(self.steps),
+        );
+        let update = |m: &mut f64, v: &mut f64, grad: f64, rate: f64| {
+            advance(config, corrections, (m, v), grad, rate)
+        };
+        let kernels = scene.len();
+        // Kernel by kernel in parallel: each parameter's update reads and writes only its
+        // own value and moments, so the result does not depend on the thread count.
+        let moments1 = &mut self.first[..PARAMS * kernels];
+        let moments2 = &mut self.second[..PARAMS * kernels];
+        (
+            scene.means.par_iter_mut(),
+            scene.amplitudes.par_iter_mut(),
+            scene.velocities.par_iter_mut(),
+            scene.scales.par_iter_mut(),
+            moments1.par_chunks_mut(PARAMS),
+            moments2.par_chunks_mut(PARAMS),
+        )
+            .into_par_iter()
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(
+                |(i, ([x, y, z, t], [r, g, b], [vx, vy, vz], scales, first, second))| {
+                    let params: [(&mut f64, f64, f64); 10] = [
+                        (x, grads.v_means[i][0], rates.mean),
+                        (y, grads.v_means[i][1], rates.mean),
+                        (z, grads.v_means[i][2], rates.mean),
+                        (t, grads.v_means[i][3], rates.time),
+                        (r, grads.v_amplitudes[i][0], rates.amplitude),
+                        (g, grads.v_amplitudes[i][1], rates.amplitude),
+                        (b, grads.v_amplitudes[i][2], rates.amplitude),
+                        (vx, grads.v_velocities[i][0], rates.velocity),
+                        (vy, grads.v_velocities[i][1], rates.velocity),
+                        (vz, grads.v_velocities[i][2], rates.velocity),
+                    ];
+                    for (k, (value, grad, rate)) in params.into_iter().enumerate() {
+                        if rate == 0.0 {
+                            continue;
+                        }
+                        *value -= update(&mut first[k], &mut second[k], grad, rate);
+                    }
+                    if rates.scale != 0.0 {
+                        for (k, s) in scales.iter_mut().enumerate() {
+                            // In ln s: the gradient is s ∂L/∂s.
+                            let grad = *s * grads.v_scales[i][k];
+                            let step =
+                                update(&mut first[10 + k], &mut second[10 + k], grad, rates.scale);
+                            *s *= (-step).exp();
+                        }
+                    }
+                },
+            );
         if rates.background != 0.0 {
             let base = PARAMS * scene.len();
             for c in 0..3 {
                 let grad = grads.v_background[c];
-                scene.background[c] -=
-                    self.update(base + c, grad, rates.background, correction1, correction2);
+                scene.background[c] -= update(
+                    &mut self.first[base + c],
+                    &mut self.second[base + c],
+                    grad,
+                    rates.background,
+                );
             }
         }
     }
+}
+
+/// One parameter's Adam update with bias corrections `(1 - β1^k, 1 - β2^k)`: its moments
+/// `(m, v)` are advanced with `grad`, and the step to subtract is returned.
+fn advance(
+    config: AdamConfig,
+    (correction1, correction2): (f64, f64),
+    (first, second): (&mut f64, &mut f64),
+    grad: f64,
+    rate: f64,
+) -> f64 {
+    let AdamConfig {
+        beta1,
+        beta2,
+        epsilon,
+    } = config;
+    let m = beta1 * *first + (1.0 - beta1) * grad;
+    let v = beta2 * *second + (1.0 - beta2) * grad * grad;
+    *first = m;
+    *second = v;
+    rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
 }
 
 #[cfg(test)]
