@@ -17,6 +17,8 @@
 //! with `∂tx/∂x = 1, ∂tx/∂z = 0` unclamped and `∂tx/∂x = 0, ∂tx/∂z = lim = tx/z` clamped
 //! (likewise y). All f64; the per-kernel projection is recomputed from the slice.
 
+use rayon::prelude::*;
+
 use crate::backward::raster::ScreenGradients;
 use crate::model::camera::Camera;
 use crate::project::{ProjectedKernels, Projection, project_one};
@@ -123,23 +125,45 @@ pub fn project_backward(
         out.v_opacities.resize(sliced.len(), 0.0);
     }
     let rc = camera.rotation();
-    for p in 0..proj.len() {
-        let s = proj.slice_from_proj[p] as usize;
-        let projection = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
-            .expect("a kernel that was projected projects again");
-        let v_p = camera_mean_gradient(
-            camera,
-            &projection,
-            screen.v_means[p],
-            screen.v_covariances[p],
-        );
-        // p_cam = Rc m + tc  →  ∂L/∂m = Rcᵀ ∂L/∂p_cam
-        out.v_means[s] = std::array::from_fn(|c| (0..3).map(|r| rc[r][c] * v_p[r]).sum());
-        out.v_amplitudes[s] = screen.v_amplitudes[p];
-        if let Some(&v_opacity) = screen.v_opacities.get(p) {
-            out.v_opacities[s] = v_opacity;
+    // Each projected kernel's slice, by slice (`slice_from_proj` is one-to-one): the slices
+    // are then filled in parallel, each from its own kernel's values alone.
+    const CULLED: u32 = u32::MAX;
+    let mut proj_from_slice = vec![CULLED; sliced.len()];
+    for (p, &s) in proj.slice_from_proj.iter().enumerate() {
+        proj_from_slice[s as usize] = p as u32;
+    }
+    (
+        out.v_means.par_iter_mut(),
+        out.v_amplitudes.par_iter_mut(),
+        out.v_covariances.par_iter_mut(),
+        &proj_from_slice,
+    )
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(256)
+        .filter(|(_, (_, _, _, p))| **p != CULLED)
+        .for_each(|(s, (v_mean, v_amplitude, v_covariance, &p))| {
+            let p = p as usize;
+            let projection =
+                project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
+                    .expect("a kernel that was projected projects again");
+            let v_p = camera_mean_gradient(
+                camera,
+                &projection,
+                screen.v_means[p],
+                screen.v_covariances[p],
+            );
+            // p_cam = Rc m + tc  →  ∂L/∂m = Rcᵀ ∂L/∂p_cam
+            *v_mean = std::array::from_fn(|c| (0..3).map(|r| rc[r][c] * v_p[r]).sum());
+            *v_amplitude = screen.v_amplitudes[p];
+            *v_covariance =
+                world_covariance_gradient(&rc, &projection.jacobian, screen.v_covariances[p]);
+        });
+    if !screen.v_opacities.is_empty() {
+        for (&p, v_opacity) in proj_from_slice.iter().zip(&mut out.v_opacities) {
+            if p != CULLED {
+                *v_opacity = screen.v_opacities[p as usize];
+            }
         }
-        out.v_covariances[s] =
-            world_covariance_gradient(&rc, &projection.jacobian, screen.v_covariances[p]);
     }
 }
