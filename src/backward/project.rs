@@ -144,9 +144,8 @@ pub fn project_backward(
         .filter(|(_, (_, _, _, p))| **p != CULLED)
         .for_each(|(s, (v_mean, v_amplitude, v_covariance, &p))| {
             let p = p as usize;
-            let projection =
-                project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
-                    .expect("a kernel that was projected projects again");
+            let projection = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])
+                .expect("a kernel that was projected projects again");
             let v_p = camera_mean_gradient(
                 camera,
                 &projection,
