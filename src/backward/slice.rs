@@ -32,7 +32,9 @@ use crate::model::scene::{Blend, Scene};
 use crate::slice::{SlicedKernels, rotation_matrix};
 
 /// Adds the kernel gradients of one view to `grads` (sized for the scene:
-/// [`Gradients::for_scene`]).
+/// [`Gradients::for_scene`]). The kernels run in blocks, in parallel: each kernel takes the
+/// terms of its one slice in the same order as one after the other, so the result does not
+/// depend on the thread count.
 pub fn slice_backward(
     scene: &Scene,
     camera: &Camera,
@@ -41,14 +43,152 @@ pub fn slice_backward(
     from_slice: &SliceGradients,
     grads: &mut Gradients,
 ) {
+    use rayon::prelude::*;
     assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
     let alpha = scene.blend == Blend::Alpha;
     if alpha {
         assert_eq!(grads.v_opacities.len(), scene.len(), "alpha gradients");
+        assert_eq!(
+            grads.v_sh.len(),
+            scene.sh_count * scene.len(),
+            "alpha gradients"
+        );
     }
     let centre = camera_centre(camera);
-    for s in 0..sliced.len() {
-        let i = sliced.kernel_from_slice[s] as usize;
+    let view = SliceView {
+        scene,
+        tau,
+        centre,
+        sliced,
+        from_slice,
+    };
+    kernel_blocks(scene, sliced, grads)
+        .into_par_iter()
+        .for_each(|mut block| {
+            for s in block.slices.clone() {
+                let i = sliced.kernel_from_slice[s] as usize;
+                view.kernel_backward(s, i, &mut block.kernel(i));
+            }
+        });
+}
+
+/// What every kernel's backward reads.
+struct SliceView<'a> {
+    scene: &'a Scene,
+    tau: f64,
+    centre: [f64; 3],
+    sliced: &'a SlicedKernels,
+    from_slice: &'a SliceGradients,
+}
+
+/// One kernel's entries of [`Gradients`].
+struct KernelGradients<'a> {
+    mean: &'a mut [f64; 4],
+    amplitude: &'a mut [f64; 3],
+    velocity: &'a mut [f64; 3],
+    scale: &'a mut [f64; 4],
+    rotation: &'a mut [f64; 4],
+    /// Alpha scenes only.
+    opacity: Option<&'a mut f64>,
+    /// Alpha scenes: the kernel's `sh_count` coefficients (empty otherwise).
+    sh: &'a mut [[f64; 3]],
+}
+
+/// A block of consecutive kernels' gradients, and the slices of those kernels.
+struct KernelBlock<'a> {
+    first: usize,
+    slices: std::ops::Range<usize>,
+    sh_count: usize,
+    means: &'a mut [[f64; 4]],
+    amplitudes: &'a mut [[f64; 3]],
+    velocities: &'a mut [[f64; 3]],
+    scales: &'a mut [[f64; 4]],
+    rotations: &'a mut [[f64; 4]],
+    opacities: &'a mut [f64],
+    sh: &'a mut [[f64; 3]],
+}
+
+impl KernelBlock<'_> {
+    /// Kernel `i`'s gradients (`i` in the block).
+    fn kernel(&mut self, i: usize) -> KernelGradients<'_> {
+        let k = i - self.first;
+        let count = self.sh_count;
+        KernelGradients {
+            mean: &mut self.means[k],
+            amplitude: &mut self.amplitudes[k],
+            velocity: &mut self.velocities[k],
+            scale: &mut self.scales[k],
+            rotation: &mut self.rotations[k],
+            opacity: self.opacities.get_mut(k),
+            sh: self.sh.get_mut(k * count..(k + 1) * count).unwrap_or_default(),
+        }
+    }
+}
+
+/// The first `len` items of `rest`, which keeps the others.
+fn take<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+    let (head, tail) = std::mem::take(rest).split_at_mut(len);
+    *rest = tail;
+    head
+}
+
+/// `grads` split into blocks of consecutive kernels, each with the range of slices of its
+/// kernels (`kernel_from_slice` ascends).
+fn kernel_blocks<'a>(
+    scene: &Scene,
+    sliced: &SlicedKernels,
+    grads: &'a mut Gradients,
+) -> Vec<KernelBlock<'a>> {
+    const KERNELS: usize = 1024;
+    let n = scene.len();
+    let alpha = scene.blend == Blend::Alpha;
+    let count = if alpha { scene.sh_count } else { 0 };
+    let mut blocks = Vec::with_capacity(n.div_ceil(KERNELS));
+    let (mut means, mut amplitudes, mut velocities) = (
+        grads.v_means.as_mut_slice(),
+        grads.v_amplitudes.as_mut_slice(),
+        grads.v_velocities.as_mut_slice(),
+    );
+    let (mut scales, mut rotations) = (
+        grads.v_scales.as_mut_slice(),
+        grads.v_rotations.as_mut_slice(),
+    );
+    let mut opacities = if alpha {
+        grads.v_opacities.as_mut_slice()
+    } else {
+        &mut []
+    };
+    let mut sh = if alpha {
+        grads.v_sh.as_mut_slice()
+    } else {
+        &mut []
+    };
+    let mut slice = 0;
+    for first in (0..n).step_by(KERNELS) {
+        let len = KERNELS.min(n - first);
+        let end = slice
+            + sliced.kernel_from_slice[slice..].partition_point(|&i| (i as usize) < first + len);
+        blocks.push(KernelBlock {
+            first,
+            slices: slice..end,
+            sh_count: count,
+            means: take(&mut means, len),
+            amplitudes: take(&mut amplitudes, len),
+            velocities: take(&mut velocities, len),
+            scales: take(&mut scales, len),
+            rotations: take(&mut rotations, len),
+            opacities: take(&mut opacities, if alpha { len } else { 0 }),
+            sh: take(&mut sh, count * len),
+        });
+        slice = end;
+    }
+    blocks
+}
+
+impl SliceView<'_> {
+    /// Adds slice `s`'s terms to kernel `i`'s gradients.
+    fn kernel_backward(&self, s: usize, i: usize, grads: &mut KernelGradients) {
+        let (scene, tau, sliced, from_slice) = (self.scene, self.tau, self.sliced, self.from_slice);
         let mut v_m = from_slice.v_means[s];
         let v_a = from_slice.v_amplitudes[s];
         let t = scene.means[i][3];
@@ -60,17 +200,24 @@ pub fn slice_backward(
         let velocity = scene.velocities[i];
         // ∂L/∂t and ∂L/∂st through the temporal weight, on a(τ) = A w or on o(τ) = o w
         // (the additive sums keep their order of operations, so their bits).
-        let (v_t_weight, v_st_weight) = if alpha {
+        let (v_t_weight, v_st_weight) = if let Some(opacity) = grads.opacity.as_deref_mut() {
             let v_opacity = from_slice.v_opacities[s];
-            grads.v_opacities[i] += w * v_opacity;
-            let v_mean_colour = colour_backward(scene, i, centre, sliced.means[s], v_a, grads);
+            *opacity += w * v_opacity;
+            let v_mean_colour = colour_backward(
+                scene,
+                i,
+                self.centre,
+                sliced.means[s],
+                v_a,
+                (grads.amplitude, grads.sh),
+            );
             for c in 0..3 {
                 v_m[c] += v_mean_colour[c];
             }
             let v_weighted = scene.opacities[i] * w * v_opacity;
             (v_weighted * (d / st), v_weighted * (d * d / st))
         } else {
-            for (total, v) in grads.v_amplitudes[i].iter_mut().zip(v_a) {
+            for (total, v) in grads.amplitude.iter_mut().zip(v_a) {
                 *total += w * v;
             }
             (
@@ -83,17 +230,17 @@ pub fn slice_backward(
             )
         };
         let v_t = v_t_weight - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
-        let mean = &mut grads.v_means[i];
+        let mean = &mut *grads.mean;
         for c in 0..3 {
             mean[c] += v_m[c];
-            grads.v_velocities[i][c] += dt * v_m[c];
+            grads.velocity[c] += dt * v_m[c];
         }
         mean[3] += v_t;
         // Scales: the spatial ones through Σ3, σt through the temporal weight.
         let r = rotation_matrix(scene.rotations[i]);
         let v_sigma = from_slice.v_covariances[s];
         let scale = scene.scales[i];
-        let v_scale = &mut grads.v_scales[i];
+        let v_scale = &mut *grads.scale;
         for k in 0..3 {
             // (Rᵀ V R)_kk = Σ_ab R_ak V_ab R_bk
             let diagonal: f64 = (0..3)
@@ -107,14 +254,14 @@ pub fn slice_backward(
         }
         v_scale[3] += v_st_weight;
         let v_rotation = rotation_gradient(scene.rotations[i], scale, &r, &v_sigma);
-        for (total, v) in grads.v_rotations[i].iter_mut().zip(v_rotation) {
+        for (total, v) in grads.rotation.iter_mut().zip(v_rotation) {
             *total += v;
         }
     }
 }
 
 /// The colour's backward for kernel `i` seen from `centre` at slice centre `mean`: adds
-/// `∂L/∂A` and `∂L/∂sh` to `grads` and returns the part of `∂L/∂m(τ)` that comes through the
+/// `∂L/∂A` and `∂L/∂sh` to the kernel's gradients and returns the part of `∂L/∂m(τ)` that comes through the
 /// view direction.
 fn colour_backward(
     scene: &Scene,
@@ -122,12 +269,12 @@ fn colour_backward(
     centre: [f64; 3],
     mean: [f64; 3],
     v_colour: [f64; 3],
-    grads: &mut Gradients,
+    (v_amplitude, v_sh): (&mut [f64; 3], &mut [[f64; 3]]),
 ) -> [f64; 3] {
     let (direction, distance) = view_direction(centre, mean);
     let raw = raw_colour(scene, i, direction);
     let g: [f64; 3] = std::array::from_fn(|c| if raw[c] > 0.0 { v_colour[c] } else { 0.0 });
-    for (total, v) in grads.v_amplitudes[i].iter_mut().zip(g) {
+    for (total, v) in v_amplitude.iter_mut().zip(g) {
         *total += v;
     }
     let count = scene.sh_count;
@@ -139,7 +286,7 @@ fn colour_backward(
     let sh = scene.sh_of(i);
     let mut v_direction = [0.0; 3];
     for j in 0..count {
-        let v_sh = &mut grads.v_sh[i * count + j];
+        let v_sh = &mut v_sh[j];
         let mut along = 0.0;
         for c in 0..3 {
             v_sh[c] += basis[j] * g[c];
