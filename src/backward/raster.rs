@@ -112,7 +112,9 @@ pub(crate) fn rasterize_backward_on(
 /// A loss's gradient with respect to the rendered pixels, run by run: `gradient(k,
 /// rendered, v)` sets `v[i]`, `∂L/∂C` of channel `k + i` of the image (RGB, row-major),
 /// from its rendered value `rendered[i]` (the runs are one tile row's pixels, in any
-/// order). [`rasterize_with_backward`] calls it on each tile as soon as the tile is summed.
+/// order). [`rasterize_with_backward`] calls it on each tile as soon as the tile is summed,
+/// on the worker thread that summed it, whose scratch is in use: it must not start parallel
+/// work of its own (a rayon call could run another tile on the same thread).
 pub type PixelGradient<'a> = dyn Fn(usize, &[f32], &mut [f32]) + Sync + 'a;
 
 /// The forward raster ([`crate::raster::rasterize`]) and [`rasterize_backward`] of one

@@ -120,7 +120,10 @@ impl KernelBlock<'_> {
             scale: &mut self.scales[k],
             rotation: &mut self.rotations[k],
             opacity: self.opacities.get_mut(k),
-            sh: self.sh.get_mut(k * count..(k + 1) * count).unwrap_or_default(),
+            sh: self
+                .sh
+                .get_mut(k * count..(k + 1) * count)
+                .unwrap_or_default(),
         }
     }
 }

@@ -24,11 +24,14 @@ const LARGE: usize = 2 << 20;
 /// file read, the slice, the projection, the bins) got fresh pages, a page fault and a
 /// zeroing each, where the previous phase's freed blocks would have done: a 10k-kernel
 /// 512×512 render took 2270 faults, 2020 with this. Blocks of [`LARGE`] and more are this
-/// allocator's own, and still go back when freed; the heap keeps at most [`KEEP_FREE`].
+/// allocator's own, and still go back when freed; each glibc arena (one per thread that
+/// allocates, at most a few) keeps at most `KEEP_FREE` free at its top, so what a command
+/// holds after a peak is bounded by that peak.
 pub fn keep_freed_blocks() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `mallopt` only sets glibc's allocation parameters; both values are within
-    // their ranges (the mmap threshold may be at most 32 MiB on 64-bit systems).
+    // SAFETY: `mallopt` only sets glibc's allocation parameters (a value out of range is
+    // refused, as the mmap threshold above 512 KiB is on 32-bit systems, and changes
+    // nothing).
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, LARGE as libc::c_int);
         libc::mallopt(libc::M_TRIM_THRESHOLD, KEEP_FREE as libc::c_int);
@@ -36,6 +39,7 @@ pub fn keep_freed_blocks() {
 }
 
 /// The free memory glibc's heap may keep at its top before giving it back.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
 const KEEP_FREE: usize = 64 << 20;
 
 /// The system allocator, with large blocks on huge pages.

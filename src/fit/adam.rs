@@ -118,6 +118,7 @@ impl Adam {
         self.second = second;
     }
 
+    /// One update of `scene` with `grads` (sized for the scene).
     pub fn step(&mut self, scene: &mut Scene, grads: &Gradients, rates: &LearningRates) {
         assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
         assert_eq!(

@@ -301,6 +301,70 @@ mod tests {
         assert_eq!(view_mse(&image, &view), 0.0);
     }
 
+    #[test]
+    fn the_per_run_gradient_is_the_whole_image_formula_on_any_runs() {
+        // `scale (C - T)`, or `scale w_p (C - T)`, each in f32 as written, with the scale
+        // computed in f64 and rounded once; runs of any length and start give the same bits.
+        let (w, h) = (7_u32, 3_u32);
+        let n = (3 * w * h) as usize;
+        let value = |k: usize, phase: f64| (0.37 * k as f64 + phase).sin() as f32;
+        let image = Image {
+            width: w,
+            height: h,
+            pixels: (0..n).map(|k| value(k, 0.0)).collect(),
+        };
+        let target = Image {
+            width: w,
+            height: h,
+            pixels: (0..n).map(|k| value(k, 1.3)).collect(),
+        };
+        let weights: Vec<f32> = (0..n / 3).map(|p| (p % 4) as f32 / 3.0).collect();
+        let total: f64 = weights.iter().map(|&x| f64::from(x)).sum();
+        for weighted in [false, true] {
+            let view = View {
+                camera: crate::model::Camera::look_at(
+                    [0.0, 0.0, -1.0],
+                    [0.0; 3],
+                    [0.0, 1.0, 0.0],
+                    40.0,
+                    w,
+                    h,
+                )
+                .unwrap(),
+                time: 0.0,
+                image: target.clone().into(),
+                name: "v".into(),
+                weights: weighted.then(|| weights.clone()),
+            };
+            let expected: Vec<u32> = (0..n)
+                .map(|k| {
+                    let (c, t) = (image.pixels[k], target.pixels[k]);
+                    let v = if weighted {
+                        (0.25 * 2.0 / (3.0 * total)) as f32 * weights[k / 3] * (c - t)
+                    } else {
+                        (0.25 * 2.0 / n as f64) as f32 * (c - t)
+                    };
+                    v.to_bits()
+                })
+                .collect();
+            let mut whole = Vec::new();
+            view_mse_with_gradient(&image, &view, 0.25, &mut whole);
+            assert_eq!(
+                whole.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                expected
+            );
+            let gradient = view_mse_gradient(&view, 0.25);
+            let mut runs = vec![f32::NAN; n];
+            for (start, end) in [(0, 5), (5, 6), (6, 30), (30, n)] {
+                gradient(start, &image.pixels[start..end], &mut runs[start..end]);
+            }
+            assert_eq!(
+                runs.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                expected
+            );
+        }
+    }
+
     /// The pattern of the independent reference value below, as f32 pixels.
     fn pattern(w: u32, h: u32, f: impl Fn(f64, f64, f64) -> f64) -> Image {
         let mut image = Image::filled(w, h, [0.0; 3]);

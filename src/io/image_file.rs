@@ -12,7 +12,7 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, ImageFormat, Rgb};
 
-use crate::io::{write_atomically, write_atomically_sized, write_bytes_atomically};
+use crate::io::{write_atomically, write_atomically_sized};
 use crate::model::Image;
 use crate::model::error::{Error, Result};
 use crate::model::image::{all_finite, quantize_all_checked};
@@ -250,14 +250,15 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
         )));
     }
     // Both are written with their length known beforehand (`write_atomically_sized`): an
-    // EXR's follows from its size, a PNG is encoded in memory first (it is smaller than its
-    // levels).
+    // EXR's follows from its size, a PNG is encoded in memory first (usually smaller than its
+    // levels, at most a few bytes a row larger).
     match levels {
         Some(levels) => {
             let mut png = std::io::Cursor::new(Vec::new());
             encode_png(image, &levels, &mut png)
                 .map_err(|e| Error::write(path, "cannot encode", std::io::Error::other(e)))?;
-            write_bytes_atomically(path, png.get_ref())
+            let bytes = png.get_ref();
+            write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(bytes))
         }
         None => {
             let bytes = exr_file_bytes(image).map_err(|e| Error::write(path, "cannot write", e))?;

@@ -218,9 +218,9 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         .map_err(|e| Error::write(out, "cannot write in its folder", e))
 }
 
-/// Writes `bytes` to `path` with [`write_atomically_sized`] (their length is known).
+/// Writes `bytes` to `path` with [`write_atomically`].
 pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(bytes))
+    write_atomically(path, |w| w.write_all(bytes))
 }
 
 /// Writes a file all at once or not at all: `write` fills a temporary file in the same
@@ -238,7 +238,10 @@ pub fn write_atomically(
 /// [`write_atomically`] for a file whose length, `bytes`, is known before it is written:
 /// the temporary file's blocks are reserved first (Linux: `fallocate` keeping its size), so
 /// that renaming it over an earlier output does not wait for the file system to write it out.
-/// A wrong length only costs that saving.
+/// The trade (see `reserve_blocks` in the source): after a power loss in the seconds before
+/// the kernel writes the file out, it may read as zeros. For renders (`image_file`), which
+/// can be made again, not for scenes and logs. Pass the exact length: a larger one leaves
+/// the blocks past the end reserved until the file is replaced or deleted.
 pub fn write_atomically_sized(
     path: &Path,
     bytes: u64,
