@@ -103,7 +103,8 @@ pub(crate) fn rasterize_backward_on(
     runs.into_par_iter().for_each(|(t, run)| {
         SCRATCH.with(|cell| {
             let scratch = &mut *cell.borrow_mut();
-            backward_tile_on(path, exp, bins, forms, v_image, t, run, scratch);
+            prepare_tile_on(path, bins, forms, t, scratch);
+            backward_prepared_tile_on(path, exp, bins, v_image, 0, t, run, scratch);
         });
     });
     reduce(proj, bins, partials, sums, out);
@@ -315,76 +316,45 @@ thread_local! {
         std::cell::RefCell::new(BackwardScratch::default());
 }
 
-/// [`backward_tile`] compiled for `path`.
-#[allow(clippy::too_many_arguments)]
-fn backward_tile_on(
+/// Sets tile `t` up in `scratch.tile` for [`backward_prepared_tile_on`] on `path` (which
+/// the CPU must have) as the forward does: whole rows with AVX-512, half rows otherwise.
+fn prepare_tile_on(
     path: SimdPath,
-    exp: ExpMode,
     bins: &TileBins,
     forms: &[RowForm],
-    v_image: &[f32],
     t: usize,
-    run: &mut [[f32; 8]],
     scratch: &mut BackwardScratch,
 ) {
-    match (path, exp) {
+    match path {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `SimdPath::detect` found the features.
-        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
-            avx512::backward_tile::<true>(bins, forms, v_image, t, run, scratch);
+        // SAFETY: the caller checked that the CPU has the path's features.
+        SimdPath::Avx512 => unsafe {
+            crate::raster::avx512::prepare_tile::<false>(
+                bins,
+                forms,
+                t,
+                &mut scratch.tile.whole_rows,
+            );
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx512, ExpMode::Std) => unsafe {
-            avx512::backward_tile::<false>(bins, forms, v_image, t, run, scratch);
-        },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: as above.
-        (SimdPath::Avx2, ExpMode::Poly) => unsafe {
-            backward_tile_avx2::<true>(bins, forms, v_image, t, run, scratch);
-        },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: as above.
-        (SimdPath::Avx2, ExpMode::Std) => unsafe {
-            backward_tile_avx2::<false>(bins, forms, v_image, t, run, scratch);
-        },
-        (_, ExpMode::Poly) => backward_tile::<true, false>(bins, forms, v_image, t, run, scratch),
-        (_, ExpMode::Std) => backward_tile::<false, false>(bins, forms, v_image, t, run, scratch),
+        SimdPath::Avx2 => unsafe { prepare_tile_avx2(bins, forms, t, &mut scratch.tile) },
+        _ => prepare_tile(bins, forms, t, &mut scratch.tile),
     }
 }
 
-/// [`backward_tile`] compiled for AVX2 and FMA, its half rows with intrinsics.
+/// [`prepare_tile`] compiled for AVX2 and FMA (as the forward's AVX2 tiles are).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn backward_tile_avx2<const FAST: bool>(
-    bins: &TileBins,
-    forms: &[RowForm],
-    v_image: &[f32],
-    t: usize,
-    run: &mut [[f32; 8]],
-    scratch: &mut BackwardScratch,
-) {
-    backward_tile::<FAST, true>(bins, forms, v_image, t, run, scratch);
+fn prepare_tile_avx2(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut TileScratch) {
+    prepare_tile(bins, forms, t, scratch);
 }
 
-/// Accumulates tile `t`'s entries into `run` (one partial per entry): the forward's row
-/// entries, half row by half row; each kernel's moments are summed column by column over
-/// the tile's rows (f32, at most 16 terms a column), then over the columns in f64.
-#[inline(always)]
-fn backward_tile<const FAST: bool, const AVX2: bool>(
-    bins: &TileBins,
-    forms: &[RowForm],
-    v_image: &[f32],
-    t: usize,
-    run: &mut [[f32; 8]],
-    scratch: &mut BackwardScratch,
-) {
-    prepare_tile(bins, forms, t, &mut scratch.tile);
-    backward_prepared_tile::<FAST, AVX2>(bins, v_image, 0, t, run, scratch);
-}
-
-/// [`backward_tile`] on a tile [`prepare_tile`] has set up in `scratch.tile` (by the
-/// forward of the same frame, say). `v` holds `∂L/∂C` of the image rows from `v_row` on.
+/// Accumulates tile `t`'s entries into `run` (one partial per entry), the tile set up in
+/// `scratch.tile` by [`prepare_tile`] (by the forward of the same frame, say): the
+/// forward's row entries, half row by half row; each kernel's moments are summed column by
+/// column over the tile's rows (f32, at most 16 terms a column), then over the columns in
+/// f64. `v` holds `∂L/∂C` of the image rows from `v_row` on.
 #[inline(always)]
 fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
     bins: &TileBins,
@@ -568,28 +538,13 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     use super::{BackwardScratch, Moments, ROW, partial_of, read_planes};
-    use crate::raster::RowForm;
-    use crate::raster::avx512::{gaussian, prepare_tile, row_lanes};
+    use crate::raster::avx512::{gaussian, row_lanes};
     use crate::tiles::TileBins;
 
-    /// [`super::backward_tile`] with AVX-512: per kernel and row the operations of
-    /// [`super::half_row`] on 16 lanes.
-    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-    pub(super) fn backward_tile<const FAST: bool>(
-        bins: &TileBins,
-        forms: &[RowForm],
-        v_image: &[f32],
-        t: usize,
-        run: &mut [[f32; 8]],
-        scratch: &mut BackwardScratch,
-    ) {
-        prepare_tile::<false>(bins, forms, t, &mut scratch.tile.whole_rows);
-        backward_prepared_tile::<FAST>(bins, v_image, 0, t, run, scratch);
-    }
-
-    /// [`backward_tile`] on a tile whose blocks, masks and kernels are set up in
-    /// `scratch.tile.whole_rows` (by the forward's `prepare_tile::<true>`, say, which sets
-    /// up the same ones and the row lists besides). `v` holds `∂L/∂C` of the image rows
+    /// [`super::backward_prepared_tile`] with AVX-512, per kernel and row the operations of
+    /// [`super::half_row`] on 16 lanes, on a tile whose blocks, masks and kernels are set
+    /// up in `scratch.tile.whole_rows` (by `prepare_tile::<false>`, or by the forward's
+    /// `prepare_tile::<true>`, which sets up the same ones and the row lists besides). `v` holds `∂L/∂C` of the image rows
     /// from `v_row` on.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
     pub(super) fn backward_prepared_tile<const FAST: bool>(

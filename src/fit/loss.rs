@@ -258,6 +258,26 @@ pub fn ssim(image: &Image, target: &Image) -> f64 {
 mod tests {
     use super::*;
 
+    /// A view of `target` (through some camera of its size) with `weights`.
+    fn view_of(target: Image, weights: Option<Vec<f32>>) -> View {
+        let camera = crate::model::Camera::look_at(
+            [0.0, 0.0, -1.0],
+            [0.0; 3],
+            [0.0, 1.0, 0.0],
+            40.0,
+            target.width,
+            target.height,
+        )
+        .unwrap();
+        View {
+            camera,
+            time: 0.0,
+            image: target.into(),
+            name: "v".into(),
+            weights,
+        }
+    }
+
     #[test]
     fn weighted_mse_is_the_weighted_mean_and_its_gradient_matches() {
         let target = Image {
@@ -270,21 +290,7 @@ mod tests {
             height: 1,
             pixels: vec![0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
         };
-        let mut view = View {
-            camera: crate::model::Camera::look_at(
-                [0.0, 0.0, -1.0],
-                [0.0; 3],
-                [0.0, 1.0, 0.0],
-                40.0,
-                2,
-                1,
-            )
-            .unwrap(),
-            time: 0.0,
-            image: target.into(),
-            name: "v".into(),
-            weights: None,
-        };
+        let mut view = view_of(target, None);
         let mut v = Vec::new();
         // Unweighted: (3·0.25 + 3·1)/6; weights (1, 1) give the same number.
         assert_eq!(view_mse(&image, &view), 0.625);
@@ -321,21 +327,7 @@ mod tests {
         let weights: Vec<f32> = (0..n / 3).map(|p| (p % 4) as f32 / 3.0).collect();
         let total: f64 = weights.iter().map(|&x| f64::from(x)).sum();
         for weighted in [false, true] {
-            let view = View {
-                camera: crate::model::Camera::look_at(
-                    [0.0, 0.0, -1.0],
-                    [0.0; 3],
-                    [0.0, 1.0, 0.0],
-                    40.0,
-                    w,
-                    h,
-                )
-                .unwrap(),
-                time: 0.0,
-                image: target.clone().into(),
-                name: "v".into(),
-                weights: weighted.then(|| weights.clone()),
-            };
+            let view = view_of(target.clone(), weighted.then(|| weights.clone()));
             let expected: Vec<u32> = (0..n)
                 .map(|k| {
                     let (c, t) = (image.pixels[k], target.pixels[k]);
