@@ -24,6 +24,11 @@
 //! reach add exact zeros. The entries are reduced in entry order (tile-major) in
 //! f64: no atomics, and the result does not depend on the thread count or the SIMD path (the
 //! AVX2 loop performs the portable loop's operations in the same order).
+//!
+//! A training step runs the forward raster and this backward in one pass over the tiles
+//! ([`rasterize_with_backward`]): each tile is set up once, summed, given its `∂L/∂C` by the
+//! loss ([`PixelGradient`]) and differentiated at once, with the same bits as the two
+//! passes.
 
 use rayon::prelude::*;
 
