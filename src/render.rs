@@ -185,13 +185,9 @@ impl RenderContext {
         Ok(self.finish_frame(scene, camera, options))
     }
 
-    /// Stages 2–4 after the slice.
-    fn finish_frame(
-        &mut self,
-        scene: &Scene,
-        camera: &Camera,
-        options: &RenderOptions,
-    ) -> RenderStats {
+    /// Stages 2 and 3 after the slice: the projection (alpha scenes: shaded and in depth
+    /// order) and the tile bins.
+    fn project_and_bin(&mut self, scene: &Scene, camera: &Camera, options: &RenderOptions) {
         project(&self.sliced, camera, options.dilation, &mut self.projected);
         if scene.blend == Blend::Alpha {
             shade(scene, &self.sliced, camera, &mut self.projected);
@@ -203,6 +199,26 @@ impl RenderContext {
             );
         }
         bin(&self.projected, camera.width, camera.height, &mut self.bins);
+    }
+
+    /// The frame's counts, with the `pairs` its raster took.
+    fn stats(&self, pairs: u64) -> RenderStats {
+        RenderStats {
+            sliced: self.sliced.len(),
+            projected: self.projected.len(),
+            tile_entries: self.bins.proj_from_entry.len(),
+            pairs,
+        }
+    }
+
+    /// Stages 2–4 after the slice.
+    fn finish_frame(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        options: &RenderOptions,
+    ) -> RenderStats {
+        self.project_and_bin(scene, camera, options);
         let background = scene.background.map(|b| b as f32);
         let pairs = match scene.blend {
             Blend::Additive => rasterize(
@@ -223,12 +239,7 @@ impl RenderContext {
                 &mut self.pixel_stops,
             ),
         };
-        RenderStats {
-            sliced: self.sliced.len(),
-            projected: self.projected.len(),
-            tile_entries: self.bins.proj_from_entry.len(),
-            pairs,
-        }
+        self.stats(pairs)
     }
 
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
@@ -300,8 +311,7 @@ impl RenderContext {
         }
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
-        project(&self.sliced, camera, options.dilation, &mut self.projected);
-        bin(&self.projected, camera.width, camera.height, &mut self.bins);
+        self.project_and_bin(scene, camera, options);
         let buffers = &mut self.backward;
         let pairs = rasterize_with_backward(
             &self.projected,
@@ -317,12 +327,7 @@ impl RenderContext {
         );
         let v_background = background_gradient(v_image);
         self.backward_from_screen(scene, camera, tau, options, v_background, grads);
-        Ok(RenderStats {
-            sliced: self.sliced.len(),
-            projected: self.projected.len(),
-            tile_entries: self.bins.proj_from_entry.len(),
-            pairs,
-        })
+        Ok(self.stats(pairs))
     }
 
     /// The backward's stages 2 and 1 from the screen-space gradients in

@@ -359,11 +359,11 @@ fn prepare_tile_avx2(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut
 /// `scratch.tile` by [`prepare_tile`] (by the forward of the same frame, say): the
 /// forward's row entries, half row by half row; each kernel's moments are summed column by
 /// column over the tile's rows (f32, at most 16 terms a column), then over the columns in
-/// f64. `v` holds `∂L/∂C` of the image rows from `v_row` on.
+/// f64. `v_image` holds `∂L/∂C` of the image rows from `v_row` on.
 #[inline(always)]
 fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
     bins: &TileBins,
-    v: &[f32],
+    v_image: &[f32],
     v_row: usize,
     t: usize,
     run: &mut [[f32; 8]],
@@ -375,7 +375,6 @@ fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
     let rect = bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
     let width = bins.width as usize;
-    let v_image = v;
     for HalfRow {
         row,
         index,
@@ -549,8 +548,8 @@ mod avx512 {
     /// [`super::backward_prepared_tile`] with AVX-512, per kernel and row the operations of
     /// [`super::half_row`] on 16 lanes, on a tile whose blocks, masks and kernels are set
     /// up in `scratch.tile.whole_rows` (by `prepare_tile::<false>`, or by the forward's
-    /// `prepare_tile::<true>`, which sets up the same ones and the row lists besides). `v` holds `∂L/∂C` of the image rows
-    /// from `v_row` on.
+    /// `prepare_tile::<true>`, which sets up the same ones and the row lists besides).
+    /// `v_image` holds `∂L/∂C` of the image rows from `v_row` on.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
     pub(super) fn backward_prepared_tile<const FAST: bool>(
         bins: &TileBins,

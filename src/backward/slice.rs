@@ -264,8 +264,8 @@ impl SliceView<'_> {
 }
 
 /// The colour's backward for kernel `i` seen from `centre` at slice centre `mean`: adds
-/// `∂L/∂A` and `∂L/∂sh` to the kernel's gradients and returns the part of `∂L/∂m(τ)` that comes through the
-/// view direction.
+/// `∂L/∂A` and `∂L/∂sh` to the kernel's gradients and returns the part of `∂L/∂m(τ)` that
+/// comes through the view direction.
 fn colour_backward(
     scene: &Scene,
     i: usize,

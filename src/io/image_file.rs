@@ -62,7 +62,9 @@ pub fn encode_image<W: Write + Seek>(
     out: &mut W,
 ) -> image::ImageResult<()> {
     match kind {
-        ImageKind::Exr => write_exr(image, out).map_err(image::ImageError::IoError),
+        ImageKind::Exr => ExrLayout::of(image.width as usize, image.height as usize)
+            .and_then(|layout| write_exr(image, &layout, out))
+            .map_err(image::ImageError::IoError),
         ImageKind::Png => encode_png(image, &Levels::of(image, depth).0, out),
     }
 }
@@ -110,13 +112,38 @@ fn encode_png<W: Write + Seek>(
     }
 }
 
-/// An EXR file's header ([`write_exr`]) for a `w`×`h` image: its length does not depend
-/// on the pixels.
+/// The error of an image too large for an EXR file's 32-bit sizes.
+fn too_large_for_exr() -> std::io::Error {
+    std::io::Error::other("the image is too large for an EXR file")
+}
+
+/// What [`write_exr`] writes before the samples of a `w`×`h` image, which does not depend
+/// on the pixels: its header, and each line's sample byte count.
+struct ExrLayout {
+    header: Vec<u8>,
+    line_bytes: i32,
+}
+
+impl ExrLayout {
+    fn of(w: usize, h: usize) -> std::io::Result<Self> {
+        Ok(ExrLayout {
+            header: exr_header(w, h)?,
+            line_bytes: i32::try_from(12 * w).map_err(|_| too_large_for_exr())?,
+        })
+    }
+
+    /// The length of the file: the header, the line offsets (8 bytes a line), and per line
+    /// 8 bytes of y and size and the samples.
+    fn file_bytes(&self, h: usize) -> u64 {
+        self.header.len() as u64 + h as u64 * (8 + 8 + self.line_bytes as u64)
+    }
+}
+
+/// An EXR file's header ([`write_exr`]) for a `w`×`h` image.
 fn exr_header(w: usize, h: usize) -> std::io::Result<Vec<u8>> {
-    let too_large = || std::io::Error::other("the image is too large for an EXR file");
     let (x_max, y_max) = (
-        i32::try_from(w).map_err(|_| too_large())? - 1,
-        i32::try_from(h).map_err(|_| too_large())? - 1,
+        i32::try_from(w).map_err(|_| too_large_for_exr())? - 1,
+        i32::try_from(h).map_err(|_| too_large_for_exr())? - 1,
     );
     let mut header = Vec::with_capacity(400);
     header.extend_from_slice(&[0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0]);
@@ -155,30 +182,19 @@ fn exr_header(w: usize, h: usize) -> std::io::Result<Vec<u8>> {
     Ok(header)
 }
 
-/// The byte count of one EXR line's samples (three f32 a pixel).
-fn exr_line_bytes(w: usize) -> std::io::Result<i32> {
-    i32::try_from(12 * w)
-        .map_err(|_| std::io::Error::other("the image is too large for an EXR file"))
-}
-
-/// The length of the EXR file [`write_exr`] writes for `image`: the header, the line
-/// offsets (8 bytes a line), and per line 8 bytes of y and size and 12 per pixel.
-fn exr_file_bytes(image: &Image) -> std::io::Result<u64> {
-    let (w, h) = (image.width as usize, image.height as usize);
-    let header = exr_header(w, h)?.len() as u64;
-    Ok(header + h as u64 * (8 + 8 + 12 * w as u64))
-}
-
 /// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
 /// y — the simplest layout of the format (OpenEXR file layout: magic and version, header
 /// attributes, line offset table, then per line its y, its byte count and the channels'
 /// samples in alphabetical order, B, G, R). Float renders hardly compress, so writing is a
 /// copy at memory speed; every reader of the format opens it (tested with the `exr` crate's).
-fn write_exr<W: Write + Seek>(image: &Image, out: &mut W) -> std::io::Result<()> {
+fn write_exr<W: Write + Seek>(
+    image: &Image,
+    ExrLayout { header, line_bytes }: &ExrLayout,
+    out: &mut W,
+) -> std::io::Result<()> {
     let (w, h) = (image.width as usize, image.height as usize);
-    let line_bytes = exr_line_bytes(w)?;
-    let header = exr_header(w, h)?;
-    out.write_all(&header)?;
+    let line_bytes = *line_bytes;
+    out.write_all(header)?;
     // One block per line: 8 bytes of y and size, then the samples.
     let first_block = (header.len() + 8 * h) as u64;
     let block = 8 + 12 * w as u64;
@@ -261,8 +277,11 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
             write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(bytes))
         }
         None => {
-            let bytes = exr_file_bytes(image).map_err(|e| Error::write(path, "cannot write", e))?;
-            write_atomically_sized(path, bytes, |w| write_exr(image, w))
+            let (w, h) = (image.width as usize, image.height as usize);
+            let layout = ExrLayout::of(w, h).map_err(|e| Error::write(path, "cannot write", e))?;
+            write_atomically_sized(path, layout.file_bytes(h), |out| {
+                write_exr(image, &layout, out)
+            })
         }
     }
 }
@@ -470,7 +489,8 @@ mod tests {
             save_image(&image, &path, BitDepth::Eight).unwrap();
             // The length reserved before writing is the length written.
             let written = std::fs::metadata(&path).unwrap().len();
-            assert_eq!(exr_file_bytes(&image).unwrap(), written, "{w}×{h}");
+            let layout = ExrLayout::of(w as usize, h as usize).unwrap();
+            assert_eq!(layout.file_bytes(h as usize), written, "{w}×{h}");
             // The exr crate's own reader, not the image crate's.
             let read = exr::prelude::read()
                 .no_deep_data()
