@@ -437,7 +437,8 @@ pub fn fit_alpha(
     let mut screen_gradient = vec![0.0_f64; scene.len()];
     let mut seen = vec![0_u32; scene.len()];
     let mut draws = ViewDraws::new(train.len(), options.seed ^ 0x5eed);
-    let mut records = Vec::with_capacity(options.steps);
+    // Grows with the steps actually run: a flag never decides an allocation up front.
+    let mut records = Vec::with_capacity(options.steps.min(1 << 12));
     let mut drawn = Vec::with_capacity(batch);
     for step in 1..=options.steps {
         grads.reset_for_scene(scene);
