@@ -1174,7 +1174,7 @@ pub(crate) mod avx512 {
         }
     }
 
-    /// [`super::avx2::exp_neg_half`] on 16 lanes, the same operations.
+    /// [`super::avx2::exp_neg_half`] on 16 lanes, the same operations but the last.
     #[inline]
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
     pub(crate) fn exp_neg_half(q: __m512) -> __m512 {
@@ -1198,9 +1198,10 @@ pub(crate) mod avx512 {
         let p = step(0.499_989, p);
         let p = step(0.999_999_64, p);
         let p = step(1.000_000_1, p);
-        let n_int = _mm512_sub_epi32(_mm512_castps_si512(shifted), _mm512_castps_si512(shift));
-        let scale = _mm512_slli_epi32::<23>(_mm512_add_epi32(n_int, _mm512_set1_epi32(127)));
-        _mm512_mul_ps(p, _mm512_castsi512_ps(scale))
+        // `p · 2ⁿ` in one instruction where the other paths assemble `2ⁿ` in the exponent
+        // bits and multiply: `n` is a whole number in [-126, 0] and `2ⁿ` a normal f32, so
+        // both round the same exact product once (the same bits, subnormal results too).
+        _mm512_scalef_ps(p, n)
     }
 
     /// The lane numbers 0..16.
@@ -1273,8 +1274,6 @@ pub(crate) mod avx512 {
         for row in 0..(ty1 - ty0) as usize {
             let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
             let mut hi = lo;
-            // Pairs per lane (summed exactly below while a row has fewer than 2³² pairs).
-            let mut counts = _mm512_setzero_si512();
             for &k in &tiles.rows[row] {
                 debug_assert!((k as usize) < tiles.kernels.len());
                 // SAFETY: the lists hold only indices of kept kernels, each with a block.
@@ -1285,11 +1284,13 @@ pub(crate) mod avx512 {
                     )
                 };
                 let (_, q, hit) = row_lanes(kernel, block, row, valid);
-                // Each pair's lane counts one: minus the all-ones of its mask.
-                counts = _mm512_mask_sub_epi32(counts, hit, counts, _mm512_set1_epi32(-1));
-                let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
-                let g_lo = _mm512_cvtps_pd(_mm512_castps512_ps256(g));
-                let g_hi = _mm512_cvtps_pd(_mm512_extractf32x8_ps::<1>(g));
+                // The pairs counted on the scalar side, off the vector pipes.
+                pairs += u64::from(hit.count_ones());
+                // Lanes that are not pairs convert as +0 (the mask's zeroing).
+                let g = gaussian::<FAST>(q);
+                let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
+                let g_hi =
+                    _mm512_maskz_cvtps_pd((hit >> 8) as __mmask8, _mm512_extractf32x8_ps::<1>(g));
                 // `a G` is exact in f64, so the fused multiply-add rounds as `acc + a G`.
                 for c in 0..3 {
                     let a = _mm512_set1_pd(kernel.amplitude[c]);
@@ -1297,7 +1298,6 @@ pub(crate) mod avx512 {
                     hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
                 }
             }
-            pairs += _mm512_reduce_add_epi32(counts) as u32 as u64;
             for c in 0..3 {
                 // SAFETY: each channel holds 16 doubles: 8 in `lo`, 8 in `hi`.
                 unsafe {
