@@ -1340,6 +1340,54 @@ mod tests {
     }
 
     #[test]
+    fn every_simd_path_gives_the_scalar_exp_bit_for_bit() {
+        // Dense over [0, 200] (past the clamp), then every 65537th bit pattern of a
+        // non-negative f32 (infinity and NaN included).
+        let mut qs = Vec::new();
+        let mut q = 0.0_f32;
+        while q <= 200.0 {
+            qs.push(q);
+            q = (q + 1e-3).max(q.next_up());
+        }
+        qs.extend((0..0x7fff_ffff_u32).step_by(65_537).map(f32::from_bits));
+        qs.resize(qs.len().next_multiple_of(ROW), 0.0);
+        let scalar: Vec<u32> = qs.iter().map(|&q| fast_exp_neg_half(q).to_bits()).collect();
+        for &path in SimdPath::available() {
+            let mut values = vec![0.0_f32; qs.len()];
+            for (q, g) in qs.chunks_exact(ROW).zip(values.chunks_exact_mut(ROW)) {
+                match path {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: `available` lists only paths this CPU runs; 16 floats each.
+                    SimdPath::Avx512 => unsafe {
+                        use std::arch::x86_64::{_mm512_loadu_ps, _mm512_storeu_ps};
+                        let e = avx512::exp_neg_half(_mm512_loadu_ps(q.as_ptr()));
+                        _mm512_storeu_ps(g.as_mut_ptr(), e);
+                    },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above, two halves of 8.
+                    SimdPath::Avx2 => unsafe {
+                        use std::arch::x86_64::{_mm256_loadu_ps, _mm256_storeu_ps};
+                        for h in [0, 8] {
+                            let e = avx2::exp_neg_half(_mm256_loadu_ps(q[h..].as_ptr()));
+                            _mm256_storeu_ps(g[h..].as_mut_ptr(), e);
+                        }
+                    },
+                    _ => g
+                        .iter_mut()
+                        .zip(q)
+                        .for_each(|(g, &q)| *g = fast_exp_neg_half(q)),
+                }
+            }
+            let differing = values
+                .iter()
+                .zip(&scalar)
+                .zip(&qs)
+                .find(|((g, s), _)| g.to_bits() != **s);
+            assert!(differing.is_none(), "{path:?}: {differing:?}");
+        }
+    }
+
+    #[test]
     fn every_simd_path_gives_the_same_image_bit_for_bit() {
         use crate::render::{RenderContext, RenderOptions};
         let paths = SimdPath::available();
