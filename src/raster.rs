@@ -328,7 +328,8 @@ impl RowEntry {
         let lane = i as f32;
         // Lane i is tile pixel first + i: its offset from the anchor is exact.
         let t = (lane + (first - self.offset)) + self.t_anchor;
-        let q = kernel.qxx * t * t + self.row_q;
+        // One rounding for the product and the sum, as the SIMD paths' FMA.
+        let q = (kernel.qxx * t).mul_add(t, self.row_q);
         let hit = q <= kernel.qmax && lane < lanes;
         let value = gaussian::<FAST>(q);
         (t, if hit { value } else { 0.0 }, hit)
@@ -1009,8 +1010,9 @@ pub(crate) mod avx2 {
             _mm256_add_ps(iota, _mm256_set1_ps(first - entry.offset)),
             _mm256_set1_ps(entry.t_anchor),
         );
-        let q = _mm256_add_ps(
-            _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t), t),
+        let q = _mm256_fmadd_ps(
+            _mm256_mul_ps(_mm256_set1_ps(kernel.qxx), t),
+            t,
             _mm256_set1_ps(entry.row_q),
         );
         let hit = _mm256_and_ps(
@@ -1227,8 +1229,9 @@ pub(crate) mod avx512 {
             _mm512_add_ps(lane_numbers(), _mm512_set1_ps(block.shift[row])),
             _mm512_set1_ps(block.t_anchor[row]),
         );
-        let q = _mm512_add_ps(
-            _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t), t),
+        let q = _mm512_fmadd_ps(
+            _mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t),
+            t,
             _mm512_set1_ps(block.row_q[row]),
         );
         let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));

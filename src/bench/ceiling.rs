@@ -120,9 +120,10 @@ pub fn fill_efficiencies(rows: &mut [BenchRow], ceilings: &[Ceiling]) {
 /// The ceiling probe: the ideal inner loop of an additive tile rasterizer on this CPU, to
 /// measure [`crate::raster`] against (`splat4d bench --ceiling`). One row of 16 pixels, three
 /// channels of f32 accumulators kept in registers while every one of `kernels` kernels
-/// passes over it (`q = Qxx t² + row_q`, the degree-5 polynomial exp, `acc += a G`); the
-/// kernels' constants sit in L1; no binning, no test, no memory traffic. Every lane counts as
-/// a pair. Compiled for `path` like the renderer. Returns the pairs evaluated and a checksum
+/// passes over it (`q = Qxx t² + row_q` with the sum fused, the degree-5 polynomial exp by
+/// fused multiply-adds, `acc += a G` fused on the SIMD paths); the kernels' constants sit in
+/// L1; no binning, no test, no memory traffic. Every lane counts as a pair. Compiled for
+/// `path` like the renderer. Returns the pairs evaluated and a checksum
 /// (so that the work cannot be optimised away).
 ///
 /// # Panics
@@ -167,7 +168,7 @@ fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
         for &[t0, qxx, row_q, r, g, b] in constants {
             for (i, pixel) in acc.iter_mut().enumerate() {
                 let t = t0 + i as f32;
-                let value = fast_exp_neg_half(qxx * t * t + row_q);
+                let value = fast_exp_neg_half((qxx * t).mul_add(t, row_q));
                 pixel[0] += r * value;
                 pixel[1] += g * value;
                 pixel[2] += b * value;
@@ -198,11 +199,10 @@ mod avx2 {
                 let amplitude = [_mm256_set1_ps(r), _mm256_set1_ps(g), _mm256_set1_ps(b)];
                 for (h, iota) in [iota_lo, iota_hi].into_iter().enumerate() {
                     let t = _mm256_add_ps(iota, _mm256_set1_ps(t0));
-                    let q = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(qxx, t), t), row_q);
+                    let q = _mm256_fmadd_ps(_mm256_mul_ps(qxx, t), t, row_q);
                     let value = exp_neg_half(q);
                     for c in 0..3 {
-                        acc[2 * c + h] =
-                            _mm256_add_ps(acc[2 * c + h], _mm256_mul_ps(amplitude[c], value));
+                        acc[2 * c + h] = _mm256_fmadd_ps(amplitude[c], value, acc[2 * c + h]);
                     }
                 }
             }
@@ -236,13 +236,14 @@ mod avx512 {
             let mut acc = [_mm512_setzero_ps(); 3];
             for &[t0, qxx, row_q, r, g, b] in constants {
                 let t = _mm512_add_ps(iota, _mm512_set1_ps(t0));
-                let q = _mm512_add_ps(
-                    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(qxx), t), t),
+                let q = _mm512_fmadd_ps(
+                    _mm512_mul_ps(_mm512_set1_ps(qxx), t),
+                    t,
                     _mm512_set1_ps(row_q),
                 );
                 let value = exp_neg_half(q);
                 for (acc, a) in acc.iter_mut().zip([r, g, b]) {
-                    *acc = _mm512_add_ps(*acc, _mm512_mul_ps(_mm512_set1_ps(a), value));
+                    *acc = _mm512_fmadd_ps(_mm512_set1_ps(a), value, *acc);
                 }
             }
             for a in acc {
@@ -332,7 +333,7 @@ fn alpha_ceiling_loop(constants: &[ProbeKernel], passes: usize) -> f64 {
             let mut g = [0.0_f32; ROW];
             for (i, g) in g.iter_mut().enumerate() {
                 let t = kernel.t0 + i as f32;
-                *g = fast_exp_neg_half(kernel.qxx * t * t + kernel.row_q);
+                *g = fast_exp_neg_half((kernel.qxx * t).mul_add(t, kernel.row_q));
             }
             for i in 0..ROW {
                 let alpha = clamped_alpha(kernel.opacity, g[i]);
