@@ -453,23 +453,25 @@ fn half_row<const FAST: bool>(
         let column = first as usize;
         for i in 0..LANES {
             let (t, g, _) = entry.lane::<FAST>(kernel, first, lanes, i);
-            let w = (v[0][i] * a[0] + v[1][i] * a[1] + v[2][i] * a[2]) * g;
+            // Every product that is summed is fused with its sum (`mul_add`: one rounding),
+            // as the SIMD paths' FMA instructions do.
+            let w = v[2][i].mul_add(a[2], v[1][i].mul_add(a[1], v[0][i] * a[0])) * g;
             let wt = w * t;
             let k = column + i;
-            m[0][k] += v[0][i] * g;
-            m[1][k] += v[1][i] * g;
-            m[2][k] += v[2][i] * g;
+            m[0][k] = v[0][i].mul_add(g, m[0][k]);
+            m[1][k] = v[1][i].mul_add(g, m[1][k]);
+            m[2][k] = v[2][i].mul_add(g, m[2][k]);
             m[3][k] += wt;
-            m[4][k] += wt * t;
-            m[5][k] += dv * w;
-            m[6][k] += dv * wt;
-            m[7][k] += dv2 * w;
+            m[4][k] = wt.mul_add(t, m[4][k]);
+            m[5][k] = dv.mul_add(w, m[5][k]);
+            m[6][k] = dv.mul_add(wt, m[6][k]);
+            m[7][k] = dv2.mul_add(w, m[7][k]);
         }
     }
 }
 
-/// [`half_row`] with AVX2 intrinsics: the same operations in the same order (no fused
-/// multiply-add), so the same bits.
+/// [`half_row`] with AVX2 intrinsics: the same operations in the same order (its fused
+/// multiply-adds by FMA), so the same bits.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use std::arch::x86_64::*;
@@ -501,31 +503,34 @@ mod avx2 {
             let value = gaussian::<FAST>(q);
             let g = _mm256_and_ps(value, hit);
             let w = _mm256_mul_ps(
-                _mm256_add_ps(
-                    _mm256_add_ps(_mm256_mul_ps(v[0], a[0]), _mm256_mul_ps(v[1], a[1])),
-                    _mm256_mul_ps(v[2], a[2]),
+                _mm256_fmadd_ps(
+                    v[2],
+                    a[2],
+                    _mm256_fmadd_ps(v[1], a[1], _mm256_mul_ps(v[0], a[0])),
                 ),
                 g,
             );
             let wt = _mm256_mul_ps(w, t);
             let dv = _mm256_set1_ps(entry.dv);
             let dv2 = _mm256_set1_ps(entry.dv * entry.dv);
-            let terms = [
-                _mm256_mul_ps(v[0], g),
-                _mm256_mul_ps(v[1], g),
-                _mm256_mul_ps(v[2], g),
-                wt,
-                _mm256_mul_ps(wt, t),
-                _mm256_mul_ps(dv, w),
-                _mm256_mul_ps(dv, wt),
-                _mm256_mul_ps(dv2, w),
+            // Each moment's term as (factor, factor); the fourth is `wt` itself, added.
+            let products = [
+                (v[0], g),
+                (v[1], g),
+                (v[2], g),
+                (wt, t),
+                (dv, w),
+                (dv, wt),
+                (dv2, w),
             ];
             let m = &mut moments[entry.kernel as usize];
-            for (sum, term) in m.iter_mut().zip(terms) {
-                // SAFETY: each moment holds 16 floats, from column `first` (0 or 8) on 8.
-                unsafe {
-                    let p = sum.as_mut_ptr().add(first as usize);
-                    _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), term));
+            // SAFETY: each moment holds 16 floats, from column `first` (0 or 8) on 8.
+            unsafe {
+                let p = m[3].as_mut_ptr().add(first as usize);
+                _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), wt));
+                for (moment, (x, y)) in [0, 1, 2, 4, 5, 6, 7].into_iter().zip(products) {
+                    let p = m[moment].as_mut_ptr().add(first as usize);
+                    _mm256_storeu_ps(p, _mm256_fmadd_ps(x, y, _mm256_loadu_ps(p)));
                 }
             }
         }
@@ -588,27 +593,28 @@ mod avx512 {
                 let v = v[row].map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
                 let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
                 let w = _mm512_mul_ps(
-                    _mm512_add_ps(
-                        _mm512_add_ps(_mm512_mul_ps(v[0], a[0]), _mm512_mul_ps(v[1], a[1])),
-                        _mm512_mul_ps(v[2], a[2]),
+                    _mm512_fmadd_ps(
+                        v[2],
+                        a[2],
+                        _mm512_fmadd_ps(v[1], a[1], _mm512_mul_ps(v[0], a[0])),
                     ),
                     g,
                 );
                 let wt = _mm512_mul_ps(w, t);
                 let dv = _mm512_set1_ps(block.dv[row]);
                 let dv2 = _mm512_set1_ps(block.dv[row] * block.dv[row]);
-                let terms = [
-                    _mm512_mul_ps(v[0], g),
-                    _mm512_mul_ps(v[1], g),
-                    _mm512_mul_ps(v[2], g),
-                    wt,
-                    _mm512_mul_ps(wt, t),
-                    _mm512_mul_ps(dv, w),
-                    _mm512_mul_ps(dv, wt),
-                    _mm512_mul_ps(dv2, w),
+                sums[3] = _mm512_add_ps(sums[3], wt);
+                let products = [
+                    (v[0], g),
+                    (v[1], g),
+                    (v[2], g),
+                    (wt, t),
+                    (dv, w),
+                    (dv, wt),
+                    (dv2, w),
                 ];
-                for (sum, term) in sums.iter_mut().zip(terms) {
-                    *sum = _mm512_add_ps(*sum, term);
+                for (moment, (x, y)) in [0, 1, 2, 4, 5, 6, 7].into_iter().zip(products) {
+                    sums[moment] = _mm512_fmadd_ps(x, y, sums[moment]);
                 }
             }
             let mut moments: Moments = [[0.0; ROW]; 8];
