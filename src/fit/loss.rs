@@ -8,6 +8,7 @@
 //! loss has the same bits on any thread count.
 
 use crate::model::{Image, View};
+use crate::parallel::{add_lanes, lane_sum, sum_in_blocks};
 
 /// MSE of `image` against `target` (same size), accumulated in f64 ([`sum_in_blocks`]).
 #[must_use]
@@ -17,29 +18,13 @@ pub fn mse(image: &Image, target: &Image) -> f64 {
         (target.width, target.height),
         "image and target sizes differ"
     );
-    let sum = sum_in_blocks(image.pixels.len(), |range| {
-        squared_errors(&image.pixels[range.clone()], &target.pixels[range])
+    let [sum] = sum_in_blocks(image.pixels.len(), |range| {
+        [squared_errors(
+            &image.pixels[range.clone()],
+            &target.pixels[range],
+        )]
     });
     sum / image.pixels.len() as f64
-}
-
-/// Values summed per block of a loss: the blocks' sums are taken in parallel and added in
-/// block order.
-const SUM_BLOCK: usize = 1 << 16;
-
-/// `Σ block(range)` over the ranges `0..len` cut into [`SUM_BLOCK`]s, the blocks in parallel
-/// and their sums added in order: the same bits for any thread count.
-fn sum_in_blocks(len: usize, block: impl Fn(std::ops::Range<usize>) -> f64 + Sync) -> f64 {
-    use rayon::prelude::*;
-    let blocks = len.div_ceil(SUM_BLOCK);
-    if blocks <= 1 {
-        return block(0..len);
-    }
-    let sums: Vec<f64> = (0..blocks)
-        .into_par_iter()
-        .map(|b| block(b * SUM_BLOCK..((b + 1) * SUM_BLOCK).min(len)))
-        .collect();
-    sums.into_iter().sum()
 }
 
 /// `Σ (c - t)²` in f64 over the values of `c` and `t` (the same length), in
@@ -57,31 +42,6 @@ fn squared_errors(c: &[f32], t: &[f32]) -> f64 {
         *sum += (f64::from(c) - f64::from(t)).powi(2);
     }
     add_lanes(s)
-}
-
-/// `Σ term(i)` for `i < len` in a fixed order that does not wait on each addition: term `i`
-/// goes to accumulator `i mod 8`, and the eight are added pairwise ([`add_lanes`]). One
-/// chain of additions is bound by their latency (a 512×512 loss took 0.65 ms); eight are
-/// not.
-#[inline(always)]
-fn lane_sum(len: usize, term: impl Fn(usize) -> f64) -> f64 {
-    let mut s = [0.0_f64; 8];
-    let whole = len - len % 8;
-    for group in 0..whole / 8 {
-        for (lane, sum) in s.iter_mut().enumerate() {
-            *sum += term(8 * group + lane);
-        }
-    }
-    for (sum, i) in s.iter_mut().zip(whole..len) {
-        *sum += term(i);
-    }
-    add_lanes(s)
-}
-
-/// The eight accumulators of [`lane_sum`] added pairwise: `((s0 + s4) + (s2 + s6)) +
-/// ((s1 + s5) + (s3 + s7))`.
-fn add_lanes(s: [f64; 8]) -> f64 {
-    ((s[0] + s[4]) + (s[2] + s[6])) + ((s[1] + s[5]) + (s[3] + s[7]))
 }
 
 /// MSE of `image` against `target`, and `v_image = weight ∂MSE/∂C = weight 2 (C - C_gt)/N`
@@ -118,22 +78,22 @@ pub fn weighted_mse(image: &Image, target: &Image, weights: &[f32]) -> f64 {
         image.pixels.len() / 3,
         "one weight per pixel"
     );
-    let sum = sum_in_blocks(weights.len(), |range| {
+    let [sum] = sum_in_blocks(weights.len(), |range| {
         let w = &weights[range.clone()];
         let (c, t) = (
             &image.pixels[3 * range.start..3 * range.end],
             &target.pixels[3 * range.start..3 * range.end],
         );
-        lane_sum(w.len(), |p| {
+        [lane_sum(w.len(), |p| {
             let error = (3 * p..3 * p + 3)
                 .map(|k| (f64::from(c[k]) - f64::from(t[k])).powi(2))
                 .sum::<f64>();
             f64::from(w[p]) * error
-        })
+        })]
     });
-    let total = sum_in_blocks(weights.len(), |range| {
+    let [total] = sum_in_blocks(weights.len(), |range| {
         let w = &weights[range];
-        lane_sum(w.len(), |p| f64::from(w[p]))
+        [lane_sum(w.len(), |p| f64::from(w[p]))]
     });
     if total > 0.0 {
         sum / (3.0 * total)
