@@ -32,22 +32,28 @@
 //! **Paths.** The row loop is written three times, with AVX-512 intrinsics (16 lanes), AVX2
 //! intrinsics (8) and portably (8), with the same operations in the same order; the tile
 //! set-up is one portable loop compiled for each path (AVX-512, AVX2+FMA, baseline x86-64),
-//! chosen at run time ([`SimdPath`]; `SPLAT4D_SIMD` names a narrower one). No fused
-//! operation is formed in f32, the one in the f64 accumulation rounds like `acc + a G`
-//! because `a G` is exact, and every conversion is exact, so all paths give the same image
-//! bit for bit (tested on every path the CPU has): a whole row's list is the union of its
-//! two half lists in the same order, and the lanes of a half a kernel does not reach add
-//! exact zeros. [`crate::bench::ceiling_probe`] is the ideal loop the renderer is measured
-//! against, compiled for the same path (16 lanes a register on AVX-512).
+//! chosen at run time ([`SimdPath`]; `SPLAT4D_SIMD` names a narrower one). The f32 steps
+//! that fuse a product with a sum (`q`'s last step, the exp's range reduction and Horner
+//! steps) are `mul_add` in the portable loop and FMA instructions in the SIMD loops, each
+//! rounding once; the f64 accumulation's FMA rounds like `acc + a G` because `a G` is
+//! exact; every conversion is exact. So all paths give the same image bit for bit (tested on
+//! every path the CPU has): a whole row's list is the union of its two half lists in the
+//! same order, and the lanes of a half a kernel does not reach add exact zeros.
+//! [`crate::bench::ceiling_probe`] is the ideal loop the renderer is measured against,
+//! compiled for the same path (16 lanes a register on AVX-512, its `q`, exp and f32
+//! accumulation fused as well).
 //!
 //! **Where the rest of the ceiling goes** (100k kernels at 1920×1080, one thread, AVX-512,
-//! `perf record`; `docs/performance.md` has the method and the figures): about 62 % of a
-//! frame's time is the row loop, 17 % the tile set-up (`avx512::prepare_tile`), the rest
-//! slicing, projection, binning and the row forms. Per row entry the loop runs the probe's
-//! work for 16 lanes (`q`, the polynomial `exp`) plus what the probe has not: the pair test
-//! and count, the widening of `G` to f64 and six f64 multiply-adds where the probe has three
-//! f32 ones, and the loads of the row's constants; and a row entry holds on average 10.3
-//! pairs of its 16 lanes (the probe counts all 16). The work is bound by instructions and
+//! `perf record`; `docs/performance.md` has the method and the figures): about two thirds
+//! of a frame's time is the row loop, a fifth the tile set-up (`avx512::prepare_tile`), the
+//! rest slicing, projection, binning and the row forms. Per row entry the loop runs the
+//! probe's work for 16 lanes (`q` and the polynomial `exp`: 14 vector instructions) plus
+//! what the probe has not: the lanes' `t` (two additions where the probe has one), the pair
+//! test, the widening of `G` to f64 (two masked conversions and an extraction) and six f64
+//! multiply-adds where the probe has three f32 ones, with three amplitudes broadcast: 26
+//! vector arithmetic instructions a row entry against the probe's 18 (`objdump` of both
+//! loops); and a row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all
+//! 16). So the loop alone can reach about 18/26 × 10.3/16 ≈ 45 % of the probe. The work is bound by instructions and
 //! their latency, not memory (each tile's blocks and lists stay in its worker's cache). Tile
 //! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
 //! threads finish within ~1 % of each other; many more threads would need the tile as the
