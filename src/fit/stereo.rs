@@ -309,7 +309,8 @@ fn bilinear(image: &Image, u: f64, v: f64) -> Option<[f32; 3]> {
     if !(x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0) {
         return None;
     }
-    let (i0, j0) = (x.floor() as u32, y.floor() as u32);
+    // `x` and `y` are at least 0 here: truncation is their floor (without a libm call).
+    let (i0, j0) = (x as u32, y as u32);
     let (i1, j1) = (
         (i0 + 1).min(image.width - 1),
         (j0 + 1).min(image.height - 1),
@@ -327,15 +328,26 @@ fn bilinear(image: &Image, u: f64, v: f64) -> Option<[f32; 3]> {
 }
 
 /// The mean of `costs` over the `(2 WINDOW + 1)²` window around each pixel (clipped at the
-/// edges), into `out`.
+/// edges), into `out`: per pixel, the window's row sums (each left to right) added top to
+/// bottom, then divided by the window's size. A row's sum over a window is the same for the
+/// `2 WINDOW + 1` pixels above and below that use it, so each is computed once
+/// (`row_sums`); the additions are those of summing every window afresh, in the same order.
 fn box_filter(costs: &[f32], w: usize, h: usize, out: &mut [f32]) {
+    let columns = |i: usize| (i.saturating_sub(WINDOW), (i + WINDOW).min(w - 1));
+    let row_sums: Vec<f32> = (0..h * w)
+        .map(|p| {
+            let (jj, i) = (p / w, p % w);
+            let (i0, i1) = columns(i);
+            costs[jj * w + i0..=jj * w + i1].iter().sum::<f32>()
+        })
+        .collect();
     for j in 0..h {
+        let (j0, j1) = (j.saturating_sub(WINDOW), (j + WINDOW).min(h - 1));
         for i in 0..w {
-            let (j0, j1) = (j.saturating_sub(WINDOW), (j + WINDOW).min(h - 1));
-            let (i0, i1) = (i.saturating_sub(WINDOW), (i + WINDOW).min(w - 1));
+            let (i0, i1) = columns(i);
             let mut sum = 0.0;
             for jj in j0..=j1 {
-                sum += costs[jj * w + i0..=jj * w + i1].iter().sum::<f32>();
+                sum += row_sums[jj * w + i];
             }
             out[j * w + i] = sum / ((j1 - j0 + 1) * (i1 - i0 + 1)) as f32;
         }
@@ -399,6 +411,43 @@ fn texture(image: &Image, w: usize, h: usize, i: usize, j: usize) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every window summed afresh: each row of the window left to right, the rows top to
+    /// bottom, divided by the window's size.
+    fn box_filter_by_definition(costs: &[f32], w: usize, h: usize) -> Vec<f32> {
+        let mut out = vec![0.0; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let (j0, j1) = (j.saturating_sub(WINDOW), (j + WINDOW).min(h - 1));
+                let (i0, i1) = (i.saturating_sub(WINDOW), (i + WINDOW).min(w - 1));
+                let mut sum = 0.0;
+                for jj in j0..=j1 {
+                    sum += costs[jj * w + i0..=jj * w + i1].iter().sum::<f32>();
+                }
+                out[j * w + i] = sum / ((j1 - j0 + 1) * (i1 - i0 + 1)) as f32;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_box_filter_gives_the_definitions_bits() {
+        // Sizes below, at and above the window, with costs of many magnitudes.
+        for (w, h) in [(1, 1), (3, 2), (5, 5), (7, 13), (40, 9)] {
+            let costs: Vec<f32> = (0..w * h)
+                .map(|k| (k as f32 * 0.618_034).fract() * 10f32.powi(k as i32 % 7 - 3))
+                .collect();
+            let mut out = vec![f32::NAN; w * h];
+            box_filter(&costs, w, h, &mut out);
+            let expected = box_filter_by_definition(&costs, w, h);
+            assert!(
+                out.iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{w}×{h}"
+            );
+        }
+    }
 
     #[test]
     fn bilinear_reads_pixel_centres_exactly_and_refuses_outside() {
