@@ -22,8 +22,9 @@
 //! image does not depend on them. `α̂`, `T` and `C` are f64 per lane, so the
 //! transmittance's product keeps its precision over long lists and the stop decision
 //! follows the f64 model; a half row ends when all its lanes have stopped. The loop is one
-//! portable function compiled for each [`SimdPath`] (no fused operation can form: Rust never
-//! contracts), so the image is the same bit for bit on every path and thread count.
+//! portable function compiled for each [`SimdPath`] (its fused multiply-adds are the
+//! written-out `mul_add`s of `RowEntry::lane` and the exp, and Rust forms no other), so the
+//! image is the same bit for bit on every path and thread count.
 
 use rayon::prelude::*;
 

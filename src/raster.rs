@@ -44,20 +44,23 @@
 //! accumulation fused as well).
 //!
 //! **Where the rest of the ceiling goes** (100k kernels at 1920×1080, one thread, AVX-512,
-//! `perf record`; `docs/performance.md` has the method and the figures): about two thirds
-//! of a frame's time is the row loop, a fifth the tile set-up (`avx512::prepare_tile`), the
-//! rest slicing, projection, binning and the row forms. Per row entry the loop runs the
+//! `perf record`; `docs/performance.md` has the method and the figures): the row loop takes
+//! about 3.5 times the tile set-up (`avx512::prepare_tile`; 38 % and 11 % of the samples of
+//! `splat4d bench --scene 100k --size 1920x1080 --threads 1 --no-dense`, beside the probe,
+//! the f64 reference and page zeroing; a frame alone measured 62 % and 17 % before the
+//! fused loops), the rest slicing, projection, binning and the row forms. Per row entry the
+//! loop runs the
 //! probe's work for 16 lanes (`q` and the polynomial `exp`: 14 vector instructions) plus
 //! what the probe has not: the lanes' `t` (two additions where the probe has one), the pair
 //! test, the widening of `G` to f64 (two masked conversions and an extraction) and six f64
 //! multiply-adds where the probe has three f32 ones, with three amplitudes broadcast: 26
 //! vector arithmetic instructions a row entry against the probe's 18 (`objdump` of both
 //! loops); and a row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all
-//! 16). So the loop alone can reach about 18/26 × 10.3/16 ≈ 45 % of the probe. The work is bound by instructions and
-//! their latency, not memory (each tile's blocks and lists stay in its worker's cache). Tile
-//! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
-//! threads finish within ~1 % of each other; many more threads would need the tile as the
-//! unit.
+//! 16). So the loop alone can reach about 18/26 × 10.3/16 ≈ 45 % of the probe. The work is
+//! bound by instructions and their latency, not memory (each tile's blocks and lists stay in
+//! its worker's cache). Tile rows are the parallel unit: at 1080p the largest of the 68 is
+//! 2.5 % of the frame, so two threads finish within ~1 % of each other; many more threads
+//! would need the tile as the unit.
 
 use std::fmt;
 use std::str::FromStr;
@@ -118,11 +121,13 @@ impl FromStr for ExpMode {
 /// is about 1e-38 instead of less (never a subnormal). Relative error ≤ 4e-7 for
 /// `0 ≤ q ≤ 174` (tested against f64).
 ///
-/// Every step but the first and last is a fused multiply-add (`f32::mul_add`, one rounding),
-/// as each SIMD path computes it with its FMA instructions, so every path gives these bits:
-/// nine roundings fewer than separate products and sums, and half the dependent chain.
-/// Where the CPU has no FMA (x86-64 before 2013, the portable path there) `mul_add` is a
-/// library call: exact, and slow.
+/// The range reduction's two products and the Horner steps are fused multiply-adds
+/// (`f32::mul_add`, one rounding each), as each SIMD path computes them with its FMA
+/// instructions, so every path gives these bits: 8 operations fewer than separate products
+/// and sums (at most 7 roundings fewer: `n ln2_hi` is exact), and a dependent chain of 12
+/// steps instead of 19. Compiled without FMA (the baseline path) `mul_add` is a call to a
+/// software `fmaf`: exact, and slow (the baseline path renders about 3.4× slower than with
+/// separate products and sums).
 #[inline(always)]
 #[must_use]
 pub fn fast_exp_neg_half(q: f32) -> f32 {
@@ -159,9 +164,10 @@ pub(crate) fn gaussian<const FAST: bool>(q: f32) -> f32 {
 }
 
 /// The instruction set the per-pixel loops are compiled for, chosen once per render from
-/// what the CPU has. Every path runs the same operations in the same order (no fused
-/// multiply-adds are formed, conversions are exact), so the image is the same bit for bit on
-/// every path; only the vector width differs.
+/// what the CPU has. Every path runs the same operations in the same order (the fused
+/// multiply-adds are written out, `mul_add` or FMA instructions, and none is formed by the
+/// compiler; conversions are exact), so the image is the same bit for bit on every path;
+/// only the vector width differs.
 ///
 /// Not part of SPEC: every path gives the same bits (SPEC §5's sum, evaluated identically).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -956,9 +962,9 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
 }
 
 /// The half-row loop with AVX2 intrinsics: the operations of [`sum_half_row`] in the same
-/// order, 8 lanes at a time, so the result is the same bit for bit: the f32 part forms no
-/// fused multiply-add, and the f64 accumulation `acc + a G` uses one only because `a G` is
-/// exact there.
+/// order, 8 lanes at a time, so the result is the same bit for bit: the f32 part fuses
+/// exactly where the portable code calls `mul_add`, and the f64 accumulation `acc + a G`
+/// rounds like the portable sum because `a G` is exact there.
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {
     use std::arch::x86_64::*;

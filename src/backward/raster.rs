@@ -21,7 +21,8 @@
 //! forward's whole-row tile set-up (16 lanes a row, `raster::avx512::prepare_tile`) and walks
 //! each kernel's own rows with its moments in registers: a column adds the same terms in the
 //! same order (one per row, rows ascending), and the lanes of a half the kernel does not
-//! reach add exact zeros. The entries are reduced in entry order (tile-major) in
+//! reach add zeros (which can change only the sign of a zero sum; a partial's zero is stored
+//! as +0). The entries are reduced in entry order (tile-major) in
 //! f64: no atomics, and the result does not depend on the thread count or the SIMD path (the
 //! AVX2 loop performs the portable loop's operations in the same order).
 //!
@@ -425,10 +426,12 @@ fn store_partials(moments: &[Moments], entry_of: &[u32], run: &mut [[f32; 8]]) {
 }
 
 /// One tile kernel's partial: each moment summed over the 16 columns in f64, in column
-/// order.
+/// order. A sum that is zero is stored as +0: a fused product that underflows can leave a
+/// column at -0 where a path that skips the lane leaves +0 (the only way the paths' column
+/// sums can differ), and adding +0 makes the two the same bits.
 #[inline(always)]
 fn partial_of(moments: &Moments) -> [f32; 8] {
-    std::array::from_fn(|m| moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() as f32)
+    std::array::from_fn(|m| (moments[m].iter().map(|&x| f64::from(x)).sum::<f64>() + 0.0) as f32)
 }
 
 /// One half row's entries into their kernels' moments (lane `i` is tile pixel `first + i`;
@@ -497,7 +500,8 @@ mod avx2 {
             let a = kernel.amplitude.map(|a| _mm256_set1_ps(a as f32));
             let (t, q, hit) = lanes(entry, kernel, numbers, first);
             if _mm256_movemask_ps(hit) == 0 {
-                // Every term is zero: adding them would change nothing (sums start at +0).
+                // Every term is zero: adding them could change only the sign of a zero
+                // sum, which `partial_of` stores as +0.
                 continue;
             }
             let value = gaussian::<FAST>(q);
@@ -586,7 +590,8 @@ mod avx512 {
                 rows &= rows - 1;
                 let (t, q, hit) = row_lanes(kernel, block, row, valid);
                 if hit == 0 {
-                    // Every term is zero: adding them would change nothing (sums start at +0).
+                    // Every term is zero: adding them could change only the sign of a zero
+                    // sum, which `partial_of` stores as +0.
                     continue;
                 }
                 // SAFETY: each channel of the row holds 16 floats.

@@ -91,10 +91,7 @@ pub fn weighted_mse(image: &Image, target: &Image, weights: &[f32]) -> f64 {
             f64::from(w[p]) * error
         })]
     });
-    let [total] = sum_in_blocks(weights.len(), |range| {
-        let w = &weights[range];
-        [lane_sum(w.len(), |p| f64::from(w[p]))]
-    });
+    let total = total_weight(weights);
     if total > 0.0 {
         sum / (3.0 * total)
     } else {
@@ -127,6 +124,16 @@ pub fn view_mse_with_gradient(
     view_mse(image, view)
 }
 
+/// `Σ w_p` in f64, in the fixed order of [`sum_in_blocks`] and [`lane_sum`]: the loss and its
+/// gradient divide by the same bits.
+fn total_weight(weights: &[f32]) -> f64 {
+    let [total] = sum_in_blocks(weights.len(), |range| {
+        let w = &weights[range];
+        [lane_sum(w.len(), |p| f64::from(w[p]))]
+    });
+    total
+}
+
 /// The gradient of `weight ×` [`view_mse`] with respect to the rendered pixels, channel
 /// run by channel run (a [`crate::backward::raster::PixelGradient`]): `gradient(k, c, v)`
 /// sets `v[i]` for channel `k + i` of the view's image from its rendered value `c[i]`, to
@@ -138,7 +145,7 @@ pub fn view_mse_gradient(view: &View, weight: f64) -> impl Fn(usize, &[f32], &mu
     let scale = match weights {
         None => (weight * 2.0 / target.len() as f64) as f32,
         Some(weights) => {
-            let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
+            let total = total_weight(weights);
             if total > 0.0 {
                 (weight * 2.0 / (3.0 * total)) as f32
             } else {
