@@ -389,6 +389,31 @@ pub(crate) struct TileScratch {
     pub(crate) halves: [Vec<RowEntry>; 2 * ROW],
     /// The AVX-512 loops' form of the tile.
     pub(crate) whole_rows: TileBlocks,
+    /// The AVX-512 forward's `G` of the tile, kept for its backward in a training step.
+    pub(crate) kept: KeptGaussians,
+}
+
+/// `G` of every (tile kernel, row) the AVX-512 forward evaluated — zero where a lane is not
+/// a pair — and the row's pair mask, kernel-major (`16 k + row`): a training step's
+/// backward of the same tile reads them instead of evaluating `q` and `exp(-½ q)` again (the
+/// same values, so the same bits). Only the rows a kernel is listed on are written, and only
+/// those are read.
+#[derive(Default)]
+pub(crate) struct KeptGaussians {
+    pub(crate) values: Vec<[f32; ROW]>,
+    pub(crate) hits: Vec<u16>,
+}
+
+impl KeptGaussians {
+    /// Room for `kernels` tile kernels (grown, never shrunk nor cleared: what a tile writes
+    /// is all it reads).
+    #[inline(always)]
+    fn make_room(&mut self, kernels: usize) {
+        if self.values.len() < ROW * kernels {
+            self.values.resize(ROW * kernels, [0.0; ROW]);
+            self.hits.resize(ROW * kernels, 0);
+        }
+    }
 }
 
 /// The forward's per-tile scratch, owned by the render context and kept between frames: a
@@ -510,7 +535,8 @@ pub(crate) fn size_image(bins: &TileBins, image: &mut Image) -> bool {
 /// Prepares tile `t` of a frame into `scratch` and sums it into `band` (the image rows of
 /// its tile row) with the loops compiled for `path` (which the CPU must have), as
 /// [`rasterize_on`] does; the set-up stays in `scratch` for a backward of the same tile
-/// ([`crate::backward::raster`]). Returns the pairs.
+/// ([`crate::backward::raster`]), and on the AVX-512 path its `G` too
+/// ([`KeptGaussians`]). Returns the pairs.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn forward_tile_on(
     path: SimdPath,
@@ -527,7 +553,19 @@ pub(crate) fn forward_tile_on(
         forms,
         background: background.map(f64::from),
     };
-    tile_on(path, exp, &frame, t, scratch, band)
+    match (path, exp) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: the caller checked that the CPU has the path's features.
+        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
+            tile_avx512::<true, true>(&frame, t, scratch, band)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx512, ExpMode::Std) => unsafe {
+            tile_avx512::<false, true>(&frame, t, scratch, band)
+        },
+        _ => tile_on(path, exp, &frame, t, scratch, band),
+    }
 }
 
 /// A tile's pixel geometry, for the per-kernel set-up.
@@ -812,12 +850,12 @@ fn tile_on(
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `rasterize_on` checked that the CPU has the path's features.
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
-            tile_avx512::<true>(frame, t, scratch, band)
+            tile_avx512::<true, false>(frame, t, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
         (SimdPath::Avx512, ExpMode::Std) => unsafe {
-            tile_avx512::<false>(frame, t, scratch, band)
+            tile_avx512::<false, false>(frame, t, scratch, band)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
@@ -831,17 +869,22 @@ fn tile_on(
 }
 
 /// The tile with AVX-512: [`avx512::prepare_tile`] (whole rows), then [`avx512::sum_tile`]
-/// (16 lanes a row).
+/// (16 lanes a row), keeping its `G` in `scratch.kept` when `KEEP`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-fn tile_avx512<const FAST: bool>(
+fn tile_avx512<const FAST: bool, const KEEP: bool>(
     frame: &Frame,
     t: usize,
     scratch: &mut TileScratch,
     band: &mut [f32],
 ) -> u64 {
     avx512::prepare_tile::<true>(frame.bins, frame.forms, t, &mut scratch.whole_rows);
-    avx512::sum_tile::<FAST>(frame.bins, t, frame.background, &scratch.whole_rows, band)
+    let tiles = &scratch.whole_rows;
+    if KEEP {
+        scratch.kept.make_room(tiles.kernels.len());
+    }
+    let kept = &mut scratch.kept;
+    avx512::sum_tile::<FAST, KEEP>(frame.bins, t, frame.background, tiles, band, kept)
 }
 
 /// [`tile`] compiled for AVX2 and FMA.
@@ -1237,10 +1280,7 @@ pub(crate) mod avx512 {
         row: usize,
         valid: __mmask16,
     ) -> (__m512, __m512, __mmask16) {
-        let t = _mm512_add_ps(
-            _mm512_add_ps(lane_numbers(), _mm512_set1_ps(block.shift[row])),
-            _mm512_set1_ps(block.t_anchor[row]),
-        );
+        let t = row_t(block, row);
         let q = _mm512_fmadd_ps(
             _mm512_mul_ps(_mm512_set1_ps(kernel.qxx), t),
             t,
@@ -1248,6 +1288,16 @@ pub(crate) mod avx512 {
         );
         let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, q, _mm512_set1_ps(kernel.qmax));
         (t, q, hit)
+    }
+
+    /// The lanes' `t` of [`row_lanes`], alone.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
+    pub(crate) fn row_t(block: &RowBlock, row: usize) -> __m512 {
+        _mm512_add_ps(
+            _mm512_add_ps(lane_numbers(), _mm512_set1_ps(block.shift[row])),
+            _mm512_set1_ps(block.t_anchor[row]),
+        )
     }
 
     /// `exp(-½ q)` on 16 lanes as [`super::gaussian`] evaluates it.
@@ -1270,12 +1320,13 @@ pub(crate) mod avx512 {
     /// the row's list; the row is then rounded to f32 and written in place.
     #[inline]
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-    pub(super) fn sum_tile<const FAST: bool>(
+    pub(super) fn sum_tile<const FAST: bool, const KEEP: bool>(
         bins: &TileBins,
         t: usize,
         background: [f64; 3],
         tiles: &TileBlocks,
         band: &mut [f32],
+        kept: &mut super::KeptGaussians,
     ) -> u64 {
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let width = bins.width as usize;
@@ -1301,6 +1352,15 @@ pub(crate) mod avx512 {
                 pairs += u64::from(hit.count_ones());
                 // Lanes that are not pairs convert as +0 (the mask's zeroing).
                 let g = gaussian::<FAST>(q);
+                if KEEP {
+                    // SAFETY: `make_room` gave `kept` 16 rows for each tile kernel.
+                    unsafe {
+                        let at = ROW * k as usize + row;
+                        let values = kept.values.get_unchecked_mut(at);
+                        _mm512_storeu_ps(values.as_mut_ptr(), _mm512_maskz_mov_ps(hit, g));
+                        *kept.hits.get_unchecked_mut(at) = hit;
+                    }
+                }
                 let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
                 let g_hi =
                     _mm512_maskz_cvtps_pd((hit >> 8) as __mmask8, _mm512_extractf32x8_ps::<1>(g));

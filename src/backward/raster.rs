@@ -29,7 +29,9 @@
 //! A training step runs the forward raster and this backward in one pass over the tiles
 //! ([`rasterize_with_backward`]): each tile is set up once, summed, given its `∂L/∂C` by the
 //! loss ([`PixelGradient`]) and differentiated at once, with the same bits as the two
-//! passes.
+//! passes. On the AVX-512 path the forward keeps each (tile kernel, row)'s `G` and pair mask
+//! (`raster::KeptGaussians`, 66 bytes) and the backward reads them instead of evaluating `q`
+//! and the exp again: half the backward's vector work per row.
 
 use rayon::prelude::*;
 
@@ -110,7 +112,7 @@ pub(crate) fn rasterize_backward_on(
         SCRATCH.with(|cell| {
             let scratch = &mut *cell.borrow_mut();
             prepare_tile_on(path, bins, forms, t, scratch);
-            backward_prepared_tile_on(path, exp, bins, v_image, 0, t, run, scratch);
+            backward_prepared_tile_on(path, exp, bins, v_image, 0, t, run, scratch, false);
         });
     });
     reduce(proj, bins, partials, sums, out);
@@ -238,6 +240,7 @@ pub(crate) fn rasterize_with_backward_on(
                             t,
                             run,
                             scratch,
+                            true,
                         );
                     }
                     pairs
@@ -249,7 +252,9 @@ pub(crate) fn rasterize_with_backward_on(
     pairs
 }
 
-/// [`backward_prepared_tile`] compiled for `path`.
+/// [`backward_prepared_tile`] compiled for `path`. `kept`: the tile's forward ran just before
+/// with [`crate::raster::forward_tile_on`], which keeps its `G` on the AVX-512 path; that
+/// path then reads it instead of evaluating `q` and `exp(-½ q)` again.
 #[allow(clippy::too_many_arguments)]
 fn backward_prepared_tile_on(
     path: SimdPath,
@@ -260,32 +265,39 @@ fn backward_prepared_tile_on(
     t: usize,
     run: &mut [[f32; 8]],
     scratch: &mut BackwardScratch,
+    kept: bool,
 ) {
-    match (path, exp) {
+    match (path, exp, kept) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller checked that the CPU has the path's features.
-        (SimdPath::Avx512, ExpMode::Poly) => unsafe {
-            avx512::backward_prepared_tile::<true>(bins, v, v_row, t, run, scratch);
+        // SAFETY: the caller checked that the CPU has the path's features; `kept` says the
+        // scratch holds this tile's `G`.
+        (SimdPath::Avx512, _, true) => unsafe {
+            avx512::backward_prepared_tile::<true, true>(bins, v, v_row, t, run, scratch);
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx512, ExpMode::Std) => unsafe {
-            avx512::backward_prepared_tile::<false>(bins, v, v_row, t, run, scratch);
+        (SimdPath::Avx512, ExpMode::Poly, false) => unsafe {
+            avx512::backward_prepared_tile::<true, false>(bins, v, v_row, t, run, scratch);
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx2, ExpMode::Poly) => unsafe {
+        (SimdPath::Avx512, ExpMode::Std, false) => unsafe {
+            avx512::backward_prepared_tile::<false, false>(bins, v, v_row, t, run, scratch);
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (SimdPath::Avx2, ExpMode::Poly, _) => unsafe {
             backward_prepared_tile_avx2::<true>(bins, v, v_row, t, run, scratch);
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (SimdPath::Avx2, ExpMode::Std) => unsafe {
+        (SimdPath::Avx2, ExpMode::Std, _) => unsafe {
             backward_prepared_tile_avx2::<false>(bins, v, v_row, t, run, scratch);
         },
-        (_, ExpMode::Poly) => {
+        (_, ExpMode::Poly, _) => {
             backward_prepared_tile::<true, false>(bins, v, v_row, t, run, scratch);
         }
-        (_, ExpMode::Std) => {
+        (_, ExpMode::Std, _) => {
             backward_prepared_tile::<false, false>(bins, v, v_row, t, run, scratch);
         }
     }
@@ -551,7 +563,7 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     use super::{BackwardScratch, Moments, ROW, partial_of, read_planes};
-    use crate::raster::avx512::{gaussian, row_lanes};
+    use crate::raster::avx512::{gaussian, row_lanes, row_t};
     use crate::tiles::TileBins;
 
     /// [`super::backward_prepared_tile`] with AVX-512, per kernel and row the operations of
@@ -560,7 +572,7 @@ mod avx512 {
     /// `prepare_tile::<true>`, which sets up the same ones and the row lists besides).
     /// `v_image` holds `∂L/∂C` of the image rows from `v_row` on.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
-    pub(super) fn backward_prepared_tile<const FAST: bool>(
+    pub(super) fn backward_prepared_tile<const FAST: bool, const KEPT: bool>(
         bins: &TileBins,
         v_image: &[f32],
         v_row: usize,
@@ -568,7 +580,7 @@ mod avx512 {
         run: &mut [[f32; 8]],
         scratch: &mut BackwardScratch,
     ) {
-        let tile = &scratch.tile.whole_rows;
+        let (tile, kept) = (&scratch.tile.whole_rows, &scratch.tile.kept);
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let lanes = (tx1 - tx0) as usize;
         let width = bins.width as usize;
@@ -588,7 +600,20 @@ mod avx512 {
             while rows != 0 {
                 let row = rows.trailing_zeros() as usize;
                 rows &= rows - 1;
-                let (t, q, hit) = row_lanes(kernel, block, row, valid);
+                // `t`, `G` (zero where a lane is not a pair) and the pair mask: as the
+                // forward kept them (`KEPT`), or evaluated again (the same operations).
+                let (t, g, hit) = if KEPT {
+                    let at = ROW * k + row;
+                    let t = row_t(block, row);
+                    // SAFETY: the forward of this tile wrote 16 rows for each tile kernel.
+                    unsafe {
+                        let g = _mm512_loadu_ps(kept.values.get_unchecked(at).as_ptr());
+                        (t, g, *kept.hits.get_unchecked(at))
+                    }
+                } else {
+                    let (t, q, hit) = row_lanes(kernel, block, row, valid);
+                    (t, _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q)), hit)
+                };
                 if hit == 0 {
                     // Every term is zero: adding them could change only the sign of a zero
                     // sum, which `partial_of` stores as +0.
@@ -596,7 +621,6 @@ mod avx512 {
                 }
                 // SAFETY: each channel of the row holds 16 floats.
                 let v = v[row].map(|c| unsafe { _mm512_loadu_ps(c.as_ptr()) });
-                let g = _mm512_maskz_mov_ps(hit, gaussian::<FAST>(q));
                 let w = _mm512_mul_ps(
                     _mm512_fmadd_ps(
                         v[2],

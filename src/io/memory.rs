@@ -16,8 +16,9 @@ pub const FIT_BYTES_PER_KERNEL: u64 = 2048;
 
 /// Bytes per kernel of each view a fit renders at once (one per worker thread, up to the
 /// batch), beyond [`FIT_BYTES_PER_KERNEL`]: its own gradients, and its sliced, projected and
-/// binned copies and tile lists.
-pub const VIEW_BYTES_PER_KERNEL: u64 = 1024;
+/// binned copies and tile lists, and the AVX-512 training step's `G` kept per (tile kernel,
+/// row) for the backward (up to 1 KiB a kernel when one tile holds them all).
+pub const VIEW_BYTES_PER_KERNEL: u64 = 2048;
 
 /// Bytes a render holds per pixel: the f32 image, the raster's per-pixel work and the
 /// encoder's copy.

@@ -178,7 +178,7 @@ fn a_fits_estimate_counts_the_views_it_renders_at_once() {
         "{}",
         String::from_utf8_lossy(&made.stderr)
     );
-    // 100 000 kernels: 307 MB on one thread (2 + 1 KiB each), 614 MB on four (2 + 4 KiB).
+    // 100 000 kernels: 410 MB on one thread (2 + 2 KiB each), 1 GB on four (2 + 8 KiB).
     let fit = |threads: &str| {
         run(
             &[
