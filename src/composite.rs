@@ -34,7 +34,7 @@ use std::ops::Range;
 
 use crate::raster::{
     ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile_range, row_forms,
+    prepare_tile_range, row_forms, size_image,
 };
 use crate::tiles::TileBins;
 
@@ -175,17 +175,11 @@ pub fn composite_on(
         "opacities of an alpha frame"
     );
     row_forms(proj, bins, forms);
+    let pixels = size_image(bins, image);
     let (w, h) = (bins.width as usize, bins.height as usize);
-    image.width = bins.width;
-    image.height = bins.height;
-    if image.pixels.capacity() < 3 * w * h {
-        image.pixels = vec![0.0; 3 * w * h];
-    } else {
-        image.pixels.resize(3 * w * h, 0.0);
-    }
     stops.clear();
     stops.resize(w * h, PixelStop::default());
-    if w == 0 || h == 0 {
+    if !pixels {
         return 0;
     }
     let frame = AlphaFrame {
