@@ -49,11 +49,11 @@
 //! `splat4d bench --scene 100k --size 1920x1080 --threads 1 --no-dense`, beside the probe,
 //! the f64 reference and page zeroing; a frame alone measured 62 % and 17 % before the
 //! fused loops), the rest slicing, projection, binning and the row forms. Per row entry the
-//! loop runs the
-//! probe's work for 16 lanes (`q` and the polynomial `exp`: 14 vector instructions) plus
-//! what the probe has not: the lanes' `t` (two additions where the probe has one), the pair
-//! test, the widening of `G` to f64 (two masked conversions and an extraction) and six f64
-//! multiply-adds where the probe has three f32 ones, with three amplitudes broadcast: 26
+//! loop runs the probe's work for 16 lanes (`q` and the polynomial `exp`: 14 vector
+//! instructions) plus what the probe has not: the lanes' `t` (two additions where the probe
+//! has one), the pair test, the widening of `G` to f64 (two masked conversions and an
+//! extraction) and six f64 multiply-adds where the probe has three f32 ones, with three
+//! amplitudes broadcast: 26
 //! vector arithmetic instructions a row entry against the probe's 18 (`objdump` of both
 //! loops); and a row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all
 //! 16). So the loop alone can reach about 18/26 × 10.3/16 ≈ 45 % of the probe. The work is

@@ -605,7 +605,9 @@ mod avx512 {
                 let (t, g, hit) = if KEPT {
                     let at = ROW * k + row;
                     let t = row_t(block, row);
-                    // SAFETY: the forward of this tile wrote 16 rows for each tile kernel.
+                    // SAFETY: the forward of this tile made room for 16 rows of each tile
+                    // kernel (`make_room`) and wrote the rows it is listed on, which are
+                    // the rows read here.
                     unsafe {
                         let g = _mm512_loadu_ps(kept.values.get_unchecked(at).as_ptr());
                         (t, g, *kept.hits.get_unchecked(at))
