@@ -28,7 +28,7 @@ fn exit_code(kind: ErrorKind) -> u8 {
 }
 
 fn main() -> ExitCode {
-    cli::allocator::keep_freed_blocks();
+    cli::allocator::tune_heap();
     let args = <cli::Cli as clap::Parser>::parse();
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,

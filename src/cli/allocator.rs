@@ -16,18 +16,36 @@ use std::alloc::{GlobalAlloc, Layout, System};
 /// Blocks of at least this many bytes are mapped whole (`LARGE` itself: a huge page).
 const LARGE: usize = 2 << 20;
 
-/// Keeps the blocks below [`LARGE`] that the program frees for its next allocations (glibc:
-/// `mallopt`; elsewhere nothing). Call first thing in `main`.
+/// Sets glibc's heap up for a command's allocations (glibc: `mallopt`; elsewhere nothing).
+/// Call first thing in `main`. Three settings, each measured on the 2-core VM of
+/// `docs/performance.md` (whole `splat4d render` processes):
 ///
-/// Why: glibc maps blocks of 128 KiB and more on their own and unmaps them when freed, and
-/// gives the top of its heap back beyond 128 KiB free, so each phase of a command (the
-/// file read, the slice, the projection, the bins) got fresh pages, a page fault and a
-/// zeroing each, where the previous phase's freed blocks would have done: a 10k-kernel
-/// 512×512 render took 2270 faults, 2020 with this. Blocks of [`LARGE`] and more are this
-/// allocator's own, and still go back when freed; each glibc arena (one per thread that
-/// allocates, at most a few) keeps at most `KEEP_FREE` free at its top, so what a command
-/// holds after a peak is bounded by that peak.
-pub fn keep_freed_blocks() {
+/// - **Freed blocks are kept** for the next allocations. glibc maps blocks of 128 KiB and
+///   more on their own and unmaps them when freed, and gives the top of its heap back beyond
+///   128 KiB free, so each phase of a command (the file read, the slice, the projection, the
+///   bins) got fresh pages, a page fault and a zeroing each, where the previous phase's freed
+///   blocks would have done: a 10k-kernel 512×512 render took 2270 faults, 2020 with this.
+///   Blocks of [`LARGE`] and more are this allocator's own, and still go back when freed; the
+///   heap keeps at most `KEEP_FREE` free at its top, so what a command holds after a peak is
+///   bounded by that peak.
+/// - **The heap is marked for huge pages as it grows** (`M_TOP_PAD`: it grows
+///   [`HEAP_GROWTH`] at a time, reserving addresses, not memory; this allocator marks each
+///   stretch `madvise(MADV_HUGEPAGE)` after the allocation that grew it, [`heap`]). A fault
+///   costs ~1.2 µs a 4 KiB page and ~40–190 µs a 2 MiB huge page, so the per-kernel arrays
+///   of a small frame (10k kernels: ~6 MB of blocks below [`LARGE`]) cost a few huge pages
+///   instead of ~1500 faults: 1970 → 510 faults and 17.5 → 14.7 ms of CPU at 10k@512² on
+///   one thread. A command that touches less than ~300 KiB of a 2 MiB stretch pays more
+///   than it would have.
+/// - **One arena for every thread** (`M_ARENA_MAX`). A render's work runs on the thread
+///   pool, so its arrays were allocated in the workers' own glibc arenas (mapped apart from
+///   the heap, on 4 KiB pages, each keeping its own freed blocks): with two threads the
+///   huge-page heap went unused (2050 faults). With one arena: 860 faults, 28 → 19 ms of
+///   CPU. Threads share the arena's lock for blocks their per-thread cache does not hold;
+///   the loops allocate per phase, not per pair, and fits measured the same or faster
+///   (two threads; see `docs/performance.md`).
+///
+/// Nothing an allocation returns depends on this: outputs are the same bits.
+pub fn tune_heap() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: `mallopt` only sets glibc's allocation parameters (a value out of range is
     // refused, as the mmap threshold above 512 KiB is on 32-bit systems, and changes
@@ -35,7 +53,83 @@ pub fn keep_freed_blocks() {
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, LARGE as libc::c_int);
         libc::mallopt(libc::M_TRIM_THRESHOLD, KEEP_FREE as libc::c_int);
+        libc::mallopt(libc::M_TOP_PAD, HEAP_GROWTH as libc::c_int);
+        libc::mallopt(libc::M_ARENA_MAX, 1);
+        heap::start_marking();
     }
+}
+
+/// How much glibc's heap grows at a time once [`tune_heap`] ran: addresses, backed by
+/// memory only where touched.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const HEAP_GROWTH: usize = 32 << 20;
+
+/// Marks glibc's heap for huge pages as it grows: after each allocation of at least a page
+/// from glibc, the whole huge pages the program break has moved over since the last mark
+/// are marked `MADV_HUGEPAGE`, before anything is written to the block returned. (Marking
+/// ahead of the growth is not possible, `madvise` needs a mapping; growing the heap ahead
+/// was measured worse: glibc then zeroes every zeroed block by hand, as it can no longer
+/// tell fresh memory from used.) A stretch that glibc wrote to while growing it (its
+/// block and top headers) stays on 4 KiB pages.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+mod heap {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    use super::LARGE;
+
+    /// The program break up to which the heap is marked; 0 until [`start_marking`].
+    static MARKED_UP_TO: AtomicUsize = AtomicUsize::new(0);
+
+    /// Starts marking from the current program break.
+    pub fn start_marking() {
+        // SAFETY: `sbrk(0)` only reads the program break.
+        let brk = unsafe { libc::sbrk(0) } as usize;
+        MARKED_UP_TO.store(brk, Ordering::Relaxed);
+    }
+
+    /// Called after glibc returned a block of `bytes`.
+    #[inline]
+    pub fn mark_growth(bytes: usize) {
+        if bytes < 4096 {
+            return;
+        }
+        let marked = MARKED_UP_TO.load(Ordering::Relaxed);
+        if marked == 0 {
+            return;
+        }
+        // SAFETY: `sbrk(0)` only reads the program break.
+        let brk = unsafe { libc::sbrk(0) } as usize;
+        if brk < marked {
+            // The heap was trimmed: what grows back is unmarked.
+            let _ =
+                MARKED_UP_TO.compare_exchange(marked, brk, Ordering::Relaxed, Ordering::Relaxed);
+            return;
+        }
+        if let Some((start, end)) = whole_huge_pages(marked, brk)
+            && MARKED_UP_TO
+                .compare_exchange(marked, brk, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+        {
+            // SAFETY: a hint about whole pages of the heap's own mapping (below the break),
+            // which changes no byte of it.
+            unsafe { libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE) };
+        }
+    }
+
+    /// The whole huge pages between the addresses `from` and `to`, if any.
+    pub fn whole_huge_pages(from: usize, to: usize) -> Option<(usize, usize)> {
+        let (start, end) = (from.next_multiple_of(LARGE), to - to % LARGE);
+        (end > start).then_some((start, end))
+    }
+}
+
+/// [`heap::mark_growth`] where it exists.
+#[inline]
+fn after_system_alloc(bytes: usize) {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    heap::mark_growth(bytes);
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    let _ = bytes;
 }
 
 /// The free memory glibc's heap may keep at its top before giving it back.
@@ -163,7 +257,9 @@ unsafe impl GlobalAlloc for HugePages {
             return map::map(layout.size());
         }
         // SAFETY: forwarded with the caller's promises.
-        unsafe { System.alloc(layout) }
+        let block = unsafe { System.alloc(layout) };
+        after_system_alloc(layout.size());
+        block
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
@@ -173,7 +269,9 @@ unsafe impl GlobalAlloc for HugePages {
             return map::map(layout.size());
         }
         // SAFETY: forwarded with the caller's promises.
-        unsafe { System.alloc_zeroed(layout) }
+        let block = unsafe { System.alloc_zeroed(layout) };
+        after_system_alloc(layout.size());
+        block
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -193,8 +291,12 @@ unsafe impl GlobalAlloc for HugePages {
             #[cfg(target_os = "linux")]
             // SAFETY: mapped with `layout.size()` bytes.
             (true, true) => unsafe { map::resize(ptr, layout.size(), new_size) },
-            // SAFETY: both blocks belong to the system allocator.
-            (false, false) => unsafe { System.realloc(ptr, layout, new_size) },
+            (false, false) => {
+                // SAFETY: both blocks belong to the system allocator.
+                let block = unsafe { System.realloc(ptr, layout, new_size) };
+                after_system_alloc(new_size);
+                block
+            }
             _ => {
                 // SAFETY: a fresh block of the new layout, the common prefix copied, then the
                 // old block freed by its own allocator.
@@ -247,6 +349,54 @@ mod tests {
                 let block = a.alloc_zeroed(zeroed);
                 assert!((0..3 * LARGE).step_by(4093).all(|i| *block.add(i) == 0));
                 a.dealloc(block, zeroed);
+            }
+        }
+    }
+
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    #[test]
+    fn the_heap_is_marked_in_whole_huge_pages_only() {
+        use heap::whole_huge_pages;
+        let page = LARGE;
+        assert_eq!(whole_huge_pages(page, 3 * page), Some((page, 3 * page)));
+        assert_eq!(
+            whole_huge_pages(page + 1, 3 * page),
+            Some((2 * page, 3 * page))
+        );
+        assert_eq!(whole_huge_pages(page + 1, 3 * page - 1), None);
+        assert_eq!(whole_huge_pages(page + 1, 2 * page + 5), None);
+        assert_eq!(
+            whole_huge_pages(0x5555_0000_1000, 0x5555_0210_0000),
+            Some((0x5555_0020_0000, 0x5555_0200_0000))
+        );
+        assert_eq!(whole_huge_pages(5 * page, 5 * page), None);
+    }
+
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    #[test]
+    fn blocks_keep_their_contents_once_the_heap_is_tuned() {
+        // Heap growth and its marking on the way: blocks below `LARGE`, ~48 MB in all (more
+        // than one `HEAP_GROWTH`), each written whole and checked after the others came.
+        tune_heap();
+        let a = HugePages;
+        let layout = Layout::from_size_align(LARGE / 2 + 123, 16).unwrap();
+        // SAFETY: a valid non-zero layout; every block is used within its size and freed.
+        unsafe {
+            let blocks: Vec<*mut u8> = (0..48)
+                .map(|b| {
+                    let block = a.alloc(layout);
+                    assert!(!block.is_null());
+                    std::ptr::write_bytes(block, b as u8, layout.size());
+                    block
+                })
+                .collect();
+            for (b, &block) in blocks.iter().enumerate() {
+                assert!(
+                    (0..layout.size())
+                        .step_by(997)
+                        .all(|i| *block.add(i) == b as u8)
+                );
+                a.dealloc(block, layout);
             }
         }
     }
