@@ -6,7 +6,9 @@ use splat4d::raster::ExpMode;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::tasks::render::{CameraSource, ViewRequest};
 
-/// What to look at: a scene through a camera at a time.
+// What to look at: a scene through a camera at a time. (A `//` comment: subcommands are
+// defined when first used, `defer`, and a doc comment here would replace the about text of
+// every subcommand that flattens these flags.)
 #[derive(Debug, clap::Args)]
 #[command(group(clap::ArgGroup::new("camera_source").required(true).args(["camera", "camera_from"])))]
 pub struct ViewFlags {
@@ -47,7 +49,7 @@ impl ViewFlags {
     }
 }
 
-/// Flags shared by every command that renders.
+// Flags shared by every command that renders. (`//`: as for `ViewFlags`.)
 #[derive(Debug, clap::Args)]
 pub struct RenderFlags {
     /// Variance added to each screen-space covariance, px² (SPEC §4).

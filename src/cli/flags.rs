@@ -27,7 +27,9 @@ pub fn given_flags(args: impl IntoIterator<Item = String>) -> Vec<String> {
 /// The long flags of the subcommand named first in `args` (all of the top level's when
 /// none matches), from the clap definitions.
 pub fn command_flags(args: &[String]) -> Vec<String> {
-    let command = <crate::cli::Cli as clap::CommandFactory>::command();
+    let mut command = <crate::cli::Cli as clap::CommandFactory>::command();
+    // Subcommands are defined when first used (`defer`): define them all.
+    command.build();
     let sub = args
         .iter()
         .skip(1)
