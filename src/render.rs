@@ -60,19 +60,15 @@ impl RenderOptions {
     /// Checks the ranges of SPEC §4–5.
     pub fn validate(&self) -> Result<()> {
         if !(self.dilation.is_finite() && self.dilation >= 0.0) {
-            return Err(Error::invalid(
-                "<options>",
-                "render",
-                "dilation",
-                format!("{} must be finite and ≥ 0", self.dilation),
+            return Err(Error::setting(
+                &["dilation"],
+                format!("`dilation` {} must be finite and ≥ 0", self.dilation),
             ));
         }
         if !(self.cutoff.is_finite() && self.cutoff >= 0.0) {
-            return Err(Error::invalid(
-                "<options>",
-                "render",
-                "cutoff",
-                format!("{} must be finite and ≥ 0", self.cutoff),
+            return Err(Error::setting(
+                &["cutoff"],
+                format!("`cutoff` {} must be finite and ≥ 0", self.cutoff),
             ));
         }
         Ok(())
@@ -398,11 +394,9 @@ fn background_gradient(v_image: &[f32]) -> [f64; 3] {
 fn check_frame(tau: f64, options: &RenderOptions) -> Result<()> {
     options.validate()?;
     if !tau.is_finite() {
-        return Err(Error::invalid(
-            "<options>",
-            "render",
-            "time",
-            format!("{tau} is not finite"),
+        return Err(Error::setting(
+            &["time"],
+            format!("`time` {tau} is not finite"),
         ));
     }
     Ok(())

@@ -234,6 +234,19 @@ fn bad_flags_exit_2() {
         );
         assert!(files_in(dir.path()).is_empty());
     }
+    // A value the flag's parser takes and the render's options refuse: the message names the
+    // flag given, not the library's field.
+    for flag in ["--dilation", "--cutoff"] {
+        let mut args = render_args(scene, camera, "x.png");
+        args.extend([flag, "-1"]);
+        let output = splat4d(&args, dir.path());
+        assert_eq!(output.status.code(), Some(2), "{flag}: {}", stderr(&output));
+        assert!(
+            stderr(&output).contains(&format!("{flag} -1 must be finite and ≥ 0")),
+            "{flag}: {}",
+            stderr(&output)
+        );
+    }
 }
 
 #[test]
