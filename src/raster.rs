@@ -1315,6 +1315,63 @@ pub(crate) mod avx512 {
         unsafe { _mm512_loadu_ps(values.as_ptr()) }
     }
 
+    /// Tile kernel `k`'s `G` on tile row `row` (16 lanes), its pair mask and amplitudes; with
+    /// `KEEP` also written to `kept` (non-pairs as +0).
+    #[inline(always)]
+    fn entry_g<const FAST: bool, const KEEP: bool>(
+        tiles: &TileBlocks,
+        k: u32,
+        row: usize,
+        valid: __mmask16,
+        kept: &mut super::KeptGaussians,
+    ) -> ([f64; 3], __m512, __mmask16) {
+        debug_assert!((k as usize) < tiles.kernels.len());
+        // SAFETY: the lists hold only indices of kept kernels, each with a block.
+        let (kernel, block) = unsafe {
+            (
+                tiles.kernels.get_unchecked(k as usize),
+                tiles.blocks.get_unchecked(k as usize),
+            )
+        };
+        // SAFETY (the intrinsics): the caller runs with the same target features.
+        unsafe {
+            let (_, q, hit) = row_lanes(kernel, block, row, valid);
+            let g = gaussian::<FAST>(q);
+            if KEEP {
+                // SAFETY: `make_room` gave `kept` 16 rows for each tile kernel.
+                let at = ROW * k as usize + row;
+                let values = kept.values.get_unchecked_mut(at);
+                _mm512_storeu_ps(values.as_mut_ptr(), _mm512_maskz_mov_ps(hit, g));
+                *kept.hits.get_unchecked_mut(at) = hit;
+            }
+            (kernel.amplitude, g, hit)
+        }
+    }
+
+    /// Adds `a_c G` of the pairs in `hit` to the six accumulators (lanes that are not pairs
+    /// convert as +0, the mask's zeroing).
+    #[inline(always)]
+    fn add_terms(
+        amplitude: [f64; 3],
+        g: __m512,
+        hit: __mmask16,
+        lo: &mut [__m512d; 3],
+        hi: &mut [__m512d; 3],
+    ) {
+        // SAFETY (the intrinsics): the caller runs with the same target features.
+        unsafe {
+            let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
+            let g_hi =
+                _mm512_maskz_cvtps_pd((hit >> 8) as __mmask8, _mm512_extractf32x8_ps::<1>(g));
+            // `a G` is exact in f64, so the fused multiply-add rounds as `acc + a G`.
+            for c in 0..3 {
+                let a = _mm512_set1_pd(amplitude[c]);
+                lo[c] = _mm512_fmadd_pd(a, g_lo, lo[c]);
+                hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
+            }
+        }
+    }
+
     /// Sums the prepared tile `t` row by row into `band`: per row, six accumulators (three
     /// channels, two halves of 8 f64 lanes) start at the background and take every entry of
     /// the row's list; the row is then rounded to f32 and written in place.
@@ -1338,38 +1395,25 @@ pub(crate) mod avx512 {
         for row in 0..(ty1 - ty0) as usize {
             let mut lo = background.map(|b| _mm512_set1_pd(b + 0.0));
             let mut hi = lo;
-            for &k in &tiles.rows[row] {
-                debug_assert!((k as usize) < tiles.kernels.len());
-                // SAFETY: the lists hold only indices of kept kernels, each with a block.
-                let (kernel, block) = unsafe {
-                    (
-                        tiles.kernels.get_unchecked(k as usize),
-                        tiles.blocks.get_unchecked(k as usize),
-                    )
-                };
-                let (_, q, hit) = row_lanes(kernel, block, row, valid);
-                // The pairs counted on the scalar side, off the vector pipes.
+            // Four entries at a time: their four `G` first, then their terms in list order
+            // (the same sums in the same order), so that the exps' dependent chains overlap
+            // (100k@1080p, one thread: ~5 % faster than one entry at a time; eight measured
+            // the same as four).
+            let list = &tiles.rows[row];
+            let mut fours = list.chunks_exact(4);
+            for four in &mut fours {
+                let entries: [_; 4] = std::array::from_fn(|i| {
+                    entry_g::<FAST, KEEP>(tiles, four[i], row, valid, kept)
+                });
+                for (amplitude, g, hit) in entries {
+                    pairs += u64::from(hit.count_ones());
+                    add_terms(amplitude, g, hit, &mut lo, &mut hi);
+                }
+            }
+            for &k in fours.remainder() {
+                let (amplitude, g, hit) = entry_g::<FAST, KEEP>(tiles, k, row, valid, kept);
                 pairs += u64::from(hit.count_ones());
-                // Lanes that are not pairs convert as +0 (the mask's zeroing).
-                let g = gaussian::<FAST>(q);
-                if KEEP {
-                    // SAFETY: `make_room` gave `kept` 16 rows for each tile kernel.
-                    unsafe {
-                        let at = ROW * k as usize + row;
-                        let values = kept.values.get_unchecked_mut(at);
-                        _mm512_storeu_ps(values.as_mut_ptr(), _mm512_maskz_mov_ps(hit, g));
-                        *kept.hits.get_unchecked_mut(at) = hit;
-                    }
-                }
-                let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
-                let g_hi =
-                    _mm512_maskz_cvtps_pd((hit >> 8) as __mmask8, _mm512_extractf32x8_ps::<1>(g));
-                // `a G` is exact in f64, so the fused multiply-add rounds as `acc + a G`.
-                for c in 0..3 {
-                    let a = _mm512_set1_pd(kernel.amplitude[c]);
-                    lo[c] = _mm512_fmadd_pd(a, g_lo, lo[c]);
-                    hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
-                }
+                add_terms(amplitude, g, hit, &mut lo, &mut hi);
             }
             for c in 0..3 {
                 // SAFETY: each channel holds 16 doubles: 8 in `lo`, 8 in `hi`.
@@ -1467,14 +1511,32 @@ mod tests {
         eprintln!("paths on this CPU: {paths:?}");
         // Partial tiles on the right (1 and 11 columns: a half with no lane, and one with
         // some lanes past the edge) and at the bottom.
-        for ((w, h), n, cutoff, exp) in [
-            ((161, 97), 3000, 1.0 / 255.0, ExpMode::Poly),
-            ((171, 83), 3000, 1.0 / 255.0, ExpMode::Poly),
-            ((161, 97), 300, 0.0, ExpMode::Poly),
-            ((161, 97), 500, 1.0 / 255.0, ExpMode::Std),
+        // The last case makes the order of each pixel's sum show in its f32 value: every
+        // kernel comes three times in a row, the same ellipse with amplitudes +1e12 and
+        // -1e12 around a small one, so a small term added between the two large ones loses
+        // its low bits and one added after them does not.
+        for ((w, h), n, cutoff, exp, cancelling) in [
+            ((161, 97), 3000, 1.0 / 255.0, ExpMode::Poly, false),
+            ((171, 83), 3000, 1.0 / 255.0, ExpMode::Poly, false),
+            ((161, 97), 300, 0.0, ExpMode::Poly, false),
+            ((161, 97), 500, 1.0 / 255.0, ExpMode::Std, false),
+            ((161, 97), 600, 1.0 / 255.0, ExpMode::Poly, true),
         ] {
             let camera = crate::scenes::synthetic::bench_camera(w, h);
-            let scene = crate::scenes::synthetic::bench_scene(n, 5);
+            let mut scene = crate::scenes::synthetic::bench_scene(n, 5);
+            if cancelling {
+                let kernels: Vec<_> = (0..n)
+                    .flat_map(|i| {
+                        let small = scene.kernel(i);
+                        let mut large = scene.kernel((i + 1) % n);
+                        large.amplitude = large.amplitude.map(|a| a * 1e12);
+                        let mut cancel = large;
+                        cancel.amplitude = large.amplitude.map(|a| -a);
+                        [large, small, cancel]
+                    })
+                    .collect();
+                scene = crate::model::Scene::from_kernels(&kernels, [0.0; 3], "test").unwrap();
+            }
             let options = RenderOptions {
                 cutoff,
                 exp,
