@@ -60,9 +60,10 @@
 //! bound by instructions and their latency, not memory (each tile's blocks and lists stay in
 //! its worker's cache): an entry's `q` → exp → f64 chain is some 15 dependent steps, so the
 //! SIMD loops take a row's entries four at a time, their four `G` first and then their terms
-//! in list order (the same sums in the same order), which made frames ~3 % faster. Tile rows are the parallel unit: at 1080p the largest of the 68 is
-//! 2.5 % of the frame, so two threads finish within ~1 % of each other; many more threads
-//! would need the tile as the unit.
+//! in list order (the same sums in the same order), which made frames ~3 % faster. Tile
+//! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
+//! threads finish within ~1 % of each other; many more threads would need the tile as the
+//! unit.
 
 use std::fmt;
 use std::str::FromStr;
@@ -1096,15 +1097,19 @@ pub(crate) mod avx2 {
     }
 
     /// An entry's `G` on 8 lanes, masked, with its pair mask and its kernel's amplitudes.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA (a plain function, so that it is inlined into
+    /// [`sum_half_row`], whose target features its intrinsics then take).
     #[inline(always)]
-    fn entry_g<const FAST: bool>(
+    unsafe fn entry_g<const FAST: bool>(
         entry: &RowEntry,
         kernels: &[TileKernel],
         numbers: (__m256, __m256),
         first: f32,
     ) -> ([f64; 3], __m256, __m256) {
         let kernel = &kernels[entry.kernel as usize];
-        // SAFETY (the intrinsics): inlined into `sum_half_row`, which has AVX2 and FMA.
+        // SAFETY: the caller's promise (AVX2 and FMA).
         unsafe {
             let (_, q, hit) = lanes(entry, kernel, numbers, first);
             (
@@ -1116,13 +1121,16 @@ pub(crate) mod avx2 {
     }
 
     /// Adds an entry's `a_c G` to the accumulators; its pairs.
+    ///
+    /// # Safety
+    /// As [`entry_g`]: the CPU has AVX2 and FMA.
     #[inline(always)]
-    fn add_terms(
+    unsafe fn add_terms(
         (amplitude, g, hit): ([f64; 3], __m256, __m256),
         lo: &mut [__m256d; 3],
         hi: &mut [__m256d; 3],
     ) -> u64 {
-        // SAFETY (the intrinsics): inlined into `sum_half_row`, which has AVX2 and FMA.
+        // SAFETY: the caller's promise (AVX2 and FMA).
         unsafe {
             let g_lo = _mm256_cvtps_pd(_mm256_castps256_ps128(g));
             let g_hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(g));
@@ -1154,23 +1162,23 @@ pub(crate) mod avx2 {
         // Four entries at a time, their `G` first and then their terms in list order (the
         // same sums in the same order), as on the AVX-512 path.
         let mut fours = entries.chunks_exact(4);
-        for four in &mut fours {
-            let values = [
-                entry_g::<FAST>(&four[0], kernels, numbers, first),
-                entry_g::<FAST>(&four[1], kernels, numbers, first),
-                entry_g::<FAST>(&four[2], kernels, numbers, first),
-                entry_g::<FAST>(&four[3], kernels, numbers, first),
-            ];
-            for value in values {
+        // SAFETY: this function has AVX2 and FMA (its callers checked the CPU).
+        unsafe {
+            for four in &mut fours {
+                let values = [
+                    entry_g::<FAST>(&four[0], kernels, numbers, first),
+                    entry_g::<FAST>(&four[1], kernels, numbers, first),
+                    entry_g::<FAST>(&four[2], kernels, numbers, first),
+                    entry_g::<FAST>(&four[3], kernels, numbers, first),
+                ];
+                for value in values {
+                    pairs += add_terms(value, &mut lo, &mut hi);
+                }
+            }
+            for entry in fours.remainder() {
+                let value = entry_g::<FAST>(entry, kernels, numbers, first);
                 pairs += add_terms(value, &mut lo, &mut hi);
             }
-        }
-        for entry in fours.remainder() {
-            pairs += add_terms(
-                entry_g::<FAST>(entry, kernels, numbers, first),
-                &mut lo,
-                &mut hi,
-            );
         }
         for c in 0..3 {
             // SAFETY: each channel holds 8 doubles: 4 in `lo`, 4 in `hi`.
@@ -1367,8 +1375,14 @@ pub(crate) mod avx512 {
 
     /// Tile kernel `k`'s `G` on tile row `row` (16 lanes), its pair mask and amplitudes; with
     /// `KEEP` also written to `kept` (non-pairs as +0).
+    ///
+    /// # Safety
+    /// The CPU has the AVX-512 path's features (a plain function, so that it is inlined into
+    /// [`sum_tile`], whose target features its intrinsics then take); `k` indexes
+    /// `tiles.kernels` and `tiles.blocks` (an index of a row list); with `KEEP`,
+    /// `make_room` gave `kept` 16 rows for each tile kernel.
     #[inline(always)]
-    fn entry_g<const FAST: bool, const KEEP: bool>(
+    unsafe fn entry_g<const FAST: bool, const KEEP: bool>(
         tiles: &TileBlocks,
         k: u32,
         row: usize,
@@ -1376,19 +1390,16 @@ pub(crate) mod avx512 {
         kept: &mut super::KeptGaussians,
     ) -> ([f64; 3], __m512, __mmask16) {
         debug_assert!((k as usize) < tiles.kernels.len());
-        // SAFETY: the lists hold only indices of kept kernels, each with a block.
-        let (kernel, block) = unsafe {
-            (
+        // SAFETY: the caller's promises: the features, `k` in range, and with `KEEP` the
+        // room in `kept`.
+        unsafe {
+            let (kernel, block) = (
                 tiles.kernels.get_unchecked(k as usize),
                 tiles.blocks.get_unchecked(k as usize),
-            )
-        };
-        // SAFETY (the intrinsics): the caller runs with the same target features.
-        unsafe {
+            );
             let (_, q, hit) = row_lanes(kernel, block, row, valid);
             let g = gaussian::<FAST>(q);
             if KEEP {
-                // SAFETY: `make_room` gave `kept` 16 rows for each tile kernel.
                 let at = ROW * k as usize + row;
                 let values = kept.values.get_unchecked_mut(at);
                 _mm512_storeu_ps(values.as_mut_ptr(), _mm512_maskz_mov_ps(hit, g));
@@ -1400,15 +1411,18 @@ pub(crate) mod avx512 {
 
     /// Adds `a_c G` of the pairs in `hit` to the six accumulators (lanes that are not pairs
     /// convert as +0, the mask's zeroing).
+    ///
+    /// # Safety
+    /// The CPU has the AVX-512 path's features (as [`entry_g`]).
     #[inline(always)]
-    fn add_terms(
+    unsafe fn add_terms(
         amplitude: [f64; 3],
         g: __m512,
         hit: __mmask16,
         lo: &mut [__m512d; 3],
         hi: &mut [__m512d; 3],
     ) {
-        // SAFETY (the intrinsics): the caller runs with the same target features.
+        // SAFETY: the caller's promise (the features).
         unsafe {
             let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
             let g_hi =
@@ -1447,23 +1461,31 @@ pub(crate) mod avx512 {
             let mut hi = lo;
             // Four entries at a time: their four `G` first, then their terms in list order
             // (the same sums in the same order), so that the exps' dependent chains overlap
-            // (100k@1080p, one thread: ~5 % faster than one entry at a time; eight measured
+            // (100k@1080p, one thread: ~3 % faster than one entry at a time; eight measured
             // the same as four).
             let list = &tiles.rows[row];
             let mut fours = list.chunks_exact(4);
-            for four in &mut fours {
-                let entries: [_; 4] = std::array::from_fn(|i| {
-                    entry_g::<FAST, KEEP>(tiles, four[i], row, valid, kept)
-                });
-                for (amplitude, g, hit) in entries {
+            // SAFETY: this function has the features (its callers checked the CPU); the
+            // lists hold only indices of kept kernels, each with a block; with `KEEP`,
+            // `make_room` gave `kept` 16 rows for each tile kernel.
+            unsafe {
+                for four in &mut fours {
+                    let entries = [
+                        entry_g::<FAST, KEEP>(tiles, four[0], row, valid, kept),
+                        entry_g::<FAST, KEEP>(tiles, four[1], row, valid, kept),
+                        entry_g::<FAST, KEEP>(tiles, four[2], row, valid, kept),
+                        entry_g::<FAST, KEEP>(tiles, four[3], row, valid, kept),
+                    ];
+                    for (amplitude, g, hit) in entries {
+                        pairs += u64::from(hit.count_ones());
+                        add_terms(amplitude, g, hit, &mut lo, &mut hi);
+                    }
+                }
+                for &k in fours.remainder() {
+                    let (amplitude, g, hit) = entry_g::<FAST, KEEP>(tiles, k, row, valid, kept);
                     pairs += u64::from(hit.count_ones());
                     add_terms(amplitude, g, hit, &mut lo, &mut hi);
                 }
-            }
-            for &k in fours.remainder() {
-                let (amplitude, g, hit) = entry_g::<FAST, KEEP>(tiles, k, row, valid, kept);
-                pairs += u64::from(hit.count_ones());
-                add_terms(amplitude, g, hit, &mut lo, &mut hi);
             }
             for c in 0..3 {
                 // SAFETY: each channel holds 16 doubles: 8 in `lo`, 8 in `hi`.

@@ -4,7 +4,7 @@
 //! `/sys/kernel/mm/transparent_hugepage/enabled` is `always` or `madvise`).
 //!
 //! Why: a command's buffers are fresh memory, and the first touch of every 4 KiB page is a
-//! page fault. On the 2-core VM of `docs/performance.md` a fault costs 1.5–3 µs, so a
+//! page fault. On the 2-core VM of `docs/performance.md` a fault costs 1.2–3 µs, so a
 //! 512×512 frame (a 3 MiB image) paid ~1.5 ms of faults and a first frame of 100k kernels
 //! at 1080p (~100 MB of buffers) ~60 ms of CPU; one fault per 2 MiB page costs the zeroing
 //! of 2 MiB instead (~0.1 ms). Nothing an allocation returns depends on this: outputs are
@@ -33,14 +33,16 @@ const LARGE: usize = 2 << 20;
 ///   stretch `madvise(MADV_HUGEPAGE)` after the allocation that grew it, [`heap`]). A fault
 ///   costs ~1.2 µs a 4 KiB page and ~40–190 µs a 2 MiB huge page, so the per-kernel arrays
 ///   of a small frame (10k kernels: ~6 MB of blocks below [`LARGE`]) cost a few huge pages
-///   instead of ~1500 faults: 1970 → 510 faults and 17.5 → 14.7 ms of CPU at 10k@512² on
-///   one thread. A command that touches less than ~300 KiB of a 2 MiB stretch pays more
-///   than it would have.
+///   instead of ~1500 faults: 1970 → 366 faults at 10k@512² on one thread, the whole
+///   process 20.6 → 17.0 ms. A command that touches less than ~300 KiB of a 2 MiB stretch
+///   pays more than it would have. A zeroed block carved from that reserve is cleared by
+///   glibc by hand (it cannot tell the reserve is still fresh), as reused blocks always
+///   were; the figures count it.
 /// - **One arena for every thread** (`M_ARENA_MAX`). A render's work runs on the thread
 ///   pool, so its arrays were allocated in the workers' own glibc arenas (mapped apart from
 ///   the heap, on 4 KiB pages, each keeping its own freed blocks): with two threads the
-///   huge-page heap went unused (2050 faults). With one arena: 860 faults, 28 → 19 ms of
-///   CPU. Threads share the arena's lock for blocks their per-thread cache does not hold;
+///   huge-page heap went unused (2050 faults). With one arena: 2057 → 606 faults, the whole
+///   process 16.5 → 13.5 ms. Threads share the arena's lock for blocks their per-thread cache does not hold;
 ///   the loops allocate per phase, not per pair, and fits measured the same or faster
 ///   (two threads; see `docs/performance.md`).
 ///
@@ -65,26 +67,36 @@ pub fn tune_heap() {
 const HEAP_GROWTH: usize = 32 << 20;
 
 /// Marks glibc's heap for huge pages as it grows: after each allocation of at least a page
-/// from glibc, the whole huge pages the program break has moved over since the last mark
-/// are marked `MADV_HUGEPAGE`, before anything is written to the block returned. (Marking
-/// ahead of the growth is not possible, `madvise` needs a mapping; growing the heap ahead
-/// was measured worse: glibc then zeroes every zeroed block by hand, as it can no longer
-/// tell fresh memory from used.) A stretch that glibc wrote to while growing it (its
-/// block and top headers) stays on 4 KiB pages.
+/// from glibc, the whole huge pages between the last mark and the program break are marked
+/// `MADV_HUGEPAGE`, before the caller writes to its block. (Marking ahead of the growth is
+/// not possible, `madvise` needs a mapping.) What glibc wrote while growing the heap (block
+/// and top headers, a `realloc`'s copy) may already sit on 4 KiB pages, and a stretch that
+/// another thread's allocation grew stays unmarked until the next allocation of a page or
+/// more. The marks are hints: whatever they miss or mark in vain changes no byte, only
+/// which pages back the heap.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 mod heap {
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     use super::LARGE;
 
-    /// The program break up to which the heap is marked; 0 until [`start_marking`].
+    /// The address up to which the heap is marked; 0 until [`start_marking`].
     static MARKED_UP_TO: AtomicUsize = AtomicUsize::new(0);
+
+    /// The program break, `None` where `sbrk` fails.
+    fn program_break() -> Option<usize> {
+        // SAFETY: `sbrk(0)` only reads the program break (glibc's cached `__curbrk`: a word
+        // read while another thread's `malloc` may move it; a stale value only marks less or
+        // later).
+        let brk = unsafe { libc::sbrk(0) };
+        (brk as isize != -1).then_some(brk as usize)
+    }
 
     /// Starts marking from the current program break.
     pub fn start_marking() {
-        // SAFETY: `sbrk(0)` only reads the program break.
-        let brk = unsafe { libc::sbrk(0) } as usize;
-        MARKED_UP_TO.store(brk, Ordering::Relaxed);
+        if let Some(brk) = program_break() {
+            MARKED_UP_TO.store(brk, Ordering::Relaxed);
+        }
     }
 
     /// Called after glibc returned a block of `bytes`.
@@ -93,33 +105,51 @@ mod heap {
         if bytes < 4096 {
             return;
         }
-        let marked = MARKED_UP_TO.load(Ordering::Relaxed);
-        if marked == 0 {
+        let Some(brk) = program_break() else {
             return;
-        }
-        // SAFETY: `sbrk(0)` only reads the program break.
-        let brk = unsafe { libc::sbrk(0) } as usize;
-        if brk < marked {
-            // The heap was trimmed: what grows back is unmarked.
-            let _ =
-                MARKED_UP_TO.compare_exchange(marked, brk, Ordering::Relaxed, Ordering::Relaxed);
-            return;
-        }
-        if let Some((start, end)) = whole_huge_pages(marked, brk)
-            && MARKED_UP_TO
-                .compare_exchange(marked, brk, Ordering::Relaxed, Ordering::Relaxed)
-                .is_ok()
-        {
-            // SAFETY: a hint about whole pages of the heap's own mapping (below the break),
-            // which changes no byte of it.
-            unsafe { libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE) };
+        };
+        let mut marked = MARKED_UP_TO.load(Ordering::Relaxed);
+        while marked != 0 {
+            let Some((up_to, stretch)) = next_mark(marked, brk) else {
+                return;
+            };
+            match MARKED_UP_TO.compare_exchange_weak(
+                marked,
+                up_to,
+                Ordering::Relaxed,
+                Ordering::Relaxed,
+            ) {
+                Ok(_) => {
+                    if let Some((start, end)) = stretch {
+                        // SAFETY: `madvise(MADV_HUGEPAGE)` is a hint about which pages back
+                        // the range, and changes no byte of it; on a range that is not (or
+                        // no longer) mapped it fails, and nothing happens.
+                        unsafe {
+                            libc::madvise(
+                                start as *mut libc::c_void,
+                                end - start,
+                                libc::MADV_HUGEPAGE,
+                            )
+                        };
+                    }
+                    return;
+                }
+                Err(current) => marked = current,
+            }
         }
     }
 
-    /// The whole huge pages between the addresses `from` and `to`, if any.
-    pub fn whole_huge_pages(from: usize, to: usize) -> Option<(usize, usize)> {
-        let (start, end) = (from.next_multiple_of(LARGE), to - to % LARGE);
-        (end > start).then_some((start, end))
+    /// With the heap marked up to `marked` and the program break at `brk`: the new mark and
+    /// the stretch of whole huge pages to mark, or `None` when nothing changes. A break
+    /// below the mark means the heap was trimmed: what grows back is unmarked, so the mark
+    /// goes back with it (a trim and a regrowth between two calls go unseen; glibc trims
+    /// only beyond 64 MiB free, `KEEP_FREE`).
+    pub fn next_mark(marked: usize, brk: usize) -> Option<(usize, Option<(usize, usize)>)> {
+        if brk < marked {
+            return Some((brk, None));
+        }
+        let (start, end) = (marked.next_multiple_of(LARGE), brk - brk % LARGE);
+        (end > start).then_some((end, Some((start, end))))
     }
 }
 
@@ -355,28 +385,53 @@ mod tests {
 
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     #[test]
-    fn the_heap_is_marked_in_whole_huge_pages_only() {
-        use heap::whole_huge_pages;
+    fn successive_growths_mark_every_whole_huge_page_once() {
+        use heap::next_mark;
         let page = LARGE;
-        assert_eq!(whole_huge_pages(page, 3 * page), Some((page, 3 * page)));
-        assert_eq!(
-            whole_huge_pages(page + 1, 3 * page),
-            Some((2 * page, 3 * page))
+        // A heap starting mid-page, growing by uneven steps (some within one page).
+        let first = 0x5555_0000_1000_usize;
+        let mut marked = first;
+        let mut stretches = Vec::new();
+        let mut brk = first;
+        for step in [100 << 10, 33 << 20, 5000, 3 << 20, 1, 64 << 20, 700 << 10] {
+            brk += step;
+            if let Some((up_to, stretch)) = next_mark(marked, brk) {
+                assert!(up_to <= brk && up_to.is_multiple_of(page));
+                stretches.extend(stretch);
+                marked = up_to;
+            }
+        }
+        // Back to back, from the first whole page to the last below the break.
+        assert_eq!(stretches.first().unwrap().0, first.next_multiple_of(page));
+        assert_eq!(stretches.last().unwrap().1, brk - brk % page);
+        for pair in stretches.windows(2) {
+            assert_eq!(pair[0].1, pair[1].0, "{stretches:x?}");
+        }
+        assert!(
+            stretches
+                .iter()
+                .all(|&(s, e)| s < e && s.is_multiple_of(page))
         );
-        assert_eq!(whole_huge_pages(page + 1, 3 * page - 1), None);
-        assert_eq!(whole_huge_pages(page + 1, 2 * page + 5), None);
+        // Nothing while the break stays within a page; a trimmed heap moves the mark back.
+        assert_eq!(next_mark(3 * page, 3 * page + 5), None);
         assert_eq!(
-            whole_huge_pages(0x5555_0000_1000, 0x5555_0210_0000),
-            Some((0x5555_0020_0000, 0x5555_0200_0000))
+            next_mark(5 * page, 4 * page + 7),
+            Some((4 * page + 7, None))
         );
-        assert_eq!(whole_huge_pages(5 * page, 5 * page), None);
+        assert_eq!(
+            next_mark(4 * page + 7, 7 * page + 1),
+            Some((7 * page, Some((5 * page, 7 * page))))
+        );
     }
 
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     #[test]
     fn blocks_keep_their_contents_once_the_heap_is_tuned() {
-        // Heap growth and its marking on the way: blocks below `LARGE`, ~48 MB in all (more
-        // than one `HEAP_GROWTH`), each written whole and checked after the others came.
+        // Blocks below `LARGE`, ~48 MB in all (more than one `HEAP_GROWTH`), with the heap
+        // tuned (for this whole test process: glibc's settings change speed, not results),
+        // each written whole and checked after the others came. (libtest's thread may
+        // allocate from an arena of its own, off the heap, so the marking itself is tested
+        // above, on its arithmetic.)
         tune_heap();
         let a = HugePages;
         let layout = Layout::from_size_align(LARGE / 2 + 123, 16).unwrap();

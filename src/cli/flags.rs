@@ -27,14 +27,15 @@ pub fn given_flags(args: impl IntoIterator<Item = String>) -> Vec<String> {
 /// The long flags of the subcommand named first in `args` (all of the top level's when
 /// none matches), from the clap definitions.
 pub fn command_flags(args: &[String]) -> Vec<String> {
-    let mut command = <crate::cli::Cli as clap::CommandFactory>::command();
-    // Subcommands are defined when first used (`defer`): define them all.
-    command.build();
+    let command = <crate::cli::Cli as clap::CommandFactory>::command();
     let sub = args
         .iter()
         .skip(1)
         .find_map(|a| command.find_subcommand(a).cloned());
-    let command = sub.unwrap_or(command);
+    let mut command = sub.unwrap_or(command);
+    // A subcommand's flags are defined when it is first used (`defer`): define this one's
+    // (on its own, so without the flags the top level passes down, as before `defer`).
+    command.build();
     command
         .get_arguments()
         .filter_map(|arg| arg.get_long().map(|long| format!("--{long}")))

@@ -56,7 +56,7 @@ pub struct Cli {
 }
 
 // `defer`: each subcommand's flags are defined only when it is used (`splat4d --version`
-// 1.6 → 1.3 ms). `cli::flags` defines them all when it needs them.
+// 1.6–1.7 → 1.2–1.3 ms). `cli::flags` defines the one it names flags of when it needs them.
 #[derive(Debug, Subcommand)]
 #[command(defer = true)]
 enum Command {
