@@ -20,7 +20,7 @@ use crate::backward::{BackwardBuffers, Gradients};
 use crate::colour::{order_by_depth, shade};
 use crate::composite::composite;
 use crate::model::camera::Camera;
-use crate::model::error::{Error, Result};
+use crate::model::error::{Error, Result, check_non_negative_setting};
 use crate::model::scene::{Blend, Scene};
 use crate::project::{ProjectedKernels, project};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
@@ -59,19 +59,8 @@ impl Default for RenderOptions {
 impl RenderOptions {
     /// Checks the ranges of SPEC §4–5.
     pub fn validate(&self) -> Result<()> {
-        if !(self.dilation.is_finite() && self.dilation >= 0.0) {
-            return Err(Error::setting(
-                &["dilation"],
-                format!("`dilation` {} must be finite and ≥ 0", self.dilation),
-            ));
-        }
-        if !(self.cutoff.is_finite() && self.cutoff >= 0.0) {
-            return Err(Error::setting(
-                &["cutoff"],
-                format!("`cutoff` {} must be finite and ≥ 0", self.cutoff),
-            ));
-        }
-        Ok(())
+        check_non_negative_setting("dilation", self.dilation)?;
+        check_non_negative_setting("cutoff", self.cutoff)
     }
 }
 

@@ -28,7 +28,7 @@ pub use crate::fit::defaults::*;
 use crate::fit::hull::is_foreground;
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::train::{FitMode, FitOptions};
-use crate::model::{Camera, Error, Result, Scene, View};
+use crate::model::{Camera, Error, Result, Scene, View, check_non_negative_setting};
 use crate::render::RenderOptions;
 
 /// Where a fit starts.
@@ -200,12 +200,7 @@ impl FitPlan {
             ("prune_below", self.rounds.prune_below),
             ("min_scale", self.min_scale.unwrap_or(0.0)),
         ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::setting(
-                    &[field],
-                    format!("`{field}` {value} must be finite and ≥ 0"),
-                ));
-            }
+            check_non_negative_setting(field, value)?;
             // Adam moves a parameter by about its rate each step: beyond this every
             // parameter leaves the finite numbers within a few steps.
             if field.starts_with("lr_") && value > MAX_RATE {

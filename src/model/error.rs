@@ -183,6 +183,17 @@ pub fn cut(text: &str, limit: usize) -> String {
     }
 }
 
+/// Error naming the setting `field` unless `value` is finite and ≥ 0.
+pub fn check_non_negative_setting(field: &'static str, value: f64) -> Result<()> {
+    if value.is_finite() && value >= 0.0 {
+        return Ok(());
+    }
+    Err(Error::setting(
+        &[field],
+        format!("`{field}` {value} must be finite and ≥ 0"),
+    ))
+}
+
 /// Error naming `field` of `item` unless every value is finite.
 pub fn check_finite(origin: &str, item: &str, field: &str, values: &[f64]) -> Result<()> {
     match values.iter().position(|v| !v.is_finite()) {

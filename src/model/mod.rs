@@ -23,7 +23,7 @@ pub mod view;
 
 pub use axis::Up;
 pub use camera::Camera;
-pub use error::{Error, ErrorKind, Result, check_finite};
+pub use error::{Error, ErrorKind, Result, check_finite, check_non_negative_setting};
 pub use image::Image;
 pub use progress::{Progress, Silent};
 pub use scene::{Blend, Kernel, SH_COUNTS, Scene};

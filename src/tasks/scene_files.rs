@@ -8,7 +8,7 @@ use crate::io::gltf::Spacing;
 use crate::io::gltf::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
-use crate::model::{Blend, Error, Result, Scene};
+use crate::model::{Blend, Error, Result, Scene, check_non_negative_setting};
 use crate::scenes::motion::three_blobs_scene;
 use crate::scenes::toy::{blob_scene, points_scene};
 
@@ -172,12 +172,7 @@ pub const MAX_EXPORT_FRAMES: usize = 10_000;
 /// Writes the 3D Gaussian Splatting PLY of a scene's slice at one time, or a sequence of them
 /// with an index ([`crate::io::ply::write_slice_sequence`]).
 pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
-    if !(request.cutoff.is_finite() && request.cutoff >= 0.0) {
-        return Err(Error::setting(
-            &["cutoff"],
-            format!("`cutoff` {} must be finite and ≥ 0", request.cutoff),
-        ));
-    }
+    check_non_negative_setting("cutoff", request.cutoff)?;
     match &request.times {
         ExportTimes::One(tau) if !tau.is_finite() => {
             return Err(Error::setting(&["time"], "`time` must be finite"));

@@ -7,7 +7,7 @@ use std::time::Instant;
 use crate::io::image_file::save_rgb8_png;
 use crate::io::scene_file::load_scene;
 use crate::model::Blend;
-use crate::model::{Error, Result};
+use crate::model::{Error, Result, check_non_negative_setting};
 use crate::report::charts::volume_slices_figure;
 use crate::tasks::with_threads;
 use crate::volume::{Grid, evaluate_volume, scene_bounds};
@@ -62,12 +62,7 @@ impl fmt::Display for VolumeSummary {
 
 /// Evaluates the volume at every time and writes slices through each one's peak.
 pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
-    if !(request.cutoff.is_finite() && request.cutoff >= 0.0) {
-        return Err(Error::setting(
-            &["cutoff"],
-            format!("`cutoff` {} must be finite and ≥ 0", request.cutoff),
-        ));
-    }
+    check_non_negative_setting("cutoff", request.cutoff)?;
     let scene = load_scene(&request.scene)?;
     let (min, max) = scene_bounds(&scene, &request.times, request.cutoff).ok_or_else(|| {
         Error::usage(format!(
