@@ -1410,7 +1410,8 @@ pub(crate) mod avx512 {
     }
 
     /// Adds `a_c G` of the pairs in `hit` to the six accumulators (lanes that are not pairs
-    /// convert as +0, the mask's zeroing).
+    /// convert as +0, the mask's zeroing); the pairs (counted on the scalar side, off the
+    /// vector pipes).
     ///
     /// # Safety
     /// The CPU has the AVX-512 path's features (as [`entry_g`]).
@@ -1421,7 +1422,7 @@ pub(crate) mod avx512 {
         hit: __mmask16,
         lo: &mut [__m512d; 3],
         hi: &mut [__m512d; 3],
-    ) {
+    ) -> u64 {
         // SAFETY: the caller's promise (the features).
         unsafe {
             let g_lo = _mm512_maskz_cvtps_pd(hit as __mmask8, _mm512_castps512_ps256(g));
@@ -1434,6 +1435,7 @@ pub(crate) mod avx512 {
                 hi[c] = _mm512_fmadd_pd(a, g_hi, hi[c]);
             }
         }
+        u64::from(hit.count_ones())
     }
 
     /// Sums the prepared tile `t` row by row into `band`: per row, six accumulators (three
@@ -1477,14 +1479,12 @@ pub(crate) mod avx512 {
                         entry_g::<FAST, KEEP>(tiles, four[3], row, valid, kept),
                     ];
                     for (amplitude, g, hit) in entries {
-                        pairs += u64::from(hit.count_ones());
-                        add_terms(amplitude, g, hit, &mut lo, &mut hi);
+                        pairs += add_terms(amplitude, g, hit, &mut lo, &mut hi);
                     }
                 }
                 for &k in fours.remainder() {
                     let (amplitude, g, hit) = entry_g::<FAST, KEEP>(tiles, k, row, valid, kept);
-                    pairs += u64::from(hit.count_ones());
-                    add_terms(amplitude, g, hit, &mut lo, &mut hi);
+                    pairs += add_terms(amplitude, g, hit, &mut lo, &mut hi);
                 }
             }
             for c in 0..3 {

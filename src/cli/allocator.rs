@@ -42,9 +42,9 @@ const LARGE: usize = 2 << 20;
 ///   pool, so its arrays were allocated in the workers' own glibc arenas (mapped apart from
 ///   the heap, on 4 KiB pages, each keeping its own freed blocks): with two threads the
 ///   huge-page heap went unused (2050 faults). With one arena: 2057 → 606 faults, the whole
-///   process 16.5 → 13.5 ms. Threads share the arena's lock for blocks their per-thread cache does not hold;
-///   the loops allocate per phase, not per pair, and fits measured the same or faster
-///   (two threads; see `docs/performance.md`).
+///   process 16.5 → 13.5 ms. Threads share the arena's lock for blocks their per-thread
+///   cache does not hold; the loops allocate per phase, not per pair, and fits measured the
+///   same or faster (two threads; see `docs/performance.md`).
 ///
 /// Nothing an allocation returns depends on this: outputs are the same bits.
 pub fn tune_heap() {
