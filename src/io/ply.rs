@@ -280,7 +280,8 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     let mut appearance = Appearance::default();
     // The rows already read, then the rest a block at a time.
     let mut pending = start.split_off(layout.body_start.min(start.len()));
-    let block_rows = (BLOCK_BYTES / layout.stride.max(1)).max(1);
+    // No larger than the body: a small scene's rows are not a block of fresh zeroed pages.
+    let block_rows = (BLOCK_BYTES / layout.stride.max(1)).clamp(1, layout.count.max(1));
     let mut block = vec![0_u8; block_rows * layout.stride];
     while scene.len() < layout.count {
         let rows = (layout.count - scene.len()).min(block_rows);

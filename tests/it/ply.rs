@@ -65,6 +65,38 @@ fn scene_ply_round_trips_exactly_and_is_smaller_than_json() {
 }
 
 #[test]
+fn scenes_of_no_kernel_and_of_several_read_blocks_round_trip() {
+    // The reader takes rows a block (1 MiB) at a time, the first ones carried over from the
+    // header's read: an empty body, a body within that read, and one of several blocks and
+    // a partial last one all come back as written.
+    let dir = tempfile::tempdir().unwrap();
+    let camera = crate::common::test_camera(32, 32);
+    for (k, general) in [0, 3, 16_000].into_iter().enumerate() {
+        let scene = if general == 0 {
+            Scene {
+                background: [0.25, 0.5, 0.75],
+                ..Scene::default()
+            }
+        } else {
+            crate::common::hard_random_scene(&camera, 40 + k as u64, general)
+        };
+        let path = dir.path().join(format!("s{k}.ply"));
+        splat4d::io::scene_file::save_scene(&scene, &path).unwrap();
+        if general > 1000 {
+            assert!(
+                std::fs::metadata(&path).unwrap().len() > 2 << 20,
+                "{general}"
+            );
+        }
+        assert_eq!(
+            splat4d::io::scene_file::load_scene(&path).unwrap(),
+            scene,
+            "{general}"
+        );
+    }
+}
+
+#[test]
 fn an_independent_parser_reads_the_scene_ply() {
     let scene = scene();
     let dir = tempfile::tempdir().unwrap();
