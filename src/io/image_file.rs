@@ -64,52 +64,61 @@ pub fn encode_image<W: Write + Seek>(
     match kind {
         ImageKind::Exr => ExrLayout::of(image.width as usize, image.height as usize)
             .and_then(|layout| write_exr(image, &layout, out))
-            .map_err(image::ImageError::IoError),
-        ImageKind::Png => encode_png(image, &Levels::of(image, depth).0, out),
+            .map(drop),
+        ImageKind::Png => {
+            encode_png(image, depth).and_then(|(bytes, _finite)| out.write_all(&bytes))
+        }
     }
+    .map_err(image::ImageError::IoError)
 }
 
-/// A PNG's samples: every channel quantised ([`quantize_all`]).
-enum Levels {
-    Eight(Vec<u8>),
-    Sixteen(Vec<u16>),
-}
+/// Channels quantised at a time while encoding a PNG: a band of rows small enough to stay
+/// in cache, so no full-size copy of the image's levels is ever made.
+const PNG_BAND_CHANNELS: usize = 1 << 16;
 
-impl Levels {
-    /// The levels of `image` at `depth`, and whether every channel is finite (one pass).
-    fn of(image: &Image, depth: BitDepth) -> (Self, bool) {
+/// The largest IDAT chunk a PNG is written in (12 bytes of framing each).
+const PNG_CHUNK_BYTES: usize = 1 << 16;
+
+/// `image` as an RGB PNG at `depth` (fdeflate's fast compression, adaptive filters), its
+/// channels quantised ([`quantize_all_checked`]) a band of rows at a time and streamed into
+/// the encoder, and whether every channel is finite (found in the same pass). Encoded in
+/// memory: png's stream writer drops an error of its last chunk's write (its chunk writer
+/// flushes on drop), which a `Vec` cannot return.
+fn encode_png(image: &Image, depth: BitDepth) -> std::io::Result<(Vec<u8>, bool)> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(match depth {
+        BitDepth::Eight => png::BitDepth::Eight,
+        BitDepth::Sixteen => png::BitDepth::Sixteen,
+    });
+    encoder.set_compression(png::Compression::Fast);
+    encoder.set_filter(png::Filter::Adaptive);
+    let mut writer = encoder.write_header()?;
+    let mut stream = writer.stream_writer_with_size(PNG_CHUNK_BYTES)?;
+    let row = 3 * image.width.max(1) as usize;
+    let band = row * (PNG_BAND_CHANNELS / row).max(1);
+    let mut finite = true;
+    let mut big_endian = Vec::new();
+    for channels in image.pixels.chunks(band) {
         match depth {
             BitDepth::Eight => {
-                let (levels, finite) = quantize_all_checked(&image.pixels);
-                (Levels::Eight(levels), finite)
+                let (levels, ok) = quantize_all_checked::<u8>(channels);
+                finite &= ok;
+                stream.write_all(&levels)?;
             }
             BitDepth::Sixteen => {
-                let (levels, finite) = quantize_all_checked(&image.pixels);
-                (Levels::Sixteen(levels), finite)
+                let (levels, ok) = quantize_all_checked::<u16>(channels);
+                finite &= ok;
+                big_endian.clear();
+                big_endian.extend(levels.iter().flat_map(|level| level.to_be_bytes()));
+                stream.write_all(&big_endian)?;
             }
         }
     }
-}
-
-/// Encodes the levels of `image` as an RGB PNG.
-fn encode_png<W: Write + Seek>(
-    image: &Image,
-    levels: &Levels,
-    out: &mut W,
-) -> image::ImageResult<()> {
-    let (w, h) = (image.width, image.height);
-    match levels {
-        Levels::Eight(data) => {
-            let buf: ImageBuffer<Rgb<u8>, &[u8]> = ImageBuffer::from_raw(w, h, data.as_slice())
-                .expect("image size matches its pixels");
-            buf.write_to(out, ImageFormat::Png)
-        }
-        Levels::Sixteen(data) => {
-            let buf: ImageBuffer<Rgb<u16>, &[u16]> = ImageBuffer::from_raw(w, h, data.as_slice())
-                .expect("image size matches its pixels");
-            buf.write_to(out, ImageFormat::Png)
-        }
-    }
+    stream.finish()?;
+    writer.finish()?;
+    Ok((bytes, finite))
 }
 
 /// The error of an image too large for an EXR file's 32-bit sizes.
@@ -240,15 +249,19 @@ fn write_exr<W: Write + Seek>(
 /// Writes `image` to `path` (format from the extension), atomically.
 pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     let kind = ImageKind::from_path(path)?;
-    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie. A PNG's levels
-    // are computed in the same pass as the check (the pass is bound by reading the pixels).
-    let (levels, all_finite) = match kind {
+    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie. A PNG is
+    // encoded in memory first (usually smaller than its levels, at most a few bytes a row
+    // larger), its finiteness found in the same pass; both are then written with their
+    // length known beforehand (`write_atomically_sized`), an EXR's following from its size.
+    let png = match kind {
         ImageKind::Png => {
-            let (levels, finite) = Levels::of(image, depth);
-            (Some(levels), finite)
+            Some(encode_png(image, depth).map_err(|e| Error::write(path, "cannot encode", e))?)
         }
-        ImageKind::Exr => (None, all_finite(&image.pixels)),
+        ImageKind::Exr => None,
     };
+    let all_finite = png
+        .as_ref()
+        .map_or_else(|| all_finite(&image.pixels), |(_, finite)| *finite);
     // The position only on failure.
     if let Some(k) = (!all_finite)
         .then(|| image.pixels.iter().position(|v| !v.is_finite()))
@@ -265,16 +278,9 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
             image.pixels[k]
         )));
     }
-    // Both are written with their length known beforehand (`write_atomically_sized`): an
-    // EXR's follows from its size, a PNG is encoded in memory first (usually smaller than its
-    // levels, at most a few bytes a row larger).
-    match levels {
-        Some(levels) => {
-            let mut png = std::io::Cursor::new(Vec::new());
-            encode_png(image, &levels, &mut png)
-                .map_err(|e| Error::write(path, "cannot encode", std::io::Error::other(e)))?;
-            let bytes = png.get_ref();
-            write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(bytes))
+    match png {
+        Some((bytes, _)) => {
+            write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(&bytes))
         }
         None => {
             let (w, h) = (image.width as usize, image.height as usize);
@@ -473,6 +479,64 @@ mod tests {
         assert_eq!(quantize(0.5, 255), 128); // 127.5 rounds up
         assert_eq!(quantize(0.5, 65535), 32768);
         assert_eq!(quantize(1.0 / 255.0, 255), 1);
+    }
+
+    #[test]
+    fn pngs_read_back_as_the_levels_of_every_channel_with_an_independent_reader() {
+        // Sizes of one band, of several bands and a partial last one, and of several IDAT
+        // chunks (noise compresses poorly); channels below 0, above 1, and near half steps.
+        let dir = tempfile::tempdir().unwrap();
+        for (w, h) in [(1, 1), (5, 3), (301, 257)] {
+            let mut image = Image::filled(w, h, [0.0; 3]);
+            let mut state = 0x9e37_79b9_u32;
+            for v in &mut image.pixels {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                *v = (state >> 8) as f32 / (1 << 24) as f32 * 1.2 - 0.1;
+            }
+            for depth in [BitDepth::Eight, BitDepth::Sixteen] {
+                let path = dir.path().join(format!("i{w}x{h}_{depth:?}.png"));
+                save_image(&image, &path, depth).unwrap();
+                let bytes = std::fs::read(&path).unwrap();
+                let chunks = bytes.windows(4).filter(|t| *t == b"IDAT").count();
+                assert!(w < 300 || chunks > 1, "{chunks} IDAT chunks");
+                let read = image::open(&path).unwrap();
+                let levels: Vec<u16> = match depth {
+                    BitDepth::Eight => read
+                        .into_rgb8()
+                        .into_raw()
+                        .into_iter()
+                        .map(u16::from)
+                        .collect(),
+                    BitDepth::Sixteen => read.into_rgb16().into_raw(),
+                };
+                let max = match depth {
+                    BitDepth::Eight => 255,
+                    BitDepth::Sixteen => 65535,
+                };
+                let expected: Vec<u16> = image.pixels.iter().map(|&c| quantize(c, max)).collect();
+                assert_eq!(levels, expected, "{w}×{h} {depth:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_non_finite_channel_in_the_last_band_leaves_no_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut image = Image::filled(300, 300, [0.5; 3]);
+        let last = image.pixels.len() - 2;
+        image.pixels[last] = f32::INFINITY;
+        let path = dir.path().join("i.png");
+        let message = save_image(&image, &path, BitDepth::Sixteen)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("pixel (299, 299) channel 1 is inf"),
+            "{message}"
+        );
+        assert!(!path.exists());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 
     #[test]
