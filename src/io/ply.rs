@@ -280,17 +280,24 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     let mut appearance = Appearance::default();
     // The rows already read, then the rest a block at a time.
     let mut pending = start.split_off(layout.body_start.min(start.len()));
-    // No larger than the body: a small scene's rows are not a block of fresh zeroed pages.
+    // No larger than the body, and read into without being cleared first (`read_to_end`
+    // fills the spare capacity): its pages are first touched by the copy from the file.
     let block_rows = (BLOCK_BYTES / layout.stride.max(1)).clamp(1, layout.count.max(1));
-    let mut block = vec![0_u8; block_rows * layout.stride];
+    let mut block = Vec::with_capacity(block_rows * layout.stride);
     while scene.len() < layout.count {
-        let rows = (layout.count - scene.len()).min(block_rows);
-        let bytes = &mut block[..rows * layout.stride];
-        let carried = pending.len().min(bytes.len());
-        bytes[..carried].copy_from_slice(&pending[..carried]);
+        let want = (layout.count - scene.len()).min(block_rows) * layout.stride;
+        block.clear();
+        let carried = pending.len().min(want);
+        block.extend_from_slice(&pending[..carried]);
         pending.drain(..carried);
-        file.read_exact(&mut bytes[carried..]).map_err(cannot)?;
-        layout.decode_into(&mut scene, &mut appearance, bytes, &origin)?;
+        (&mut file)
+            .take((want - carried) as u64)
+            .read_to_end(&mut block)
+            .map_err(cannot)?;
+        if block.len() < want {
+            return Err(cannot(std::io::ErrorKind::UnexpectedEof.into()));
+        }
+        layout.decode_into(&mut scene, &mut appearance, &block, &origin)?;
     }
     layout.finish(scene, appearance, &origin)
 }
