@@ -39,12 +39,28 @@ pub fn padded_qmax(qmax: f64) -> f64 {
 #[must_use]
 pub fn pixel_span(centre: f64, half_width: f64, lo: u32, hi: u32) -> Option<(u32, u32)> {
     let (from, to) = (centre - half_width - 0.5, centre + half_width - 0.5);
-    if from.is_nan() || to.is_nan() {
+    if from.is_nan() || to.is_nan() || lo >= hi {
         return None;
     }
-    let first = from.ceil().max(f64::from(lo));
-    let last = to.floor().min(f64::from(hi) - 1.0);
+    // `⌈from⌉` and `⌊to⌋` clipped to the pixels: with both ends clamped to `[lo - 1, hi]`
+    // first (whole numbers, so clamping commutes with rounding), the roundings are exact in
+    // i64, where the library's `ceil` and `floor` are calls without SSE4.1.
+    let (lo_f, hi_f) = (f64::from(lo), f64::from(hi));
+    let first = ceil_small(from.clamp(lo_f, hi_f));
+    let last = floor_small(to.clamp(lo_f - 1.0, hi_f - 1.0));
     (first <= last).then(|| (first as u32, last as u32 + 1))
+}
+
+/// `⌈x⌉` for `|x| < 2^53`.
+fn ceil_small(x: f64) -> i64 {
+    let t = x as i64;
+    t + i64::from((t as f64) < x)
+}
+
+/// `⌊x⌋` for `|x| < 2^53`.
+fn floor_small(x: f64) -> i64 {
+    let t = x as i64;
+    t - i64::from((t as f64) > x)
 }
 
 /// Kernel lists per tile, as offsets into one flat array (CSR layout).
@@ -353,5 +369,52 @@ mod tests {
         assert_eq!(pixel_span(f64::NAN, 1.0, 0, 10), None);
         assert_eq!(pixel_span(0.0, f64::INFINITY, 0, 10), Some((0, 10)));
         assert_eq!(pixel_span(1e300, 1e300, 0, 10), Some((0, 10)));
+        assert_eq!(pixel_span(5.0, 1.0, 3, 3), None);
+    }
+
+    #[test]
+    fn pixel_span_is_the_clipped_ceil_and_floor_of_its_ends() {
+        // The definition, with the library's roundings, on ends at and near whole and half
+        // numbers, far outside the range, infinite and NaN.
+        let definition = |centre: f64, half: f64, lo: u32, hi: u32| {
+            let (from, to) = (centre - half - 0.5, centre + half - 0.5);
+            if from.is_nan() || to.is_nan() {
+                return None;
+            }
+            let first = from.ceil().max(f64::from(lo));
+            let last = to.floor().min(f64::from(hi) - 1.0);
+            (first <= last).then(|| (first as u32, last as u32 + 1))
+        };
+        let mut centres = vec![f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300, -1e300, 4e9];
+        for k in -40..80 {
+            let x = f64::from(k) * 0.25;
+            centres.extend([x, x.next_up(), x.next_down(), -x - 3e9]);
+        }
+        let halves = [
+            0.0,
+            0.25,
+            0.5,
+            0.49999999999,
+            1.0,
+            2.5,
+            7.0,
+            1e12,
+            f64::INFINITY,
+            -1.0,
+        ];
+        let mut checked = 0;
+        for &centre in &centres {
+            for &half in &halves {
+                for (lo, hi) in [(0, 10), (3, 17), (0, 1), (2, 3), (0, u32::MAX)] {
+                    assert_eq!(
+                        pixel_span(centre, half, lo, hi),
+                        definition(centre, half, lo, hi),
+                        "{centre} ± {half} in {lo}..{hi}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 20_000);
     }
 }
