@@ -233,11 +233,11 @@ fn write_exr<W: Write + Seek>(
                 let y = (chunk * LINES + k) as i32;
                 block[..4].copy_from_slice(&y.to_le_bytes());
                 block[4..8].copy_from_slice(&line_bytes.to_le_bytes());
-                let samples = &mut block[8..];
-                for (plane, c) in [2, 1, 0].into_iter().enumerate() {
-                    for (x, pixel) in row.chunks_exact(3).enumerate() {
-                        let at = 4 * (plane * w + x);
-                        samples[at..at + 4].copy_from_slice(&pixel[c].to_le_bytes());
+                // The B, G and R planes of the line, each a pass over its pixels.
+                let planes = block[8..].chunks_exact_mut(4 * w.max(1));
+                for (plane, c) in planes.zip([2, 1, 0]) {
+                    for (sample, pixel) in plane.chunks_exact_mut(4).zip(row.chunks_exact(3)) {
+                        sample.copy_from_slice(&pixel[c].to_le_bytes());
                     }
                 }
             });
