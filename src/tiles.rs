@@ -405,7 +405,15 @@ mod tests {
         let mut checked = 0;
         for &centre in &centres {
             for &half in &halves {
-                for (lo, hi) in [(0, 10), (3, 17), (0, 1), (2, 3), (0, u32::MAX)] {
+                for (lo, hi) in [
+                    (0, 10),
+                    (3, 17),
+                    (0, 1),
+                    (2, 3),
+                    (0, u32::MAX),
+                    (5, 3),
+                    (0, 0),
+                ] {
                     assert_eq!(
                         pixel_span(centre, half, lo, hi),
                         definition(centre, half, lo, hi),

@@ -79,12 +79,36 @@ const PNG_BAND_CHANNELS: usize = 1 << 16;
 /// The largest IDAT chunk a PNG is written in (12 bytes of framing each).
 const PNG_CHUNK_BYTES: usize = 1 << 16;
 
-/// `image` as an RGB PNG at `depth` (fdeflate's fast compression, adaptive filters), its
-/// channels quantised ([`quantize_all_checked`]) a band of rows at a time and streamed into
-/// the encoder, and whether every channel is finite (found in the same pass). Encoded in
+/// `image` as an RGB PNG at `depth`, and whether every channel is finite (found in the
+/// same pass): fdeflate's fast compression with adaptive filters, or, where that comes out
+/// larger than the scanlines stored uncompressed would (noise: its fixed codes spend up to
+/// 12 bits on a byte), the scanlines stored, as png's whole-image writer does. Encoded in
 /// memory: png's stream writer drops an error of its last chunk's write (its chunk writer
 /// flushes on drop), which a `Vec` cannot return.
 fn encode_png(image: &Image, depth: BitDepth) -> std::io::Result<(Vec<u8>, bool)> {
+    let (bytes, finite) = encode_png_with(image, depth, png::Compression::Fast)?;
+    let channel_bytes = match depth {
+        BitDepth::Eight => 1,
+        BitDepth::Sixteen => 2,
+    };
+    let scanlines = u64::from(image.height) * (1 + 3 * channel_bytes * u64::from(image.width));
+    // Stored: the scanlines, 5 bytes a deflate block of up to 65535, 12 a chunk of 64 KiB,
+    // the zlib and PNG framing; a bound a little above.
+    let stored = scanlines + scanlines / 4096 + 96;
+    if bytes.len() as u64 > stored {
+        let (stored, _) = encode_png_with(image, depth, png::Compression::NoCompression)?;
+        return Ok((stored, finite));
+    }
+    Ok((bytes, finite))
+}
+
+/// [`encode_png`] with `compression`: the channels quantised ([`quantize_all_checked`]) a
+/// band of rows at a time and streamed into the encoder.
+fn encode_png_with(
+    image: &Image,
+    depth: BitDepth,
+    compression: png::Compression,
+) -> std::io::Result<(Vec<u8>, bool)> {
     let mut bytes = Vec::new();
     let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);
     encoder.set_color(png::ColorType::Rgb);
@@ -92,8 +116,10 @@ fn encode_png(image: &Image, depth: BitDepth) -> std::io::Result<(Vec<u8>, bool)
         BitDepth::Eight => png::BitDepth::Eight,
         BitDepth::Sixteen => png::BitDepth::Sixteen,
     });
-    encoder.set_compression(png::Compression::Fast);
-    encoder.set_filter(png::Filter::Adaptive);
+    encoder.set_compression(compression);
+    if !matches!(compression, png::Compression::NoCompression) {
+        encoder.set_filter(png::Filter::Adaptive);
+    }
     let mut writer = encoder.write_header()?;
     let mut stream = writer.stream_writer_with_size(PNG_CHUNK_BYTES)?;
     let row = 3 * image.width.max(1) as usize;
@@ -501,6 +527,15 @@ mod tests {
                 let bytes = std::fs::read(&path).unwrap();
                 let chunks = bytes.windows(4).filter(|t| *t == b"IDAT").count();
                 assert!(w < 300 || chunks > 1, "{chunks} IDAT chunks");
+                // Noise is stored rather than grown by the fast compressor's fixed codes:
+                // the file is its scanlines and a little framing.
+                let channel_bytes = if depth == BitDepth::Eight { 1 } else { 2 };
+                let scanlines = (h * (1 + 3 * channel_bytes * w)) as usize;
+                assert!(
+                    bytes.len() <= scanlines + scanlines / 1000 + 100,
+                    "{} bytes for {scanlines} of scanlines",
+                    bytes.len()
+                );
                 let read = image::open(&path).unwrap();
                 let levels: Vec<u16> = match depth {
                     BitDepth::Eight => read
