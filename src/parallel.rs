@@ -37,21 +37,45 @@ pub fn fill_in_parallel<T: Send>(
     unsafe { values.set_len(count) };
 }
 
-/// The indices `k < count` for which `keep(k)`, ascending, into `kept` (reset first).
-/// Chunks are scanned in parallel and joined in order.
-pub fn indices_where(kept: &mut Vec<u32>, count: usize, keep: impl Fn(usize) -> bool + Sync) {
-    let chunks: Vec<Vec<u32>> = (0..count.div_ceil(MIN_CHUNK * 4))
-        .into_par_iter()
-        .map(|c| {
-            let range = c * MIN_CHUNK * 4..((c + 1) * MIN_CHUNK * 4).min(count);
-            range.filter(|&k| keep(k)).map(|k| k as u32).collect()
+/// The values `value(k)` that are `Some`, each with its `k`, for `k < count` in ascending
+/// order, into `kept` (reset first). Chunks of indices are computed in parallel, each
+/// keeping its values at the start of its own stretch of `kept`; the stretches are then
+/// moved together in order. One pass over the indices and a copy of what is kept, where
+/// computing every `Option` into an array and then picking the kept ones took one pass more
+/// over arrays of the larger `Option`s.
+pub fn filter_map_in_parallel<T: Copy + Send + Sync>(
+    kept: &mut Vec<(u32, T)>,
+    count: usize,
+    value: impl Fn(usize) -> Option<T> + Sync,
+) {
+    kept.clear();
+    kept.reserve(count);
+    let slots = &mut kept.spare_capacity_mut()[..count];
+    let lens: Vec<usize> = slots
+        .par_chunks_mut(MIN_CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut len = 0;
+            for j in 0..chunk.len() {
+                let k = c * MIN_CHUNK + j;
+                if let Some(v) = value(k) {
+                    chunk[len].write((k as u32, v));
+                    len += 1;
+                }
+            }
+            len
         })
         .collect();
-    kept.clear();
-    kept.reserve(chunks.iter().map(Vec::len).sum());
-    for chunk in chunks {
-        kept.extend_from_slice(&chunk);
+    let mut len = 0;
+    for (c, &n) in lens.iter().enumerate() {
+        if len != c * MIN_CHUNK {
+            slots.copy_within(c * MIN_CHUNK..c * MIN_CHUNK + n, len);
+        }
+        len += n;
     }
+    // SAFETY: each of the first `len` slots holds a copy of a slot its chunk wrote (the
+    // chunks' kept values, in chunk order), and `reserve` made room for `count` ≥ `len`.
+    unsafe { kept.set_len(len) };
 }
 
 /// Appends `count` kernels to `scene`: kernel `kernel(i)`, checked and normalised by
@@ -169,15 +193,21 @@ mod tests {
             pool.install(|| {
                 let mut values = vec![7_u64; 3];
                 fill_in_parallel(&mut values, 10_000, |k| (k as u64) * 3);
-                let mut kept = vec![1];
-                indices_where(&mut kept, 10_000, |k| k % 7 == 3);
+                // Chunks keeping all, some or none of their values (1024 a chunk): what is
+                // kept moves down behind the previous chunks, or stays where it is.
+                let keep = |k: usize| (k < 2048 || k % 7 == 3) && !(5000..7000).contains(&k);
+                let mut kept = vec![(5, 5.0)];
+                filter_map_in_parallel(&mut kept, 10_000, |k| keep(k).then_some(k as f64 * 0.5));
                 (values, kept)
             })
         };
         let (values, kept) = run(1);
         assert_eq!(values.len(), 10_000);
         assert!(values.iter().enumerate().all(|(k, &v)| v == 3 * k as u64));
-        let expected: Vec<u32> = (0..10_000).filter(|k| k % 7 == 3).collect();
+        let expected: Vec<(u32, f64)> = (0..10_000_u32)
+            .filter(|&k| (k < 2048 || k % 7 == 3) && !(5000..7000).contains(&k))
+            .map(|k| (k, f64::from(k) * 0.5))
+            .collect();
         assert_eq!(kept, expected);
         assert_eq!(run(3), (values, kept));
     }

@@ -22,7 +22,7 @@
 //! whose amplitude is exactly zero are dropped. Everything is f64.
 
 use crate::model::scene::{Blend, Scene};
-use crate::parallel::{fill_in_parallel, indices_where};
+use crate::parallel::{fill_in_parallel, filter_map_in_parallel};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
@@ -43,10 +43,9 @@ pub struct SlicedKernels {
     pub opacities: Vec<f64>,
     /// Cut-off `qmax` on the squared Mahalanobis radius (`+∞` without truncation).
     pub qmax: Vec<f64>,
-    /// Scratch of [`slice`]: every visited kernel's slice, kept between frames.
-    scratch: Vec<Option<SlicedKernel>>,
-    /// Scratch of [`slice`]: the positions in `scratch` of the live slices.
-    kept: Vec<u32>,
+    /// Scratch of [`slice`]: the live slices with their visiting position, kept between
+    /// frames.
+    scratch: Vec<(u32, SlicedKernel)>,
 }
 
 /// One kernel's slice.
@@ -188,30 +187,30 @@ fn slice_visiting(
     cutoff: f64,
     out: &mut SlicedKernels,
 ) {
-    let mut slices = std::mem::take(&mut out.scratch);
-    let mut kept = std::mem::take(&mut out.kept);
-    fill_in_parallel(&mut slices, count, |k| {
+    let mut live = std::mem::take(&mut out.scratch);
+    filter_map_in_parallel(&mut live, count, |k| {
         slice_one(scene, kernel(k), tau, cutoff)
     });
-    // The live ones, in order, each array filled in parallel.
-    indices_where(&mut kept, count, |k| slices[k].is_some());
-    let live = |j: usize| slices[kept[j] as usize].expect("kept slices are alive");
-    fill_in_parallel(&mut out.kernel_from_slice, kept.len(), |j| {
-        kernel(kept[j] as usize) as u32
+    // Each array filled in parallel from the live slices.
+    let n = live.len();
+    let slice = |j: usize| &live[j].1;
+    fill_in_parallel(&mut out.kernel_from_slice, n, |j| {
+        kernel(live[j].0 as usize) as u32
     });
-    fill_in_parallel(&mut out.means, kept.len(), |j| live(j).mean);
-    fill_in_parallel(&mut out.covariances, kept.len(), |j| live(j).covariance);
-    fill_in_parallel(&mut out.amplitudes, kept.len(), |j| live(j).amplitude);
-    fill_in_parallel(&mut out.qmax, kept.len(), |j| live(j).qmax);
+    fill_in_parallel(&mut out.means, n, |j| slice(j).mean);
+    fill_in_parallel(&mut out.covariances, n, |j| slice(j).covariance);
+    fill_in_parallel(&mut out.amplitudes, n, |j| slice(j).amplitude);
+    fill_in_parallel(&mut out.qmax, n, |j| slice(j).qmax);
     match scene.blend {
         Blend::Additive => out.opacities.clear(),
-        Blend::Alpha => fill_in_parallel(&mut out.opacities, kept.len(), |j| live(j).opacity),
+        Blend::Alpha => fill_in_parallel(&mut out.opacities, n, |j| slice(j).opacity),
     }
-    out.scratch = slices;
-    out.kept = kept;
+    out.scratch = live;
 }
 
-#[inline]
+/// Kernel `i` sliced at `tau`, or `None` when it is culled. Inlined into [`slice_visiting`]'s
+/// pass (its result then stays out of memory until it is kept; see [`crate::project::project_one`]).
+#[inline(always)]
 fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKernel> {
     let [x, y, z, t] = scene.means[i];
     let scale = scene.scales[i];
