@@ -146,20 +146,23 @@ pub fn clamp_limits(camera: &Camera) -> [f64; 4] {
 
 /// Projects one 3D Gaussian (world-space centre and covariance `[xx, xy, xz, yy, yz, zz]`),
 /// or `None` when it is culled (outside `[near, far]`, degenerate or non-finite `Σ2`).
-///
-/// Inlined into every caller, so that one which reads a few fields (the forward's
-/// [`project`]: `m2`, `Σ2`, `Q`) has the rest, the Jacobian and `Σc`, left out by the
-/// compiler, and its result does not go through memory: the 10k-kernel 512×512 projection
-/// took 0.72 ms on one thread as a call, 0.39 ms inlined. The same operations in the same
-/// order, so the same bits.
 #[must_use]
-#[inline(always)]
 pub fn project_one(
     camera: &Camera,
     dilation: f64,
     mean: [f64; 3],
     cov: [f64; 6],
 ) -> Option<Projection> {
+    projection(camera, dilation, mean, cov)
+}
+
+/// [`project_one`], inlined where it is called, so that a caller which reads a few fields
+/// (the forward's [`project`]: `m2`, `Σ2`, `Q`) has the rest, the Jacobian and `Σc`, left
+/// out by the compiler, and its result does not go through memory: the 10k-kernel 512×512
+/// projection took 0.72 ms on one thread as a call, 0.39 ms inlined. The same operations
+/// in the same order, so the same bits.
+#[inline(always)]
+fn projection(camera: &Camera, dilation: f64, mean: [f64; 3], cov: [f64; 6]) -> Option<Projection> {
     let rc = camera.rotation();
     let tc = camera.translation();
     let p: [f64; 3] = std::array::from_fn(|r| {
@@ -234,7 +237,7 @@ struct OnScreen {
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
     let mut on_screen = std::mem::take(&mut out.scratch);
     filter_map_in_parallel(&mut on_screen, sliced.len(), |s| {
-        let projection = project_one(camera, dilation, sliced.means[s], sliced.covariances[s])?;
+        let projection = projection(camera, dilation, sliced.means[s], sliced.covariances[s])?;
         Some(OnScreen {
             mean: projection.mean,
             covariance: projection.covariance,
