@@ -4,9 +4,10 @@
 //! Every per-kernel stage (loading, slicing, projecting, binning) writes one value per index
 //! into fresh or reused arrays. Done serially, a first large frame also pays the operating
 //! system's first touch of every new page on one thread, and compaction through `push` grows
-//! its arrays by copying. These helpers write each slot exactly once, in parallel, straight
-//! into the arrays' spare capacity: index `i`'s value is computed from `i` alone, so the
-//! output is the same for any number of threads.
+//! its arrays by copying. These helpers write the slots in parallel, straight into the arrays'
+//! spare capacity (once each; [`filter_map_in_parallel`] then moves what it keeps together
+//! in order): index `i`'s value is computed from `i` alone, so the output is the same for any
+//! number of threads.
 
 use rayon::prelude::*;
 
@@ -43,7 +44,7 @@ pub fn fill_in_parallel<T: Send>(
 /// moved together in order. One pass over the indices and a copy of what is kept, where
 /// computing every `Option` into an array and then picking the kept ones took one pass more
 /// over arrays of the larger `Option`s.
-pub fn filter_map_in_parallel<T: Copy + Send + Sync>(
+pub fn filter_map_in_parallel<T: Copy + Send>(
     kept: &mut Vec<(u32, T)>,
     count: usize,
     value: impl Fn(usize) -> Option<T> + Sync,
@@ -58,6 +59,7 @@ pub fn filter_map_in_parallel<T: Copy + Send + Sync>(
             let mut len = 0;
             for j in 0..chunk.len() {
                 let k = c * MIN_CHUNK + j;
+                debug_assert!(u32::try_from(k).is_ok(), "indices fit in u32");
                 if let Some(v) = value(k) {
                     chunk[len].write((k as u32, v));
                     len += 1;
@@ -75,6 +77,7 @@ pub fn filter_map_in_parallel<T: Copy + Send + Sync>(
     }
     // SAFETY: each of the first `len` slots holds a copy of a slot its chunk wrote (the
     // chunks' kept values, in chunk order), and `reserve` made room for `count` ≥ `len`.
+    // The values are `Copy`: the stale copies past `len` need no drop.
     unsafe { kept.set_len(len) };
 }
 
@@ -194,8 +197,10 @@ mod tests {
                 let mut values = vec![7_u64; 3];
                 fill_in_parallel(&mut values, 10_000, |k| (k as u64) * 3);
                 // Chunks keeping all, some or none of their values (1024 a chunk): what is
-                // kept moves down behind the previous chunks, or stays where it is.
-                let keep = |k: usize| (k < 2048 || k % 7 == 3) && !(5000..7000).contains(&k);
+                // kept moves down behind the previous chunks (by one slot, over itself, for
+                // the second chunk), or stays where it is.
+                let keep =
+                    |k: usize| ((k < 2048 && k != 3) || k % 7 == 3) && !(5000..7000).contains(&k);
                 let mut kept = vec![(5, 5.0)];
                 filter_map_in_parallel(&mut kept, 10_000, |k| keep(k).then_some(k as f64 * 0.5));
                 (values, kept)
@@ -205,7 +210,7 @@ mod tests {
         assert_eq!(values.len(), 10_000);
         assert!(values.iter().enumerate().all(|(k, &v)| v == 3 * k as u64));
         let expected: Vec<(u32, f64)> = (0..10_000_u32)
-            .filter(|&k| (k < 2048 || k % 7 == 3) && !(5000..7000).contains(&k))
+            .filter(|&k| ((k < 2048 && k != 3) || k % 7 == 3) && !(5000..7000).contains(&k))
             .map(|k| (k, f64::from(k) * 0.5))
             .collect();
         assert_eq!(kept, expected);

@@ -177,8 +177,8 @@ pub fn slice_candidates(
     );
 }
 
-/// Slices kernels `kernel(0..count)` (ascending) in parallel, then keeps the live ones in
-/// that order: the output does not depend on the thread count.
+/// Slices kernels `kernel(0..count)` (ascending) in parallel, keeping the live ones in that
+/// order: the output does not depend on the thread count.
 fn slice_visiting(
     scene: &Scene,
     count: usize,
@@ -209,7 +209,8 @@ fn slice_visiting(
 }
 
 /// Kernel `i` sliced at `tau`, or `None` when it is culled. Inlined into [`slice_visiting`]'s
-/// pass (its result then stays out of memory until it is kept; see [`crate::project::project_one`]).
+/// pass: its result then stays out of memory until it is kept (as the projection's, whose
+/// copy through the stack stalled on store forwarding when it was a call).
 #[inline(always)]
 fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKernel> {
     let [x, y, z, t] = scene.means[i];
