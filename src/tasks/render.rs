@@ -16,8 +16,8 @@ use crate::io::scene_file::load_scene;
 use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Camera, Error, Result, Scene};
 use crate::overlay::draw_overlay;
-use crate::render::{RenderContext, RenderOptions};
-use crate::tasks::{threads_for, with_threads};
+use crate::render::{RenderContext, RenderOptions, RenderStats};
+use crate::tasks::{on_global_pool, threads_for, with_threads};
 
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -165,23 +165,29 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         &["png", "exr"],
         &[&view.scene, &view.camera.file()],
     )?;
-    // With `threads` given, loading and writing run on those threads too (a one-thread
-    // render starts no thread at all); without, the render's size decides (small work on
-    // this thread) and loading and writing use the global pool.
+    // With `threads` given, everything runs on those threads (a one-thread render starts no
+    // thread at all). Without, loading uses the global pool, and the render's size decides
+    // where the frame and its writing run: small work on this thread, the rest on a thread
+    // of the global pool.
     with_threads(view.threads, || -> Result<RenderSummary> {
         let (scene, camera) = view.load()?;
         check_render_memory(&camera, &scene)?;
         let mut context = RenderContext::new();
         let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
-        let stats = with_threads(threads_for(view.threads, units), || {
-            context.render(&scene, &camera, view.time, &view.options)
-        })??;
-        if request.overlay {
-            let (w, h, rgb) = draw_overlay(&context)?;
-            save_rgb8_png(&request.out, w, h, &rgb)?;
-        } else {
-            save_image(context.image(), &request.out, request.depth)?;
-        }
+        let render_and_write = || -> Result<RenderStats> {
+            let stats = context.render(&scene, &camera, view.time, &view.options)?;
+            if request.overlay {
+                let (w, h, rgb) = draw_overlay(&context)?;
+                save_rgb8_png(&request.out, w, h, &rgb)?;
+            } else {
+                save_image(context.image(), &request.out, request.depth)?;
+            }
+            Ok(stats)
+        };
+        let stats = match threads_for(view.threads, units) {
+            None => on_global_pool(render_and_write),
+            threads => with_threads(threads, render_and_write)?,
+        }?;
         Ok(RenderSummary {
             out: request.out.clone(),
             size: (camera.width, camera.height),

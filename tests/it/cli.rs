@@ -81,6 +81,43 @@ fn threads_flag_does_not_change_the_output() {
     assert_eq!(one, two);
 }
 
+/// Without `--threads`, work this large runs its frame and its writing on a thread of the
+/// global pool (`tasks::on_global_pool`), small work on the calling thread: the same file
+/// either way, and the same as on one or two threads.
+#[test]
+fn default_threads_give_the_same_output_for_small_and_large_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = data("blob_camera.json");
+    let camera = camera.to_str().unwrap();
+    let large = dir.path().join("large.ply");
+    // 200 kernels at 320×240: 1.5·10⁷ pixel-kernel units, above the small-work limit.
+    splat4d::io::ply::write_scene_ply(&splat4d::scenes::synthetic::bench_scene(200, 42), &large)
+        .unwrap();
+    let blob = data("blob.json");
+    for (scene, name) in [
+        (large.to_str().unwrap(), "large"),
+        (blob.to_str().unwrap(), "small"),
+    ] {
+        let mut outputs = Vec::new();
+        for threads in [None, Some("1"), Some("2")] {
+            let out = format!("{name}{}.exr", threads.unwrap_or("default"));
+            let mut args = render_args(scene, camera, &out);
+            if let Some(threads) = threads {
+                args.extend(["--threads", threads]);
+            }
+            let output = splat4d(&args, dir.path());
+            assert!(output.status.success(), "{}", stderr(&output));
+            let printed = String::from_utf8_lossy(&output.stdout).to_string();
+            assert!(
+                !printed.contains(" 0 pairs"),
+                "{name}: something on screen: {printed}"
+            );
+            outputs.push(std::fs::read(dir.path().join(&out)).unwrap());
+        }
+        assert!(outputs.iter().all(|o| *o == outputs[0]), "{name}");
+    }
+}
+
 #[test]
 fn report_quick_writes_the_report_and_its_charts() {
     let dir = tempfile::tempdir().unwrap();
