@@ -14,7 +14,7 @@ use crate::scenes::paths::{
     Circle, Lens, PathFrame, Up, even_times, framing_circle, orbit, spiral, time_range,
 };
 use crate::slice::TemporalIndex;
-use crate::tasks::with_threads;
+use crate::tasks::{on_global_pool, with_threads};
 
 /// An orbit or spiral: explicit, or framing the scene ([`framing_circle`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -230,13 +230,23 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         let files = with_threads(request.threads, || {
             write_video(frames.len(), &request.out, name, &video, |k, image| {
                 let frame = &frames[k];
-                context.render_indexed(
-                    &scene,
-                    &index,
-                    &frame.camera,
-                    frame.time,
-                    &request.options,
-                )?;
+                let mut render = || {
+                    context.render_indexed(
+                        &scene,
+                        &index,
+                        &frame.camera,
+                        frame.time,
+                        &request.options,
+                    )
+                };
+                // Without a thread count this loop runs outside the pool: the frame goes to
+                // a thread of the global pool whole, not loop by loop. (Not the whole loop:
+                // it waits on the writer thread, whose own parallel work would then find a
+                // one-thread pool busy.)
+                match request.threads {
+                    None => on_global_pool(render),
+                    Some(_) => render(),
+                }?;
                 // The frame goes to the writer; the context renders the next into `image`'s
                 // old buffer (the writer's spare, once it has handed one back).
                 context.swap_image(image);

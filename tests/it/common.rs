@@ -361,8 +361,18 @@ pub fn data(name: &str) -> std::path::PathBuf {
 
 /// Runs the executable with a time limit (a hang is a failure, not a stuck test).
 pub fn run_limited<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], cwd: &Path) -> Output {
+    run_limited_with_env(args, cwd, &[])
+}
+
+/// [`run_limited`] with environment variables set for the child.
+pub fn run_limited_with_env<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(
+    args: &[S],
+    cwd: &Path,
+    env: &[(&str, &str)],
+) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_splat4d"))
         .args(args)
+        .envs(env.iter().copied())
         .current_dir(cwd)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())

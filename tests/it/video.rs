@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use crate::common::{data, run_limited};
+use crate::common::{data, run_limited, run_limited_with_env};
 use image::AnimationDecoder;
 use splat4d::io::image_file::load_image;
 use splat4d::io::path_file::save_path;
@@ -705,4 +705,71 @@ fn a_failed_frame_or_write_leaves_the_earlier_video_whole() {
             assert_eq!(written.pixels, expected, "frame {k}");
         }
     }
+}
+
+/// Without `--threads`, each frame renders on a thread of the global pool while the frame
+/// loop waits on the writer thread: the same files as on one thread, and no hang when the
+/// global pool has a single thread (`RAYON_NUM_THREADS=1`) and the writer encodes GIFs.
+#[test]
+fn default_threads_write_the_same_video_and_do_not_wait_on_themselves() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("blob.json"), include_str!("../../data/blob.json")).unwrap();
+    let args = |out: &'static str| {
+        vec![
+            "video",
+            "--scene",
+            "blob.json",
+            "--orbit",
+            "0.5,0.5,0.5,4,20,6",
+            "--times",
+            "0,1",
+            "--size",
+            "32x24",
+            "--no-mp4",
+            "--out",
+            out,
+        ]
+    };
+    let mut one = args("one");
+    one.extend(["--threads", "1"]);
+    for (args, env) in [
+        (one, vec![]),
+        (args("default"), vec![]),
+        (args("single_pool"), vec![("RAYON_NUM_THREADS", "1")]),
+    ] {
+        let output = run_limited_with_env(&args, d, &env);
+        assert!(
+            output.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    let files = |folder: &str| {
+        let mut files = Vec::new();
+        for video in std::fs::read_dir(d.join(folder)).unwrap() {
+            let video = video.unwrap().path();
+            let paths: Vec<_> = if video.is_dir() {
+                std::fs::read_dir(&video)
+                    .unwrap()
+                    .map(|f| f.unwrap().path())
+                    .collect()
+            } else {
+                vec![video]
+            };
+            for path in paths {
+                let name = path.strip_prefix(d.join(folder)).unwrap().to_path_buf();
+                files.push((name, std::fs::read(&path).unwrap()));
+            }
+        }
+        files.sort();
+        files
+    };
+    let one = files("one");
+    assert!(
+        one.len() >= 2 * 6,
+        "two orbits of six frames and their GIFs"
+    );
+    assert!(files("default") == one, "default threads");
+    assert!(files("single_pool") == one, "a one-thread global pool");
 }
