@@ -74,15 +74,22 @@ fn on_this_thread<T: Send>(work: impl FnOnce() -> T + Send) -> Result<T> {
     Ok(pool.install(work))
 }
 
-/// `work` on a thread of rayon's global pool, the calling thread waiting for it (on a pool's
-/// thread already: in place). Parallel loops started from a thread outside the pool each
-/// hand their work over to the pool and wait for it: a 10k-kernel 512×512 frame makes about
-/// 25 such loops, and a whole `render` took 0.47 ms longer without a thread count than with
-/// `--threads 2` (10.40 against 9.93 ms, medians of 31). Only for work that does not wait
-/// on other threads' rayon work from inside: with one worker, the pool would have no thread
-/// left for it.
-pub fn on_global_pool<T: Send>(work: impl FnOnce() -> T + Send) -> T {
-    rayon::scope(|_| work())
+/// [`with_threads`], except that without a thread count `work` runs on a thread of rayon's
+/// global pool, the calling thread waiting for it (`rayon::scope`; on a pool's thread
+/// already: in place), instead of on the calling thread. Parallel loops started from a
+/// thread outside the pool each hand their work over to the pool and wait for it: a
+/// 10k-kernel 512×512 frame makes about 25 such loops, and a whole `render` took 0.47 ms
+/// longer without a thread count than with `--threads 2` (10.40 against 9.93 ms, medians of
+/// 31). Only for work that does not wait on other threads' rayon work from inside: with one
+/// worker, the global pool would have no thread left for it.
+pub fn with_threads_on_pool<T: Send>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> T + Send,
+) -> Result<T> {
+    match threads {
+        None => Ok(rayon::scope(|_| work())),
+        threads => with_threads(threads, work),
+    }
 }
 
 /// Most worker threads a task starts.

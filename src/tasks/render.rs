@@ -17,7 +17,7 @@ use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Camera, Error, Result, Scene};
 use crate::overlay::draw_overlay;
 use crate::render::{RenderContext, RenderOptions, RenderStats};
-use crate::tasks::{on_global_pool, threads_for, with_threads};
+use crate::tasks::{threads_for, with_threads, with_threads_on_pool};
 
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -184,10 +184,7 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
             }
             Ok(stats)
         };
-        let stats = match threads_for(view.threads, units) {
-            None => on_global_pool(render_and_write),
-            threads => with_threads(threads, render_and_write)?,
-        }?;
+        let stats = with_threads_on_pool(threads_for(view.threads, units), render_and_write)??;
         Ok(RenderSummary {
             out: request.out.clone(),
             size: (camera.width, camera.height),

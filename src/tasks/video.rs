@@ -14,7 +14,7 @@ use crate::scenes::paths::{
     Circle, Lens, PathFrame, Up, even_times, framing_circle, orbit, spiral, time_range,
 };
 use crate::slice::TemporalIndex;
-use crate::tasks::{on_global_pool, with_threads};
+use crate::tasks::{with_threads, with_threads_on_pool};
 
 /// An orbit or spiral: explicit, or framing the scene ([`framing_circle`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -230,7 +230,11 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         let files = with_threads(request.threads, || {
             write_video(frames.len(), &request.out, name, &video, |k, image| {
                 let frame = &frames[k];
-                let mut render = || {
+                // Without a thread count this loop runs outside the pool: the frame goes to
+                // a thread of the global pool whole, not loop by loop. (Not the whole loop:
+                // it waits on the writer thread, whose own parallel work would then find a
+                // one-thread pool busy.) With one, the loop is on that pool already.
+                with_threads_on_pool(request.threads, || {
                     context.render_indexed(
                         &scene,
                         &index,
@@ -238,15 +242,7 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
                         frame.time,
                         &request.options,
                     )
-                };
-                // Without a thread count this loop runs outside the pool: the frame goes to
-                // a thread of the global pool whole, not loop by loop. (Not the whole loop:
-                // it waits on the writer thread, whose own parallel work would then find a
-                // one-thread pool busy.)
-                match request.threads {
-                    None => on_global_pool(render),
-                    Some(_) => render(),
-                }?;
+                })??;
                 // The frame goes to the writer; the context renders the next into `image`'s
                 // old buffer (the writer's spare, once it has handed one back).
                 context.swap_image(image);

@@ -82,7 +82,7 @@ fn threads_flag_does_not_change_the_output() {
 }
 
 /// Without `--threads`, work this large runs its frame and its writing on a thread of the
-/// global pool (`tasks::on_global_pool`), small work on the calling thread: the same file
+/// global pool (`tasks::with_threads_on_pool`), small work on the calling thread: the same file
 /// either way, and the same as on one or two threads.
 #[test]
 fn default_threads_give_the_same_output_for_small_and_large_work() {
