@@ -29,12 +29,13 @@
 use rayon::prelude::*;
 
 use crate::model::Image;
+use crate::parallel::{Drain, GroupBuffers, fill_and_drain_in_order};
 use crate::project::ProjectedKernels;
 use std::ops::Range;
 
 use crate::raster::{
     ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile_range, row_forms, size_image,
+    prepare_tile_range, row_forms, size_image, tile_rows_per_group,
 };
 use crate::tiles::TileBins;
 
@@ -63,6 +64,9 @@ pub struct PixelStop {
 pub(crate) struct CompositeScratch {
     pub(crate) tile: TileScratch,
     pub(crate) opacities: Vec<f64>,
+    /// A streamed frame's stops of one tile row, which nothing reads afterwards
+    /// ([`composite_in_bands_on`]).
+    band_stops: Vec<PixelStop>,
 }
 
 thread_local! {
@@ -165,15 +169,7 @@ pub fn composite_on(
     image: &mut Image,
     stops: &mut Vec<PixelStop>,
 ) -> u64 {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
-    assert_eq!(
-        proj.opacities.len(),
-        proj.len(),
-        "opacities of an alpha frame"
-    );
+    check_alpha_frame(path, proj);
     row_forms(proj, bins, forms);
     let pixels = size_image(bins, image);
     let (w, h) = (bins.width as usize, bins.height as usize);
@@ -188,7 +184,6 @@ pub fn composite_on(
         forms,
         background: background.map(f64::from),
     };
-    let tiles_x = bins.tiles_x as usize;
     image
         .pixels
         .par_chunks_mut(3 * w * ROW)
@@ -197,19 +192,93 @@ pub fn composite_on(
         .map(|(ty, (band, band_stops))| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
-                let mut pairs = 0;
-                for tx in 0..tiles_x {
-                    let t = ty * tiles_x + tx;
-                    let out = Band {
-                        pixels: band,
-                        stops: band_stops,
-                    };
-                    pairs += tile_on(path, exp, &frame, t, scratch, out);
-                }
-                pairs
+                tile_row(path, exp, &frame, ty, scratch, band, band_stops)
             })
         })
         .sum()
+}
+
+/// [`composite_on`] without an image: the frame's rows are handed to `drain` in order, a
+/// group of tile rows at a time (its first row and its RGB values), while the next group is
+/// composited ([`fill_and_drain_in_order`]); the pixels' stops, which only a backward reads,
+/// are not kept. The same values as [`composite_on`]'s image. Returns the pairs composited,
+/// or `drain`'s first error.
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+#[allow(clippy::too_many_arguments)]
+pub fn composite_in_bands_on<E: Send>(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    forms: &mut Vec<RowForm>,
+    groups: &mut GroupBuffers,
+    drain: &mut Drain<E>,
+) -> Result<u64, E> {
+    check_alpha_frame(path, proj);
+    row_forms(proj, bins, forms);
+    let frame = AlphaFrame {
+        proj,
+        bins,
+        forms,
+        background: background.map(f64::from),
+    };
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    let row_values = 3 * w;
+    fill_and_drain_in_order(
+        (row_values * h, row_values * ROW, tile_rows_per_group()),
+        groups,
+        |ty, band| {
+            SCRATCH.with(|cell| {
+                let scratch = &mut *cell.borrow_mut();
+                let mut band_stops = std::mem::take(&mut scratch.band_stops);
+                band_stops.resize(band.len() / 3, PixelStop::default());
+                let pairs = tile_row(path, exp, &frame, ty, scratch, band, &mut band_stops);
+                scratch.band_stops = band_stops;
+                pairs
+            })
+        },
+        &mut |offset, values| drain(offset / row_values.max(1), values),
+    )
+}
+
+/// Composites tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the
+/// bottom) and their pixels' `stops`; returns its pairs.
+fn tile_row(
+    path: SimdPath,
+    exp: ExpMode,
+    frame: &AlphaFrame,
+    ty: usize,
+    scratch: &mut CompositeScratch,
+    band: &mut [f32],
+    stops: &mut [PixelStop],
+) -> u64 {
+    let tiles_x = frame.bins.tiles_x as usize;
+    (0..tiles_x)
+        .map(|tx| {
+            let out = Band {
+                pixels: band,
+                stops,
+            };
+            tile_on(path, exp, frame, ty * tiles_x + tx, scratch, out)
+        })
+        .sum()
+}
+
+/// Panics when the CPU lacks `path`'s instructions (every `unsafe` call of a path's loops
+/// relies on this check) or `proj` has no opacities.
+fn check_alpha_frame(path: SimdPath, proj: &ProjectedKernels) {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+    assert_eq!(
+        proj.opacities.len(),
+        proj.len(),
+        "opacities of an alpha frame"
+    );
 }
 
 /// What every tile of an alpha frame shares.
@@ -237,7 +306,7 @@ fn tile_on(
 ) -> u64 {
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `composite_on` checked that the CPU has the path's features.
+        // SAFETY: the caller ran `check_alpha_frame`: the CPU has the path's features.
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
             composite_tile_avx512::<true>(frame, t, scratch, band)
         },

@@ -14,6 +14,84 @@ use rayon::prelude::*;
 use crate::model::error::Result;
 use crate::model::scene::{Kernel, Scene};
 
+/// What [`fill_and_drain_in_order`] hands its values to, in order: the offset of the first
+/// value in the virtual buffer, and the values.
+pub type Drain<'a, E> = dyn FnMut(usize, &[f32]) -> std::result::Result<(), E> + Send + 'a;
+
+/// Two group buffers of [`fill_and_drain_in_order`], kept between calls.
+#[derive(Debug, Default)]
+pub struct GroupBuffers([Vec<f32>; 2]);
+
+/// Computes the `chunk`-long pieces of a virtual buffer of `total` values (the last piece
+/// may be shorter) and hands them to `drain` in order, never holding more than two groups of
+/// `group` pieces: piece `i` is computed by `fill(i, piece)`, in parallel within a group, and
+/// while `drain` takes one group (its offset into the virtual buffer and its values) the
+/// next is filled. On a pool of one thread, where nothing would overlap, groups are of one
+/// piece and one buffer is used. Returns the sum of `fill`'s results, or `drain`'s first
+/// error, after which nothing more is drained.
+///
+/// Why: a frame written to a file need not exist whole. Its rows go to the encoder as they
+/// are made, so a large image costs two groups of fresh pages, not the image's, and the
+/// encoder's serial work overlaps the rendering of the next rows. `fill` must write every
+/// value of its piece (the buffers are reused unchanged); the values drained are then the
+/// same whatever the thread count.
+pub fn fill_and_drain_in_order<E: Send>(
+    (total, chunk, group): (usize, usize, usize),
+    GroupBuffers([current, next]): &mut GroupBuffers,
+    fill: impl Fn(usize, &mut [f32]) -> u64 + Sync,
+    drain: &mut Drain<E>,
+) -> std::result::Result<u64, E> {
+    let one_thread = rayon::current_num_threads() == 1;
+    let chunk = chunk.max(1);
+    let group = if one_thread { 1 } else { group.max(1) };
+    let group_values = chunk.saturating_mul(group).min(total);
+    let buffers = if one_thread { 1 } else { 2 };
+    for buffer in [&mut *current, &mut *next].into_iter().take(buffers) {
+        if buffer.len() < group_values {
+            *buffer = vec![0.0; group_values];
+        }
+    }
+    let range = |g: usize| {
+        let start = g * group_values;
+        start..total.min(start + group_values)
+    };
+    let fill_group = |g: usize, buffer: &mut [f32]| -> u64 {
+        buffer[..range(g).len()]
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .map(|(k, piece)| fill(g * group + k, piece))
+            .sum()
+    };
+    let groups = total.div_ceil(group_values.max(1));
+    if one_thread {
+        let mut sum = 0;
+        for g in 0..groups {
+            sum += fill_group(g, current);
+            drain(range(g).start, &current[..range(g).len()])?;
+        }
+        return Ok(sum);
+    }
+    let mut sum = if groups > 0 {
+        fill_group(0, current)
+    } else {
+        0
+    };
+    for g in 0..groups {
+        let values = &current[..range(g).len()];
+        let drained = if g + 1 < groups {
+            let (drained, filled) =
+                rayon::join(|| drain(range(g).start, values), || fill_group(g + 1, next));
+            sum += filled;
+            drained
+        } else {
+            drain(range(g).start, values)
+        };
+        drained?;
+        std::mem::swap(current, next);
+    }
+    Ok(sum)
+}
+
 /// Smallest number of indices a worker takes at once.
 const MIN_CHUNK: usize = 1024;
 
@@ -215,6 +293,61 @@ mod tests {
             .collect();
         assert_eq!(kept, expected);
         assert_eq!(run(3), (values, kept));
+    }
+
+    #[test]
+    fn drains_every_piece_in_order_once_and_stops_at_the_first_error() {
+        // 10 pieces of 7 values and a last of 3 (73 values), groups of 4: piece i holds
+        // 1000 i + its position; `fill` returns i, so the sum is 0 + 1 + … + 10.
+        let fill = |i: usize, piece: &mut [f32]| {
+            for (k, v) in piece.iter_mut().enumerate() {
+                *v = (1000 * i + k) as f32;
+            }
+            i as u64
+        };
+        let expected: Vec<f32> = (0..73).map(|k| (1000 * (k / 7) + k % 7) as f32).collect();
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut buffers = GroupBuffers::default();
+            // Stale values in reused buffers are overwritten.
+            for round in 0..2 {
+                let mut drained = Vec::new();
+                let mut offsets = Vec::new();
+                let mut drain = |offset: usize, values: &[f32]| -> std::result::Result<(), ()> {
+                    assert_eq!(offset, drained.len(), "{threads} threads, in order");
+                    offsets.push(offset);
+                    drained.extend_from_slice(values);
+                    Ok(())
+                };
+                let sum = pool.install(|| {
+                    fill_and_drain_in_order((73, 7, 4), &mut buffers, fill, &mut drain)
+                });
+                assert_eq!(sum, Ok(55), "{threads} threads, round {round}");
+                assert_eq!(drained, expected, "{threads} threads, round {round}");
+                let groups = if threads == 1 { 11 } else { 3 };
+                assert_eq!(offsets.len(), groups, "{threads} threads");
+            }
+            // An error stops the draining: nothing after the failed group is drained.
+            let mut calls = 0;
+            let mut failing = |offset: usize, _: &[f32]| -> std::result::Result<(), usize> {
+                calls += 1;
+                if offset >= 28 { Err(offset) } else { Ok(()) }
+            };
+            let result = pool
+                .install(|| fill_and_drain_in_order((73, 7, 4), &mut buffers, fill, &mut failing));
+            let (failed_at, calls_expected) = if threads == 1 { (28, 5) } else { (28, 2) };
+            assert_eq!(result, Err(failed_at), "{threads} threads");
+            assert_eq!(calls, calls_expected, "{threads} threads");
+            // Nothing at all: no call.
+            let mut never =
+                |_: usize, _: &[f32]| -> std::result::Result<(), ()> { panic!("nothing to drain") };
+            let empty =
+                pool.install(|| fill_and_drain_in_order((0, 7, 4), &mut buffers, fill, &mut never));
+            assert_eq!(empty, Ok(0));
+        }
     }
 
     #[test]

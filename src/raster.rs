@@ -71,6 +71,7 @@ use std::str::FromStr;
 use rayon::prelude::*;
 
 use crate::model::Image;
+use crate::parallel::{Drain, GroupBuffers, fill_and_drain_in_order};
 use crate::project::ProjectedKernels;
 use crate::tiles::{TILE_SIZE, TileBins, padded_qmax};
 
@@ -488,10 +489,7 @@ pub fn rasterize_on(
     (forms, pool): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
+    check_path(path);
     row_forms(proj, bins, forms);
     let w = bins.width as usize;
     if !size_image(bins, image) {
@@ -507,17 +505,76 @@ pub fn rasterize_on(
         .pixels
         .par_chunks_mut(3 * w * ROW)
         .enumerate()
-        .map(|(ty, band)| {
-            pool.with(|scratch| {
-                let mut pairs = 0;
-                for tx in 0..bins.tiles_x as usize {
-                    let t = ty * bins.tiles_x as usize + tx;
-                    pairs += tile_on(path, exp, &frame, t, scratch, band);
-                }
-                pairs
-            })
-        })
+        .map(|(ty, band)| tile_row(path, exp, &frame, pool, ty, band))
         .sum()
+}
+
+/// [`rasterize_on`] without an image: the frame's rows are handed to `drain` in order, a
+/// group of tile rows at a time (its first row and its RGB values), while the next group is
+/// summed ([`fill_and_drain_in_order`]). The same values as [`rasterize_on`]'s image, in
+/// two groups' memory. Returns the pairs, or `drain`'s first error.
+///
+/// # Panics
+/// When the CPU lacks `path`'s instructions.
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize_in_bands_on<E: Send>(
+    path: SimdPath,
+    proj: &ProjectedKernels,
+    bins: &TileBins,
+    background: [f32; 3],
+    exp: ExpMode,
+    (forms, pool): (&mut Vec<RowForm>, &TileScratchPool),
+    groups: &mut GroupBuffers,
+    drain: &mut Drain<E>,
+) -> Result<u64, E> {
+    check_path(path);
+    row_forms(proj, bins, forms);
+    let frame = Frame {
+        bins,
+        forms,
+        background: background.map(f64::from),
+    };
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    let row_values = 3 * w;
+    fill_and_drain_in_order(
+        (row_values * h, row_values * ROW, tile_rows_per_group()),
+        groups,
+        |ty, band| tile_row(path, exp, &frame, pool, ty, band),
+        &mut |offset, values| drain(offset / row_values.max(1), values),
+    )
+}
+
+/// Tile rows computed together when a frame is streamed ([`rasterize_in_bands_on`]): two
+/// for each thread of the pool, enough that both threads stay busy while a group is drained.
+pub(crate) fn tile_rows_per_group() -> usize {
+    2 * rayon::current_num_threads().max(1)
+}
+
+/// Panics when the CPU lacks `path`'s instructions: every `unsafe` call of a path's loops
+/// relies on this check.
+fn check_path(path: SimdPath) {
+    assert!(
+        SimdPath::available().contains(&path),
+        "this CPU cannot run the {path} path"
+    );
+}
+
+/// Sums tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the bottom)
+/// with a scratch of `pool`; returns its pairs.
+fn tile_row(
+    path: SimdPath,
+    exp: ExpMode,
+    frame: &Frame,
+    pool: &TileScratchPool,
+    ty: usize,
+    band: &mut [f32],
+) -> u64 {
+    pool.with(|scratch| {
+        let tiles_x = frame.bins.tiles_x as usize;
+        (0..tiles_x)
+            .map(|tx| tile_on(path, exp, frame, ty * tiles_x + tx, scratch, band))
+            .sum()
+    })
 }
 
 /// Sizes `image` for the frame of `bins`, its pixels to be written tile by tile; whether
@@ -851,7 +908,7 @@ fn tile_on(
 ) -> u64 {
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `rasterize_on` checked that the CPU has the path's features.
+        // SAFETY: the caller ran `check_path`: the CPU has the path's features.
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
             tile_avx512::<true, false>(frame, t, scratch, band)
         },

@@ -18,16 +18,17 @@ use crate::backward::raster::{PixelGradient, rasterize_backward, rasterize_with_
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
 use crate::colour::{order_by_depth, shade};
-use crate::composite::composite;
+use crate::composite::{composite, composite_in_bands_on};
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result, check_non_negative_setting};
 use crate::model::scene::{Blend, Scene};
+use crate::parallel::{Drain, GroupBuffers};
 use crate::project::{ProjectedKernels, project};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
 use crate::{
     model::Image,
-    raster::{ExpMode, rasterize},
+    raster::{ExpMode, SimdPath, rasterize, rasterize_in_bands_on},
 };
 
 /// Default dilation `s` of SPEC §4, px².
@@ -115,6 +116,8 @@ pub struct RenderContext {
     /// Alpha frames: each pixel's final transmittance and stop, for the backward.
     pub(crate) pixel_stops: Vec<crate::composite::PixelStop>,
     image: Image,
+    /// The rows of a frame rendered in bands ([`Self::render_in_bands`]).
+    row_groups: GroupBuffers,
 }
 
 impl RenderContext {
@@ -136,6 +139,51 @@ impl RenderContext {
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
         Ok(self.finish_frame(scene, camera, options))
+    }
+
+    /// [`Self::render`] without an image: the frame's rows go to `drain` in order, a group
+    /// of tile rows at a time (the index of its first row and its RGB values, row-major), while
+    /// the next group is computed ([`crate::parallel::fill_and_drain_in_order`]). The values
+    /// are [`Self::render`]'s image's, bit for bit, in the memory of two groups of rows rather
+    /// than an image: for frames that go straight to a file. Nothing is kept for a backward,
+    /// and [`Self::image`] is left as it was. Returns the frame's counts, or `drain`'s first
+    /// error, after which no more rows are computed.
+    pub fn render_in_bands(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        drain: &mut Drain<Error>,
+    ) -> Result<RenderStats> {
+        check_frame(tau, options)?;
+        slice(scene, tau, options.cutoff, &mut self.sliced);
+        self.project_and_bin(scene, camera, options);
+        let background = scene.background.map(|b| b as f32);
+        let path = SimdPath::detect();
+        let pairs = match scene.blend {
+            Blend::Additive => rasterize_in_bands_on(
+                path,
+                &self.projected,
+                &self.bins,
+                background,
+                options.exp,
+                (&mut self.row_forms, &self.tile_scratch),
+                &mut self.row_groups,
+                drain,
+            ),
+            Blend::Alpha => composite_in_bands_on(
+                path,
+                &self.projected,
+                &self.bins,
+                background,
+                options.exp,
+                &mut self.row_forms,
+                &mut self.row_groups,
+                drain,
+            ),
+        }?;
+        Ok(self.stats(pairs))
     }
 
     /// [`Self::render`] visiting only the kernels `index` says may be alive at `tau`: the

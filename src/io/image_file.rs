@@ -16,6 +16,7 @@ use crate::io::{write_atomically, write_atomically_sized};
 use crate::model::Image;
 use crate::model::error::{Error, Result};
 use crate::model::image::{all_finite, quantize_all_checked};
+use crate::parallel::Drain;
 
 /// Bits per channel of an integer image file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -65,11 +66,32 @@ pub fn encode_image<W: Write + Seek>(
         ImageKind::Exr => ExrLayout::of(image.width as usize, image.height as usize)
             .and_then(|layout| write_exr(image, &layout, out))
             .map(drop),
-        ImageKind::Png => {
-            encode_png(image, depth).and_then(|(bytes, _finite)| out.write_all(&bytes))
-        }
+        ImageKind::Png => encode_png(
+            Path::new("<memory>"),
+            (image.width, image.height),
+            depth,
+            |sink| image_rows(image, sink),
+        )
+        .map_err(std::io::Error::other)
+        .and_then(|png| out.write_all(&png.bytes)),
     }
     .map_err(image::ImageError::IoError)
+}
+
+/// Rows of an image handed over in order, top to bottom: the index of the first row and
+/// whole rows of RGB values, row-major ([`save_rows`]).
+pub type RowSink<'a> = Drain<'a, Error>;
+
+/// Rows handed over at a time from an image in memory: a band small enough to stay in cache.
+const ROWS_OF_AN_IMAGE: usize = 64;
+
+/// Hands `image`'s rows to `sink` in order, [`ROWS_OF_AN_IMAGE`] at a time.
+fn image_rows(image: &Image, sink: &mut RowSink) -> Result<()> {
+    let row = 3 * image.width.max(1) as usize;
+    for (k, rows) in image.pixels.chunks(ROWS_OF_AN_IMAGE * row).enumerate() {
+        sink(k * ROWS_OF_AN_IMAGE, rows)?;
+    }
+    Ok(())
 }
 
 /// Channels quantised at a time while encoding a PNG: a band of rows small enough to stay
@@ -79,38 +101,101 @@ const PNG_BAND_CHANNELS: usize = 1 << 16;
 /// The largest IDAT chunk a PNG is written in (12 bytes of framing each).
 const PNG_CHUNK_BYTES: usize = 1 << 16;
 
-/// `image` as an RGB PNG at `depth`, and whether every channel is finite (found in the
-/// same pass): fdeflate's fast compression with adaptive filters, or, where that comes out
-/// larger than the scanlines stored uncompressed would (noise: its fixed codes spend up to
-/// 12 bits on a byte), the scanlines stored, as png's whole-image writer does. Encoded in
-/// memory: png's stream writer drops an error of its last chunk's write (its chunk writer
-/// flushes on drop), which a `Vec` cannot return.
-fn encode_png(image: &Image, depth: BitDepth) -> std::io::Result<(Vec<u8>, bool)> {
-    let (bytes, finite) = encode_png_with(image, depth, png::Compression::Fast)?;
+/// A PNG encoded in memory, what made its rows, and its first channel that was not finite.
+struct EncodedPng<T> {
+    bytes: Vec<u8>,
+    produced: T,
+    not_finite: Option<NotFinite>,
+}
+
+/// Where an image first holds a value that is not finite: its index among the image's
+/// channels, and the value.
+#[derive(Clone, Copy, Debug)]
+struct NotFinite {
+    channel: usize,
+    value: f32,
+}
+
+impl NotFinite {
+    /// The first value of `values`, the channels from index `start` of the image, that is
+    /// not finite (none when all are).
+    fn find(start: usize, values: &[f32]) -> Option<NotFinite> {
+        let k = values.iter().position(|v| !v.is_finite())?;
+        Some(NotFinite {
+            channel: start + k,
+            value: values[k],
+        })
+    }
+
+    /// The error refusing to write `path`, `width` pixels wide, for this value.
+    fn error(self, path: &Path, width: u32) -> Error {
+        let pixel = self.channel / 3;
+        let width = width.max(1) as usize;
+        Error::Numeric(format!(
+            "{}: not written: pixel ({}, {}) channel {} is {}, not finite (amplitudes or background too large for f32)",
+            path.display(),
+            pixel % width,
+            pixel / width,
+            self.channel % 3,
+            self.value
+        ))
+    }
+}
+
+/// The rows `produce` hands over ([`RowSink`]), a `size` image, as an RGB PNG at `depth`,
+/// and where it first holds a value that is not finite (found in the same pass): fdeflate's
+/// fast compression with adaptive filters, or, where that comes out larger than the
+/// scanlines stored uncompressed would (noise: its fixed codes spend up to 12 bits on a
+/// byte), the scanlines stored, as png's whole-image writer does; `produce` then runs a
+/// second time. Encoded in memory: png's stream writer drops an error of its last chunk's
+/// write (its chunk writer flushes on drop), which a `Vec` cannot return.
+fn encode_png<T>(
+    path: &Path,
+    size: (u32, u32),
+    depth: BitDepth,
+    mut produce: impl FnMut(&mut RowSink) -> Result<T>,
+) -> Result<EncodedPng<T>> {
+    let png = encode_png_with(path, size, depth, png::Compression::Fast, &mut produce)?;
     let channel_bytes = match depth {
         BitDepth::Eight => 1,
         BitDepth::Sixteen => 2,
     };
-    let scanlines = u64::from(image.height) * (1 + 3 * channel_bytes * u64::from(image.width));
+    let (width, height) = (u64::from(size.0), u64::from(size.1));
+    let scanlines = height * (1 + 3 * channel_bytes * width);
     // Stored: the scanlines, 5 bytes a deflate block of up to 65535, 12 a chunk of 64 KiB,
     // the zlib and PNG framing; a bound a little above.
     let stored = scanlines + scanlines / 4096 + 96;
-    if bytes.len() as u64 > stored {
-        let (stored, _) = encode_png_with(image, depth, png::Compression::NoCompression)?;
-        return Ok((stored, finite));
+    if png.bytes.len() as u64 > stored {
+        let stored = png::Compression::NoCompression;
+        return encode_png_with(path, size, depth, stored, &mut produce);
     }
-    Ok((bytes, finite))
+    Ok(png)
 }
 
-/// [`encode_png`] with `compression`: the channels quantised ([`quantize_all_checked`]) a
-/// band of rows at a time and streamed into the encoder.
-fn encode_png_with(
-    image: &Image,
+/// [`encode_png`] with `compression`: the channels quantised ([`quantize_all_checked`]) as
+/// they arrive, a band at a time, and streamed into the encoder; the encoder's errors name
+/// `path`.
+fn encode_png_with<T>(
+    path: &Path,
+    (width, height): (u32, u32),
     depth: BitDepth,
     compression: png::Compression,
-) -> std::io::Result<(Vec<u8>, bool)> {
+    produce: &mut impl FnMut(&mut RowSink) -> Result<T>,
+) -> Result<EncodedPng<T>> {
+    let cannot = |e| Error::write(path, "cannot encode", e);
+    encode_png_rows((width, height), depth, compression, produce, cannot)
+}
+
+/// [`encode_png_with`], its encoder's errors made by `cannot`.
+fn encode_png_rows<T>(
+    (width, height): (u32, u32),
+    depth: BitDepth,
+    compression: png::Compression,
+    produce: &mut impl FnMut(&mut RowSink) -> Result<T>,
+    cannot: impl Fn(std::io::Error) -> Error + Sync,
+) -> Result<EncodedPng<T>> {
     let mut bytes = Vec::new();
-    let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);
+    let mut encoder = png::Encoder::new(&mut bytes, width, height);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(match depth {
         BitDepth::Eight => png::BitDepth::Eight,
@@ -120,31 +205,43 @@ fn encode_png_with(
     if !matches!(compression, png::Compression::NoCompression) {
         encoder.set_filter(png::Filter::Adaptive);
     }
-    let mut writer = encoder.write_header()?;
-    let mut stream = writer.stream_writer_with_size(PNG_CHUNK_BYTES)?;
-    let row = 3 * image.width.max(1) as usize;
+    let mut writer = encoder.write_header().map_err(|e| cannot(e.into()))?;
+    let mut stream = writer
+        .stream_writer_with_size(PNG_CHUNK_BYTES)
+        .map_err(|e| cannot(e.into()))?;
+    let row = 3 * width.max(1) as usize;
     let band = row * (PNG_BAND_CHANNELS / row).max(1);
-    let mut finite = true;
+    let mut not_finite = None;
     let mut big_endian = Vec::new();
-    for channels in image.pixels.chunks(band) {
-        match depth {
-            BitDepth::Eight => {
-                let (levels, ok) = quantize_all_checked::<u8>(channels);
-                finite &= ok;
-                stream.write_all(&levels)?;
+    let mut sink = |first_row: usize, rows: &[f32]| -> Result<()> {
+        for (k, channels) in rows.chunks(band).enumerate() {
+            let finite = match depth {
+                BitDepth::Eight => {
+                    let (levels, finite) = quantize_all_checked::<u8>(channels);
+                    stream.write_all(&levels).map(|()| finite)
+                }
+                BitDepth::Sixteen => {
+                    let (levels, finite) = quantize_all_checked::<u16>(channels);
+                    big_endian.clear();
+                    big_endian.extend(levels.iter().flat_map(|level| level.to_be_bytes()));
+                    stream.write_all(&big_endian).map(|()| finite)
+                }
             }
-            BitDepth::Sixteen => {
-                let (levels, ok) = quantize_all_checked::<u16>(channels);
-                finite &= ok;
-                big_endian.clear();
-                big_endian.extend(levels.iter().flat_map(|level| level.to_be_bytes()));
-                stream.write_all(&big_endian)?;
+            .map_err(&cannot)?;
+            if !finite && not_finite.is_none() {
+                not_finite = NotFinite::find(first_row * row + k * band, channels);
             }
         }
-    }
-    stream.finish()?;
-    writer.finish()?;
-    Ok((bytes, finite))
+        Ok(())
+    };
+    let produced = produce(&mut sink)?;
+    stream.finish().map_err(|e| cannot(e.into()))?;
+    writer.finish().map_err(|e| cannot(e.into()))?;
+    Ok(EncodedPng {
+        bytes,
+        produced,
+        not_finite,
+    })
 }
 
 /// The error of an image too large for an EXR file's 32-bit sizes.
@@ -217,102 +314,147 @@ fn exr_header(w: usize, h: usize) -> std::io::Result<Vec<u8>> {
     Ok(header)
 }
 
-/// Writes `image` as an OpenEXR file: float32 R, G, B, uncompressed scan lines, increasing
-/// y — the simplest layout of the format (OpenEXR file layout: magic and version, header
-/// attributes, line offset table, then per line its y, its byte count and the channels'
-/// samples in alphabetical order, B, G, R). Float renders hardly compress, so writing is a
-/// copy at memory speed; every reader of the format opens it (tested with the `exr` crate's).
+/// Writes `image` as an OpenEXR file ([`write_exr_header`], then its lines
+/// [`write_exr_lines`]).
 fn write_exr<W: Write + Seek>(
     image: &Image,
-    ExrLayout { header, line_bytes }: &ExrLayout,
+    layout: &ExrLayout,
     out: &mut W,
 ) -> std::io::Result<()> {
-    let (w, h) = (image.width as usize, image.height as usize);
-    let line_bytes = *line_bytes;
-    out.write_all(header)?;
-    // One block per line: 8 bytes of y and size, then the samples.
-    let first_block = (header.len() + 8 * h) as u64;
-    let block = 8 + 12 * w as u64;
-    let mut offsets = Vec::with_capacity(8 * h);
-    for y in 0..h as u64 {
-        offsets.extend_from_slice(&(first_block + y * block).to_le_bytes());
-    }
-    out.write_all(&offsets)?;
-    // Lines are laid out in parallel, 64 at a time, and written in order.
-    use rayon::prelude::*;
-    const LINES: usize = 64;
-    let block_bytes = 8 + 12 * w;
-    let mut buffer = vec![0_u8; LINES * block_bytes];
-    for (chunk, rows) in image
-        .pixels
-        .chunks(LINES * 3 * w.max(1))
-        .take(h.div_ceil(LINES))
-        .enumerate()
-    {
-        let lines = rows.len() / (3 * w.max(1));
-        let bytes = &mut buffer[..lines * block_bytes];
-        bytes
-            .par_chunks_mut(block_bytes)
-            .zip(rows.par_chunks(3 * w.max(1)))
-            .enumerate()
-            .for_each(|(k, (block, row))| {
-                let y = (chunk * LINES + k) as i32;
-                block[..4].copy_from_slice(&y.to_le_bytes());
-                block[4..8].copy_from_slice(&line_bytes.to_le_bytes());
-                // The B, G and R planes of the line, each a pass over its pixels.
-                let planes = block[8..].chunks_exact_mut(4 * w.max(1));
-                for (plane, c) in planes.zip([2, 1, 0]) {
-                    for (sample, pixel) in plane.chunks_exact_mut(4).zip(row.chunks_exact(3)) {
-                        sample.copy_from_slice(&pixel[c].to_le_bytes());
-                    }
-                }
-            });
-        out.write_all(bytes)?;
+    write_exr_header(layout, image.height as usize, out)?;
+    let row = 3 * image.width.max(1) as usize;
+    let mut buffer = Vec::new();
+    for (k, rows) in image.pixels.chunks(ROWS_OF_AN_IMAGE * row).enumerate() {
+        write_exr_lines(layout, k * ROWS_OF_AN_IMAGE, rows, &mut buffer, out)?;
     }
     Ok(())
 }
 
-/// Writes `image` to `path` (format from the extension), atomically.
-pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
-    let kind = ImageKind::from_path(path)?;
-    // Nothing non-finite leaves: an EXR would hold inf, a PNG a clamped lie. A PNG is
-    // encoded in memory first (usually smaller than its levels, at most a few bytes a row
-    // larger), its finiteness found in the same pass; both are then written with their
-    // length known beforehand (`write_atomically_sized`), an EXR's following from its size.
-    let png = match kind {
-        ImageKind::Png => {
-            Some(encode_png(image, depth).map_err(|e| Error::write(path, "cannot encode", e))?)
-        }
-        ImageKind::Exr => None,
-    };
-    let all_finite = png
-        .as_ref()
-        .map_or_else(|| all_finite(&image.pixels), |(_, finite)| *finite);
-    // The position only on failure.
-    if let Some(k) = (!all_finite)
-        .then(|| image.pixels.iter().position(|v| !v.is_finite()))
-        .flatten()
-    {
-        let pixel = k / 3;
-        let width = image.width.max(1) as usize;
-        return Err(Error::Numeric(format!(
-            "{}: not written: pixel ({}, {}) channel {} is {}, not finite (amplitudes or background too large for f32)",
-            path.display(),
-            pixel % width,
-            pixel / width,
-            k % 3,
-            image.pixels[k]
-        )));
+/// Writes the start of an OpenEXR file of `h` lines laid out as `layout`: float32 R, G, B,
+/// uncompressed scan lines, increasing y — the simplest layout of the format (OpenEXR file
+/// layout: magic and version, header attributes, line offset table, then per line its y,
+/// its byte count and the channels' samples in alphabetical order, B, G, R). Float renders
+/// hardly compress, so writing is a copy at memory speed; every reader of the format opens
+/// it (tested with the `exr` crate's).
+fn write_exr_header<W: Write>(
+    ExrLayout { header, line_bytes }: &ExrLayout,
+    h: usize,
+    out: &mut W,
+) -> std::io::Result<()> {
+    out.write_all(header)?;
+    // One block per line: 8 bytes of y and size, then the samples.
+    let first_block = (header.len() + 8 * h) as u64;
+    let block = 8 + *line_bytes as u64;
+    let mut offsets = Vec::with_capacity(8 * h);
+    for y in 0..h as u64 {
+        offsets.extend_from_slice(&(first_block + y * block).to_le_bytes());
     }
-    match png {
-        Some((bytes, _)) => {
-            write_atomically_sized(path, bytes.len() as u64, |w| w.write_all(&bytes))
+    out.write_all(&offsets)
+}
+
+/// Writes whole lines `rows` (RGB, row-major) of an OpenEXR file laid out as `layout`, the
+/// first of them line `first_row`, after the lines before it ([`write_exr_header`]): each
+/// line's block laid out in `buffer`, in parallel, then written.
+fn write_exr_lines<W: Write>(
+    &ExrLayout { line_bytes, .. }: &ExrLayout,
+    first_row: usize,
+    rows: &[f32],
+    buffer: &mut Vec<u8>,
+    out: &mut W,
+) -> std::io::Result<()> {
+    use rayon::prelude::*;
+    let samples = line_bytes as usize / 4;
+    let block_bytes = 8 + 4 * samples;
+    let lines = rows.len() / samples.max(1);
+    buffer.resize(lines * block_bytes, 0);
+    buffer
+        .par_chunks_mut(block_bytes)
+        .zip(rows.par_chunks(samples.max(1)))
+        .enumerate()
+        .for_each(|(k, (block, row))| {
+            let y = (first_row + k) as i32;
+            block[..4].copy_from_slice(&y.to_le_bytes());
+            block[4..8].copy_from_slice(&line_bytes.to_le_bytes());
+            // The B, G and R planes of the line, each a pass over its pixels.
+            let planes = block[8..].chunks_exact_mut((samples / 3).max(1) * 4);
+            for (plane, c) in planes.zip([2, 1, 0]) {
+                for (sample, pixel) in plane.chunks_exact_mut(4).zip(row.chunks_exact(3)) {
+                    sample.copy_from_slice(&pixel[c].to_le_bytes());
+                }
+            }
+        });
+    out.write_all(buffer)
+}
+
+/// Writes `image` to `path` (format from the extension), atomically ([`save_rows`]).
+pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
+    save_rows(path, (image.width, image.height), depth, |sink| {
+        image_rows(image, sink)
+    })
+}
+
+/// Writes to `path` (format from the extension), atomically, the `width`×`height` image
+/// whose rows `produce` hands to its sink, in order and each once ([`RowSink`]), and returns
+/// what `produce` returned. The image never needs to be whole in memory: a PNG is encoded
+/// as its rows arrive, its levels a band at a time, then written; an EXR's rows go into its
+/// temporary file as they arrive. Nothing non-finite leaves: an EXR would hold inf, a PNG a
+/// clamped lie; the first such value is named in the error, and nothing is written. Both
+/// are written with their length known beforehand ([`write_atomically_sized`]), an EXR's
+/// following from its size, a PNG's once encoded. A PNG whose compressed data came out
+/// larger than its scanlines stored is encoded again, stored, with `produce` run again.
+pub fn save_rows<T>(
+    path: &Path,
+    (width, height): (u32, u32),
+    depth: BitDepth,
+    mut produce: impl FnMut(&mut RowSink) -> Result<T>,
+) -> Result<T> {
+    match ImageKind::from_path(path)? {
+        ImageKind::Png => {
+            let png = encode_png(path, (width, height), depth, produce)?;
+            if let Some(first) = png.not_finite {
+                return Err(first.error(path, width));
+            }
+            write_atomically_sized(path, png.bytes.len() as u64, |w| w.write_all(&png.bytes))?;
+            Ok(png.produced)
         }
-        None => {
-            let (w, h) = (image.width as usize, image.height as usize);
+        ImageKind::Exr => {
+            let (w, h) = (width as usize, height as usize);
             let layout = ExrLayout::of(w, h).map_err(|e| Error::write(path, "cannot write", e))?;
-            write_atomically_sized(path, layout.file_bytes(h), |out| {
-                write_exr(image, &layout, out)
+            // `produce`'s own error (or a sink's: a value not finite, a failed write) is
+            // kept here, and the writing stopped with a placeholder.
+            let mut failure = None;
+            let mut produced = None;
+            let written = write_atomically_sized(path, layout.file_bytes(h), |out| {
+                write_exr_header(&layout, h, out)?;
+                let mut buffer = Vec::new();
+                let mut sink = |first_row: usize, rows: &[f32]| -> Result<()> {
+                    if !all_finite(rows) {
+                        let channel = first_row * 3 * w;
+                        if let Some(first) = NotFinite::find(channel, rows) {
+                            return Err(first.error(path, width));
+                        }
+                    }
+                    write_exr_lines(&layout, first_row, rows, &mut buffer, out)
+                        .map_err(|e| Error::write(path, "cannot write", e))
+                };
+                match produce(&mut sink) {
+                    Ok(value) => {
+                        produced = Some(value);
+                        Ok(())
+                    }
+                    Err(error) => {
+                        failure = Some(error);
+                        Err(std::io::Error::other("stopped"))
+                    }
+                }
+            });
+            if let Some(error) = failure {
+                return Err(error);
+            }
+            written?;
+            produced.ok_or_else(|| {
+                let never = std::io::Error::other("no rows were made");
+                Error::write(path, "cannot write", never)
             })
         }
     }
@@ -572,6 +714,84 @@ mod tests {
         );
         assert!(!path.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    /// Hands `image`'s rows to `sink` `rows` at a time, as a renderer would.
+    fn rows_of(image: &Image, rows: usize, sink: &mut RowSink) -> Result<()> {
+        let row = 3 * image.width as usize;
+        for (k, values) in image.pixels.chunks(rows * row).enumerate() {
+            sink(k * rows, values)?;
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn rows_handed_over_in_groups_write_the_same_files_as_the_whole_image() {
+        // A smooth image (compressed) and noise (stored, so the rows are made twice).
+        let dir = tempfile::tempdir().unwrap();
+        let mut smooth = Image::filled(70, 45, [0.0; 3]);
+        for (k, v) in smooth.pixels.iter_mut().enumerate() {
+            *v = (k % 210) as f32 / 209.0;
+        }
+        let mut noise = smooth.clone();
+        let mut state = 0x2545_f491_u32;
+        for v in &mut noise.pixels {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            *v = (state >> 8) as f32 / (1 << 24) as f32;
+        }
+        for (image, what, passes) in [(&smooth, "smooth", 1), (&noise, "noise", 2)] {
+            for name in ["a.png", "a.exr"] {
+                let whole = dir.path().join(format!("whole-{what}-{name}"));
+                save_image(image, &whole, BitDepth::Sixteen).unwrap();
+                let grouped = dir.path().join(format!("grouped-{what}-{name}"));
+                let mut runs = 0;
+                let size = (image.width, image.height);
+                let made = save_rows(&grouped, size, BitDepth::Sixteen, |sink| {
+                    runs += 1;
+                    rows_of(image, 7, sink).map(|()| 42)
+                })
+                .unwrap();
+                assert_eq!(made, 42);
+                let expected_runs = if name.ends_with("png") { passes } else { 1 };
+                assert_eq!(runs, expected_runs, "{what} {name}");
+                assert_eq!(
+                    std::fs::read(&whole).unwrap(),
+                    std::fs::read(&grouped).unwrap(),
+                    "{what} {name}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_non_finite_row_or_a_failed_producer_leaves_the_previous_file_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut image = Image::filled(40, 30, [0.5; 3]);
+        // Pixel (5, 17), in the third group of 7 rows, channel 2.
+        image.pixels[3 * (17 * 40 + 5) + 2] = f32::NAN;
+        for name in ["a.exr", "a.png"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, b"previous").unwrap();
+            let message = save_rows(&path, (40, 30), BitDepth::Eight, |sink| {
+                rows_of(&image, 7, sink)
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(
+                message.contains("pixel (5, 17) channel 2 is NaN"),
+                "{name}: {message}"
+            );
+            // The producer's own error comes back as it was.
+            let failed = save_rows(&path, (40, 30), BitDepth::Eight, |_| -> Result<()> {
+                Err(Error::Usage("the frame failed".into()))
+            })
+            .unwrap_err();
+            assert_eq!(failed.to_string(), "the frame failed", "{name}");
+            assert_eq!(std::fs::read(&path).unwrap(), b"previous", "{name}");
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
     }
 
     #[test]

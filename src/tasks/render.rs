@@ -10,7 +10,7 @@ use crate::io::camera_file::load_camera;
 use crate::io::gltf::{load_camera as load_gltf_camera, split_camera_spec};
 use crate::io::gradients_file::gradients_to_json;
 use crate::io::image_file::{
-    BitDepth, ImageKind, image_size, load_image, save_image, save_rgb8_png,
+    BitDepth, ImageKind, image_size, load_image, save_rgb8_png, save_rows,
 };
 use crate::io::scene_file::load_scene;
 use crate::io::{check_output, write_bytes_atomically};
@@ -175,14 +175,17 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
         let mut context = RenderContext::new();
         let units = camera.pixel_count() as f64 * (1.0 + scene.len() as f64);
         let render_and_write = || -> Result<RenderStats> {
-            let stats = context.render(&scene, &camera, view.time, &view.options)?;
             if request.overlay {
+                let stats = context.render(&scene, &camera, view.time, &view.options)?;
                 let (w, h, rgb) = draw_overlay(&context)?;
                 save_rgb8_png(&request.out, w, h, &rgb)?;
-            } else {
-                save_image(context.image(), &request.out, request.depth)?;
+                return Ok(stats);
             }
-            Ok(stats)
+            // The frame's rows go to the file as they are made: no image in memory.
+            let size = (camera.width, camera.height);
+            save_rows(&request.out, size, request.depth, |rows| {
+                context.render_in_bands(&scene, &camera, view.time, &view.options, rows)
+            })
         };
         let stats = with_threads_on_pool(threads_for(view.threads, units), render_and_write)??;
         Ok(RenderSummary {
