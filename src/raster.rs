@@ -19,7 +19,10 @@
 //! registers **in f64** while every entry of the row passes over them, and the row is rounded
 //! to f32 and written straight into the image. Tile rows (bands of 16 image rows) run in
 //! parallel; every pixel adds the same terms in the same order whatever the number of
-//! threads. The backward ([`crate::backward::raster`]) evaluates the same pairs.
+//! threads. A frame going straight to a file needs no image: [`rasterize_in_bands_on`] sums
+//! groups of tile rows into two reused buffers and hands each group to the encoder while the
+//! next is summed, the same values. The backward ([`crate::backward::raster`]) evaluates the
+//! same pairs.
 //!
 //! **Per pixel** (SPEC §5, precision): with `Δv` the row's offset from the centre, the
 //! quadratic form is `q = Qxx t² + Δv²/Σ2yy` with `t = Δu + k Δv` (see [`crate::project`]);
