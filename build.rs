@@ -60,7 +60,9 @@ fn pack_relative_relocations() {
             .arg(&source)
             .output()
             .is_ok_and(|o| o.status.success())
-        && Command::new(&probe).output().is_ok_and(|o| o.status.success());
+        && Command::new(&probe)
+            .output()
+            .is_ok_and(|o| o.status.success());
     if works {
         println!("cargo:rustc-link-arg-bins={flag}");
     }
