@@ -563,7 +563,8 @@ fn check_path(path: SimdPath) {
 }
 
 /// Sums tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the bottom)
-/// with a scratch of `pool`; returns its pairs.
+/// with a scratch of `pool`; returns its pairs. A run of tiles without kernels is the
+/// background, written as such ([`fill_background`]) without setting the tiles up.
 fn tile_row(
     path: SimdPath,
     exp: ExpMode,
@@ -572,12 +573,48 @@ fn tile_row(
     ty: usize,
     band: &mut [f32],
 ) -> u64 {
+    let tiles_x = frame.bins.tiles_x as usize;
+    let first = ty * tiles_x;
+    let empty = |tx: usize| frame.bins.tile_entries(first + tx).is_empty();
     pool.with(|scratch| {
-        let tiles_x = frame.bins.tiles_x as usize;
-        (0..tiles_x)
-            .map(|tx| tile_on(path, exp, frame, ty * tiles_x + tx, scratch, band))
-            .sum()
+        let (mut pairs, mut tx) = (0, 0);
+        while tx < tiles_x {
+            if empty(tx) {
+                let end = (tx..tiles_x).find(|&x| !empty(x)).unwrap_or(tiles_x);
+                let width = frame.bins.width as usize;
+                let columns = tx * ROW..(end * ROW).min(width);
+                fill_background(frame.background, (columns, width), band);
+                tx = end;
+            } else {
+                pairs += tile_on(path, exp, frame, first + tx, scratch, band);
+                tx += 1;
+            }
+        }
+        pairs
     })
+}
+
+/// Writes `background` into the pixel columns `columns` of every row of `band` (whole rows
+/// of `width` RGB pixels), as a tile without kernels would: its f64 sum with no term,
+/// `b + 0` (which makes a background of −0 a +0, as the loops do), rounded to f32. The first
+/// row's span is written pixel by pixel, the others copied from it.
+fn fill_background(
+    background: [f64; 3],
+    (columns, width): (std::ops::Range<usize>, usize),
+    band: &mut [f32],
+) {
+    let pixel = background.map(|b| (b + 0.0) as f32);
+    let span = 3 * columns.start..3 * columns.end;
+    let mut lines = band.chunks_exact_mut(3 * width.max(1));
+    if let Some(line) = lines.next() {
+        for value in line[span.clone()].chunks_exact_mut(3) {
+            value.copy_from_slice(&pixel);
+        }
+        let written: &[f32] = &line[span.clone()];
+        for line in lines {
+            line[span.clone()].copy_from_slice(written);
+        }
+    }
 }
 
 /// Sizes `image` for the frame of `bins`, its pixels to be written tile by tile; whether
@@ -1633,6 +1670,74 @@ mod tests {
                 .zip(&qs)
                 .find(|((g, s), _)| g.to_bits() != **s);
             assert!(differing.is_none(), "{path:?}: {differing:?}");
+        }
+    }
+
+    #[test]
+    fn tiles_without_kernels_are_the_background_a_tile_set_up_would_give() {
+        use crate::render::{RenderContext, RenderOptions};
+        // A few kernels in one corner: most tiles are empty, in runs, with partial tiles at
+        // the right and the bottom. Every path, and backgrounds of −0 (written +0) and
+        // other values, against each tile set up and summed ([`forward_tile_on`]).
+        let (w, h) = (165, 83);
+        let camera = crate::scenes::synthetic::bench_camera(w, h);
+        let kernels: Vec<_> = (0..40)
+            .map(|i| {
+                let x = -0.9 + 0.01 * f64::from(i);
+                crate::model::scene::Kernel::new([x, 0.5, 0.0, 0.5], [0.05; 4], [0.3, 0.2, 0.1])
+            })
+            .collect();
+        let scene = crate::model::Scene::from_kernels(&kernels, [0.0; 3], "test").unwrap();
+        let mut context = RenderContext::new();
+        let stats = context
+            .render(&scene, &camera, 0.5, &RenderOptions::default())
+            .unwrap();
+        let (proj, bins) = (&context.projected, &context.bins);
+        let tiles = bins.tiles_x as usize * bins.tiles_y as usize;
+        let empty = (0..tiles)
+            .filter(|&t| bins.tile_entries(t).is_empty())
+            .count();
+        assert!(
+            stats.pairs > 0 && empty > tiles / 2 && empty < tiles,
+            "{empty} of {tiles}"
+        );
+        for background in [[-0.0, 0.25, -0.0], [0.1, -0.2, 3e-39]] {
+            for &path in SimdPath::available() {
+                let mut forms = Vec::new();
+                let pool = TileScratchPool::default();
+                let mut image = Image::default();
+                let pairs = rasterize_on(
+                    path,
+                    proj,
+                    bins,
+                    background,
+                    ExpMode::Poly,
+                    (&mut forms, &pool),
+                    &mut image,
+                );
+                let mut expected = Image::filled(w, h, [f32::NAN; 3]);
+                let mut scratch = TileScratch::default();
+                let mut expected_pairs = 0;
+                for (ty, band) in expected.pixels.chunks_mut(3 * w as usize * ROW).enumerate() {
+                    for tx in 0..bins.tiles_x as usize {
+                        let t = ty * bins.tiles_x as usize + tx;
+                        expected_pairs += forward_tile_on(
+                            path,
+                            ExpMode::Poly,
+                            bins,
+                            &forms,
+                            background,
+                            t,
+                            &mut scratch,
+                            band,
+                        );
+                    }
+                }
+                assert_eq!(pairs, expected_pairs, "{path}");
+                let bits = |i: &Image| i.pixels.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert!(bits(&image) == bits(&expected), "{path}, {background:?}");
+                assert_eq!(image.pixels[0].to_bits(), (background[0] + 0.0).to_bits());
+            }
         }
     }
 
