@@ -278,33 +278,58 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     layout.check_body_length(length.saturating_sub(layout.body_start as u64), &origin)?;
     let mut scene = layout.empty_scene(&origin)?;
     let mut appearance = Appearance::default();
-    // The rows already read, then the rest a block at a time.
+    // The rows already read, then the rest a block at a time: while one block is decoded
+    // (in parallel), the next is read, so that the copy out of the file overlaps the
+    // decoding on another thread (one after the other on one thread).
     let mut pending = start.split_off(layout.body_start.min(start.len()));
     // No larger than the body, and read into without being cleared first (`read_to_end`
     // fills the spare capacity): its pages are first touched by the copy from the file.
     let block_rows = (BLOCK_BYTES / layout.stride.max(1)).clamp(1, layout.count.max(1));
-    let mut block = Vec::with_capacity(block_rows * layout.stride);
-    while scene.len() < layout.count {
-        let want = (layout.count - scene.len()).min(block_rows) * layout.stride;
+    let mut read_rows = |block: &mut Vec<u8>, rows: usize| -> Result<()> {
+        let want = rows * layout.stride;
         block.clear();
         let carried = pending.len().min(want);
         block.extend_from_slice(&pending[..carried]);
         pending.drain(..carried);
         (&mut file)
             .take((want - carried) as u64)
-            .read_to_end(&mut block)
+            .read_to_end(block)
             .map_err(cannot)?;
         if block.len() < want {
             return Err(cannot(std::io::ErrorKind::UnexpectedEof.into()));
         }
-        layout.decode_into(&mut scene, &mut appearance, &block, &origin)?;
+        Ok(())
+    };
+    let mut block = Vec::with_capacity(block_rows * layout.stride);
+    let mut next = Vec::new();
+    let mut rows_read = layout.count.min(block_rows);
+    read_rows(&mut block, rows_read)?;
+    while !block.is_empty() {
+        let rows_next = (layout.count - rows_read).min(block_rows);
+        let (read, decoded) = rayon::join(
+            || match rows_next {
+                0 => {
+                    next.clear();
+                    Ok(())
+                }
+                rows => {
+                    next.reserve(block_rows * layout.stride);
+                    read_rows(&mut next, rows)
+                }
+            },
+            || layout.decode_into(&mut scene, &mut appearance, &block, &origin),
+        );
+        decoded?;
+        read?;
+        rows_read += rows_next;
+        std::mem::swap(&mut block, &mut next);
     }
     layout.finish(scene, appearance, &origin)
 }
 
-/// Bytes of rows read at a time: large enough to amortise a parallel pass, small enough to
-/// stay in cache.
-const BLOCK_BYTES: usize = 1 << 20;
+/// Bytes of rows read at a time: large enough to amortise a parallel pass, small enough
+/// that the block being decoded and the one being read stay in cache together.
+const BLOCK_BYTES: usize = 1 << 18;
 
 /// Where the header must end.
 const HEADER_LIMIT: usize = 64 * 1024;

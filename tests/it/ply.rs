@@ -66,9 +66,10 @@ fn scene_ply_round_trips_exactly_and_is_smaller_than_json() {
 
 #[test]
 fn scenes_of_no_kernel_and_of_several_read_blocks_round_trip() {
-    // The reader takes rows a block (1 MiB) at a time, the first ones carried over from the
-    // header's read: an empty body, a body within that read, and one of several blocks and
-    // a partial last one all come back as written.
+    // The reader takes rows a block (256 KiB) at a time, the first ones carried over from
+    // the header's read, and reads the next block while it decodes one: an empty body, a
+    // body within that read, and one of several blocks and a partial last one all come
+    // back as written, on one thread and on two.
     let dir = tempfile::tempdir().unwrap();
     let camera = crate::common::test_camera(32, 32);
     for (k, general) in [0, 3, 16_000].into_iter().enumerate() {
@@ -88,10 +89,63 @@ fn scenes_of_no_kernel_and_of_several_read_blocks_round_trip() {
                 "{general}"
             );
         }
-        assert_eq!(
-            splat4d::io::scene_file::load_scene(&path).unwrap(),
-            scene,
-            "{general}"
+        for threads in [1, 2] {
+            let loaded = crate::common::on_threads(threads, || {
+                splat4d::io::scene_file::load_scene(&path).unwrap()
+            });
+            assert_eq!(loaded, scene, "{general} kernels, {threads} threads");
+        }
+    }
+}
+
+#[test]
+fn a_bad_kernel_or_a_short_body_in_a_later_block_is_named() {
+    // 16 000 kernels and more: a bad scale written into the fifth block is named, on one
+    // thread and on two, while the next block is read; the same file, good, cut short in its
+    // last block is refused before any row is read, naming the file.
+    let dir = tempfile::tempdir().unwrap();
+    let camera = crate::common::test_camera(32, 32);
+    let scene = crate::common::hard_random_scene(&camera, 9, 16_000);
+    let good = dir.path().join("good.ply");
+    splat4d::io::scene_file::save_scene(&scene, &good).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let body = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let stride = (bytes.len() - body) / scene.len();
+    assert_eq!(stride % SCENE_PROPERTIES.len(), 0);
+    let size = stride / SCENE_PROPERTIES.len();
+    // `sy`, the sixth property, of kernel 9000, as a double or a float.
+    let at = body + 9000 * stride + 5 * size;
+    let mut bad_bytes = bytes.clone();
+    match size {
+        8 => bad_bytes[at..at + 8].copy_from_slice(&(-1.0_f64).to_le_bytes()),
+        4 => bad_bytes[at..at + 4].copy_from_slice(&(-1.0_f32).to_le_bytes()),
+        other => panic!("{other}-byte properties"),
+    }
+    let bad = dir.path().join("bad.ply");
+    std::fs::write(&bad, &bad_bytes).unwrap();
+    let short = dir.path().join("short.ply");
+    std::fs::write(&short, &bytes[..bytes.len() - 100]).unwrap();
+    for threads in [1, 2] {
+        let error = |file: &std::path::Path| {
+            crate::common::on_threads(threads, || {
+                splat4d::io::scene_file::load_scene(file)
+                    .unwrap_err()
+                    .to_string()
+            })
+        };
+        let message = error(&bad);
+        assert!(
+            message.contains("kernel 9000") && message.contains("scale[1]"),
+            "{threads} threads: {message}"
+        );
+        let message = error(&short);
+        assert!(
+            message.contains("short.ply") && message.contains("bytes of data"),
+            "{threads} threads: {message}"
         );
     }
 }
