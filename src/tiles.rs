@@ -260,12 +260,18 @@ fn sort_reaches_by_tile(out: &mut TileBins) {
         .par_iter_mut()
         .enumerate()
         .for_each(|(ty, counts)| {
+            // A reach of tiles `first..end` adds one to each: as a difference, +1 at
+            // `first` and -1 at `end` (wrapping: the running sums are the counts, whole),
+            // then summed twice, into the counts and into their running totals.
             counts.clear();
-            counts.resize(tiles_x + 1, 0);
+            counts.resize(tiles_x + 2, 0);
             for reach in reaches_of(ty) {
-                for tx in reach.first..reach.end {
-                    counts[tx as usize + 1] += 1;
-                }
+                counts[reach.first as usize + 1] = counts[reach.first as usize + 1].wrapping_add(1);
+                counts[reach.end as usize + 1] = counts[reach.end as usize + 1].wrapping_sub(1);
+            }
+            counts.pop();
+            for tx in 0..tiles_x {
+                counts[tx + 1] = counts[tx + 1].wrapping_add(counts[tx]);
             }
             for tx in 0..tiles_x {
                 counts[tx + 1] += counts[tx];
@@ -357,6 +363,47 @@ fn for_each_tile_row(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_tile_lists_the_kernels_reaching_it_in_ascending_order() {
+        // The passes (boxes, counts, reaches, the counting sort) against the plain
+        // definition: every kernel in order, pushed onto the list of each tile it reaches.
+        // Sizes with partial tiles, more kernels than a chunk, on one and three threads.
+        use crate::render::{RenderContext, RenderOptions};
+        for (n, (w, h)) in [(3000, (161, 97)), (2500, (64, 300)), (10, (17, 16))] {
+            let scene = crate::scenes::synthetic::bench_scene(n, 3);
+            let camera = crate::scenes::synthetic::bench_camera(w, h);
+            let mut context = RenderContext::new();
+            context
+                .render(&scene, &camera, 0.5, &RenderOptions::default())
+                .unwrap();
+            let proj = &context.projected;
+            let (tiles_x, tiles_y) = (w.div_ceil(TILE_SIZE), h.div_ceil(TILE_SIZE));
+            let mut lists = vec![Vec::new(); (tiles_x * tiles_y) as usize];
+            for p in 0..proj.len() {
+                let bounds = context.bins.pixel_bounds[p];
+                for_each_tile_row(proj, p, bounds, |ty, columns| {
+                    for tx in columns {
+                        lists[(ty * tiles_x + tx) as usize].push(p as u32);
+                    }
+                });
+            }
+            let entries: usize = lists.iter().map(Vec::len).sum();
+            assert!(entries >= n.min(1000), "{w}×{h}: {entries} entries");
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut bins = TileBins::default();
+                pool.install(|| bin(proj, w, h, &mut bins));
+                assert_eq!(bins.tile_count(), lists.len());
+                for (t, list) in lists.iter().enumerate() {
+                    assert_eq!(bins.tile_entries(t), list.as_slice(), "{w}×{h}, tile {t}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn pixel_span_includes_centres_on_the_boundary_and_clips() {
