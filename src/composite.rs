@@ -29,13 +29,13 @@
 use rayon::prelude::*;
 
 use crate::model::Image;
-use crate::parallel::{Drain, GroupBuffers, fill_and_drain_in_order};
+use crate::parallel::{Drain, GroupBuffers};
 use crate::project::ProjectedKernels;
 use std::ops::Range;
 
 use crate::raster::{
     ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile_range, row_forms, size_image, tile_rows_per_group,
+    prepare_tile_range, row_forms, size_image, stream_tile_rows,
 };
 use crate::tiles::TileBins;
 
@@ -169,8 +169,7 @@ pub fn composite_on(
     image: &mut Image,
     stops: &mut Vec<PixelStop>,
 ) -> u64 {
-    check_alpha_frame(path, proj);
-    row_forms(proj, bins, forms);
+    let frame = AlphaFrame::prepare(path, proj, bins, forms, background);
     let pixels = size_image(bins, image);
     let (w, h) = (bins.width as usize, bins.height as usize);
     stops.clear();
@@ -178,12 +177,6 @@ pub fn composite_on(
     if !pixels {
         return 0;
     }
-    let frame = AlphaFrame {
-        proj,
-        bins,
-        forms,
-        background: background.map(f64::from),
-    };
     image
         .pixels
         .par_chunks_mut(3 * w * ROW)
@@ -200,7 +193,7 @@ pub fn composite_on(
 
 /// [`composite_on`] without an image: the frame's rows are handed to `drain` in order, a
 /// group of tile rows at a time (its first row and its RGB values), while the next group is
-/// composited ([`fill_and_drain_in_order`]); the pixels' stops, which only a backward reads,
+/// composited ([`crate::parallel::fill_and_drain_in_order`]); the pixels' stops, which only a backward reads,
 /// are not kept. The same values as [`composite_on`]'s image. Returns the pairs composited,
 /// or `drain`'s first error.
 ///
@@ -217,18 +210,9 @@ pub fn composite_in_bands_on<E: Send>(
     groups: &mut GroupBuffers,
     drain: &mut Drain<E>,
 ) -> Result<u64, E> {
-    check_alpha_frame(path, proj);
-    row_forms(proj, bins, forms);
-    let frame = AlphaFrame {
-        proj,
+    let frame = AlphaFrame::prepare(path, proj, bins, forms, background);
+    stream_tile_rows(
         bins,
-        forms,
-        background: background.map(f64::from),
-    };
-    let (w, h) = (bins.width as usize, bins.height as usize);
-    let row_values = 3 * w;
-    fill_and_drain_in_order(
-        (row_values * h, row_values * ROW, tile_rows_per_group()),
         groups,
         |ty, band| {
             SCRATCH.with(|cell| {
@@ -240,7 +224,7 @@ pub fn composite_in_bands_on<E: Send>(
                 pairs
             })
         },
-        &mut |offset, values| drain(offset / row_values.max(1), values),
+        drain,
     )
 }
 
@@ -287,6 +271,27 @@ struct AlphaFrame<'a> {
     bins: &'a TileBins,
     forms: &'a [RowForm],
     background: [f64; 3],
+}
+
+impl<'a> AlphaFrame<'a> {
+    /// The frame of `proj` (with opacities) binned in `bins` over `background`, its row
+    /// forms computed into `forms`, after checking it and `path` ([`check_alpha_frame`]).
+    fn prepare(
+        path: SimdPath,
+        proj: &'a ProjectedKernels,
+        bins: &'a TileBins,
+        forms: &'a mut Vec<RowForm>,
+        background: [f32; 3],
+    ) -> Self {
+        check_alpha_frame(path, proj);
+        row_forms(proj, bins, forms);
+        AlphaFrame {
+            proj,
+            bins,
+            forms,
+            background: background.map(f64::from),
+        }
+    }
 }
 
 /// The image rows of one tile row, and their pixels' stops.

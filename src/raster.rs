@@ -492,17 +492,11 @@ pub fn rasterize_on(
     (forms, pool): (&mut Vec<RowForm>, &TileScratchPool),
     image: &mut Image,
 ) -> u64 {
-    check_path(path);
-    row_forms(proj, bins, forms);
+    let frame = Frame::prepare(path, proj, bins, forms, background);
     let w = bins.width as usize;
     if !size_image(bins, image) {
         return 0;
     }
-    let frame = Frame {
-        bins,
-        forms,
-        background: background.map(f64::from),
-    };
     // Tile rows (bands of 16 image rows) in parallel: each writes only its own rows.
     image
         .pixels
@@ -530,27 +524,35 @@ pub fn rasterize_in_bands_on<E: Send>(
     groups: &mut GroupBuffers,
     drain: &mut Drain<E>,
 ) -> Result<u64, E> {
-    check_path(path);
-    row_forms(proj, bins, forms);
-    let frame = Frame {
+    let frame = Frame::prepare(path, proj, bins, forms, background);
+    stream_tile_rows(
         bins,
-        forms,
-        background: background.map(f64::from),
-    };
-    let (w, h) = (bins.width as usize, bins.height as usize);
-    let row_values = 3 * w;
-    fill_and_drain_in_order(
-        (row_values * h, row_values * ROW, tile_rows_per_group()),
         groups,
         |ty, band| tile_row(path, exp, &frame, pool, ty, band),
-        &mut |offset, values| drain(offset / row_values.max(1), values),
+        drain,
     )
 }
 
-/// Tile rows computed together when a frame is streamed ([`rasterize_in_bands_on`]): two
-/// for each thread of the pool, enough that both threads stay busy while a group is drained.
-pub(crate) fn tile_rows_per_group() -> usize {
-    2 * rayon::current_num_threads().max(1)
+/// Streams the tile rows of a frame of `bins`' size: tile row `ty` is computed into its 16
+/// image rows (fewer at the bottom) by `tile_row(ty, band)`, and the rows are handed to
+/// `drain` with the index of the first ([`fill_and_drain_in_order`]), in groups of two tile
+/// rows for each thread of the pool, enough that both threads stay busy while a group is
+/// drained. Returns the sum of `tile_row`'s results or `drain`'s first error.
+pub(crate) fn stream_tile_rows<E: Send>(
+    bins: &TileBins,
+    groups: &mut GroupBuffers,
+    tile_row: impl Fn(usize, &mut [f32]) -> u64 + Sync,
+    drain: &mut Drain<E>,
+) -> Result<u64, E> {
+    let (w, h) = (bins.width as usize, bins.height as usize);
+    let row_values = 3 * w;
+    let group = 2 * rayon::current_num_threads().max(1);
+    fill_and_drain_in_order(
+        (row_values * h, row_values * ROW, group),
+        groups,
+        tile_row,
+        &mut |offset, values| drain(offset / row_values.max(1), values),
+    )
 }
 
 /// Panics when the CPU lacks `path`'s instructions: every `unsafe` call of a path's loops
@@ -935,6 +937,26 @@ struct Frame<'a> {
     bins: &'a TileBins,
     forms: &'a [RowForm],
     background: [f64; 3],
+}
+
+impl<'a> Frame<'a> {
+    /// The frame of `proj` binned in `bins` over `background`, its row forms computed into
+    /// `forms`, after checking that the CPU has `path`'s instructions.
+    fn prepare(
+        path: SimdPath,
+        proj: &ProjectedKernels,
+        bins: &'a TileBins,
+        forms: &'a mut Vec<RowForm>,
+        background: [f32; 3],
+    ) -> Self {
+        check_path(path);
+        row_forms(proj, bins, forms);
+        Frame {
+            bins,
+            forms,
+            background: background.map(f64::from),
+        }
+    }
 }
 
 /// Prepares and sums tile `t` into `band` with the loops compiled for `path`.
