@@ -36,7 +36,14 @@ pub fn set_limit(bytes: u64) {
 /// `MemAvailable` of `/proc/meminfo`, in bytes (`None` where there is none).
 #[must_use]
 pub fn available() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    use std::io::Read;
+    // Room for the whole file first: `/proc` files report no size, so reading into an
+    // empty string took nine reads of growing size where this takes two.
+    let mut text = String::with_capacity(8192);
+    std::fs::File::open("/proc/meminfo")
+        .ok()?
+        .read_to_string(&mut text)
+        .ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     kib.checked_mul(1024)
