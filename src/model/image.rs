@@ -165,8 +165,8 @@ impl Level for u16 {
 
 /// [`quantize`] of every channel of `pixels` at `T`'s depth (`u8`: 255, `u16`: 65535),
 /// the same levels bit for bit. Every PNG written pays it once a channel (786 432 channels
-/// at 512×512), so with AVX2 and FMA (chosen at run time) it runs sixteen channels a step,
-/// in f64; elsewhere it is the scalar [`quantize`].
+/// at 512×512), so with AVX2 and FMA, or AVX-512 (chosen at run time), it runs sixteen
+/// channels a step, in f64; elsewhere it is the scalar [`quantize`].
 #[must_use]
 pub fn quantize_all<T: Level>(pixels: &[f32]) -> Vec<T> {
     quantize_all_checked(pixels).0
