@@ -37,12 +37,19 @@ fn watch(git_path: &str) {
 /// works: a Linux GNU target built on itself, whose linker (binutils ≥ 2.38) takes the flag
 /// and whose C library (glibc ≥ 2.36) runs the result — a probe program is linked with it
 /// and run; otherwise the binaries are linked as before. Address randomisation is kept:
-/// the relocations are the same, only stored differently.
+/// the relocations are the same, only stored differently. The trade: a binary so linked
+/// needs glibc ≥ 2.36 where it runs (`GLIBC_ABI_DT_RELR`), as the machine that built it
+/// has; to copy a build to older systems, build with `SPLAT4D_NO_RELR=1`. Not done when
+/// `RUSTFLAGS` choose their own linker, which the probe would not be testing.
 fn pack_relative_relocations() {
     let var = |name: &str| std::env::var(name).unwrap_or_default();
+    let rustflags = var("CARGO_ENCODED_RUSTFLAGS");
     if var("CARGO_CFG_TARGET_OS") != "linux"
         || var("CARGO_CFG_TARGET_ENV") != "gnu"
         || var("TARGET") != var("HOST")
+        || std::env::var_os("SPLAT4D_NO_RELR").is_some()
+        || rustflags.contains("linker")
+        || rustflags.contains("fuse-ld")
     {
         return;
     }
@@ -70,7 +77,9 @@ fn pack_relative_relocations() {
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
-    println!("cargo:rerun-if-env-changed=RUSTC_LINKER");
+    for name in ["RUSTC_LINKER", "CARGO_ENCODED_RUSTFLAGS", "SPLAT4D_NO_RELR"] {
+        println!("cargo:rerun-if-env-changed={name}");
+    }
     pack_relative_relocations();
     let package = env!("CARGO_PKG_VERSION");
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();

@@ -1097,7 +1097,7 @@ fn sum_tile<const FAST: bool, const AVX2: bool>(
         pairs += if AVX2 {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: AVX2 is only asked for on the AVX2 and AVX-512 paths, which
-            // `rasterize_on` checked the CPU has.
+            // `Frame::prepare` (or the training step's caller) checked the CPU has.
             unsafe {
                 avx2::sum_half_row::<FAST>(
                     entries,

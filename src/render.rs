@@ -145,9 +145,11 @@ impl RenderContext {
     /// of tile rows at a time (the index of its first row and its RGB values, row-major), while
     /// the next group is computed ([`crate::parallel::fill_and_drain_in_order`]). The values
     /// are [`Self::render`]'s image's, bit for bit, in the memory of two groups of rows rather
-    /// than an image: for frames that go straight to a file. Nothing is kept for a backward,
-    /// and [`Self::image`] is left as it was. Returns the frame's counts, or `drain`'s first
-    /// error, after which no more rows are computed.
+    /// than an image: for frames that go straight to a file. Nothing is kept for a backward
+    /// (call [`Self::render`] before [`Self::backward`]), and [`Self::image`] is left as it
+    /// was. Returns the frame's counts, or `drain`'s first error, after which no more rows
+    /// are handed over (on more than one thread the group after the failed one may already
+    /// have been computed).
     pub fn render_in_bands(
         &mut self,
         scene: &Scene,
@@ -276,8 +278,9 @@ impl RenderContext {
     }
 
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
-    /// rendered (RGB, row-major, like the image). Call it right after [`Self::render`] with the
-    /// same scene, camera, time and options: it reuses that frame's slices, ellipses and bins.
+    /// rendered (RGB, row-major, like the image). Call it right after [`Self::render`] (not
+    /// [`Self::render_in_bands`], which keeps no alpha stops) with the same scene, camera,
+    /// time and options: it reuses that frame's slices, ellipses and bins.
     /// `grads` must be sized for the scene ([`Gradients::for_scene`]).
     pub fn backward(
         &mut self,

@@ -165,7 +165,8 @@ fn encode_png<T>(
     // Stored: the scanlines, 5 bytes a deflate block of up to 65535, 12 a chunk of 64 KiB,
     // the zlib and PNG framing; a bound a little above.
     let stored = scanlines + scanlines / 4096 + 96;
-    if png.bytes.len() as u64 > stored {
+    // An image that is not finite is refused anyway: no second encoding for it.
+    if png.not_finite.is_none() && png.bytes.len() as u64 > stored {
         let stored = png::Compression::NoCompression;
         return encode_png_with(path, size, depth, stored, &mut produce);
     }
@@ -393,6 +394,58 @@ pub fn save_image(image: &Image, path: &Path, depth: BitDepth) -> Result<()> {
     })
 }
 
+/// The rows a producer of [`save_rows`] has handed over: each group must start where the
+/// last ended and hold whole rows within the image, and all must be there at the end, or
+/// nothing is written (a file with rows missing or misplaced would read as an image).
+struct RowCount<'a> {
+    path: &'a Path,
+    row_values: usize,
+    height: usize,
+    taken: usize,
+}
+
+impl<'a> RowCount<'a> {
+    fn new(path: &'a Path, (width, height): (u32, u32)) -> Self {
+        RowCount {
+            path,
+            row_values: 3 * width.max(1) as usize,
+            height: height as usize,
+            taken: 0,
+        }
+    }
+
+    /// Counts rows from `first_row` holding `values`, or refuses them out of order.
+    fn take(&mut self, first_row: usize, values: &[f32]) -> Result<()> {
+        let rows = values.len() / self.row_values;
+        if first_row != self.taken
+            || !values.len().is_multiple_of(self.row_values)
+            || first_row + rows > self.height
+        {
+            return Err(self.refuse(format!(
+                "rows {first_row}.. ({} values) handed over after {} of {} rows",
+                values.len(),
+                self.taken,
+                self.height
+            )));
+        }
+        self.taken += rows;
+        Ok(())
+    }
+
+    /// Refuses an image whose rows are not all there.
+    fn all_taken(&self) -> Result<()> {
+        if self.taken == self.height {
+            return Ok(());
+        }
+        Err(self.refuse(format!("{} of {} rows made", self.taken, self.height)))
+    }
+
+    fn refuse(&self, what: String) -> Error {
+        let e = std::io::Error::other(format!("the image's rows are not whole: {what}"));
+        Error::write(self.path, "not written", e)
+    }
+}
+
 /// Writes to `path` (format from the extension), atomically, the `width`×`height` image
 /// whose rows `produce` hands to its sink, in order and each once ([`RowSink`]), and returns
 /// what `produce` returned. The image never needs to be whole in memory: a PNG is encoded
@@ -410,7 +463,16 @@ pub fn save_rows<T>(
 ) -> Result<T> {
     match ImageKind::from_path(path)? {
         ImageKind::Png => {
-            let png = encode_png(path, (width, height), depth, produce)?;
+            let mut rows = RowCount::new(path, (width, height));
+            let png = encode_png(path, (width, height), depth, |sink| {
+                rows = RowCount::new(path, (width, height));
+                let produced = produce(&mut |first_row: usize, values: &[f32]| {
+                    rows.take(first_row, values)?;
+                    sink(first_row, values)
+                })?;
+                rows.all_taken()?;
+                Ok(produced)
+            })?;
             if let Some(first) = png.not_finite {
                 return Err(first.error(path, width));
             }
@@ -427,7 +489,9 @@ pub fn save_rows<T>(
             let written = write_atomically_sized(path, layout.file_bytes(h), |out| {
                 write_exr_header(&layout, h, out)?;
                 let mut buffer = Vec::new();
+                let mut count = RowCount::new(path, (width, height));
                 let mut sink = |first_row: usize, rows: &[f32]| -> Result<()> {
+                    count.take(first_row, rows)?;
                     if !all_finite(rows) {
                         let channel = first_row * 3 * w;
                         if let Some(first) = NotFinite::find(channel, rows) {
@@ -437,7 +501,7 @@ pub fn save_rows<T>(
                     write_exr_lines(&layout, first_row, rows, &mut buffer, out)
                         .map_err(|e| Error::write(path, "cannot write", e))
                 };
-                match produce(&mut sink) {
+                match produce(&mut sink).and_then(|value| count.all_taken().map(|()| value)) {
                     Ok(value) => {
                         produced = Some(value);
                         Ok(())
@@ -792,6 +856,63 @@ mod tests {
             assert_eq!(std::fs::read(&path).unwrap(), b"previous", "{name}");
         }
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn rows_missing_or_out_of_order_write_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let image = Image::filled(20, 30, [0.5; 3]);
+        let row = 3 * 20;
+        for name in ["a.exr", "a.png"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, b"previous").unwrap();
+            type Producer<'a> = &'a dyn Fn(&mut RowSink) -> Result<()>;
+            let attempts: [(&str, Producer); 4] = [
+                ("too few", &|sink| sink(0, &image.pixels[..29 * row])),
+                ("a gap", &|sink| {
+                    sink(0, &image.pixels[..10 * row])?;
+                    sink(11, &image.pixels[11 * row..])
+                }),
+                ("twice", &|sink| {
+                    sink(0, &image.pixels)?;
+                    sink(0, &image.pixels[..row])
+                }),
+                ("part of a row", &|sink| sink(0, &image.pixels[..row + 1])),
+            ];
+            for (what, produce) in attempts {
+                let message = save_rows(&path, (20, 30), BitDepth::Eight, produce)
+                    .unwrap_err()
+                    .to_string();
+                assert!(
+                    message.contains(name) && message.contains("rows are not whole"),
+                    "{name}, {what}: {message}"
+                );
+                assert_eq!(std::fs::read(&path).unwrap(), b"previous", "{name}, {what}");
+            }
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn a_non_finite_value_past_the_first_band_of_a_group_is_placed_right() {
+        // 400 pixels wide: a PNG band holds 54 rows, so a group of 64 rows is quantised in
+        // two bands; the NaN is in the second, at pixel (7, 60), channel 1.
+        let dir = tempfile::tempdir().unwrap();
+        let mut image = Image::filled(400, 70, [0.5; 3]);
+        image.pixels[3 * (60 * 400 + 7) + 1] = f32::NAN;
+        for name in ["a.png", "a.exr"] {
+            let path = dir.path().join(name);
+            let message = save_rows(&path, (400, 70), BitDepth::Eight, |sink| {
+                rows_of(&image, 64, sink)
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(
+                message.contains("pixel (7, 60) channel 1 is NaN"),
+                "{name}: {message}"
+            );
+            assert!(!path.exists());
+        }
     }
 
     #[test]

@@ -313,6 +313,7 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
                     Ok(())
                 }
                 rows => {
+                    next.clear();
                     next.reserve(block_rows * layout.stride);
                     read_rows(&mut next, rows)
                 }
