@@ -254,10 +254,7 @@ fn tile_row(
 /// Panics when the CPU lacks `path`'s instructions (every `unsafe` call of a path's loops
 /// relies on this check) or `proj` has no opacities.
 fn check_alpha_frame(path: SimdPath, proj: &ProjectedKernels) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
+    path.assert_available();
     assert_eq!(
         proj.opacities.len(),
         proj.len(),

@@ -211,6 +211,15 @@ impl SimdPath {
         })
     }
 
+    /// Panics when this CPU cannot run the path: every `unsafe` call of a path's loops
+    /// relies on this check.
+    pub fn assert_available(self) {
+        assert!(
+            Self::available().contains(&self),
+            "this CPU cannot run the {self} path"
+        );
+    }
+
     /// Every path this CPU runs, narrowest first (the tests compare them all). Detected
     /// once per process: renders ask at every frame.
     #[must_use]
@@ -553,15 +562,6 @@ pub(crate) fn stream_tile_rows<E: Send>(
         tile_row,
         &mut |offset, values| drain(offset / row_values.max(1), values),
     )
-}
-
-/// Panics when the CPU lacks `path`'s instructions: every `unsafe` call of a path's loops
-/// relies on this check.
-fn check_path(path: SimdPath) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
 }
 
 /// Sums tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the bottom)
@@ -949,7 +949,7 @@ impl<'a> Frame<'a> {
         forms: &'a mut Vec<RowForm>,
         background: [f32; 3],
     ) -> Self {
-        check_path(path);
+        path.assert_available();
         row_forms(proj, bins, forms);
         Frame {
             bins,
@@ -970,7 +970,7 @@ fn tile_on(
 ) -> u64 {
     match (path, exp) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller ran `check_path`: the CPU has the path's features.
+        // SAFETY: the caller ran `SimdPath::assert_available`: the CPU has the path's features.
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
             tile_avx512::<true, false>(frame, t, scratch, band)
         },

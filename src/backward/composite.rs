@@ -101,10 +101,7 @@ pub(crate) fn composite_backward_on(
     partials: &mut Vec<AlphaPartial>,
     out: &mut ScreenGradients,
 ) -> [f64; 3] {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run {path}"
-    );
+    path.assert_available();
     let width = bins.width as usize;
     assert_eq!(
         v_image.len(),

@@ -87,10 +87,7 @@ pub(crate) fn rasterize_backward_on(
     sums: &mut Vec<[f64; 8]>,
     out: &mut ScreenGradients,
 ) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run {path}"
-    );
+    path.assert_available();
     let width = bins.width as usize;
     assert_eq!(
         v_image.len(),
@@ -176,10 +173,7 @@ pub(crate) fn rasterize_with_backward_on(
     (partials, sums): (&mut Vec<[f32; 8]>, &mut Vec<[f64; 8]>),
     out: &mut ScreenGradients,
 ) -> u64 {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run {path}"
-    );
+    path.assert_available();
     row_forms(proj, bins, forms);
     let pixels = size_image(bins, image);
     v_image.clear();

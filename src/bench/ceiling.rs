@@ -130,10 +130,7 @@ pub fn fill_efficiencies(rows: &mut [BenchRow], ceilings: &[Ceiling]) {
 /// When the CPU lacks `path`'s instructions.
 #[must_use]
 pub fn ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f32) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
+    path.assert_available();
     // Kernels of a few pixels, centred near the row, with q in the exp's useful range.
     let constants: Vec<[f32; 6]> = (0..kernels.max(1))
         .map(|k| {
@@ -268,10 +265,7 @@ mod avx512 {
 /// When the CPU lacks `path`'s instructions.
 #[must_use]
 pub fn alpha_ceiling_probe(path: SimdPath, kernels: usize, passes: usize) -> (u64, f64) {
-    assert!(
-        SimdPath::available().contains(&path),
-        "this CPU cannot run the {path} path"
-    );
+    path.assert_available();
     // Kernels of a few pixels near the row, q in the exp's useful range, opacities that
     // keep T well above f64's smallest normal over a pass.
     let constants: Vec<ProbeKernel> = (0..kernels.max(1))
