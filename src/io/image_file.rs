@@ -184,17 +184,6 @@ fn encode_png_with<T>(
     produce: &mut impl FnMut(&mut RowSink) -> Result<T>,
 ) -> Result<EncodedPng<T>> {
     let cannot = |e| Error::write(path, "cannot encode", e);
-    encode_png_rows((width, height), depth, compression, produce, cannot)
-}
-
-/// [`encode_png_with`], its encoder's errors made by `cannot`.
-fn encode_png_rows<T>(
-    (width, height): (u32, u32),
-    depth: BitDepth,
-    compression: png::Compression,
-    produce: &mut impl FnMut(&mut RowSink) -> Result<T>,
-    cannot: impl Fn(std::io::Error) -> Error + Sync,
-) -> Result<EncodedPng<T>> {
     let mut bytes = Vec::new();
     let mut encoder = png::Encoder::new(&mut bytes, width, height);
     encoder.set_color(png::ColorType::Rgb);
@@ -463,9 +452,8 @@ pub fn save_rows<T>(
 ) -> Result<T> {
     match ImageKind::from_path(path)? {
         ImageKind::Png => {
-            let mut rows = RowCount::new(path, (width, height));
             let png = encode_png(path, (width, height), depth, |sink| {
-                rows = RowCount::new(path, (width, height));
+                let mut rows = RowCount::new(path, (width, height));
                 let produced = produce(&mut |first_row: usize, values: &[f32]| {
                     rows.take(first_row, values)?;
                     sink(first_row, values)
