@@ -282,12 +282,14 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     // (in parallel), the next is read, so that the copy out of the file overlaps the
     // decoding on another thread (one after the other on one thread).
     let mut pending = start.split_off(layout.body_start.min(start.len()));
-    // No larger than the body, and read into without being cleared first (`read_to_end`
-    // fills the spare capacity): its pages are first touched by the copy from the file.
     let block_rows = (BLOCK_BYTES / layout.stride.max(1)).clamp(1, layout.count.max(1));
+    // `rows` rows into `block`, emptied first: room for exactly them, read into without
+    // being cleared (`read_to_end` fills the spare capacity), so that its pages are first
+    // touched by the copy from the file. No rows: an empty block, and nothing read.
     let mut read_rows = |block: &mut Vec<u8>, rows: usize| -> Result<()> {
         let want = rows * layout.stride;
         block.clear();
+        block.reserve(want);
         let carried = pending.len().min(want);
         block.extend_from_slice(&pending[..carried]);
         pending.drain(..carried);
@@ -300,24 +302,13 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
         }
         Ok(())
     };
-    let mut block = Vec::with_capacity(block_rows * layout.stride);
-    let mut next = Vec::new();
+    let (mut block, mut next) = (Vec::new(), Vec::new());
     let mut rows_read = layout.count.min(block_rows);
     read_rows(&mut block, rows_read)?;
     while !block.is_empty() {
         let rows_next = (layout.count - rows_read).min(block_rows);
         let (read, decoded) = rayon::join(
-            || match rows_next {
-                0 => {
-                    next.clear();
-                    Ok(())
-                }
-                rows => {
-                    next.clear();
-                    next.reserve(block_rows * layout.stride);
-                    read_rows(&mut next, rows)
-                }
-            },
+            || read_rows(&mut next, rows_next),
             || layout.decode_into(&mut scene, &mut appearance, &block, &origin),
         );
         decoded?;
