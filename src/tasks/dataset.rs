@@ -8,7 +8,7 @@ use crate::io::scene_file::load_scene;
 use crate::model::{Progress, Result};
 use crate::render::RenderOptions;
 use crate::scenes::dataset::{DatasetSpec, frame_count, render_views};
-use crate::tasks::with_threads;
+use crate::tasks::with_threads_on_pool;
 
 /// `splat4d dataset`.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,7 +69,10 @@ pub fn write_dataset(
     let mut writer = DatasetWriter::new(&request.out, request.exr)?.with_blend(scene.blend);
     progress.start("render", frame_count(spec));
     let mut frames = [0_usize; 3];
-    with_threads(request.threads, || {
+    // Without a thread count the views are rendered and written on a thread of the global
+    // pool, so each frame's parallel loops start there instead of being handed over one by
+    // one (a 60-frame 48×48 set: 30.8 → 21.8 ms).
+    with_threads_on_pool(request.threads, || {
         render_views(&scene, spec, &request.options, |split, view| {
             frames[split.index()] += 1;
             writer.add(split.name(), &view)?;

@@ -21,7 +21,7 @@ use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Result, Scene, Silent, Up};
 use crate::render::RenderContext;
-use crate::tasks::with_threads;
+use crate::tasks::with_threads_on_pool;
 use crate::view::live::StepPoint;
 use crate::view::{Live, Server, Showing};
 
@@ -249,7 +249,10 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     });
     progress.start(plan.steps);
     let mut last_heldout = None;
-    let records = with_threads(request.threads, || {
+    // Without a thread count the steps run on a thread of the global pool, so each step's
+    // parallel loops start there instead of being handed over one by one. The step's
+    // callback only hands the viewer a snapshot: nothing here waits on another thread.
+    let records = with_threads_on_pool(request.threads, || {
         fit(
             &mut scene,
             &dataset.train,
@@ -306,7 +309,7 @@ fn finish_fit(
         ("test", &dataset.test),
     ] {
         if !views.is_empty() {
-            let mse = with_threads(request.threads, || {
+            let mse = with_threads_on_pool(request.threads, || {
                 evaluate(scene, views, render, &mut context)
             })??;
             splits.push((split, views.len(), mse));
@@ -418,7 +421,7 @@ fn fit_alpha_dataset(
     });
     progress.start(options.steps);
     let mut last_heldout = None;
-    let records = with_threads(request.threads, || {
+    let records = with_threads_on_pool(request.threads, || {
         fit_alpha(
             &mut scene,
             &bounds,
