@@ -20,7 +20,9 @@
 //! pixels inside the ellipse follows from one square root. Everything here is f64.
 
 use crate::model::camera::Camera;
-use crate::parallel::{fill_in_parallel, filter_map_in_parallel};
+use rayon::prelude::*;
+
+use crate::parallel::{KEEP_CHUNK, fill_in_parallel, gather_kept};
 use crate::slice::SlicedKernels;
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
@@ -48,9 +50,6 @@ pub struct ProjectedKernels {
     pub amplitudes: Vec<[f32; 3]>,
     /// Alpha scenes: the opacity at τ, `o(τ)` ([`crate::colour::shade`]; empty otherwise).
     pub opacities: Vec<f64>,
-    /// Scratch of [`project`]: the kept projections with their slice index, kept between
-    /// frames.
-    scratch: Vec<(u32, OnScreen)>,
 }
 
 impl ProjectedKernels {
@@ -225,45 +224,66 @@ fn projection(camera: &Camera, dilation: f64, mean: [f64; 3], cov: [f64; 6]) -> 
     })
 }
 
-/// What the forward stages read of a kernel's [`Projection`].
-#[derive(Clone, Copy, Debug)]
-struct OnScreen {
-    mean: [f64; 2],
-    covariance: [f64; 3],
-    conic: [f64; 3],
-}
-
 /// Projects every sliced kernel into `out` (reset first). `dilation` is `s` of SPEC §4, px².
 /// The kernels are projected in parallel and the ones on screen kept in ascending order
 /// (the result does not depend on the thread count).
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
-    let mut on_screen = std::mem::take(&mut out.scratch);
-    filter_map_in_parallel(&mut on_screen, sliced.len(), |s| {
-        let projection = projection(camera, dilation, sliced.means[s], sliced.covariances[s])?;
-        Some(OnScreen {
-            mean: projection.mean,
-            covariance: projection.covariance,
-            conic: projection.conic,
+    let count = sliced.len();
+    out.reset();
+    out.slice_from_proj.reserve(count);
+    out.means.reserve(count);
+    out.covariances.reserve(count);
+    out.conics.reserve(count);
+    // One pass: each chunk of sliced kernels writes the projections it keeps at the start of
+    // its own stretch of these arrays ([`KEEP_CHUNK`]); the stretches are gathered after.
+    let kept: Vec<usize> = out.slice_from_proj.spare_capacity_mut()[..count]
+        .par_chunks_mut(KEEP_CHUNK)
+        .zip(out.means.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .zip(out.covariances.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .zip(out.conics.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .enumerate()
+        .map(|(c, (((slices, means), covariances), conics))| {
+            let mut len = 0;
+            for j in 0..slices.len() {
+                let s = c * KEEP_CHUNK + j;
+                if let Some(on_screen) =
+                    projection(camera, dilation, sliced.means[s], sliced.covariances[s])
+                {
+                    debug_assert!(u32::try_from(s).is_ok(), "slice indices fit in u32");
+                    slices[len].write(s as u32);
+                    means[len].write(on_screen.mean);
+                    covariances[len].write(on_screen.covariance);
+                    conics[len].write(on_screen.conic);
+                    len += 1;
+                }
+            }
+            len
         })
-    });
-    // Each array filled in parallel from the kept projections.
-    let n = on_screen.len();
-    let slice_of = |p: usize| on_screen[p].0 as usize;
-    let kernel = |p: usize| &on_screen[p].1;
-    fill_in_parallel(&mut out.slice_from_proj, n, |p| on_screen[p].0);
+        .collect();
+    let n = gather_kept(out.slice_from_proj.spare_capacity_mut(), &kept);
+    gather_kept(out.means.spare_capacity_mut(), &kept);
+    gather_kept(out.covariances.spare_capacity_mut(), &kept);
+    gather_kept(out.conics.spare_capacity_mut(), &kept);
+    // SAFETY: each array's first `n` slots hold the kept projections in order
+    // (`gather_kept` moved every chunk's written slots together), and `reserve` made room
+    // for `count ≥ n`. The values are `Copy`: the stale slots past `n` need no drop.
+    unsafe {
+        out.slice_from_proj.set_len(n);
+        out.means.set_len(n);
+        out.covariances.set_len(n);
+        out.conics.set_len(n);
+    }
+    // The per-slice values of the kept kernels, gathered.
+    let slice_of = |p: usize| out.slice_from_proj[p] as usize;
     fill_in_parallel(&mut out.kernel_from_proj, n, |p| {
         sliced.kernel_from_slice[slice_of(p)]
     });
-    fill_in_parallel(&mut out.means, n, |p| kernel(p).mean);
-    fill_in_parallel(&mut out.covariances, n, |p| kernel(p).covariance);
-    fill_in_parallel(&mut out.conics, n, |p| kernel(p).conic);
     fill_in_parallel(&mut out.qmax, n, |p| sliced.qmax[slice_of(p)]);
     fill_in_parallel(&mut out.radii, n, |p| {
-        let (qmax, covariance) = (sliced.qmax[slice_of(p)], kernel(p).covariance);
+        let (qmax, covariance) = (sliced.qmax[slice_of(p)], out.covariances[p]);
         [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
     });
     fill_in_parallel(&mut out.amplitudes, n, |p| {
         sliced.amplitudes[slice_of(p)].map(|a| a as f32)
     });
-    out.scratch = on_screen;
 }

@@ -22,7 +22,9 @@
 //! whose amplitude is exactly zero are dropped. Everything is f64.
 
 use crate::model::scene::{Blend, Scene};
-use crate::parallel::{fill_in_parallel, filter_map_in_parallel};
+use rayon::prelude::*;
+
+use crate::parallel::{KEEP_CHUNK, fill_in_parallel, gather_kept};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
@@ -43,9 +45,6 @@ pub struct SlicedKernels {
     pub opacities: Vec<f64>,
     /// Cut-off `qmax` on the squared Mahalanobis radius (`+∞` without truncation).
     pub qmax: Vec<f64>,
-    /// Scratch of [`slice`]: the live slices with their visiting position, kept between
-    /// frames.
-    scratch: Vec<(u32, SlicedKernel)>,
 }
 
 /// One kernel's slice.
@@ -54,7 +53,6 @@ struct SlicedKernel {
     mean: [f64; 3],
     covariance: [f64; 6],
     amplitude: [f64; 3],
-    opacity: f64,
     qmax: f64,
 }
 
@@ -187,25 +185,73 @@ fn slice_visiting(
     cutoff: f64,
     out: &mut SlicedKernels,
 ) {
-    let mut live = std::mem::take(&mut out.scratch);
-    filter_map_in_parallel(&mut live, count, |k| {
-        slice_one(scene, kernel(k), tau, cutoff)
-    });
-    // Each array filled in parallel from the live slices.
-    let n = live.len();
-    let slice = |j: usize| &live[j].1;
-    fill_in_parallel(&mut out.kernel_from_slice, n, |j| {
-        kernel(live[j].0 as usize) as u32
-    });
-    fill_in_parallel(&mut out.means, n, |j| slice(j).mean);
-    fill_in_parallel(&mut out.covariances, n, |j| slice(j).covariance);
-    fill_in_parallel(&mut out.amplitudes, n, |j| slice(j).amplitude);
-    fill_in_parallel(&mut out.qmax, n, |j| slice(j).qmax);
-    match scene.blend {
-        Blend::Additive => out.opacities.clear(),
-        Blend::Alpha => fill_in_parallel(&mut out.opacities, n, |j| slice(j).opacity),
+    out.reset();
+    out.kernel_from_slice.reserve(count);
+    out.means.reserve(count);
+    out.covariances.reserve(count);
+    out.amplitudes.reserve(count);
+    out.qmax.reserve(count);
+    // One pass: each chunk of visiting positions writes the slices it keeps at the start of
+    // its own stretch of every array ([`KEEP_CHUNK`]); the stretches are gathered after.
+    let kept: Vec<usize> = out.kernel_from_slice.spare_capacity_mut()[..count]
+        .par_chunks_mut(KEEP_CHUNK)
+        .zip(out.means.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .zip(out.covariances.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .zip(out.amplitudes.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .zip(out.qmax.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
+        .enumerate()
+        .map(
+            |(c, ((((indices, means), covariances), amplitudes), qmax))| {
+                let mut len = 0;
+                for j in 0..indices.len() {
+                    let i = kernel(c * KEEP_CHUNK + j);
+                    if let Some(s) = slice_one(scene, i, tau, cutoff) {
+                        debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
+                        indices[len].write(i as u32);
+                        means[len].write(s.mean);
+                        covariances[len].write(s.covariance);
+                        amplitudes[len].write(s.amplitude);
+                        qmax[len].write(s.qmax);
+                        len += 1;
+                    }
+                }
+                len
+            },
+        )
+        .collect();
+    let n = gather_kept(out.kernel_from_slice.spare_capacity_mut(), &kept);
+    gather_kept(out.means.spare_capacity_mut(), &kept);
+    gather_kept(out.covariances.spare_capacity_mut(), &kept);
+    gather_kept(out.amplitudes.spare_capacity_mut(), &kept);
+    gather_kept(out.qmax.spare_capacity_mut(), &kept);
+    // SAFETY: each array's first `n` slots hold the kept slices in order (`gather_kept`
+    // moved every chunk's written slots together), and `reserve` made room for `count ≥ n`.
+    // The values are `Copy`: the stale slots past `n` need no drop.
+    unsafe {
+        out.kernel_from_slice.set_len(n);
+        out.means.set_len(n);
+        out.covariances.set_len(n);
+        out.amplitudes.set_len(n);
+        out.qmax.set_len(n);
     }
-    out.scratch = live;
+    if scene.blend == Blend::Alpha {
+        let kept = &out.kernel_from_slice;
+        fill_in_parallel(&mut out.opacities, n, |s| {
+            scene.opacities[kept[s] as usize] * temporal_weight(scene, kept[s] as usize, tau)
+        });
+    }
+}
+
+/// The temporal weight `w = exp(-½ d²)` of `d = (τ - t) / st` (SPEC §2).
+#[inline(always)]
+fn weight_of(d: f64) -> f64 {
+    (-0.5 * d * d).exp()
+}
+
+/// Kernel `i`'s temporal weight at `tau`, as [`slice_one`] computes it.
+#[inline(always)]
+fn temporal_weight(scene: &Scene, i: usize, tau: f64) -> f64 {
+    weight_of((tau - scene.means[i][3]) / scene.scales[i][3])
 }
 
 /// Kernel `i` sliced at `tau`, or `None` when it is culled. Inlined into [`slice_visiting`]'s
@@ -218,7 +264,7 @@ fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKer
     let dt = tau - t;
     let d = dt / scale[3];
     let qmax = cutoff_radius_squared(peak(scene, i), d, cutoff)?;
-    let w = (-0.5 * d * d).exp();
+    let w = weight_of(d);
     let v = scene.velocities[i];
     let (amplitude, opacity) = match scene.blend {
         Blend::Additive => (scene.amplitudes[i].map(|a| a * w), 0.0),
@@ -231,7 +277,6 @@ fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKer
         mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
         covariance: covariance_3d(scene.rotations[i], scale),
         amplitude,
-        opacity,
         qmax,
     })
 }
