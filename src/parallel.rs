@@ -5,9 +5,9 @@
 //! into fresh or reused arrays. Done serially, a first large frame also pays the operating
 //! system's first touch of every new page on one thread, and compaction through `push` grows
 //! its arrays by copying. These helpers write the slots in parallel, straight into the arrays'
-//! spare capacity (once each; [`filter_map_in_parallel`] then moves what it keeps together
-//! in order): index `i`'s value is computed from `i` alone, so the output is the same for any
-//! number of threads.
+//! spare capacity (once each; a pass that keeps some values writes each chunk's at the start
+//! of its stretch and [`gather_kept`] moves them together in order): index `i`'s value is
+//! computed from `i` alone, so the output is the same for any number of threads.
 
 use rayon::prelude::*;
 

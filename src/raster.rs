@@ -52,14 +52,18 @@
 //! `splat4d bench --scene 100k --size 1920x1080 --threads 1 --no-dense`, beside the probe,
 //! the f64 reference and page zeroing; a frame alone measured 62 % and 17 % before the
 //! fused loops), the rest slicing, projection, binning and the row forms. Per row entry the
-//! loop runs the probe's work for 16 lanes (`q` and the polynomial `exp`: 14 vector
-//! instructions) plus what the probe has not: the lanes' `t` (two additions where the probe
-//! has one), the pair test, the widening of `G` to f64 (two masked conversions and an
-//! extraction) and six f64 multiply-adds where the probe has three f32 ones, with three
-//! amplitudes broadcast: 26
-//! vector arithmetic instructions a row entry against the probe's 18 (`objdump` of both
-//! loops); and a row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all
-//! 16). So the loop alone can reach about 18/26 × 10.3/16 ≈ 45 % of the probe. The work is
+//! loop runs the probe's work for 16 lanes (`q` and the polynomial `exp`: 13 vector
+//! instructions since the exp no longer forms `-½ q`) plus what the probe has not: the
+//! lanes' `t` (two additions where the probe has one), the pair test, the widening of `G` to
+//! f64 (two masked conversions and an extraction) and six f64 multiply-adds where the probe
+//! has three f32 ones, with three amplitudes broadcast: 25 vector arithmetic instructions a
+//! row entry against the probe's 17 (`objdump` of both loops: 159 instructions for four
+//! entries, 30 of them vector ones an entry with the broadcasts and register copies); and a
+//! row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all 16). So the
+//! loop alone can reach about 17/25 × 10.3/16 ≈ 44 % of the probe. Most of those
+//! instructions go to the two pipes that multiply and fuse (19 of them an entry, each taking
+//! both pipes for a cycle at 512 bits); about 20 cycles an entry is what a 100k@1080p frame
+//! takes, so the loop is bound by those pipes. The work is
 //! bound by instructions and their latency, not memory (each tile's blocks and lists stay in
 //! its worker's cache): an entry's `q` → exp → f64 chain is some 15 dependent steps, so the
 //! SIMD loops take a row's entries four at a time, their four `G` first and then their terms
@@ -137,7 +141,7 @@ impl FromStr for ExpMode {
 /// separate products and sums).
 ///
 /// **Without forming `x`.** The steps work on `y = min(q, 174) = -2 x` and `r' = -2 r`
-/// instead, with the constants scaled by powers of two ([`exp_constants`]): scaling by a
+/// instead, with the constants scaled by powers of two (`exp_constants` in the source): scaling by a
 /// power of two commutes with rounding (no step comes near an underflow or overflow), so
 /// each step rounds `(-½)^k` times the value the steps on `x` and `r` round, and the result
 /// is the same bits. That saves the product `-½ q`: one vector instruction of the 19 that a
