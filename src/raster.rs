@@ -141,10 +141,10 @@ impl FromStr for ExpMode {
 /// separate products and sums).
 ///
 /// **Without forming `x`.** The steps work on `y = min(q, 174) = -2 x` and `r' = -2 r`
-/// instead, with the constants scaled by powers of two (`exp_constants` in the source): scaling by a
-/// power of two commutes with rounding (no step comes near an underflow or overflow), so
-/// each step rounds `(-½)^k` times the value the steps on `x` and `r` round, and the result
-/// is the same bits. That saves the product `-½ q`: one vector instruction of the 19 that a
+/// instead, with the constants scaled by powers of two (`exp_constants` in the source):
+/// scaling by a power of two commutes with rounding (no step comes near an underflow or
+/// overflow), so each step rounds `(-½)^k` times the value the steps on `x` and `r` round,
+/// and the result is the same bits. That saves the product `-½ q`: one vector instruction of the 19 that a
 /// row entry spends on the FMA pipes. Checked on all 2³² f32 inputs against the steps on
 /// `x` (none differs), and against f64 by the tests.
 #[inline(always)]

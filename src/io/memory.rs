@@ -33,9 +33,32 @@ pub fn set_limit(bytes: u64) {
     LIMIT.store(bytes, Ordering::Relaxed);
 }
 
-/// `MemAvailable` of `/proc/meminfo`, in bytes (`None` where there is none).
+/// `MemAvailable` of `/proc/meminfo`, in bytes (`None` where there is none). A reading is
+/// reused for [`READING_KEPT`]: a command's checks follow each other within milliseconds
+/// (a `render` checks its scene file and then its frame), and the kernel composes the whole
+/// file for each read.
 #[must_use]
 pub fn available() -> Option<u64> {
+    static LAST: std::sync::Mutex<Option<(std::time::Instant, Option<u64>)>> =
+        std::sync::Mutex::new(None);
+    let mut last = LAST
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some((at, bytes)) = *last
+        && at.elapsed() < READING_KEPT
+    {
+        return bytes;
+    }
+    let bytes = read_available();
+    *last = Some((std::time::Instant::now(), bytes));
+    bytes
+}
+
+/// How long [`available`] reuses a reading.
+pub const READING_KEPT: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// `MemAvailable` read from `/proc/meminfo`.
+fn read_available() -> Option<u64> {
     use std::io::Read;
     // Room for the whole file first: `/proc` files report no size, so reading into an
     // empty string took nine reads of growing size where this takes two.
