@@ -21,7 +21,7 @@ use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Result, Scene, Silent, Up};
 use crate::render::RenderContext;
-use crate::tasks::with_threads_on_pool;
+use crate::tasks::{with_threads_on_pool, with_threads_on_pool_unless_shared};
 use crate::view::live::StepPoint;
 use crate::view::{Live, Server, Showing};
 
@@ -250,9 +250,10 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     progress.start(plan.steps);
     let mut last_heldout = None;
     // Without a thread count the steps run on a thread of the global pool, so each step's
-    // parallel loops start there instead of being handed over one by one. The step's
-    // callback only hands the viewer a snapshot: nothing here waits on another thread.
-    let records = with_threads_on_pool(request.threads, || {
+    // parallel loops start there instead of being handed over one by one; not with a live
+    // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
+    // the viewer a snapshot: nothing here waits on another thread.
+    let records = with_threads_on_pool_unless_shared(request.threads, viewer.is_some(), || {
         fit(
             &mut scene,
             &dataset.train,
@@ -421,7 +422,11 @@ fn fit_alpha_dataset(
     });
     progress.start(options.steps);
     let mut last_heldout = None;
-    let records = with_threads_on_pool(request.threads, || {
+    // Without a thread count the steps run on a thread of the global pool, so each step's
+    // parallel loops start there instead of being handed over one by one; not with a live
+    // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
+    // the viewer a snapshot: nothing here waits on another thread.
+    let records = with_threads_on_pool_unless_shared(request.threads, viewer.is_some(), || {
         fit_alpha(
             &mut scene,
             &bounds,

@@ -92,6 +92,22 @@ pub fn with_threads_on_pool<T: Send>(
     }
 }
 
+/// [`with_threads_on_pool`], unless `shared`: another thread runs parallel loops on the
+/// global pool while `work` runs (a live viewer renders there), and a global pool of one
+/// thread, busy with `work` from start to end, would never serve them; then
+/// [`with_threads`], whose loops take turns with the other thread's on the pool.
+pub fn with_threads_on_pool_unless_shared<T: Send>(
+    threads: Option<usize>,
+    shared: bool,
+    work: impl FnOnce() -> T + Send,
+) -> Result<T> {
+    if shared {
+        with_threads(threads, work)
+    } else {
+        with_threads_on_pool(threads, work)
+    }
+}
+
 /// Most worker threads a task starts.
 pub const MAX_THREADS: usize = 1024;
 
