@@ -80,8 +80,10 @@ fn on_this_thread<T: Send>(work: impl FnOnce() -> T + Send) -> Result<T> {
 /// thread outside the pool each hand their work over to the pool and wait for it: a
 /// 10k-kernel 512×512 frame makes about 25 such loops, and a whole `render` took 0.47 ms
 /// longer without a thread count than with `--threads 2` (10.40 against 9.93 ms, medians of
-/// 31). Only for work that does not wait on other threads' rayon work from inside: with one
-/// worker, the global pool would have no thread left for it.
+/// 31). Only for work that does not wait on other threads' rayon work from inside, and
+/// that no other thread needs the global pool during: with one worker, busy with `work`
+/// from start to end, the pool would have no thread left for them
+/// ([`with_threads_on_pool_unless_shared`]).
 pub fn with_threads_on_pool<T: Send>(
     threads: Option<usize>,
     work: impl FnOnce() -> T + Send,
