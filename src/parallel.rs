@@ -5,8 +5,8 @@
 //! into fresh or reused arrays. Done serially, a first large frame also pays the operating
 //! system's first touch of every new page on one thread, and compaction through `push` grows
 //! its arrays by copying. These helpers write the slots in parallel, straight into the arrays'
-//! spare capacity (once each; a pass that keeps some values writes each chunk's at the start
-//! of its stretch and [`gather_kept`] moves them together in order): index `i`'s value is
+//! spare capacity (once each; a pass that keeps some values, [`keep_in_parallel`], writes
+//! each chunk's at the start of its stretch and [`gather_kept`] moves them together): index `i`'s value is
 //! computed from `i` alone, so the output is the same for any number of threads.
 
 use rayon::prelude::*;
@@ -116,18 +116,58 @@ pub fn fill_in_parallel<T: Send>(
     unsafe { values.set_len(count) };
 }
 
-/// Indices a chunk of a kept-values pass covers: chunk `c` computes `c·KEEP_CHUNK ..`
-/// (up to `KEEP_CHUNK` of them) in parallel with the others and writes the values it keeps
-/// at the start of its own stretch of each output array; [`gather_kept`] then moves the
-/// stretches together in order. One pass over the indices writes the outputs directly, so
-/// the kept values are never copied out of a scratch array (the slice and the projection:
-/// 120 and 72 bytes a kernel that a frame no longer writes, reads and first touches).
-pub const KEEP_CHUNK: usize = MIN_CHUNK;
+/// Indices a chunk of a kept-values pass covers ([`keep_in_parallel`]).
+const KEEP_CHUNK: usize = MIN_CHUNK;
 
-/// After a pass that let chunk `c` keep `kept[c]` values at the start of its stretch
-/// `c·KEEP_CHUNK ..` of `slots` ([`KEEP_CHUNK`]): moves them together in chunk order and
-/// returns how many there are. The caller may then `set_len` to that count.
-pub fn gather_kept<T: Copy>(slots: &mut [std::mem::MaybeUninit<T>], kept: &[usize]) -> usize {
+/// `column` emptied, with room for `count` values, as the chunks of a kept-values pass
+/// ([`keep_in_parallel`]) write into it: chunk `c` is the stretch `c·KEEP_CHUNK ..` of its
+/// spare capacity.
+pub fn keep_chunks<T: Send>(
+    column: &mut Vec<T>,
+    count: usize,
+) -> rayon::slice::ChunksMut<'_, std::mem::MaybeUninit<T>> {
+    column.clear();
+    column.reserve(count);
+    column.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK)
+}
+
+/// A kept-values pass over indices `0..count`: the indices are taken a chunk at a time in
+/// parallel, and chunk `c` (the `c`-th item of `chunks`: [`keep_chunks`] of each output
+/// column, zipped) computes `value(k)` for its indices in order and writes each `Some` with
+/// `write(chunk, at, k, value)` at the next slot `at` of its own stretch. Returns how many
+/// each chunk kept, for [`gather_kept`]. One pass writes the outputs directly, so the kept
+/// values are never copied out of a scratch array (the slice and the projection: 120 and
+/// 72 bytes a kernel that a frame no longer writes, reads and first touches).
+pub fn keep_in_parallel<C: Send, R>(
+    count: usize,
+    chunks: impl IndexedParallelIterator<Item = C>,
+    value: impl Fn(usize) -> Option<R> + Sync,
+    write: impl Fn(&mut C, usize, usize, R) + Sync,
+) -> Vec<usize> {
+    chunks
+        .enumerate()
+        .map(|(c, mut chunk)| {
+            let first = c * KEEP_CHUNK;
+            let mut len = 0;
+            for k in first..count.min(first + KEEP_CHUNK) {
+                if let Some(v) = value(k) {
+                    write(&mut chunk, len, k, v);
+                    len += 1;
+                }
+            }
+            len
+        })
+        .collect()
+}
+
+/// After [`keep_in_parallel`]: moves each chunk's `kept[c]` values together in chunk order
+/// and sets `column`'s length to their count.
+///
+/// # Safety
+/// `column` was [`keep_chunks`] of the pass (empty, its spare capacity split into the
+/// pass's chunks), and chunk `c` wrote its first `kept[c]` slots.
+pub unsafe fn gather_kept<T: Copy>(column: &mut Vec<T>, kept: &[usize]) {
+    let slots = column.spare_capacity_mut();
     let mut len = 0;
     for (c, &n) in kept.iter().enumerate() {
         let from = c * KEEP_CHUNK;
@@ -136,7 +176,10 @@ pub fn gather_kept<T: Copy>(slots: &mut [std::mem::MaybeUninit<T>], kept: &[usiz
         }
         len += n;
     }
-    len
+    // SAFETY: the caller's promise: the first `len` slots now hold the written values of
+    // the chunks, in order, within the room `keep_chunks` reserved. The values are `Copy`:
+    // the stale copies past `len` need no drop.
+    unsafe { column.set_len(len) };
 }
 
 /// Appends `count` kernels to `scene`: kernel `kernel(i)`, checked and normalised by
@@ -260,27 +303,16 @@ mod tests {
                 let keep =
                     |k: usize| ((k < 2048 && k != 3) || k % 7 == 3) && !(5000..7000).contains(&k);
                 let mut kept = vec![(5, 5.0)];
-                kept.clear();
-                kept.reserve(10_000);
-                // A kept-values pass as the slice and the projection write theirs.
-                let lens: Vec<usize> = kept.spare_capacity_mut()[..10_000]
-                    .par_chunks_mut(KEEP_CHUNK)
-                    .enumerate()
-                    .map(|(c, chunk)| {
-                        let mut len = 0;
-                        for j in 0..chunk.len() {
-                            let k = c * KEEP_CHUNK + j;
-                            if keep(k) {
-                                chunk[len].write((k as u32, k as f64 * 0.5));
-                                len += 1;
-                            }
-                        }
-                        len
-                    })
-                    .collect();
-                let n = gather_kept(kept.spare_capacity_mut(), &lens);
-                // SAFETY: `gather_kept` put the `n` written values first; room for 10 000.
-                unsafe { kept.set_len(n) };
+                let lens = keep_in_parallel(
+                    10_000,
+                    keep_chunks(&mut kept, 10_000),
+                    |k| keep(k).then_some(k as f64 * 0.5),
+                    |chunk, at, k, v| {
+                        chunk[at].write((k as u32, v));
+                    },
+                );
+                // SAFETY: `kept` is the pass's column and each chunk wrote its kept values.
+                unsafe { gather_kept(&mut kept, &lens) };
                 (values, kept)
             })
         };

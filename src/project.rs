@@ -22,7 +22,7 @@
 use crate::model::camera::Camera;
 use rayon::prelude::*;
 
-use crate::parallel::{KEEP_CHUNK, fill_in_parallel, gather_kept};
+use crate::parallel::{fill_in_parallel, gather_kept, keep_chunks, keep_in_parallel};
 use crate::slice::SlicedKernels;
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
@@ -230,49 +230,32 @@ fn projection(camera: &Camera, dilation: f64, mean: [f64; 3], cov: [f64; 6]) -> 
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
     let count = sliced.len();
     out.reset();
-    out.slice_from_proj.reserve(count);
-    out.means.reserve(count);
-    out.covariances.reserve(count);
-    out.conics.reserve(count);
     // One pass: each chunk of sliced kernels writes the projections it keeps at the start of
-    // its own stretch of these arrays ([`KEEP_CHUNK`]); the stretches are gathered after.
-    let kept: Vec<usize> = out.slice_from_proj.spare_capacity_mut()[..count]
-        .par_chunks_mut(KEEP_CHUNK)
-        .zip(out.means.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .zip(out.covariances.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .zip(out.conics.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .enumerate()
-        .map(|(c, (((slices, means), covariances), conics))| {
-            let mut len = 0;
-            for j in 0..slices.len() {
-                let s = c * KEEP_CHUNK + j;
-                if let Some(on_screen) =
-                    projection(camera, dilation, sliced.means[s], sliced.covariances[s])
-                {
-                    debug_assert!(u32::try_from(s).is_ok(), "slice indices fit in u32");
-                    slices[len].write(s as u32);
-                    means[len].write(on_screen.mean);
-                    covariances[len].write(on_screen.covariance);
-                    conics[len].write(on_screen.conic);
-                    len += 1;
-                }
-            }
-            len
-        })
-        .collect();
-    let n = gather_kept(out.slice_from_proj.spare_capacity_mut(), &kept);
-    gather_kept(out.means.spare_capacity_mut(), &kept);
-    gather_kept(out.covariances.spare_capacity_mut(), &kept);
-    gather_kept(out.conics.spare_capacity_mut(), &kept);
-    // SAFETY: each array's first `n` slots hold the kept projections in order
-    // (`gather_kept` moved every chunk's written slots together), and `reserve` made room
-    // for `count ≥ n`. The values are `Copy`: the stale slots past `n` need no drop.
+    // its own stretch of these arrays; the stretches are gathered after.
+    let chunks = keep_chunks(&mut out.slice_from_proj, count)
+        .zip(keep_chunks(&mut out.means, count))
+        .zip(keep_chunks(&mut out.covariances, count))
+        .zip(keep_chunks(&mut out.conics, count));
+    let kept = keep_in_parallel(
+        count,
+        chunks,
+        |s| projection(camera, dilation, sliced.means[s], sliced.covariances[s]),
+        |(((slices, means), covariances), conics), at, s, on_screen| {
+            debug_assert!(u32::try_from(s).is_ok(), "slice indices fit in u32");
+            slices[at].write(s as u32);
+            means[at].write(on_screen.mean);
+            covariances[at].write(on_screen.covariance);
+            conics[at].write(on_screen.conic);
+        },
+    );
+    // SAFETY: each array is a column of the pass, whose chunks wrote their kept projections.
     unsafe {
-        out.slice_from_proj.set_len(n);
-        out.means.set_len(n);
-        out.covariances.set_len(n);
-        out.conics.set_len(n);
+        gather_kept(&mut out.slice_from_proj, &kept);
+        gather_kept(&mut out.means, &kept);
+        gather_kept(&mut out.covariances, &kept);
+        gather_kept(&mut out.conics, &kept);
     }
+    let n = out.slice_from_proj.len();
     // The per-slice values of the kept kernels, gathered.
     let slice_of = |p: usize| out.slice_from_proj[p] as usize;
     fill_in_parallel(&mut out.kernel_from_proj, n, |p| {

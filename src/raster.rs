@@ -63,11 +63,11 @@
 //! loop alone can reach about 17/25 × 10.3/16 ≈ 44 % of the probe. Most of those
 //! instructions go to the two pipes that multiply and fuse (19 of them an entry, each taking
 //! both pipes for a cycle at 512 bits); about 20 cycles an entry is what a 100k@1080p frame
-//! takes, so the loop is bound by those pipes. The work is
-//! bound by instructions and their latency, not memory (each tile's blocks and lists stay in
-//! its worker's cache): an entry's `q` → exp → f64 chain is some 15 dependent steps, so the
-//! SIMD loops take a row's entries four at a time, their four `G` first and then their terms
-//! in list order (the same sums in the same order), which made frames ~3 % faster. Tile
+//! takes, so the loop is bound by those pipes, not by memory (each tile's blocks and lists
+//! stay in its worker's cache). An entry's `q` → exp → f64 chain is some 15 dependent
+//! steps, so the SIMD loops take a row's entries four at a time, their four `G` first and
+//! then their terms in list order (the same sums in the same order), which made frames ~3 %
+//! faster. Tile
 //! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
 //! threads finish within ~1 % of each other; many more threads would need the tile as the
 //! unit.
@@ -144,8 +144,9 @@ impl FromStr for ExpMode {
 /// instead, with the constants scaled by powers of two (`exp_constants` in the source):
 /// scaling by a power of two commutes with rounding away from underflow and overflow, so
 /// each step rounds `(-½)^k` times the value the steps on `x` and `r` round, and the result
-/// is the same bits. (A subnormal `q`, whose `-½ q` rounds, gives 1 both ways.) That saves the product `-½ q`: one vector instruction of the 19 that a
-/// row entry spends on the FMA pipes. Checked on all 2³² f32 inputs against the steps on
+/// is the same bits. (A subnormal `q`, whose `-½ q` rounds, gives 1 both ways.) That saves
+/// the product `-½ q`: one vector instruction of the 19 that a row entry spends on the FMA
+/// pipes. Checked on all 2³² f32 inputs against the steps on
 /// `x` (none differs), and against f64 by the tests.
 #[inline(always)]
 #[must_use]

@@ -24,7 +24,7 @@
 use crate::model::scene::{Blend, Scene};
 use rayon::prelude::*;
 
-use crate::parallel::{KEEP_CHUNK, fill_in_parallel, gather_kept};
+use crate::parallel::{fill_in_parallel, gather_kept, keep_chunks, keep_in_parallel};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
@@ -186,54 +186,38 @@ fn slice_visiting(
     out: &mut SlicedKernels,
 ) {
     out.reset();
-    out.kernel_from_slice.reserve(count);
-    out.means.reserve(count);
-    out.covariances.reserve(count);
-    out.amplitudes.reserve(count);
-    out.qmax.reserve(count);
     // One pass: each chunk of visiting positions writes the slices it keeps at the start of
-    // its own stretch of every array ([`KEEP_CHUNK`]); the stretches are gathered after.
-    let kept: Vec<usize> = out.kernel_from_slice.spare_capacity_mut()[..count]
-        .par_chunks_mut(KEEP_CHUNK)
-        .zip(out.means.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .zip(out.covariances.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .zip(out.amplitudes.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .zip(out.qmax.spare_capacity_mut()[..count].par_chunks_mut(KEEP_CHUNK))
-        .enumerate()
-        .map(
-            |(c, ((((indices, means), covariances), amplitudes), qmax))| {
-                let mut len = 0;
-                for j in 0..indices.len() {
-                    let i = kernel(c * KEEP_CHUNK + j);
-                    if let Some(s) = slice_one(scene, i, tau, cutoff) {
-                        debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
-                        indices[len].write(i as u32);
-                        means[len].write(s.mean);
-                        covariances[len].write(s.covariance);
-                        amplitudes[len].write(s.amplitude);
-                        qmax[len].write(s.qmax);
-                        len += 1;
-                    }
-                }
-                len
-            },
-        )
-        .collect();
-    let n = gather_kept(out.kernel_from_slice.spare_capacity_mut(), &kept);
-    gather_kept(out.means.spare_capacity_mut(), &kept);
-    gather_kept(out.covariances.spare_capacity_mut(), &kept);
-    gather_kept(out.amplitudes.spare_capacity_mut(), &kept);
-    gather_kept(out.qmax.spare_capacity_mut(), &kept);
-    // SAFETY: each array's first `n` slots hold the kept slices in order (`gather_kept`
-    // moved every chunk's written slots together), and `reserve` made room for `count ≥ n`.
-    // The values are `Copy`: the stale slots past `n` need no drop.
+    // its own stretch of every array; the stretches are gathered after.
+    let chunks = keep_chunks(&mut out.kernel_from_slice, count)
+        .zip(keep_chunks(&mut out.means, count))
+        .zip(keep_chunks(&mut out.covariances, count))
+        .zip(keep_chunks(&mut out.amplitudes, count))
+        .zip(keep_chunks(&mut out.qmax, count));
+    let kept = keep_in_parallel(
+        count,
+        chunks,
+        |k| {
+            let i = kernel(k);
+            slice_one(scene, i, tau, cutoff).map(|s| (i, s))
+        },
+        |((((indices, means), covariances), amplitudes), qmax), at, _, (i, s)| {
+            debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
+            indices[at].write(i as u32);
+            means[at].write(s.mean);
+            covariances[at].write(s.covariance);
+            amplitudes[at].write(s.amplitude);
+            qmax[at].write(s.qmax);
+        },
+    );
+    // SAFETY: each array is a column of the pass, whose chunks wrote their kept slices.
     unsafe {
-        out.kernel_from_slice.set_len(n);
-        out.means.set_len(n);
-        out.covariances.set_len(n);
-        out.amplitudes.set_len(n);
-        out.qmax.set_len(n);
+        gather_kept(&mut out.kernel_from_slice, &kept);
+        gather_kept(&mut out.means, &kept);
+        gather_kept(&mut out.covariances, &kept);
+        gather_kept(&mut out.amplitudes, &kept);
+        gather_kept(&mut out.qmax, &kept);
     }
+    let n = out.kernel_from_slice.len();
     if scene.blend == Blend::Alpha {
         let kept = &out.kernel_from_slice;
         fill_in_parallel(&mut out.opacities, n, |s| {
