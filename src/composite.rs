@@ -64,9 +64,6 @@ pub struct PixelStop {
 pub(crate) struct CompositeScratch {
     pub(crate) tile: TileScratch,
     pub(crate) opacities: Vec<f64>,
-    /// A streamed frame's stops of one tile row, which nothing reads afterwards
-    /// ([`composite_in_bands_on`]).
-    band_stops: Vec<PixelStop>,
 }
 
 thread_local! {
@@ -131,7 +128,8 @@ pub(crate) fn clamped_alpha(opacity: f64, g: f32) -> f64 {
 
 /// Composites the binned kernels (binned in depth order) into `image` (resized to the bins'
 /// size) over `background`, on the widest [`SimdPath`] the CPU has. `forms` is scratch for
-/// [`row_forms`]; `stops` receives each pixel's [`PixelStop`] (row-major, for the backward).
+/// [`row_forms`]; `stops`, when given, receives each pixel's [`PixelStop`] (row-major, for
+/// the backward; a frame only looked at needs none, and writing them was 16 bytes a pixel).
 /// Returns the number of (pixel, kernel) pairs composited (before each pixel's stop).
 pub fn composite(
     proj: &ProjectedKernels,
@@ -140,7 +138,7 @@ pub fn composite(
     exp: ExpMode,
     forms: &mut Vec<RowForm>,
     image: &mut Image,
-    stops: &mut Vec<PixelStop>,
+    stops: Option<&mut Vec<PixelStop>>,
 ) -> u64 {
     composite_on(
         SimdPath::detect(),
@@ -167,28 +165,33 @@ pub fn composite_on(
     exp: ExpMode,
     forms: &mut Vec<RowForm>,
     image: &mut Image,
-    stops: &mut Vec<PixelStop>,
+    stops: Option<&mut Vec<PixelStop>>,
 ) -> u64 {
     let frame = AlphaFrame::prepare(path, proj, bins, forms, background);
     let pixels = size_image(bins, image);
-    let (w, h) = (bins.width as usize, bins.height as usize);
-    stops.clear();
-    stops.resize(w * h, PixelStop::default());
-    if !pixels {
-        return 0;
-    }
-    image
-        .pixels
-        .par_chunks_mut(3 * w * ROW)
-        .zip(stops.par_chunks_mut(w * ROW))
-        .enumerate()
-        .map(|(ty, (band, band_stops))| {
-            SCRATCH.with(|cell| {
-                let scratch = &mut *cell.borrow_mut();
-                tile_row(path, exp, &frame, ty, scratch, band, band_stops)
-            })
+    let w = bins.width as usize;
+    let composite_band = |ty: usize, band: &mut [f32], band_stops: Option<&mut [PixelStop]>| {
+        SCRATCH.with(|cell| {
+            let scratch = &mut *cell.borrow_mut();
+            tile_row(path, exp, &frame, ty, scratch, band, band_stops)
         })
-        .sum()
+    };
+    let bands = image.pixels.par_chunks_mut(3 * w * ROW).enumerate();
+    match stops {
+        Some(stops) => {
+            stops.clear();
+            stops.resize(w * bins.height as usize, PixelStop::default());
+            if !pixels {
+                return 0;
+            }
+            bands
+                .zip(stops.par_chunks_mut(w * ROW))
+                .map(|((ty, band), band_stops)| composite_band(ty, band, Some(band_stops)))
+                .sum()
+        }
+        None if !pixels => 0,
+        None => bands.map(|(ty, band)| composite_band(ty, band, None)).sum(),
+    }
 }
 
 /// [`composite_on`] without an image: the frame's rows are handed to `drain` in order, a
@@ -217,11 +220,7 @@ pub fn composite_in_bands_on<E: Send>(
         |ty, band| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
-                let mut band_stops = std::mem::take(&mut scratch.band_stops);
-                band_stops.resize(band.len() / 3, PixelStop::default());
-                let pairs = tile_row(path, exp, &frame, ty, scratch, band, &mut band_stops);
-                scratch.band_stops = band_stops;
-                pairs
+                tile_row(path, exp, &frame, ty, scratch, band, None)
             })
         },
         drain,
@@ -229,7 +228,7 @@ pub fn composite_in_bands_on<E: Send>(
 }
 
 /// Composites tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the
-/// bottom) and their pixels' `stops`; returns its pairs.
+/// bottom) and, when given, their pixels' `stops`; returns its pairs.
 fn tile_row(
     path: SimdPath,
     exp: ExpMode,
@@ -237,14 +236,14 @@ fn tile_row(
     ty: usize,
     scratch: &mut CompositeScratch,
     band: &mut [f32],
-    stops: &mut [PixelStop],
+    mut stops: Option<&mut [PixelStop]>,
 ) -> u64 {
     let tiles_x = frame.bins.tiles_x as usize;
     (0..tiles_x)
         .map(|tx| {
             let out = Band {
                 pixels: band,
-                stops,
+                stops: stops.as_deref_mut(),
             };
             tile_on(path, exp, frame, ty * tiles_x + tx, scratch, out)
         })
@@ -291,10 +290,10 @@ impl<'a> AlphaFrame<'a> {
     }
 }
 
-/// The image rows of one tile row, and their pixels' stops.
+/// The image rows of one tile row, and their pixels' stops when they are kept.
 pub(crate) struct Band<'a> {
     pixels: &'a mut [f32],
-    stops: &'a mut [PixelStop],
+    stops: Option<&'a mut [PixelStop]>,
 }
 
 /// [`composite_tile`] compiled for `path`.
@@ -505,7 +504,7 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
     frame: &AlphaFrame,
     t: usize,
     scratch: &mut CompositeScratch,
-    band: Band,
+    mut band: Band,
 ) -> u64 {
     let AlphaFrame {
         proj,
@@ -550,7 +549,6 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
     {
         let state = &states[index];
         pairs += state.pairs;
-        let ends = state.ends(scratch.tile.halves[index].len());
         let start = row * width + rect[0] as usize + first;
         let out = &mut band.pixels[3 * start..][..3 * lanes];
         for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
@@ -558,11 +556,14 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
                 pixel[c] = (state.colour[c][i] + state.transmittance[i] * background[c]) as f32;
             }
         }
-        for (i, stop) in band.stops[start..start + lanes].iter_mut().enumerate() {
-            *stop = PixelStop {
-                transmittance: state.transmittance[i],
-                end: ends[i],
-            };
+        if let Some(stops) = band.stops.as_deref_mut() {
+            let ends = state.ends(scratch.tile.halves[index].len());
+            for (i, stop) in stops[start..start + lanes].iter_mut().enumerate() {
+                *stop = PixelStop {
+                    transmittance: state.transmittance[i],
+                    end: ends[i],
+                };
+            }
         }
     }
     pairs

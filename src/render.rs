@@ -115,6 +115,9 @@ pub struct RenderContext {
     depth_keys: Vec<(f64, u32, u32)>,
     /// Alpha frames: each pixel's final transmittance and stop, for the backward.
     pub(crate) pixel_stops: Vec<crate::composite::PixelStop>,
+    /// Whether the last frame was rendered by [`Self::render_for_backward`]: it kept what
+    /// [`Self::backward`] reads.
+    ready_for_backward: bool,
     image: Image,
     /// The rows of a frame rendered in bands ([`Self::render_in_bands`]).
     row_groups: GroupBuffers,
@@ -127,8 +130,9 @@ impl RenderContext {
         RenderContext::default()
     }
 
-    /// Renders `scene` through `camera` at time `tau`. The scene and camera must be valid
-    /// (they are when loaded or built by this library).
+    /// Renders `scene` through `camera` at time `tau` into [`Self::image`]. The scene and
+    /// camera must be valid (they are when loaded or built by this library). A frame to
+    /// differentiate is rendered by [`Self::render_for_backward`] instead.
     pub fn render(
         &mut self,
         scene: &Scene,
@@ -138,7 +142,22 @@ impl RenderContext {
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
-        Ok(self.finish_frame(scene, camera, options))
+        Ok(self.finish_frame(scene, camera, options, false))
+    }
+
+    /// [`Self::render`], keeping what [`Self::backward`] reads: for alpha scenes each pixel's
+    /// stop (its final transmittance and the entry that stopped it, SPEC §8), 16 bytes a
+    /// pixel that a frame only looked at does without. The same image.
+    pub fn render_for_backward(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+    ) -> Result<RenderStats> {
+        check_frame(tau, options)?;
+        slice(scene, tau, options.cutoff, &mut self.sliced);
+        Ok(self.finish_frame(scene, camera, options, true))
     }
 
     /// [`Self::render`] without an image: the frame's rows go to `drain` in order, a group
@@ -146,8 +165,8 @@ impl RenderContext {
     /// the next group is computed ([`crate::parallel::fill_and_drain_in_order`]). The values
     /// are [`Self::render`]'s image's, bit for bit, in the memory of two groups of rows rather
     /// than an image: for frames that go straight to a file. Nothing is kept for a backward
-    /// (call [`Self::render`] before [`Self::backward`]), and [`Self::image`] is left as it
-    /// was. Returns the frame's counts, or `drain`'s first error, after which no more rows
+    /// (call [`Self::render_for_backward`] before [`Self::backward`]), and [`Self::image`] is
+    /// left as it was. Returns the frame's counts, or `drain`'s first error, after which no more rows
     /// are handed over (on more than one thread the group after the failed one may already
     /// have been computed).
     pub fn render_in_bands(
@@ -160,6 +179,7 @@ impl RenderContext {
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
+        self.ready_for_backward = false;
         self.project_and_bin(scene, camera, options);
         let background = scene.background.map(|b| b as f32);
         let path = SimdPath::detect();
@@ -217,7 +237,7 @@ impl RenderContext {
             options.cutoff,
             &mut self.sliced,
         );
-        Ok(self.finish_frame(scene, camera, options))
+        Ok(self.finish_frame(scene, camera, options, false))
     }
 
     /// Stages 2 and 3 after the slice: the projection (alpha scenes: shaded and in depth
@@ -246,13 +266,15 @@ impl RenderContext {
         }
     }
 
-    /// Stages 2–4 after the slice.
+    /// Stages 2–4 after the slice, keeping what the backward reads when `for_backward`.
     fn finish_frame(
         &mut self,
         scene: &Scene,
         camera: &Camera,
         options: &RenderOptions,
+        for_backward: bool,
     ) -> RenderStats {
+        self.ready_for_backward = for_backward;
         self.project_and_bin(scene, camera, options);
         let background = scene.background.map(|b| b as f32);
         let pairs = match scene.blend {
@@ -271,17 +293,21 @@ impl RenderContext {
                 options.exp,
                 &mut self.row_forms,
                 &mut self.image,
-                &mut self.pixel_stops,
+                for_backward.then_some(&mut self.pixel_stops),
             ),
         };
         self.stats(pairs)
     }
 
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
-    /// rendered (RGB, row-major, like the image). Call it right after [`Self::render`] (not
-    /// [`Self::render_in_bands`], which keeps no alpha stops) with the same scene, camera,
-    /// time and options: it reuses that frame's slices, ellipses and bins.
+    /// rendered (RGB, row-major, like the image). Call it right after
+    /// [`Self::render_for_backward`] with the same scene, camera, time and options: it reuses
+    /// that frame's slices, ellipses, bins and (alpha scenes) stops.
     /// `grads` must be sized for the scene ([`Gradients::for_scene`]).
+    ///
+    /// # Panics
+    /// When the last frame was not rendered by [`Self::render_for_backward`] (a
+    /// [`Self::render`], [`Self::render_in_bands`] or [`Self::swap_image`] came between).
     pub fn backward(
         &mut self,
         scene: &Scene,
@@ -291,6 +317,10 @@ impl RenderContext {
         v_image: &[f32],
         grads: &mut Gradients,
     ) {
+        assert!(
+            self.ready_for_backward,
+            "RenderContext::backward: the last frame was not rendered by render_for_backward"
+        );
         let buffers = &mut self.backward;
         let v_background = match scene.blend {
             Blend::Additive => {
@@ -338,7 +368,7 @@ impl RenderContext {
         grads: &mut Gradients,
     ) -> Result<RenderStats> {
         if scene.blend != Blend::Additive {
-            let stats = self.render(scene, camera, tau, options)?;
+            let stats = self.render_for_backward(scene, camera, tau, options)?;
             v_image.clear();
             v_image.resize(self.image.pixels.len(), 0.0);
             gradient(0, &self.image.pixels, v_image);
@@ -347,6 +377,7 @@ impl RenderContext {
         }
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
+        self.ready_for_backward = true;
         self.project_and_bin(scene, camera, options);
         let buffers = &mut self.backward;
         let pairs = rasterize_with_backward(
@@ -401,8 +432,9 @@ impl RenderContext {
     /// Exchanges the last rendered image with `other`: a sequence of frames handed on (to a
     /// writer, say) without a copy. The context keeps `other`'s buffer, whose pixels the next
     /// render overwrites (every pixel is written each frame); until then [`Self::image`] is
-    /// `other`'s old content and [`Self::backward`] must not be called.
+    /// `other`'s old content and [`Self::backward`] refuses to run.
     pub fn swap_image(&mut self, other: &mut Image) {
+        self.ready_for_backward = false;
         std::mem::swap(&mut self.image, other);
     }
 }
@@ -486,5 +518,55 @@ mod tests {
             assert_eq!(on(threads).map(f64::to_bits), one.map(f64::to_bits));
         }
         assert_eq!(background_gradient(&[]), [0.0; 3]);
+    }
+
+    /// An alpha frame and a context that rendered it for a backward, then `between` on it.
+    fn backward_after(between: impl FnOnce(&mut RenderContext, &Scene, &Camera)) {
+        let camera = crate::scenes::synthetic::bench_camera(40, 24);
+        let scene = crate::scenes::synthetic::varied_alpha_bench_scene(50, 3, 0.2);
+        let options = RenderOptions::default();
+        let mut context = RenderContext::new();
+        context
+            .render_for_backward(&scene, &camera, 0.5, &options)
+            .unwrap();
+        between(&mut context, &scene, &camera);
+        let v_image = vec![1.0_f32; context.image().pixels.len()];
+        let mut grads = Gradients::for_scene(&scene);
+        context.backward(&scene, &camera, 0.5, &options, &v_image, &mut grads);
+    }
+
+    #[test]
+    fn a_backward_reads_the_frame_rendered_for_it() {
+        backward_after(|_, _, _| {});
+        // A frame only looked at keeps no stops, and the image is the same.
+        backward_after(|context, scene, camera| {
+            let kept = context.image().clone();
+            let stops = context.pixel_stops.clone();
+            assert_eq!(stops.len(), 40 * 24);
+            context
+                .render(scene, camera, 0.5, &RenderOptions::default())
+                .unwrap();
+            assert_eq!(context.image(), &kept);
+            context
+                .render_for_backward(scene, camera, 0.5, &RenderOptions::default())
+                .unwrap();
+            assert_eq!(context.pixel_stops, stops);
+        });
+    }
+
+    #[test]
+    #[should_panic(expected = "not rendered by render_for_backward")]
+    fn a_backward_after_a_frame_only_looked_at_panics() {
+        backward_after(|context, scene, camera| {
+            context
+                .render(scene, camera, 0.5, &RenderOptions::default())
+                .unwrap();
+        });
+    }
+
+    #[test]
+    #[should_panic(expected = "not rendered by render_for_backward")]
+    fn a_backward_after_the_image_was_handed_on_panics() {
+        backward_after(|context, _, _| context.swap_image(&mut Image::default()));
     }
 }

@@ -42,7 +42,9 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
         // Target: the same scene at another time, so residuals are non-zero everywhere.
         context.render(&scene, &camera, 0.3, &options).unwrap();
         let target = context.image().clone();
-        let stats = context.render(&scene, &camera, TAU, &options).unwrap();
+        let stats = context
+            .render_for_backward(&scene, &camera, TAU, &options)
+            .unwrap();
         let mut v_image = Vec::new();
         mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
         let mut grads = Gradients::zeros(n);
@@ -52,7 +54,9 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
         let repeats = (2_000_000 / n).clamp(3, 200);
         let start = Instant::now();
         for _ in 0..repeats {
-            context.render(&scene, &camera, TAU, &options).unwrap();
+            context
+                .render_for_backward(&scene, &camera, TAU, &options)
+                .unwrap();
         }
         let forward = start.elapsed().as_secs_f64() / repeats as f64;
         let start = Instant::now();
@@ -75,7 +79,13 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
                 .unwrap();
             let id = |what: &str| BenchmarkId::new(format!("{what}/{n}"), format!("{threads}t"));
             group.bench_function(id("forward"), |b| {
-                pool.install(|| b.iter(|| context.render(&scene, &camera, TAU, &options).unwrap()))
+                pool.install(|| {
+                    b.iter(|| {
+                        context
+                            .render_for_backward(&scene, &camera, TAU, &options)
+                            .unwrap()
+                    })
+                })
             });
             group.bench_function(id("backward"), |b| {
                 pool.install(|| {
@@ -89,7 +99,9 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
             group.bench_function(id("step"), |b| {
                 pool.install(|| {
                     b.iter(|| {
-                        context.render(&fitted, &camera, TAU, &options).unwrap();
+                        context
+                            .render_for_backward(&fitted, &camera, TAU, &options)
+                            .unwrap();
                         mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
                         grads.reset(n);
                         context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);

@@ -32,7 +32,9 @@ fn measure(scene: &Scene, camera: &splat4d::Camera) -> (f64, f64) {
     let mut backward = Vec::new();
     for _ in 0..FRAMES {
         let start = Instant::now();
-        context.render(scene, camera, TAU, &options).unwrap();
+        context
+            .render_for_backward(scene, camera, TAU, &options)
+            .unwrap();
         forward.push(start.elapsed().as_secs_f64());
         let mut grads = Gradients::for_scene(scene);
         let start = Instant::now();

@@ -124,7 +124,9 @@ fn main() {
             // The same step with the render and the backward one after the other.
             let (separate, cpu_separate) = (Instant::now(), cpu_seconds());
             grads.reset(n);
-            context.render(&fitted, &camera, TAU, &options).unwrap();
+            context
+                .render_for_backward(&fitted, &camera, TAU, &options)
+                .unwrap();
             mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
             context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
             adam.step(&mut fitted, &grads, &rates);

@@ -395,7 +395,9 @@ mod tests {
         let scene = crate::scenes::synthetic::varied_alpha_bench_scene(n, 11, 0.1);
         let mut context = RenderContext::new();
         let options = RenderOptions::default();
-        context.render(&scene, &camera, 0.4, &options).unwrap();
+        context
+            .render_for_backward(&scene, &camera, 0.4, &options)
+            .unwrap();
         let v_image: Vec<f32> = (0..context.image().pixels.len())
             .map(|i| ((i * 7919) % 211) as f32 / 105.0 - 1.0)
             .collect();

@@ -193,7 +193,7 @@ pub fn view_loss_and_gradients(
             target.width, target.height, camera.width, camera.height
         )));
     }
-    context.render(scene, camera, tau, options)?;
+    context.render_for_backward(scene, camera, tau, options)?;
     let mut v_image = Vec::new();
     let loss = mse_with_gradient(context.image(), target, 1.0, &mut v_image);
     context.backward(scene, camera, tau, options, &v_image, grads);

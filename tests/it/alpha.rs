@@ -247,21 +247,34 @@ fn every_thread_count_and_simd_path_composites_the_same_bits() {
     }
     let mut context = RenderContext::new();
     context.render(&scene, &camera, 0.5, &options).unwrap();
+    let mut path_stops = Vec::new();
     for &path in splat4d::raster::SimdPath::available() {
-        let mut forms = Vec::new();
-        let mut image = Image::default();
-        let mut stops = Vec::new();
-        splat4d::composite::composite_on(
-            path,
-            &context.projected,
-            &context.bins,
-            scene.background.map(|b| b as f32),
-            options.exp,
-            &mut forms,
-            &mut image,
-            &mut stops,
-        );
-        images.push(image);
+        // With the stops a backward reads, and without: the same image.
+        for keep_stops in [true, false] {
+            let mut forms = Vec::new();
+            let mut image = Image::default();
+            let mut stops = Vec::new();
+            splat4d::composite::composite_on(
+                path,
+                &context.projected,
+                &context.bins,
+                scene.background.map(|b| b as f32),
+                options.exp,
+                &mut forms,
+                &mut image,
+                keep_stops.then_some(&mut stops),
+            );
+            images.push(image);
+            if keep_stops {
+                assert_eq!(stops.len(), (camera.width * camera.height) as usize);
+                path_stops.push(stops);
+            } else {
+                assert!(stops.is_empty());
+            }
+        }
+    }
+    for stops in &path_stops[1..] {
+        assert_eq!(stops, &path_stops[0]);
     }
     for image in &images[1..] {
         assert!(

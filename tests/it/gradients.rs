@@ -442,7 +442,9 @@ fn a_training_steps_render_and_backward_in_one_pass_are_the_same_bits() {
             let weighted = view.weights.is_some();
             // One after the other.
             let mut apart = RenderContext::new();
-            apart.render(&scene, &camera, 0.6, &options).unwrap();
+            apart
+                .render_for_backward(&scene, &camera, 0.6, &options)
+                .unwrap();
             let mut v_image = Vec::new();
             let loss = view_mse_with_gradient(apart.image(), &view, 0.5, &mut v_image);
             let mut grads = Gradients::for_scene(&scene);
