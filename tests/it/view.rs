@@ -629,6 +629,104 @@ fn a_running_fit_is_shown_with_its_chart() {
     let _ = fit.wait();
 }
 
+/// A fit whose viewer renders on the same global pool: with a pool of one thread, a fit
+/// running there from start to end would never let the viewer's frames through
+/// (`tasks::with_threads_on_pool_unless_shared`). Without a browser: a frame asked for on
+/// the socket arrives while the fit runs, in milliseconds where it took seconds.
+#[test]
+fn a_fit_on_a_one_thread_pool_still_serves_its_viewer() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
+    let made = splat4d(
+        &[
+            "dataset",
+            "--scene",
+            "scene.json",
+            "--views",
+            "4",
+            "--times",
+            "2",
+            "--size",
+            "48x36",
+            "--out",
+            "ds",
+        ],
+        d,
+    );
+    assert!(made.status.success(), "{}", crate::common::stderr(&made));
+    let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"))
+        .args([
+            "fit",
+            "--views",
+            "ds",
+            "--out",
+            "fitted.json",
+            "--blend",
+            "additive",
+            "--steps",
+            "100000",
+            "--view",
+            "0",
+        ])
+        .env("RAYON_NUM_THREADS", "1")
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(fit.stderr.take().unwrap()).lines();
+    let url = loop {
+        let line = lines
+            .next()
+            .expect("the fit names its viewer's address")
+            .unwrap();
+        if let Some(rest) = line.split("viewing the fit at ").nth(1) {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in lines {});
+    let ws_url = format!("{}ws", url.replace("http://", "ws://"));
+    let (mut socket, _) = tungstenite::connect(ws_url.as_str()).unwrap();
+    if let tungstenite::stream::MaybeTlsStream::Plain(stream) = socket.get_ref() {
+        stream
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .unwrap();
+    }
+    let hello = next_text(&mut socket);
+    assert_eq!(hello["type"], "hello", "{hello}");
+    let c2w = &hello["camera"]["c2w"];
+    let request =
+        json!({"type":"frame","id":5,"c2w":c2w,"fov":40,"width":32,"height":24,"time":0.5});
+    let asked = Instant::now();
+    socket
+        .send(tungstenite::Message::text(request.to_string()))
+        .unwrap();
+    let frame = loop {
+        match socket.read() {
+            Ok(tungstenite::Message::Binary(bytes)) => break bytes,
+            Ok(_) => {}
+            Err(e) => panic!("no frame from the fit's viewer within 30 s: {e}"),
+        }
+    };
+    // A bound on waiting, not a speed figure: here the frame takes ~5 ms with the fit off
+    // the pool and ~8.5 s with it on (the viewer's job then waits for the fit's loops).
+    assert!(
+        asked.elapsed() < Duration::from_secs(4),
+        "the fit's viewer took {:?} to serve a 32×24 frame",
+        asked.elapsed()
+    );
+    let n = u32::from_le_bytes(frame[..4].try_into().unwrap()) as usize;
+    let header: Value = serde_json::from_slice(&frame[4..4 + n]).unwrap();
+    assert_eq!(header["width"].as_u64(), Some(32), "{header}");
+    assert!(
+        fit.try_wait().unwrap().is_none(),
+        "the fit was still running"
+    );
+    let _ = fit.kill();
+    let _ = fit.wait();
+}
+
 #[test]
 fn a_busy_port_is_refused_naming_it() {
     let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
