@@ -44,36 +44,33 @@ pub fn threads_for(asked: Option<usize>, units: f64) -> Option<usize> {
 }
 
 thread_local! {
-    /// The pool this thread is the first thread of, and its size: built on first use and
-    /// kept (rayon cannot take a thread back out of a pool that uses it).
-    static THIS_THREAD: std::cell::OnceCell<Option<(usize, rayon::ThreadPool)>> =
+    /// This thread as a one-thread pool, built on first use and kept (rayon cannot take a
+    /// thread back out of a pool that uses it).
+    static THIS_THREAD: std::cell::OnceCell<Option<rayon::ThreadPool>> =
         const { std::cell::OnceCell::new() };
 }
 
-/// `work` on a pool of `n` threads whose first is the calling thread, so that `n - 1` are
-/// started (none for one thread), and the calling thread works instead of waiting. A thread
-/// can be in one such pool only: where it already is in one of another size, or rayon cannot
-/// make one, `work` runs on a pool of `n` started threads.
-fn on_this_and_started_threads<T: Send>(n: usize, work: impl FnOnce() -> T + Send) -> Result<T> {
+/// `work` on a pool whose one thread is the calling thread (or, where rayon cannot make
+/// one, on a pool of one started thread).
+fn on_this_thread<T: Send>(work: impl FnOnce() -> T + Send) -> Result<T> {
     let local = THIS_THREAD.with(|cell| {
         cell.get_or_init(|| {
             rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
+                .num_threads(1)
                 .use_current_thread()
                 .build()
                 .ok()
-                .map(|pool| (n, pool))
         })
         .as_ref()
-        .is_some_and(|(size, pool)| *size == n && pool.current_thread_index().is_some())
+        .map(|pool| pool.current_thread_index().is_some())
     });
-    if local {
+    if local == Some(true) {
         return Ok(work());
     }
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
+        .num_threads(1)
         .build()
-        .map_err(|e| Error::usage(format!("cannot start {n} worker threads: {e}")))?;
+        .map_err(|e| Error::usage(format!("cannot start a worker thread: {e}")))?;
     Ok(pool.install(work))
 }
 
@@ -117,12 +114,9 @@ pub fn with_threads_on_pool_unless_shared<T: Send>(
 pub const MAX_THREADS: usize = 1024;
 
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool (one thread per
-/// core) when `None`. The pool's first thread is the calling thread itself, which works
-/// rather than waits: `threads - 1` are started (none for one thread: a small command pays
-/// nothing for a pool), and work already running on a pool of `threads` stays there (no
-/// second pool). The calling thread stays in that pool afterwards (rayon cannot take it
-/// out): a later call with the same count starts nothing, and parallel loops the thread
-/// starts outside `with_threads` run there too. Results do not depend on the thread count.
+/// core) when `None`. One thread is the calling thread itself (no thread is started: a
+/// small command pays nothing for a pool), and work already running on a pool of `threads`
+/// stays there (no second pool). Results do not depend on the thread count.
 pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(work()),
@@ -133,53 +127,13 @@ pub fn with_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + 
         Some(n) if rayon::current_thread_index().is_some() && rayon::current_num_threads() == n => {
             Ok(work())
         }
-        Some(n) => on_this_and_started_threads(n, work),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use rayon::prelude::*;
-
-    /// Where `work` ran: its index in its pool, the pool's size, and whether on this thread.
-    fn placement(threads: Option<usize>) -> (Option<usize>, usize, bool) {
-        let caller = std::thread::current().id();
-        with_threads(threads, || {
-            (
-                rayon::current_thread_index(),
-                rayon::current_num_threads(),
-                std::thread::current().id() == caller,
-            )
-        })
-        .unwrap()
-    }
-
-    #[test]
-    fn a_pool_s_first_thread_is_the_calling_thread_once_per_thread() {
-        // A test runs on a thread of its own: in no pool yet.
-        std::thread::spawn(|| {
-            assert_eq!(placement(Some(2)), (Some(0), 2, true));
-            assert_eq!(placement(Some(2)), (Some(0), 2, true));
-            // Another count: a pool of started threads, this thread waiting.
-            let (_, threads, here) = placement(Some(3));
-            assert_eq!((threads, here), (3, false));
-            let (_, threads, here) = placement(Some(1));
-            assert_eq!((threads, here), (1, false));
-            // The same sums on every count.
-            let sum = |threads| {
-                with_threads(Some(threads), || {
-                    (0..100_000_u64).into_par_iter().map(|k| k * k).sum::<u64>()
-                })
-                .unwrap()
-            };
-            assert!([1, 2, 3].iter().all(|&n| sum(n) == sum(2)));
-        })
-        .join()
-        .unwrap();
-        std::thread::spawn(|| assert_eq!(placement(Some(1)), (Some(0), 1, true)))
-            .join()
-            .unwrap();
-        assert!(with_threads(Some(0), || ()).is_err());
+        Some(1) => on_this_thread(work),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| Error::usage(format!("cannot start {n} worker threads: {e}")))?;
+            Ok(pool.install(work))
+        }
     }
 }
