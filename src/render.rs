@@ -140,9 +140,7 @@ impl RenderContext {
         tau: f64,
         options: &RenderOptions,
     ) -> Result<RenderStats> {
-        check_frame(tau, options)?;
-        slice(scene, tau, options.cutoff, &mut self.sliced);
-        Ok(self.finish_frame(scene, camera, options, false))
+        self.render_frame(scene, camera, tau, options, false)
     }
 
     /// [`Self::render`], keeping what [`Self::backward`] reads: for alpha scenes each pixel's
@@ -155,9 +153,21 @@ impl RenderContext {
         tau: f64,
         options: &RenderOptions,
     ) -> Result<RenderStats> {
+        self.render_frame(scene, camera, tau, options, true)
+    }
+
+    /// The whole frame's four stages, keeping what the backward reads when `for_backward`.
+    fn render_frame(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        for_backward: bool,
+    ) -> Result<RenderStats> {
         check_frame(tau, options)?;
         slice(scene, tau, options.cutoff, &mut self.sliced);
-        Ok(self.finish_frame(scene, camera, options, true))
+        Ok(self.finish_frame(scene, camera, options, for_backward))
     }
 
     /// [`Self::render`] without an image: the frame's rows go to `drain` in order, a group

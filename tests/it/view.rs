@@ -562,34 +562,38 @@ fn frames_per_second_on_10k_and_100k_kernels() {
     );
 }
 
-#[test]
-fn a_running_fit_is_shown_with_its_chart() {
-    let Some(binary) = browser_binary() else {
-        println!("SKIPPED: no browser (chromium) found; `.ci/run` installs Debian's chromium");
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
-    let made = splat4d(
-        &[
-            "dataset",
-            "--scene",
-            "scene.json",
-            "--views",
-            "4",
-            "--times",
-            "2",
-            "--size",
-            "48x36",
-            "--out",
-            "ds",
-        ],
-        d,
-    );
-    assert!(made.status.success(), "{}", crate::common::stderr(&made));
-    let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"))
-        .args([
+/// A running `splat4d fit --view 0` of a small dataset made from a 60-kernel scene in a
+/// temporary folder (`steps` steps), and its viewer's address; killed on drop.
+struct ViewedFit {
+    child: Child,
+    url: String,
+    _dir: tempfile::TempDir,
+}
+
+impl ViewedFit {
+    fn start(steps: &str, one_thread_pool: bool) -> ViewedFit {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
+        let made = splat4d(
+            &[
+                "dataset",
+                "--scene",
+                "scene.json",
+                "--views",
+                "4",
+                "--times",
+                "2",
+                "--size",
+                "48x36",
+                "--out",
+                "ds",
+            ],
+            d,
+        );
+        assert!(made.status.success(), "{}", crate::common::stderr(&made));
+        let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"));
+        fit.args([
             "fit",
             "--views",
             "ds",
@@ -598,35 +602,59 @@ fn a_running_fit_is_shown_with_its_chart() {
             "--blend",
             "additive",
             "--steps",
-            "100000",
+            steps,
             "--view",
             "0",
-        ])
-        .current_dir(d)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(fit.stderr.take().unwrap()).lines();
-    let url = loop {
-        let line = lines
-            .next()
-            .expect("the fit names its viewer's address")
-            .unwrap();
-        if let Some(rest) = line.split("viewing the fit at ").nth(1) {
-            break rest.split_whitespace().next().unwrap().to_owned();
+        ]);
+        if one_thread_pool {
+            fit.env("RAYON_NUM_THREADS", "1");
         }
+        let mut child = fit
+            .current_dir(d)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let url = loop {
+            let line = lines
+                .next()
+                .expect("the fit names its viewer's address")
+                .unwrap();
+            if let Some(rest) = line.split("viewing the fit at ").nth(1) {
+                break rest.split_whitespace().next().unwrap().to_owned();
+            }
+        };
+        std::thread::spawn(move || for _ in lines {});
+        ViewedFit {
+            child,
+            url,
+            _dir: dir,
+        }
+    }
+}
+
+impl Drop for ViewedFit {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn a_running_fit_is_shown_with_its_chart() {
+    let Some(binary) = browser_binary() else {
+        println!("SKIPPED: no browser (chromium) found; `.ci/run` installs Debian's chromium");
+        return;
     };
-    std::thread::spawn(move || for _ in lines {});
-    let mut browser = Browser::launch(&binary, &url, [800, 600]);
+    let fit = ViewedFit::start("100000", false);
+    let mut browser = Browser::launch(&binary, &fit.url, [800, 600]);
     browser.wait_for("window.splat4dFrames > 0", "a frame of the fit's scene");
     browser.wait_for(
         "/step \\d+ \\/ 100000 · \\d+ kernels/.test(document.getElementById('live-text').textContent)",
         "the fit's progress",
     );
     browser.screenshot(&std::env::temp_dir().join("splat4d_view_fit.png"));
-    let _ = fit.kill();
-    let _ = fit.wait();
 }
 
 /// A fit whose viewer renders on the same global pool: with a pool of one thread, a fit
@@ -635,58 +663,8 @@ fn a_running_fit_is_shown_with_its_chart() {
 /// the socket arrives while the fit runs, in milliseconds where it took seconds.
 #[test]
 fn a_fit_on_a_one_thread_pool_still_serves_its_viewer() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
-    let made = splat4d(
-        &[
-            "dataset",
-            "--scene",
-            "scene.json",
-            "--views",
-            "4",
-            "--times",
-            "2",
-            "--size",
-            "48x36",
-            "--out",
-            "ds",
-        ],
-        d,
-    );
-    assert!(made.status.success(), "{}", crate::common::stderr(&made));
-    let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"))
-        .args([
-            "fit",
-            "--views",
-            "ds",
-            "--out",
-            "fitted.json",
-            "--blend",
-            "additive",
-            "--steps",
-            "100000",
-            "--view",
-            "0",
-        ])
-        .env("RAYON_NUM_THREADS", "1")
-        .current_dir(d)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(fit.stderr.take().unwrap()).lines();
-    let url = loop {
-        let line = lines
-            .next()
-            .expect("the fit names its viewer's address")
-            .unwrap();
-        if let Some(rest) = line.split("viewing the fit at ").nth(1) {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    std::thread::spawn(move || for _ in lines {});
-    let ws_url = format!("{}ws", url.replace("http://", "ws://"));
+    let mut fit = ViewedFit::start("100000000", true);
+    let ws_url = format!("{}ws", fit.url.replace("http://", "ws://"));
     let (mut socket, _) = tungstenite::connect(ws_url.as_str()).unwrap();
     if let tungstenite::stream::MaybeTlsStream::Plain(stream) = socket.get_ref() {
         stream
@@ -720,11 +698,9 @@ fn a_fit_on_a_one_thread_pool_still_serves_its_viewer() {
     let header: Value = serde_json::from_slice(&frame[4..4 + n]).unwrap();
     assert_eq!(header["width"].as_u64(), Some(32), "{header}");
     assert!(
-        fit.try_wait().unwrap().is_none(),
+        fit.child.try_wait().unwrap().is_none(),
         "the fit was still running"
     );
-    let _ = fit.kill();
-    let _ = fit.wait();
 }
 
 #[test]
