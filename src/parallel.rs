@@ -144,20 +144,37 @@ pub fn keep_in_parallel<C: Send, R>(
     value: impl Fn(usize) -> Option<R> + Sync,
     write: impl Fn(&mut C, usize, usize, R) + Sync,
 ) -> Vec<usize> {
-    chunks
+    keep_and_tally_in_parallel(count, chunks, |k, _| value(k), write).0
+}
+
+/// [`keep_in_parallel`] whose `value(k, tally)` may also count on its chunk's tally (a
+/// count of something other than what it keeps: the slice and projection in one pass count
+/// the kernels alive after the slice); returns the kept counts and the tallies' sum.
+pub fn keep_and_tally_in_parallel<C: Send, R>(
+    count: usize,
+    chunks: impl IndexedParallelIterator<Item = C>,
+    value: impl Fn(usize, &mut usize) -> Option<R> + Sync,
+    write: impl Fn(&mut C, usize, usize, R) + Sync,
+) -> (Vec<usize>, usize) {
+    let chunk_counts: Vec<(usize, usize)> = chunks
         .enumerate()
         .map(|(c, mut chunk)| {
             let first = c * KEEP_CHUNK;
-            let mut len = 0;
+            let (mut len, mut tally) = (0, 0);
             for k in first..count.min(first + KEEP_CHUNK) {
-                if let Some(v) = value(k) {
+                if let Some(v) = value(k, &mut tally) {
                     write(&mut chunk, len, k, v);
                     len += 1;
                 }
             }
-            len
+            (len, tally)
         })
-        .collect()
+        .collect();
+    let tally = chunk_counts.iter().map(|&(_, tally)| tally).sum();
+    (
+        chunk_counts.into_iter().map(|(len, _)| len).collect(),
+        tally,
+    )
 }
 
 /// After [`keep_in_parallel`]: moves each chunk's `kept[c]` values together in chunk order

@@ -22,8 +22,11 @@
 use crate::model::camera::Camera;
 use rayon::prelude::*;
 
-use crate::parallel::{fill_in_parallel, gather_kept, keep_chunks, keep_in_parallel};
-use crate::slice::SlicedKernels;
+use crate::model::scene::{Blend, Scene};
+use crate::parallel::{
+    fill_in_parallel, gather_kept, keep_and_tally_in_parallel, keep_chunks, keep_in_parallel,
+};
+use crate::slice::{SlicedKernels, slice_one};
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
 /// `p` of every array is one projected kernel, in ascending scene order.
@@ -257,16 +260,135 @@ pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut
     }
     let n = out.slice_from_proj.len();
     // The per-slice values of the kept kernels, gathered.
-    let slice_of = |p: usize| out.slice_from_proj[p] as usize;
+    let slices = &out.slice_from_proj;
+    let slice_of = |p: usize| slices[p] as usize;
     fill_in_parallel(&mut out.kernel_from_proj, n, |p| {
         sliced.kernel_from_slice[slice_of(p)]
     });
     fill_in_parallel(&mut out.qmax, n, |p| sliced.qmax[slice_of(p)]);
-    fill_in_parallel(&mut out.radii, n, |p| {
-        let (qmax, covariance) = (sliced.qmax[slice_of(p)], out.covariances[p]);
-        [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
-    });
     fill_in_parallel(&mut out.amplitudes, n, |p| {
         sliced.amplitudes[slice_of(p)].map(|a| a as f32)
     });
+    fill_radii(out);
+}
+
+/// The half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of every projected kernel, from its
+/// `qmax` and `Σ2`.
+fn fill_radii(out: &mut ProjectedKernels) {
+    let (qmax, covariances) = (&out.qmax, &out.covariances);
+    fill_in_parallel(&mut out.radii, qmax.len(), |p| {
+        let (qmax, covariance) = (qmax[p], covariances[p]);
+        [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
+    });
+}
+
+/// Stages 1 and 2 in one pass for an additive frame that no backward reads (SPEC §2, §4):
+/// each kernel of `scene` is sliced at `tau` ([`crate::slice::slice`]'s per-kernel step)
+/// and projected at once, and only the projections are written; the slices' arrays (108
+/// bytes a kernel, which [`project`] reads back) are never made. `out` is what
+/// [`crate::slice::slice`] then [`project`] give, bit for bit (the same steps on the same
+/// f64 values), except `slice_from_proj`, which only a backward reads, left empty. Returns
+/// the number of kernels alive at `tau` (the slice's length).
+///
+/// # Panics
+/// When `scene` is an alpha scene (its colours and depth order read the slices).
+pub fn slice_and_project(
+    scene: &Scene,
+    (tau, cutoff): (f64, f64),
+    camera: &Camera,
+    dilation: f64,
+    out: &mut ProjectedKernels,
+) -> usize {
+    slice_and_project_visiting(
+        scene,
+        scene.len(),
+        |k| k,
+        (tau, cutoff),
+        camera,
+        dilation,
+        out,
+    )
+}
+
+/// [`slice_and_project`] of the kernels `candidates` lists (ascending scene indices, a
+/// superset of the kernels alive at `tau`, as [`crate::slice::TemporalIndex::candidates`]
+/// gives): the same output.
+///
+/// # Panics
+/// When `scene` is an alpha scene.
+pub fn slice_candidates_and_project(
+    scene: &Scene,
+    candidates: &[u32],
+    (tau, cutoff): (f64, f64),
+    camera: &Camera,
+    dilation: f64,
+    out: &mut ProjectedKernels,
+) -> usize {
+    let kernel = |k: usize| candidates[k] as usize;
+    slice_and_project_visiting(
+        scene,
+        candidates.len(),
+        kernel,
+        (tau, cutoff),
+        camera,
+        dilation,
+        out,
+    )
+}
+
+/// [`slice_and_project`] of kernels `kernel(0..count)` (ascending), in parallel, keeping the
+/// projections in that order: the output does not depend on the thread count.
+fn slice_and_project_visiting(
+    scene: &Scene,
+    count: usize,
+    kernel: impl Fn(usize) -> usize + Sync,
+    (tau, cutoff): (f64, f64),
+    camera: &Camera,
+    dilation: f64,
+    out: &mut ProjectedKernels,
+) -> usize {
+    assert_eq!(
+        scene.blend,
+        Blend::Additive,
+        "slice_and_project: an additive scene"
+    );
+    out.reset();
+    let chunks = keep_chunks(&mut out.kernel_from_proj, count)
+        .zip(keep_chunks(&mut out.means, count))
+        .zip(keep_chunks(&mut out.covariances, count))
+        .zip(keep_chunks(&mut out.conics, count))
+        .zip(keep_chunks(&mut out.qmax, count))
+        .zip(keep_chunks(&mut out.amplitudes, count));
+    let (kept, alive) = keep_and_tally_in_parallel(
+        count,
+        chunks,
+        |k, alive| {
+            let i = kernel(k);
+            let sliced = slice_one(scene, i, tau, cutoff)?;
+            *alive += 1;
+            let on_screen = projection(camera, dilation, sliced.mean, sliced.covariance)?;
+            Some((i, sliced, on_screen))
+        },
+        |(((((indices, means), covariances), conics), qmax), amplitudes), at, _, value| {
+            let (i, sliced, on_screen) = value;
+            debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
+            indices[at].write(i as u32);
+            means[at].write(on_screen.mean);
+            covariances[at].write(on_screen.covariance);
+            conics[at].write(on_screen.conic);
+            qmax[at].write(sliced.qmax);
+            amplitudes[at].write(sliced.amplitude.map(|a| a as f32));
+        },
+    );
+    // SAFETY: each array is a column of the pass, whose chunks wrote their kept projections.
+    unsafe {
+        gather_kept(&mut out.kernel_from_proj, &kept);
+        gather_kept(&mut out.means, &kept);
+        gather_kept(&mut out.covariances, &kept);
+        gather_kept(&mut out.conics, &kept);
+        gather_kept(&mut out.qmax, &kept);
+        gather_kept(&mut out.amplitudes, &kept);
+    }
+    fill_radii(out);
+    alive
 }

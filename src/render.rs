@@ -7,6 +7,10 @@
 //! alpha:    slice → project → colour::shade → order_by_depth → tiles → composite::composite
 //! ```
 //!
+//! An additive frame no backward reads (`render`, `render_in_bands`, `render_indexed`)
+//! slices and projects each kernel in one pass ([`crate::project::slice_and_project`]): the
+//! same projections without the slices' arrays.
+//!
 //! Buffers are kept between frames and only cleared, so rendering a sequence of frames
 //! allocates nothing once the largest frame has been seen. Tiles run on the current rayon
 //! thread pool (install a pool to choose the thread count); the image is identical bit for
@@ -23,7 +27,7 @@ use crate::model::camera::Camera;
 use crate::model::error::{Error, Result, check_non_negative_setting};
 use crate::model::scene::{Blend, Scene};
 use crate::parallel::{Drain, GroupBuffers};
-use crate::project::{ProjectedKernels, project};
+use crate::project::{ProjectedKernels, project, slice_and_project, slice_candidates_and_project};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
 use crate::{
@@ -80,6 +84,14 @@ pub struct RenderStats {
     pub pairs: u64,
 }
 
+/// Which kernels a frame visits: all of the scene's, or the candidates of a temporal index
+/// ([`RenderContext::render_indexed`]).
+#[derive(Clone, Copy)]
+enum Visit {
+    All,
+    Candidates,
+}
+
 /// Owns the buffers of every stage; reuse it across frames.
 ///
 /// SPEC §2–5 forward, §6 and §8 backward.
@@ -98,7 +110,8 @@ pub struct RenderStats {
 /// ```
 #[derive(Debug, Default)]
 pub struct RenderContext {
-    /// Stage 1 output.
+    /// Stage 1 output; empty after an additive frame no backward reads (its kernels are
+    /// sliced and projected in one pass, and only the projections kept).
     pub sliced: SlicedKernels,
     /// Kernels a temporal index proposes for the frame.
     candidates: Vec<u32>,
@@ -166,8 +179,8 @@ impl RenderContext {
         for_backward: bool,
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
-        slice(scene, tau, options.cutoff, &mut self.sliced);
-        Ok(self.finish_frame(scene, camera, options, for_backward))
+        let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, for_backward);
+        Ok(self.finish_frame(scene, options, for_backward, alive))
     }
 
     /// [`Self::render`] without an image: the frame's rows go to `drain` in order, a group
@@ -188,9 +201,8 @@ impl RenderContext {
         drain: &mut Drain<Error>,
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
-        slice(scene, tau, options.cutoff, &mut self.sliced);
         self.ready_for_backward = false;
-        self.project_and_bin(scene, camera, options);
+        let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, false);
         let background = scene.background.map(|b| b as f32);
         let path = SimdPath::detect();
         let pairs = match scene.blend {
@@ -215,7 +227,7 @@ impl RenderContext {
                 drain,
             ),
         }?;
-        Ok(self.stats(pairs))
+        Ok(self.stats(alive, pairs))
     }
 
     /// [`Self::render`] visiting only the kernels `index` says may be alive at `tau`: the
@@ -240,52 +252,80 @@ impl RenderContext {
             )));
         }
         index.candidates(tau, &mut self.candidates);
-        slice_candidates(
-            scene,
-            &self.candidates,
-            tau,
-            options.cutoff,
-            &mut self.sliced,
-        );
-        Ok(self.finish_frame(scene, camera, options, false))
+        let alive = self.prepare_frame(scene, Visit::Candidates, camera, tau, options, false);
+        Ok(self.finish_frame(scene, options, false, alive))
     }
 
-    /// Stages 2 and 3 after the slice: the projection (alpha scenes: shaded and in depth
-    /// order) and the tile bins.
-    fn project_and_bin(&mut self, scene: &Scene, camera: &Camera, options: &RenderOptions) {
-        project(&self.sliced, camera, options.dilation, &mut self.projected);
-        if scene.blend == Blend::Alpha {
-            shade(scene, &self.sliced, camera, &mut self.projected);
-            order_by_depth(
-                &self.sliced,
-                camera,
-                &mut self.projected,
-                &mut self.depth_keys,
-            );
-        }
+    /// Stages 1–3 of a frame: the slice, the projection (alpha scenes: shaded and in depth
+    /// order) and the tile bins; returns the number of kernels alive at `tau`. A frame that
+    /// keeps what a backward reads, and an alpha frame (whose colours and order read the
+    /// slices), keep the slices in [`Self::sliced`]; an additive frame only looked at
+    /// slices and projects each kernel in one pass ([`slice_and_project`]) and keeps none
+    /// (`sliced` is left empty): the same projections, bit for bit.
+    fn prepare_frame(
+        &mut self,
+        scene: &Scene,
+        visit: Visit,
+        camera: &Camera,
+        tau: f64,
+        options: &RenderOptions,
+        keep_slices: bool,
+    ) -> usize {
+        let alive = if keep_slices || scene.blend == Blend::Alpha {
+            match visit {
+                Visit::All => slice(scene, tau, options.cutoff, &mut self.sliced),
+                Visit::Candidates => {
+                    let candidates = &self.candidates;
+                    slice_candidates(scene, candidates, tau, options.cutoff, &mut self.sliced);
+                }
+            }
+            project(&self.sliced, camera, options.dilation, &mut self.projected);
+            if scene.blend == Blend::Alpha {
+                shade(scene, &self.sliced, camera, &mut self.projected);
+                order_by_depth(
+                    &self.sliced,
+                    camera,
+                    &mut self.projected,
+                    &mut self.depth_keys,
+                );
+            }
+            self.sliced.len()
+        } else {
+            self.sliced.reset();
+            let (times, dilation) = ((tau, options.cutoff), options.dilation);
+            let out = &mut self.projected;
+            match visit {
+                Visit::All => slice_and_project(scene, times, camera, dilation, out),
+                Visit::Candidates => {
+                    let candidates = &self.candidates;
+                    slice_candidates_and_project(scene, candidates, times, camera, dilation, out)
+                }
+            }
+        };
         bin(&self.projected, camera.width, camera.height, &mut self.bins);
+        alive
     }
 
-    /// The frame's counts, with the `pairs` its raster took.
-    fn stats(&self, pairs: u64) -> RenderStats {
+    /// The frame's counts: `alive` kernels after the slice, and the `pairs` its raster took.
+    fn stats(&self, alive: usize, pairs: u64) -> RenderStats {
         RenderStats {
-            sliced: self.sliced.len(),
+            sliced: alive,
             projected: self.projected.len(),
             tile_entries: self.bins.proj_from_entry.len(),
             pairs,
         }
     }
 
-    /// Stages 2–4 after the slice, keeping what the backward reads when `for_backward`.
+    /// Stage 4 after [`Self::prepare_frame`] (`alive` kernels after the slice), keeping what
+    /// the backward reads when `for_backward`.
     fn finish_frame(
         &mut self,
         scene: &Scene,
-        camera: &Camera,
         options: &RenderOptions,
         for_backward: bool,
+        alive: usize,
     ) -> RenderStats {
         self.ready_for_backward = for_backward;
-        self.project_and_bin(scene, camera, options);
         let background = scene.background.map(|b| b as f32);
         let pairs = match scene.blend {
             Blend::Additive => rasterize(
@@ -306,7 +346,7 @@ impl RenderContext {
                 for_backward.then_some(&mut self.pixel_stops),
             ),
         };
-        self.stats(pairs)
+        self.stats(alive, pairs)
     }
 
     /// Adds the gradient of a loss to `grads`, given `v_image = ∂L/∂C` for the frame last
@@ -386,9 +426,8 @@ impl RenderContext {
             return Ok(stats);
         }
         check_frame(tau, options)?;
-        slice(scene, tau, options.cutoff, &mut self.sliced);
         self.ready_for_backward = true;
-        self.project_and_bin(scene, camera, options);
+        let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, true);
         let buffers = &mut self.backward;
         let pairs = rasterize_with_backward(
             &self.projected,
@@ -404,7 +443,7 @@ impl RenderContext {
         );
         let v_background = background_gradient(v_image);
         self.backward_from_screen(scene, camera, tau, options, v_background, grads);
-        Ok(self.stats(pairs))
+        Ok(self.stats(alive, pairs))
     }
 
     /// The backward's stages 2 and 1 from the screen-space gradients in

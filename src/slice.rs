@@ -49,11 +49,11 @@ pub struct SlicedKernels {
 
 /// One kernel's slice.
 #[derive(Clone, Copy, Debug)]
-struct SlicedKernel {
-    mean: [f64; 3],
-    covariance: [f64; 6],
-    amplitude: [f64; 3],
-    qmax: f64,
+pub(crate) struct SlicedKernel {
+    pub(crate) mean: [f64; 3],
+    pub(crate) covariance: [f64; 6],
+    pub(crate) amplitude: [f64; 3],
+    pub(crate) qmax: f64,
 }
 
 impl SlicedKernels {
@@ -239,10 +239,11 @@ fn temporal_weight(scene: &Scene, i: usize, tau: f64) -> f64 {
 }
 
 /// Kernel `i` sliced at `tau`, or `None` when it is culled. Inlined into [`slice_visiting`]'s
-/// pass: its result then stays out of memory until it is kept (as the projection's, whose
-/// copy through the stack stalled on store forwarding when it was a call).
+/// pass (and [`crate::project::slice_and_project`]'s): its result then stays out of memory
+/// until it is kept (as the projection's, whose copy through the stack stalled on store
+/// forwarding when it was a call).
 #[inline(always)]
-fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKernel> {
+pub(crate) fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Option<SlicedKernel> {
     let [x, y, z, t] = scene.means[i];
     let scale = scene.scales[i];
     let dt = tau - t;

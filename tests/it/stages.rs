@@ -6,16 +6,19 @@
 //! |---|---|---|---|
 //! | slice (SPEC §2) | `slice::slice` | `reference_slice` | same kernels; `m`, `Σ3`, `a(τ)`, `qmax` within 1e-12 relative |
 //! | project (SPEC §4) | `project::project` | `reference_project` on the fast slice | same kernels; `m2` within 1e-9 px + 1e-12 relative, `Q` within 1e-9 of its largest entry |
+//! | slice and project in one pass | `project::slice_and_project` | `slice` then `project` | the same bits |
 //! | tiles + raster (SPEC §5) | `RenderContext` | the f64 per-pixel sum over the fast projection | the f32 bound `1e-6 + 2e-6 Σ|a|`, band pairs excepted |
 //!
 //! Scenes are the seeded hard scenes of `common` (rotations, velocities, negative
 //! amplitudes, kernels behind, straddling and beside the camera).
 
 use glam::{DMat3, DVec3};
-use splat4d::project::{ProjectedKernels, project};
+use splat4d::project::{
+    ProjectedKernels, project, slice_and_project, slice_candidates_and_project,
+};
 use splat4d::reference::{ReferenceSlice, is_borderline, reference_project, reference_slice};
 use splat4d::render::DEFAULT_CUTOFF;
-use splat4d::slice::{SlicedKernels, slice};
+use splat4d::slice::{SlicedKernels, TemporalIndex, slice};
 use splat4d::{RenderContext, RenderOptions};
 
 use crate::common::{ATOL, RTOL, hard_random_scene, test_camera};
@@ -152,6 +155,69 @@ fn project_matches_its_twin_on_the_same_slice() {
         }
     }
     assert!(compared > 1_000, "only {compared} kernels compared");
+}
+
+/// Every column `slice_and_project` writes, as bits, for comparing passes.
+fn projection_bits(p: &ProjectedKernels) -> Vec<Vec<u64>> {
+    let f64s = |values: Vec<f64>| values.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+    vec![
+        p.kernel_from_proj.iter().map(|&k| u64::from(k)).collect(),
+        f64s(p.means.iter().flatten().copied().collect()),
+        f64s(p.covariances.iter().flatten().copied().collect()),
+        f64s(p.conics.iter().flatten().copied().collect()),
+        f64s(p.qmax.clone()),
+        f64s(p.radii.iter().flatten().copied().collect()),
+        p.amplitudes
+            .iter()
+            .flatten()
+            .map(|&a| u64::from(a.to_bits()))
+            .collect(),
+    ]
+}
+
+#[test]
+fn slice_and_project_in_one_pass_give_the_two_stages_bits() {
+    let camera = test_camera(64, 48);
+    let mut sliced = SlicedKernels::default();
+    let (mut apart, mut together) = (ProjectedKernels::default(), ProjectedKernels::default());
+    let mut compared = 0;
+    for seed in 0..4 {
+        // 3000 kernels: several chunks of the parallel pass.
+        let scene = hard_random_scene(&camera, seed, 3000);
+        for (cutoff, dilation) in CASES {
+            for tau in [0.1, 0.5, 0.93] {
+                slice(&scene, tau, cutoff, &mut sliced);
+                project(&sliced, &camera, dilation, &mut apart);
+                let expected = projection_bits(&apart);
+                for threads in [1, 2, 3] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    let alive = pool.install(|| {
+                        slice_and_project(&scene, (tau, cutoff), &camera, dilation, &mut together)
+                    });
+                    assert_eq!(alive, sliced.len(), "seed {seed}, τ {tau}");
+                    assert_eq!(projection_bits(&together), expected, "seed {seed}, τ {tau}");
+                }
+                let index = TemporalIndex::new(&scene, cutoff);
+                let mut candidates = Vec::new();
+                index.candidates(tau, &mut candidates);
+                let alive = slice_candidates_and_project(
+                    &scene,
+                    &candidates,
+                    (tau, cutoff),
+                    &camera,
+                    dilation,
+                    &mut together,
+                );
+                assert_eq!(alive, sliced.len());
+                assert_eq!(projection_bits(&together), expected, "indexed, seed {seed}");
+                compared += apart.len();
+            }
+        }
+    }
+    assert!(compared > 10_000, "{compared} projections compared");
 }
 
 #[test]
