@@ -266,20 +266,18 @@ pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut
         sliced.kernel_from_slice[slice_of(p)]
     });
     fill_in_parallel(&mut out.qmax, n, |p| sliced.qmax[slice_of(p)]);
+    fill_in_parallel(&mut out.radii, n, |p| {
+        radii_of(sliced.qmax[slice_of(p)], out.covariances[p])
+    });
     fill_in_parallel(&mut out.amplitudes, n, |p| {
         sliced.amplitudes[slice_of(p)].map(|a| a as f32)
     });
-    fill_radii(out);
 }
 
-/// The half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of every projected kernel, from its
-/// `qmax` and `Σ2`.
-fn fill_radii(out: &mut ProjectedKernels) {
-    let (qmax, covariances) = (&out.qmax, &out.covariances);
-    fill_in_parallel(&mut out.radii, qmax.len(), |p| {
-        let (qmax, covariance) = (qmax[p], covariances[p]);
-        [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
-    });
+/// The half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of the ellipse `q ≤ qmax` of `Σ2`.
+#[inline(always)]
+fn radii_of(qmax: f64, covariance: [f64; 3]) -> [f64; 2] {
+    [(qmax * covariance[0]).sqrt(), (qmax * covariance[2]).sqrt()]
 }
 
 /// Stages 1 and 2 in one pass for an additive frame that no backward reads (SPEC §2, §4):
@@ -358,6 +356,7 @@ fn slice_and_project_visiting(
         .zip(keep_chunks(&mut out.covariances, count))
         .zip(keep_chunks(&mut out.conics, count))
         .zip(keep_chunks(&mut out.qmax, count))
+        .zip(keep_chunks(&mut out.radii, count))
         .zip(keep_chunks(&mut out.amplitudes, count));
     let (kept, alive) = keep_and_tally_in_parallel(
         count,
@@ -369,7 +368,7 @@ fn slice_and_project_visiting(
             let on_screen = projection(camera, dilation, sliced.mean, sliced.covariance)?;
             Some((i, sliced, on_screen))
         },
-        |(((((indices, means), covariances), conics), qmax), amplitudes), at, _, value| {
+        |((((((indices, means), covariances), conics), qmax), radii), amplitudes), at, _, value| {
             let (i, sliced, on_screen) = value;
             debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
             indices[at].write(i as u32);
@@ -377,6 +376,7 @@ fn slice_and_project_visiting(
             covariances[at].write(on_screen.covariance);
             conics[at].write(on_screen.conic);
             qmax[at].write(sliced.qmax);
+            radii[at].write(radii_of(sliced.qmax, on_screen.covariance));
             amplitudes[at].write(sliced.amplitude.map(|a| a as f32));
         },
     );
@@ -387,8 +387,8 @@ fn slice_and_project_visiting(
         gather_kept(&mut out.covariances, &kept);
         gather_kept(&mut out.conics, &kept);
         gather_kept(&mut out.qmax, &kept);
+        gather_kept(&mut out.radii, &kept);
         gather_kept(&mut out.amplitudes, &kept);
     }
-    fill_radii(out);
     alive
 }
