@@ -34,7 +34,8 @@ use crate::slice::{SlicedKernels, slice_one};
 /// SPEC §4 (EWA projection) and §5 (the cut-off's `qmax`).
 #[derive(Clone, Debug, Default)]
 pub struct ProjectedKernels {
-    /// Index into the [`SlicedKernels`] it came from.
+    /// Index into the [`SlicedKernels`] it came from; empty after [`slice_and_project`]
+    /// (an additive frame no backward reads), which keeps no slices.
     pub slice_from_proj: Vec<u32>,
     /// Scene index, ascending.
     pub kernel_from_proj: Vec<u32>,

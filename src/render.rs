@@ -126,7 +126,8 @@ pub struct RenderContext {
     tile_scratch: crate::raster::TileScratchPool,
     /// Scratch of the depth order (alpha scenes).
     depth_keys: Vec<(f64, u32, u32)>,
-    /// Alpha frames: each pixel's final transmittance and stop, for the backward.
+    /// Alpha frames: each pixel's final transmittance and stop, for the backward; kept by
+    /// [`Self::render_for_backward`] only (after other frames, an older frame's or none).
     pub(crate) pixel_stops: Vec<crate::composite::PixelStop>,
     /// Whether the last frame was rendered by [`Self::render_for_backward`]: it kept what
     /// [`Self::backward`] reads.
@@ -201,7 +202,6 @@ impl RenderContext {
         drain: &mut Drain<Error>,
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
-        self.ready_for_backward = false;
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, false);
         let background = scene.background.map(|b| b as f32);
         let path = SimdPath::detect();
@@ -271,6 +271,8 @@ impl RenderContext {
         options: &RenderOptions,
         keep_slices: bool,
     ) -> usize {
+        // Ready again only once a frame for a backward is whole.
+        self.ready_for_backward = false;
         let alive = if keep_slices || scene.blend == Blend::Alpha {
             match visit {
                 Visit::All => slice(scene, tau, options.cutoff, &mut self.sliced),
@@ -357,7 +359,8 @@ impl RenderContext {
     ///
     /// # Panics
     /// When the last frame was not rendered by [`Self::render_for_backward`] (a
-    /// [`Self::render`], [`Self::render_in_bands`] or [`Self::swap_image`] came between).
+    /// [`Self::render`], [`Self::render_in_bands`], [`Self::render_indexed`] or
+    /// [`Self::swap_image`] came between).
     pub fn backward(
         &mut self,
         scene: &Scene,
@@ -401,9 +404,9 @@ impl RenderContext {
         self.backward_from_screen(scene, camera, tau, options, v_background, grads);
     }
 
-    /// [`Self::render`], then [`Self::backward`] of the loss whose `∂L/∂C` `gradient` gives
-    /// from the rendered pixels ([`PixelGradient`]), written to `v_image`: a training step's
-    /// render and backward. Additive scenes take one pass over the tiles, each set up once for
+    /// [`Self::render_for_backward`], then [`Self::backward`] of the loss whose `∂L/∂C`
+    /// `gradient` gives from the rendered pixels ([`PixelGradient`]), written to `v_image`: a
+    /// training step's render and backward. Additive scenes take one pass over the tiles, each set up once for
     /// both ([`rasterize_with_backward`]); the image, `v_image` and the gradients are the
     /// same bits as the two calls with `gradient` applied to the whole image between them.
     #[allow(clippy::too_many_arguments)]
@@ -426,8 +429,8 @@ impl RenderContext {
             return Ok(stats);
         }
         check_frame(tau, options)?;
-        self.ready_for_backward = true;
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, true);
+        self.ready_for_backward = true;
         let buffers = &mut self.backward;
         let pairs = rasterize_with_backward(
             &self.projected,

@@ -82,7 +82,10 @@ fn stages(c: &mut Criterion) {
     for n in [1_000, 10_000, 100_000] {
         let scene = bench_scene(n, 42);
         let mut context = RenderContext::new();
-        context.render(&scene, &camera, TAU, &options).unwrap();
+        // Rendered for a backward: the context keeps the slices `project` reads.
+        context
+            .render_for_backward(&scene, &camera, TAU, &options)
+            .unwrap();
         group.throughput(Throughput::Elements(n as u64));
         group.bench_function(BenchmarkId::new("slice", n), |b| {
             b.iter(|| slice(&scene, TAU, options.cutoff, &mut context.sliced))

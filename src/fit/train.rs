@@ -288,7 +288,7 @@ impl ViewSlot {
     ) -> Result<f64> {
         self.grads.reset_for_scene(scene);
         // The render and its backward in one pass over the tiles (the same bits as
-        // `render`, `view_mse_with_gradient` and `backward`).
+        // `render_for_backward`, `view_mse_with_gradient` and `backward`).
         self.context.render_and_backward(
             scene,
             &view.camera,
