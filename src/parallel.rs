@@ -6,8 +6,9 @@
 //! system's first touch of every new page on one thread, and compaction through `push` grows
 //! its arrays by copying. These helpers write the slots in parallel, straight into the arrays'
 //! spare capacity (once each; a pass that keeps some values, [`keep_in_parallel`], writes
-//! each chunk's at the start of its stretch and [`gather_kept`] moves them together): index `i`'s value is
-//! computed from `i` alone, so the output is the same for any number of threads.
+//! each chunk's at the start of its stretch and [`gather_kept`] moves them together): index
+//! `i`'s value is computed from `i` alone, so the output is the same for any number of
+//! threads.
 
 use rayon::prelude::*;
 

@@ -23,10 +23,8 @@ use crate::model::camera::Camera;
 use rayon::prelude::*;
 
 use crate::model::scene::{Blend, Scene};
-use crate::parallel::{
-    fill_in_parallel, gather_kept, keep_and_tally_in_parallel, keep_chunks, keep_in_parallel,
-};
-use crate::slice::{SlicedKernels, slice_one};
+use crate::parallel::{fill_in_parallel, gather_kept, keep_and_tally_in_parallel, keep_chunks};
+use crate::slice::{SlicedKernel, SlicedKernels, slice_one};
 
 /// Screen-space ellipses of the kernels that survive projection. Struct-of-arrays, index
 /// `p` of every array is one projected kernel, in ascending scene order.
@@ -232,47 +230,16 @@ fn projection(camera: &Camera, dilation: f64, mean: [f64; 3], cov: [f64; 6]) -> 
 /// The kernels are projected in parallel and the ones on screen kept in ascending order
 /// (the result does not depend on the thread count).
 pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut ProjectedKernels) {
-    let count = sliced.len();
-    out.reset();
-    // One pass: each chunk of sliced kernels writes the projections it keeps at the start of
-    // its own stretch of these arrays; the stretches are gathered after.
-    let chunks = keep_chunks(&mut out.slice_from_proj, count)
-        .zip(keep_chunks(&mut out.means, count))
-        .zip(keep_chunks(&mut out.covariances, count))
-        .zip(keep_chunks(&mut out.conics, count));
-    let kept = keep_in_parallel(
-        count,
-        chunks,
-        |s| projection(camera, dilation, sliced.means[s], sliced.covariances[s]),
-        |(((slices, means), covariances), conics), at, s, on_screen| {
-            debug_assert!(u32::try_from(s).is_ok(), "slice indices fit in u32");
-            slices[at].write(s as u32);
-            means[at].write(on_screen.mean);
-            covariances[at].write(on_screen.covariance);
-            conics[at].write(on_screen.conic);
-        },
-    );
-    // SAFETY: each array is a column of the pass, whose chunks wrote their kept projections.
-    unsafe {
-        gather_kept(&mut out.slice_from_proj, &kept);
-        gather_kept(&mut out.means, &kept);
-        gather_kept(&mut out.covariances, &kept);
-        gather_kept(&mut out.conics, &kept);
-    }
-    let n = out.slice_from_proj.len();
-    // The per-slice values of the kept kernels, gathered.
-    let slices = &out.slice_from_proj;
-    let slice_of = |p: usize| slices[p] as usize;
-    fill_in_parallel(&mut out.kernel_from_proj, n, |p| {
-        sliced.kernel_from_slice[slice_of(p)]
-    });
-    fill_in_parallel(&mut out.qmax, n, |p| sliced.qmax[slice_of(p)]);
-    fill_in_parallel(&mut out.radii, n, |p| {
-        radii_of(sliced.qmax[slice_of(p)], out.covariances[p])
-    });
-    fill_in_parallel(&mut out.amplitudes, n, |p| {
-        sliced.amplitudes[slice_of(p)].map(|a| a as f32)
-    });
+    let slice = |s: usize, _: &mut usize| {
+        let kernel = SlicedKernel {
+            mean: sliced.means[s],
+            covariance: sliced.covariances[s],
+            amplitude: sliced.amplitudes[s],
+            qmax: sliced.qmax[s],
+        };
+        Some((sliced.kernel_from_slice[s], kernel))
+    };
+    projection_pass(sliced.len(), slice, true, (camera, dilation), out);
 }
 
 /// The half extents `[√(qmax Σ2xx), √(qmax Σ2yy)]` of the ellipse `q ≤ qmax` of `Σ2`.
@@ -351,8 +318,33 @@ fn slice_and_project_visiting(
         Blend::Additive,
         "slice_and_project: an additive scene"
     );
+    let slice = |k: usize, alive: &mut usize| {
+        let i = kernel(k);
+        let sliced = slice_one(scene, i, tau, cutoff)?;
+        *alive += 1;
+        debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
+        Some((i as u32, sliced))
+    };
+    projection_pass(count, slice, false, (camera, dilation), out)
+}
+
+/// The projection's one pass over `count` indices, into `out` (reset first):
+/// `slice(k, alive)` gives index `k`'s kernel (its scene index and its slice, counting it on
+/// `alive` if it likes) or `None`, and each kernel on screen has every array of `out` written
+/// but the opacities (alpha scenes: [`crate::colour::shade`]), `slice_from_proj` (as `k`) only
+/// with `slice_indices`. The chunks of indices run in parallel, each writing what it keeps at
+/// the start of its own stretch of every array, gathered after: the output does not depend
+/// on the thread count. Returns the sum of the `alive` counts.
+fn projection_pass(
+    count: usize,
+    slice: impl Fn(usize, &mut usize) -> Option<(u32, SlicedKernel)> + Sync,
+    slice_indices: bool,
+    (camera, dilation): (&Camera, f64),
+    out: &mut ProjectedKernels,
+) -> usize {
     out.reset();
-    let chunks = keep_chunks(&mut out.kernel_from_proj, count)
+    let chunks = keep_chunks(&mut out.slice_from_proj, count)
+        .zip(keep_chunks(&mut out.kernel_from_proj, count))
         .zip(keep_chunks(&mut out.means, count))
         .zip(keep_chunks(&mut out.covariances, count))
         .zip(keep_chunks(&mut out.conics, count))
@@ -363,16 +355,18 @@ fn slice_and_project_visiting(
         count,
         chunks,
         |k, alive| {
-            let i = kernel(k);
-            let sliced = slice_one(scene, i, tau, cutoff)?;
-            *alive += 1;
+            let (i, sliced) = slice(k, alive)?;
             let on_screen = projection(camera, dilation, sliced.mean, sliced.covariance)?;
             Some((i, sliced, on_screen))
         },
-        |((((((indices, means), covariances), conics), qmax), radii), amplitudes), at, _, value| {
-            let (i, sliced, on_screen) = value;
-            debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
-            indices[at].write(i as u32);
+        |columns, at, k, (i, sliced, on_screen)| {
+            let (((((((slices, kernels), means), covariances), conics), qmax), radii), amplitudes) =
+                columns;
+            if slice_indices {
+                debug_assert!(u32::try_from(k).is_ok(), "slice indices fit in u32");
+                slices[at].write(k as u32);
+            }
+            kernels[at].write(i);
             means[at].write(on_screen.mean);
             covariances[at].write(on_screen.covariance);
             conics[at].write(on_screen.conic);
@@ -381,8 +375,12 @@ fn slice_and_project_visiting(
             amplitudes[at].write(sliced.amplitude.map(|a| a as f32));
         },
     );
-    // SAFETY: each array is a column of the pass, whose chunks wrote their kept projections.
+    // SAFETY: each array is a column of the pass, whose chunks wrote their kept projections
+    // (`slice_from_proj` only with `slice_indices`; otherwise it stays empty).
     unsafe {
+        if slice_indices {
+            gather_kept(&mut out.slice_from_proj, &kept);
+        }
         gather_kept(&mut out.kernel_from_proj, &kept);
         gather_kept(&mut out.means, &kept);
         gather_kept(&mut out.covariances, &kept);

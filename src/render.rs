@@ -190,9 +190,9 @@ impl RenderContext {
     /// are [`Self::render`]'s image's, bit for bit, in the memory of two groups of rows rather
     /// than an image: for frames that go straight to a file. Nothing is kept for a backward
     /// (call [`Self::render_for_backward`] before [`Self::backward`]), and [`Self::image`] is
-    /// left as it was. Returns the frame's counts, or `drain`'s first error, after which no more rows
-    /// are handed over (on more than one thread the group after the failed one may already
-    /// have been computed).
+    /// left as it was. Returns the frame's counts, or `drain`'s first error, after which no
+    /// more rows are handed over (on more than one thread the group after the failed one may
+    /// already have been computed).
     pub fn render_in_bands(
         &mut self,
         scene: &Scene,
@@ -406,9 +406,10 @@ impl RenderContext {
 
     /// [`Self::render_for_backward`], then [`Self::backward`] of the loss whose `∂L/∂C`
     /// `gradient` gives from the rendered pixels ([`PixelGradient`]), written to `v_image`: a
-    /// training step's render and backward. Additive scenes take one pass over the tiles, each set up once for
-    /// both ([`rasterize_with_backward`]); the image, `v_image` and the gradients are the
-    /// same bits as the two calls with `gradient` applied to the whole image between them.
+    /// training step's render and backward. Additive scenes take one pass over the tiles,
+    /// each set up once for both ([`rasterize_with_backward`]); the image, `v_image` and the
+    /// gradients are the same bits as the two calls with `gradient` applied to the whole image
+    /// between them.
     #[allow(clippy::too_many_arguments)]
     pub fn render_and_backward(
         &mut self,
