@@ -24,7 +24,7 @@
 use crate::model::scene::{Blend, Scene};
 use rayon::prelude::*;
 
-use crate::parallel::{fill_in_parallel, gather_kept, keep_chunks, keep_in_parallel};
+use crate::parallel::{gather_kept, keep_chunks, keep_in_parallel};
 
 /// Kernels alive at τ, sliced to 3D. Struct-of-arrays: index `s` of every array is one
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
@@ -53,6 +53,8 @@ pub(crate) struct SlicedKernel {
     pub(crate) mean: [f64; 3],
     pub(crate) covariance: [f64; 6],
     pub(crate) amplitude: [f64; 3],
+    /// Alpha scenes: `o(τ)` (0 for additive ones).
+    pub(crate) opacity: f64,
     pub(crate) qmax: f64,
 }
 
@@ -192,7 +194,9 @@ fn slice_visiting(
         .zip(keep_chunks(&mut out.means, count))
         .zip(keep_chunks(&mut out.covariances, count))
         .zip(keep_chunks(&mut out.amplitudes, count))
-        .zip(keep_chunks(&mut out.qmax, count));
+        .zip(keep_chunks(&mut out.qmax, count))
+        .zip(keep_chunks(&mut out.opacities, count));
+    let alpha = scene.blend == Blend::Alpha;
     let kept = keep_in_parallel(
         count,
         chunks,
@@ -200,29 +204,30 @@ fn slice_visiting(
             let i = kernel(k);
             slice_one(scene, i, tau, cutoff).map(|s| (i, s))
         },
-        |((((indices, means), covariances), amplitudes), qmax), at, _, (i, s)| {
+        |columns, at, _, (i, s)| {
+            let (((((indices, means), covariances), amplitudes), qmax), opacities) = columns;
             debug_assert!(u32::try_from(i).is_ok(), "scene indices fit in u32");
             indices[at].write(i as u32);
             means[at].write(s.mean);
             covariances[at].write(s.covariance);
             amplitudes[at].write(s.amplitude);
             qmax[at].write(s.qmax);
+            if alpha {
+                opacities[at].write(s.opacity);
+            }
         },
     );
-    // SAFETY: each array is a column of the pass, whose chunks wrote their kept slices.
+    // SAFETY: each array is a column of the pass, whose chunks wrote their kept slices (the
+    // opacities only for alpha scenes; otherwise they stay empty).
     unsafe {
         gather_kept(&mut out.kernel_from_slice, &kept);
         gather_kept(&mut out.means, &kept);
         gather_kept(&mut out.covariances, &kept);
         gather_kept(&mut out.amplitudes, &kept);
         gather_kept(&mut out.qmax, &kept);
-    }
-    let n = out.kernel_from_slice.len();
-    if scene.blend == Blend::Alpha {
-        let kept = &out.kernel_from_slice;
-        fill_in_parallel(&mut out.opacities, n, |s| {
-            scene.opacities[kept[s] as usize] * temporal_weight(scene, kept[s] as usize, tau)
-        });
+        if alpha {
+            gather_kept(&mut out.opacities, &kept);
+        }
     }
 }
 
@@ -230,12 +235,6 @@ fn slice_visiting(
 #[inline(always)]
 fn weight_of(d: f64) -> f64 {
     (-0.5 * d * d).exp()
-}
-
-/// Kernel `i`'s temporal weight at `tau`, as [`slice_one`] computes it.
-#[inline(always)]
-fn temporal_weight(scene: &Scene, i: usize, tau: f64) -> f64 {
-    weight_of((tau - scene.means[i][3]) / scene.scales[i][3])
 }
 
 /// Kernel `i` sliced at `tau`, or `None` when it is culled. Inlined into [`slice_visiting`]'s
@@ -262,6 +261,7 @@ pub(crate) fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Optio
         mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
         covariance: covariance_3d(scene.rotations[i], scale),
         amplitude,
+        opacity,
         qmax,
     })
 }
