@@ -298,8 +298,8 @@ fn sort_reaches_by_tile(out: &mut TileBins) {
     rows.into_par_iter().for_each(|(ty, entries, counts)| {
         // `counts[tx]` is where tile tx's next entry goes within the row.
         for reach in reaches_of(ty) {
-            for tx in reach.first..reach.end {
-                let slot = &mut counts[tx as usize];
+            let (first, end) = (reach.first as usize, reach.end as usize);
+            for slot in &mut counts[first..end] {
                 entries[*slot as usize] = reach.kernel;
                 *slot += 1;
             }
@@ -325,11 +325,16 @@ fn for_each_tile_row(
     let qxx = proj.conics[p][0];
     let q = padded_qmax(proj.qmax[p]);
     let reach_x = (q * sxx).sqrt();
-    let dv_star = q.sqrt() * sxy / sxx.sqrt();
+    // `√q Σ2xy/√Σ2xx`, with the one square root.
+    let dv_star = sxy * (reach_x / sxx);
     let shear = sxy / syy;
-    // The chord's ends on row offset `dv`.
+    // The chord's ends on row offset `dv`: `half² = (q - dv²/Σ2yy) / Qxx`, with the two
+    // quotients taken once per kernel.
+    let (half_sq_at_centre, half_sq_per_dv_sq) = (q / qxx, 1.0 / (syy * qxx));
     let chord = |dv: f64| {
-        let half = ((q - dv * dv / syy).max(0.0) / qxx).sqrt();
+        let half = (half_sq_at_centre - dv * dv * half_sq_per_dv_sq)
+            .max(0.0)
+            .sqrt();
         let centre = mx + shear * dv;
         (centre - half, centre + half)
     };
