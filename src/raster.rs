@@ -70,7 +70,10 @@
 //! faster. Tile
 //! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
 //! threads finish within ~1 % of each other; many more threads would need the tile as the
-//! unit.
+//! unit. The f64 sum is about a fifth of a frame: the same loop accumulating in f32 (tried,
+//! not kept) took a 100k@1080p frame from 30 % to 37 % of the probe at 9× the error
+//! (max 2.2e-6 → 2.0e-5), so even without it a frame stays well under half the probe;
+//! outside the raster, the bins take 9 % of that frame and 17 % of a 10k@512² one.
 
 use std::fmt;
 use std::str::FromStr;
