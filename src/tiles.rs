@@ -343,15 +343,21 @@ fn for_each_tile_row(
         let first = (ty * TILE_SIZE).max(y0);
         let last = ((ty + 1) * TILE_SIZE).min(y1) - 1;
         let (dv_lo, dv_hi) = (f64::from(first) + 0.5 - my, f64::from(last) + 0.5 - my);
-        let right = if (dv_lo..=dv_hi).contains(&dv_star) {
+        // The band's extremes: the ellipse's own where `±Δv*` falls in the band (the clamp
+        // leaves it as it is), else the chord at the clamped row. Both chords are taken and
+        // the ends chosen after: a branch on where `Δv*` falls mispredicted (the pass was
+        // ~15 % slower with it, the same values).
+        let (right_dv, left_dv) = (dv_star.clamp(dv_lo, dv_hi), (-dv_star).clamp(dv_lo, dv_hi));
+        let (right_chord, left_chord) = (chord(right_dv).1, chord(left_dv).0);
+        let right = if right_dv == dv_star {
             mx + reach_x
         } else {
-            chord(dv_star.clamp(dv_lo, dv_hi)).1
+            right_chord
         };
-        let left = if (dv_lo..=dv_hi).contains(&-dv_star) {
+        let left = if left_dv == -dv_star {
             mx - reach_x
         } else {
-            chord((-dv_star).clamp(dv_lo, dv_hi)).0
+            left_chord
         };
         let margin = 1e-9 * (left.abs() + right.abs()) + 1e-9;
         let columns = match pixel_span(0.5 * (left + right), 0.5 * (right - left) + margin, x0, x1)
