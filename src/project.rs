@@ -235,7 +235,8 @@ pub fn project(sliced: &SlicedKernels, camera: &Camera, dilation: f64, out: &mut
             mean: sliced.means[s],
             covariance: sliced.covariances[s],
             amplitude: sliced.amplitudes[s],
-            opacity: sliced.opacities.get(s).copied().unwrap_or(0.0),
+            // Not read by the projection (alpha scenes' opacities are shaded after it).
+            opacity: 0.0,
             qmax: sliced.qmax[s],
         };
         Some((sliced.kernel_from_slice[s], kernel))
