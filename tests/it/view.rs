@@ -342,6 +342,33 @@ fn cli_render(browser: &mut Browser, dir: &Path, scene: &str) -> image::RgbImage
     image::open(dir.join("page_render.png")).unwrap().to_rgb8()
 }
 
+/// Writes `scene.json` (the bench scene of `kernels` kernels from `seed`, spread over time)
+/// in `d` and its dataset `ds` of `views` views at two times, `size` pixels each.
+fn scene_and_dataset(d: &Path, (kernels, seed): (usize, u64), views: &str, size: &str) {
+    save_scene(
+        &bench_scene_in_time(kernels, seed, 1.0),
+        &d.join("scene.json"),
+    )
+    .unwrap();
+    let made = splat4d(
+        &[
+            "dataset",
+            "--scene",
+            "scene.json",
+            "--views",
+            views,
+            "--times",
+            "2",
+            "--size",
+            size,
+            "--out",
+            "ds",
+        ],
+        d,
+    );
+    assert!(made.status.success(), "{}", crate::common::stderr(&made));
+}
+
 /// This machine's address on its default route, if it has one other than loopback.
 fn non_loopback_address() -> Option<std::net::IpAddr> {
     let socket = std::net::UdpSocket::bind("0.0.0.0:0").ok()?;
@@ -358,24 +385,7 @@ fn the_page_draws_orbits_scrubs_compares_and_matches_render() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    save_scene(&bench_scene_in_time(400, 7, 1.0), &d.join("scene.json")).unwrap();
-    let made = splat4d(
-        &[
-            "dataset",
-            "--scene",
-            "scene.json",
-            "--views",
-            "3",
-            "--times",
-            "2",
-            "--size",
-            "64x48",
-            "--out",
-            "ds",
-        ],
-        d,
-    );
-    assert!(made.status.success(), "{}", crate::common::stderr(&made));
+    scene_and_dataset(d, (400, 7), "3", "64x48");
     let viewer = Viewer::start(&["--scene", "scene.json", "--views", "ds"], d);
     let port: u16 = viewer
         .url
@@ -574,24 +584,7 @@ impl ViewedFit {
     fn start(steps: &str, one_thread_pool: bool) -> ViewedFit {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        save_scene(&bench_scene_in_time(60, 3, 1.0), &d.join("scene.json")).unwrap();
-        let made = splat4d(
-            &[
-                "dataset",
-                "--scene",
-                "scene.json",
-                "--views",
-                "4",
-                "--times",
-                "2",
-                "--size",
-                "48x36",
-                "--out",
-                "ds",
-            ],
-            d,
-        );
-        assert!(made.status.success(), "{}", crate::common::stderr(&made));
+        scene_and_dataset(d, (60, 3), "4", "48x36");
         let mut fit = Command::new(env!("CARGO_BIN_EXE_splat4d"));
         fit.args([
             "fit",
