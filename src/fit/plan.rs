@@ -404,7 +404,7 @@ impl FitPlan {
         let [t0, t1] = time;
         if self.time_range.is_none() && !(t1 - t0).is_finite() {
             return Err(Error::usage(format!(
-                "the training frames' times span {t0}..{t1}, wider than the finite numbers: check the `time` field of the frames in the transforms files (or give `time_range`)"
+                "the training frames' times span {t0:e}..{t1:e}, wider than the finite numbers: check the `time` field of the frames in the transforms files (or give `time_range`)"
             )));
         }
         match self.bounds {

@@ -420,8 +420,7 @@ fn image(
 ) -> Result<ColmapImage> {
     check_finite(origin, item, "qvec", &rotation)?;
     check_finite(origin, item, "tvec", &translation)?;
-    let norm = rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
-    if norm < 1e-9 {
+    if rotation.iter().all(|&v| v == 0.0) {
         return Err(Error::invalid(
             origin,
             item,
@@ -581,8 +580,7 @@ pub fn parse_points_txt(text: &str, origin: &str) -> Result<SparseModel> {
 /// normalised quaternion `(w, x, y, z)` and the translation.
 #[must_use]
 pub fn world_to_camera(rotation: [f64; 4], translation: [f64; 3]) -> [[f64; 4]; 4] {
-    let norm = rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let [w, x, y, z] = rotation.map(|v| v / norm);
+    let [w, x, y, z] = unit_quaternion(rotation);
     let [tx, ty, tz] = translation;
     [
         [
@@ -607,9 +605,36 @@ pub fn world_to_camera(rotation: [f64; 4], translation: [f64; 3]) -> [[f64; 4]; 
     ]
 }
 
+/// `q / |q|` for any finite, non-zero `q`: scaled by its largest component first, so that
+/// neither `|q|²` overflows (a unit quaternion times 1e200) nor underflows (times 1e-200).
+fn unit_quaternion(q: [f64; 4]) -> [f64; 4] {
+    let largest = q.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let scaled = q.map(|v| v / largest);
+    let norm = scaled.iter().map(|v| v * v).sum::<f64>().sqrt();
+    scaled.map(|v| v / norm)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_quaternion_scaled_far_up_or_down_is_the_same_rotation() {
+        let q = [0.5_f64, 0.5, -0.5, 0.5];
+        let t = [1.0, -2.0, 3.0];
+        let unit = world_to_camera(q, t);
+        for scale in [1e200, 1e-200, 3.0, 1e300, 5e-310] {
+            let scaled = world_to_camera(q.map(|v| v * scale), t);
+            for (row, expected) in scaled.iter().zip(&unit) {
+                for (a, b) in row.iter().zip(expected) {
+                    assert!(
+                        (a - b).abs() < 1e-12,
+                        "scale {scale}: {scaled:?} vs {unit:?}"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn images_txt_with_and_without_points_lines() {

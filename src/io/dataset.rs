@@ -62,7 +62,7 @@ use crate::io::point_cloud::read_point_cloud;
 use crate::io::write_bytes_atomically;
 use crate::model::camera::Camera;
 use crate::model::distortion::{Distortion, RemapTable};
-use crate::model::error::{Error, Result, check_finite};
+use crate::model::error::{Error, MAX_QUOTE, Result, check_finite, cut};
 use crate::model::{Blend, Dataset, DatasetPoint, Image, View};
 
 /// The three splits, in file order.
@@ -566,7 +566,7 @@ fn missing_frames(
     let mut names = missing
         .iter()
         .take(NAMED_MISSING)
-        .map(|(_, name)| name.as_str())
+        .map(|(_, name)| cut(name, MAX_QUOTE))
         .collect::<Vec<_>>()
         .join(", ");
     if missing.len() > NAMED_MISSING {

@@ -686,6 +686,45 @@ impl SceneLayout {
         }
     }
 
+    /// Error naming the 3DGS file's own property (`scale_0`, `f_dc_0`, `opacity`,
+    /// `f_rest_3`, …) unless the row's stored values are finite and its log scales give a
+    /// finite, positive `σ = exp(scale)`: checked before the conversion, whose fields
+    /// (`scale[0]`, `amplitude`) are not what the file calls them.
+    fn check_gaussian_row(&self, row: &[u8], index: usize, origin: &str) -> Result<()> {
+        let named = GAUSSIAN_3D_PROPERTIES
+            .iter()
+            .map(|name| (*name).to_owned())
+            .zip(self.fields.iter().copied())
+            .chain(
+                (0..self.sh.len())
+                    .map(|k| format!("f_rest_{k}"))
+                    .zip(self.sh.iter().copied()),
+            );
+        for (name, field) in named {
+            let value = value_at(row, field);
+            let problem = if !value.is_finite() {
+                Some("is not finite".to_owned())
+            } else if name.starts_with("scale_") && !(value.exp() > 0.0 && value.exp().is_finite())
+            {
+                Some(format!(
+                    "is a log scale: σ = exp({value}) is {}, outside the numbers a kernel can hold",
+                    value.exp()
+                ))
+            } else {
+                None
+            };
+            if let Some(problem) = problem {
+                return Err(Error::invalid(
+                    origin,
+                    format!("vertex {index}"),
+                    &name,
+                    format!("{value} {problem}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Decodes whole rows `bytes` (in parallel) and appends them to `scene` (checked), their
     /// opacities and SH to `appearance`.
     fn decode_into(
@@ -698,6 +737,11 @@ impl SceneLayout {
         let stride = self.stride.max(1);
         let rows = bytes.len() / stride;
         let first = scene.len();
+        if self.kind == PlyKind::Gaussian3d {
+            for (i, row) in bytes.chunks_exact(stride).take(rows).enumerate() {
+                self.check_gaussian_row(row, first + i, origin)?;
+            }
+        }
         extend_scene(
             scene,
             rows,

@@ -187,6 +187,16 @@ pub fn parse_point_cloud(bytes: &[u8], origin: &str) -> Result<Vec<DatasetPoint>
                 ));
             }
         }
+        for (c, field) in ["red", "green", "blue"].iter().enumerate() {
+            if !colour[c].is_finite() {
+                return Err(Error::invalid(
+                    origin,
+                    format!("vertex {i}"),
+                    field,
+                    format!("{} is not a finite colour", row[colours[c]]),
+                ));
+            }
+        }
         points.push(DatasetPoint { position, colour });
     }
     Ok(points)

@@ -269,12 +269,16 @@ impl Scene {
     /// A recorded time range must be finite and ordered.
     pub fn check_time_range(&self, origin: &str) -> Result<()> {
         match self.time_range {
-            Some([t0, t1]) if !(t0.is_finite() && t1.is_finite() && t0 <= t1) => {
+            Some([t0, t1])
+                if !(t0.is_finite() && t1.is_finite() && t0 <= t1 && (t1 - t0).is_finite()) =>
+            {
                 Err(Error::invalid(
                     origin,
                     "scene",
                     "time_range",
-                    format!("[{t0}, {t1}] is not a finite, ordered pair"),
+                    format!(
+                        "[{t0:?}, {t1:?}] is not a finite, ordered pair whose span t1 - t0 is finite"
+                    ),
                 ))
             }
             _ => match self.framing {

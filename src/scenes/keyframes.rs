@@ -18,7 +18,7 @@
 use glam::{DMat3, DQuat, DVec3};
 
 use crate::model::{Camera, Error, Result};
-use crate::scenes::paths::PathFrame;
+use crate::scenes::paths::{PathFrame, lerp};
 
 /// One keyframe: a pose, a field of view and (optionally) a scene time.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,6 +92,18 @@ pub fn check_keyframes(keyframes: &[Keyframe], origin: &str) -> Result<()> {
         if key.time.is_some_and(|t| !t.is_finite()) {
             return Err(bad("time", "a finite number is required"));
         }
+        // The spline's knots are distances between neighbours: they must not overflow.
+        if let Some(previous) = i.checked_sub(1).map(|p| &keyframes[p])
+            && !(key.position() - previous.position()).length().is_finite()
+        {
+            return Err(bad(
+                "matrix",
+                &format!(
+                    "the position is too far from keyframes[{}]'s to interpolate between them (their distance overflows)",
+                    i - 1
+                ),
+            ));
+        }
     }
     Ok(())
 }
@@ -143,7 +155,7 @@ fn pose_at(keyframes: &[Keyframe], i: usize, u: f64, timed: bool) -> Pose {
     if qa.dot(qb) < 0.0 {
         qb = -qb;
     }
-    let lerp = |x: f64, y: f64| x + (y - x) * u;
+    let lerp = |x: f64, y: f64| lerp(x, y, u);
     Pose {
         camera_to_world: orthonormal(qa.slerp(qb, u).normalize(), position),
         fov_y_degrees: lerp(a.fov_y_degrees, b.fov_y_degrees),
@@ -234,6 +246,26 @@ mod tests {
             fov_y_degrees: fov,
             time: Some(time),
         }
+    }
+
+    #[test]
+    fn times_of_plus_minus_1e308_interpolate_to_finite_times() {
+        let keys = [key(0.0, 0.0, 50.0, -1e308), key(1.0, 0.3, 50.0, 1e308)];
+        check_keyframes(&keys, "path.json").unwrap();
+        let poses = interpolate(&keys, 5);
+        let times: Vec<f64> = poses.iter().map(|p| p.time.unwrap()).collect();
+        assert!(times.iter().all(|t| t.is_finite()), "{times:?}");
+        assert_eq!((times[0], times[2], times[4]), (-1e308, 0.0, 1e308));
+    }
+
+    #[test]
+    fn keyframes_too_far_apart_to_interpolate_are_refused_naming_the_keyframe() {
+        let keys = [key(-1e308, 0.0, 50.0, 0.0), key(1e308, 0.3, 50.0, 1.0)];
+        let message = check_keyframes(&keys, "path.json").unwrap_err().to_string();
+        assert!(
+            message.contains("keyframes[1]") && message.contains("`matrix`"),
+            "{message}"
+        );
     }
 
     #[test]

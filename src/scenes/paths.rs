@@ -48,8 +48,20 @@ pub struct Circle {
     pub up: Up,
 }
 
+/// `x + (y - x) s`, or `x (1 - s) + y s` where `y - x` overflows (ends of ±1e308): finite
+/// for finite ends and `s` in `[0, 1]`.
+#[must_use]
+pub fn lerp(x: f64, y: f64, s: f64) -> f64 {
+    let span = y - x;
+    if span.is_finite() {
+        x + span * s
+    } else {
+        x * (1.0 - s) + y * s
+    }
+}
+
 /// `n` times evenly over `[t0, t1]`, ends included (`t0` alone when `n = 1`):
-/// `t_k = t0 + (t1 - t0) k / (n - 1)`.
+/// `t_k = t0 + (t1 - t0) k / (n - 1)` ([`lerp`]).
 #[must_use]
 pub fn even_times([t0, t1]: [f64; 2], n: usize) -> Vec<f64> {
     (0..n)
@@ -57,7 +69,7 @@ pub fn even_times([t0, t1]: [f64; 2], n: usize) -> Vec<f64> {
             if n == 1 {
                 t0
             } else {
-                t0 + (t1 - t0) * k as f64 / (n - 1) as f64
+                lerp(t0, t1, k as f64 / (n - 1) as f64)
             }
         })
         .collect()
@@ -192,7 +204,7 @@ pub fn spiral(circle: &Circle, lens: &Lens, [t0, t1]: [f64; 2]) -> Result<Vec<Pa
             let elevation = circle.elevation_degrees * (2.0 * s - 1.0);
             Ok(PathFrame {
                 camera: camera_at(circle, lens, azimuth, elevation)?,
-                time: t0 + (t1 - t0) * s,
+                time: lerp(t0, t1, s),
             })
         })
         .collect()

@@ -11,7 +11,7 @@ use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
 use crate::render::{RenderContext, RenderOptions};
 use crate::scenes::paths::{
-    Circle, Lens, PathFrame, Up, even_times, framing_circle, orbit, spiral, time_range,
+    Circle, Lens, PathFrame, Up, even_times, framing_circle, lerp, orbit, spiral, time_range,
 };
 use crate::slice::TemporalIndex;
 use crate::tasks::{with_threads, with_threads_on_pool};
@@ -93,6 +93,16 @@ impl fmt::Display for VideoSummary {
 /// A named camera path, with its own frame rate when its file gives one.
 type NamedPath = (String, Vec<PathFrame>, Option<u32>);
 
+/// `tau` for a file name: two decimals (`0.50`), or in scientific form beyond a million
+/// (`1.00e308`, where two decimals would be a 312-character name).
+fn time_label(tau: f64) -> String {
+    if tau.abs() < 1e6 {
+        format!("{tau:.2}")
+    } else {
+        format!("{tau:.2e}")
+    }
+}
+
 /// The named camera paths of `request`.
 fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     let lens = &request.lens;
@@ -106,7 +116,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
         if t0 == t1 {
             vec![t0]
         } else {
-            vec![t0, 0.5 * (t0 + t1), t1]
+            vec![t0, lerp(t0, t1, 0.5), t1]
         }
     });
     let nothing_asked =
@@ -116,7 +126,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     if let Some(spec) = &orbit_spec {
         for &tau in &times {
             videos.push((
-                format!("orbit_t{tau:.2}"),
+                format!("orbit_t{}", time_label(tau)),
                 orbit(&circle(spec, &[tau]), lens, tau)?,
                 None,
             ));

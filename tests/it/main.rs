@@ -45,6 +45,9 @@ mod layers;
 mod matches_reference;
 /// The memory rule: estimates above the available memory or --max-memory are refused first.
 mod memory;
+/// Messages of the fourth attack round: values cut, the file's own property named, extreme
+/// times kept finite or refused.
+mod messages;
 /// The output rule: only a command's own earlier output is replaced, never an input.
 mod outputs;
 /// PLY: 3DGS slices read by an independent parser, 4D scenes round-tripped.
