@@ -10,5 +10,6 @@ pub mod hull;
 pub mod init;
 pub mod loss;
 pub mod plan;
+pub mod settings;
 pub mod stereo;
 pub mod train;

@@ -13,7 +13,8 @@ use crate::fit::alpha::{
 use crate::fit::hull::{HULL_GRID, flat_background, visual_hull};
 use crate::fit::init::SpaceTimeBox;
 use crate::fit::loss::psnr;
-use crate::fit::plan::{FitPlan, Init, border_median, start_amplitude};
+use crate::fit::plan::{Init, border_median, start_amplitude};
+use crate::fit::settings::FitSettings;
 use crate::fit::stereo::plane_sweep;
 use crate::fit::train::{StepRecord, evaluate, fit};
 use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
@@ -38,12 +39,11 @@ pub struct FitRequest {
     pub allow_outside_images: bool,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
-    /// Everything else about the fit.
-    pub plan: FitPlan,
+    /// Everything else about the fit, as chosen: each setting acts on the fit's blend or
+    /// is refused ([`FitSettings`]).
+    pub settings: FitSettings,
     /// The blend to fit; `None`: the start scene's, else the dataset's, else alpha.
     pub blend: Option<Blend>,
-    /// The alpha fit's options (used when the blend is alpha).
-    pub alpha: AlphaFitOptions,
     /// Output scene.
     pub out: PathBuf,
     /// Log file: one JSON object per step.
@@ -135,16 +135,19 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
             frames += 1;
         }
     }
+    // The additive fit's start, and an alpha fit's budget (unless the additive blend is
+    // asked for): what either may hold.
+    let additive = request.settings.additive_plan("").ok();
+    let alpha = request.settings.alpha_options("").ok();
     let mut kernels = match Init::parse_builtin(&request.init)? {
         Some(Init::Random(n)) => n,
-        Some(Init::Auto) => request.plan.start_kernels.max(1),
+        Some(Init::Auto) => additive.as_ref().map_or(1, |p| p.start_kernels.max(1)),
         _ => 0,
     };
-    // An alpha fit (unless the additive one is asked for) may grow to its kernel budget.
-    let mut batch = request.plan.batch_size;
-    if request.blend != Some(Blend::Additive) {
-        kernels = kernels.max(request.alpha.max_kernels);
-        batch = batch.max(request.alpha.batch_size);
+    let mut batch = additive.as_ref().map_or(1, |p| p.batch_size);
+    if let Some(alpha) = alpha.filter(|_| request.blend != Some(Blend::Additive)) {
+        kernels = kernels.max(alpha.max_kernels);
+        batch = batch.max(alpha.batch_size);
     }
     // The fit runs on `--threads` workers (or the global pool's), one view on each.
     let threads = request.threads.unwrap_or_else(rayon::current_num_threads);
@@ -162,8 +165,7 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
 
 /// Fits kernels to the dataset in `request.views` and writes the scene (and the log).
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
-    let plan = &request.plan;
-    plan.validate()?;
+    request.settings.validate()?;
     // Outputs are checked before the work: a fit is never lost to an unwritable path, and
     // never replaces its dataset or its start.
     // Every file the fit reads: the transforms files, the images they name, the start.
@@ -187,7 +189,11 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         .map(|port| Server::bind("127.0.0.1", port))
         .transpose()?;
     let options = DatasetOptions {
-        background: plan.background.unwrap_or([0.0; 3]).map(|b| b as f32),
+        background: request
+            .settings
+            .background
+            .unwrap_or([0.0; 3])
+            .map(|b| b as f32),
         downscale: request.downscale,
         strict: request.strict,
         allow_outside_images: request.allow_outside_images,
@@ -196,7 +202,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     for note in &dataset.notes {
         progress.note(note);
     }
-    if dataset.transparent && plan.background.is_none() {
+    if dataset.transparent && request.settings.background.is_none() {
         progress.note(
             "images with transparency were composited over black (`background` chooses the colour)",
         );
@@ -213,10 +219,21 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
     };
-    let blend = request.blend.unwrap_or(match &init {
-        Init::Scene(scene) => scene.blend,
-        _ => dataset.blend.unwrap_or(Blend::Alpha),
-    });
+    if request.settings.start_kernels.is_some() && !matches!(init, Init::Auto) {
+        return Err(crate::model::Error::setting(
+            &["start_kernels"],
+            format!(
+                "`start_kernels` sizes an `auto` start, and `init` is {}: give random:N for N kernels, or leave `start_kernels` out",
+                crate::model::error::cut(&request.init, crate::model::error::MAX_QUOTE)
+            ),
+        ));
+    }
+    let (blend, why) = match (request.blend, &init, dataset.blend) {
+        (Some(blend), _, _) => (blend, "`blend` chose it"),
+        (None, Init::Scene(scene), _) => (scene.blend, "the start scene's"),
+        (None, _, Some(blend)) => (blend, "the one the dataset records"),
+        (None, _, None) => (Blend::Alpha, "the default for a dataset"),
+    };
     if let Init::Scene(scene) = &init
         && scene.blend != blend
     {
@@ -226,9 +243,11 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         )));
     }
     if blend == Blend::Alpha {
+        let options = request.settings.alpha_options(why)?;
         progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
-        return fit_alpha_dataset(request, &dataset, init, up, server, progress);
+        return fit_alpha_dataset(request, &options, &dataset, init, up, server, progress);
     }
+    let plan = &request.settings.additive_plan(why)?;
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
     let up = up.or(scene.up);
@@ -369,16 +388,16 @@ fn start_from_images(
 /// border pixels.
 fn fit_alpha_dataset(
     request: &FitRequest,
+    options: &AlphaFitOptions,
     dataset: &crate::model::Dataset,
     init: Init,
     up: Option<Up>,
     server: Option<Server>,
     progress: &mut dyn FitProgress,
 ) -> Result<FitSummary> {
-    let options = &request.alpha;
     let bounds = alpha_bounds(&dataset.train)?;
     let background = request
-        .plan
+        .settings
         .background
         .unwrap_or_else(|| border_median(&dataset.train));
     let colour =

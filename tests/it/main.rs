@@ -27,6 +27,8 @@ mod finite_outputs;
 mod fit;
 /// The alpha fit recovers occluding scenes.
 mod fit_alpha;
+/// Every `fit` flag acts on the chosen blend's fit or is refused naming its blend.
+mod fit_flags;
 /// Seeded byte-level fuzzing of every loader: errors, never panics.
 mod fuzz_loaders;
 /// 3DGS PLYs both ways: graphdeco files read, exports drawn by a minimal 3DGS compositor.

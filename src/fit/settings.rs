@@ -1,0 +1,523 @@
+//! What a caller chose for a fit, and the plan of each blend made from it: every setting
+//! either acts on the chosen blend's fit or is refused naming the setting and the blend it
+//! belongs to, never ignored.
+//!
+//! A [`FitSettings`] holds each setting as the caller gave it (`None`, or `false`, where the
+//! caller left the choice to the plan). [`FitSettings::additive_plan`] turns it into the
+//! additive fit's [`FitPlan`] (SPEC §5–6), [`FitSettings::alpha_options`] into the alpha
+//! fit's [`AlphaFitOptions`] (SPEC §8); the defaults are those of
+//! [`crate::fit::defaults`] (through [`FitPlan::default`] and [`DEFAULT_ALPHA`]).
+//!
+//! Three kinds of setting ([`BOTH_BLENDS`], [`ADDITIVE_ONLY`], [`ALPHA_ONLY`]):
+//! - **both blends**: steps, batch, seed, start and budget counts, the background, the
+//!   rendering options, the learning rates of the groups both models have (means, times,
+//!   velocities, scales, amplitudes: the alpha colour's base), the final rate factor, the
+//!   density rounds' schedule and thresholds, and freezing means, times or amplitudes (a
+//!   frozen group's rate is 0);
+//! - **additive only**: the mode and what it fits, merging, `min_improvement`, `min_scale`,
+//!   the random start's box, time range, scales and amplitude, `adaptive` (the alpha fit
+//!   always densifies and prunes), the background's rate and freezing (the alpha fit keeps
+//!   its background fixed at its start);
+//! - **alpha only**: SH, the opacity, rotation and SH rates, the opacity reset, the split
+//!   size (`percent_dense`) and the split in time.
+//!
+//! The rates' units follow each model's parameters: the alpha fit's spatial rates are
+//! fractions of the cameras' box per step ([`crate::fit::alpha::AlphaRates`]), the
+//! additive fit's are absolute ([`crate::fit::adam::LearningRates`]); the density threshold
+//! is a mean positional gradient per standard deviation for the additive fit and a mean
+//! screen gradient per pixel for the alpha fit; `prune_below` a peak amplitude for the
+//! additive fit and an opacity for the alpha fit; `max_growth` the largest fraction of the
+//! kernels a round densifies in both.
+
+use crate::fit::adam::LearningRates;
+use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, MAX_RATE};
+use crate::fit::train::FitMode;
+use crate::model::{Blend, Error, Result, check_non_negative_setting};
+use crate::render::RenderOptions;
+
+/// Settings every blend's fit acts on.
+pub const BOTH_BLENDS: [&str; 23] = [
+    "steps",
+    "batch",
+    "start_kernels",
+    "max_kernels",
+    "eval_every",
+    "seed",
+    "background",
+    "lr_mean",
+    "lr_time",
+    "lr_velocity",
+    "lr_scale",
+    "lr_amplitude",
+    "lr_final",
+    "densify_every",
+    "densify_from",
+    "densify_until",
+    "densify_threshold",
+    "max_growth",
+    "prune_below",
+    "freeze_mean",
+    "freeze_time",
+    "freeze_amplitude",
+    "render",
+];
+
+/// Settings only the additive fit acts on.
+pub const ADDITIVE_ONLY: [&str; 13] = [
+    "mode",
+    "fit_velocity",
+    "fit_scale",
+    "adaptive",
+    "min_improvement",
+    "merge_tolerance",
+    "min_scale",
+    "box",
+    "time_range",
+    "init_scale",
+    "init_amplitude",
+    "lr_background",
+    "freeze_background",
+];
+
+/// Settings only the alpha fit acts on.
+pub const ALPHA_ONLY: [&str; 8] = [
+    "sh",
+    "sh_raise_every",
+    "lr_opacity",
+    "lr_rotation",
+    "lr_sh",
+    "opacity_reset_every",
+    "percent_dense",
+    "time_split_fraction",
+];
+
+/// Learning rates a caller chose, per group (`None`: the blend's default).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RateSettings {
+    /// Spatial means (both blends).
+    pub mean: Option<f64>,
+    /// Time means (both blends).
+    pub time: Option<f64>,
+    /// Velocities (both blends).
+    pub velocity: Option<f64>,
+    /// Log scales (both blends).
+    pub scale: Option<f64>,
+    /// Amplitudes: the additive colour, the alpha colour's base (both blends).
+    pub amplitude: Option<f64>,
+    /// The background (additive: the alpha fit keeps its background fixed).
+    pub background: Option<f64>,
+    /// Opacity logits (alpha).
+    pub opacity: Option<f64>,
+    /// Quaternions (alpha).
+    pub rotation: Option<f64>,
+    /// SH coefficients beyond the base colour (alpha).
+    pub sh: Option<f64>,
+}
+
+/// Everything a caller can choose about a fit, as chosen: `None` (or `false`) where the
+/// plan of the blend decides.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FitSettings {
+    /// Adam steps.
+    pub steps: Option<usize>,
+    /// Views per step.
+    pub batch: Option<usize>,
+    /// Kernels an automatic start makes.
+    pub start_kernels: Option<usize>,
+    /// Most kernels the density rounds may reach.
+    pub max_kernels: Option<usize>,
+    /// Held-out evaluation period in steps (0: only at the end).
+    pub eval_every: Option<usize>,
+    /// Seed of the start and of the batch order.
+    pub seed: Option<u64>,
+    /// Background colour (the start's; fitted by the additive fit unless frozen).
+    pub background: Option<[f64; 3]>,
+    /// Rendering options of fitting and evaluation.
+    pub render: RenderOptions,
+    /// Learning rates.
+    pub rates: RateSettings,
+    /// Learning rates at the last step as a fraction of the first.
+    pub lr_final: Option<f64>,
+    /// Steps between density rounds.
+    pub densify_every: Option<usize>,
+    /// Density rounds from this fraction of the run …
+    pub densify_from: Option<f64>,
+    /// … until this one.
+    pub densify_until: Option<f64>,
+    /// The gradient at which a kernel is densified (units by blend: see the module docs).
+    pub densify_threshold: Option<f64>,
+    /// Largest fraction of the kernels densified in one round.
+    pub max_growth: Option<f64>,
+    /// Kernels below this are pruned (additive: peak amplitude; alpha: opacity).
+    pub prune_below: Option<f64>,
+    /// Keep the spatial means fixed.
+    pub freeze_mean: bool,
+    /// Keep the time means fixed.
+    pub freeze_time: bool,
+    /// Keep the amplitudes fixed.
+    pub freeze_amplitude: bool,
+    /// Additive: keep the background fixed.
+    pub freeze_background: bool,
+    /// Additive: what the fit moves.
+    pub mode: Option<FitMode>,
+    /// Additive: fit the velocities whatever the mode.
+    pub fit_velocity: bool,
+    /// Additive: fit the scales whatever the mode.
+    pub fit_scale: bool,
+    /// Additive: densify and prune a random or scene start too.
+    pub adaptive: bool,
+    /// Additive: densify only when the loss fell by less than this fraction.
+    pub min_improvement: Option<f64>,
+    /// Additive: merge kernels within this many standard deviations.
+    pub merge_tolerance: Option<f64>,
+    /// Additive: densified kernels above this mean spatial scale are split.
+    pub min_scale: Option<f64>,
+    /// Additive: the random start's box `x0,y0,z0,x1,y1,z1`.
+    pub bounds: Option<[f64; 6]>,
+    /// Additive: the random start's time range.
+    pub time_range: Option<[f64; 2]>,
+    /// Additive: the random start's scales.
+    pub init_scale: Option<[f64; 4]>,
+    /// Additive: the start's amplitude per channel.
+    pub init_amplitude: Option<f64>,
+    /// Alpha: SH triplets per kernel (0, 3, 8 or 15).
+    pub sh: Option<usize>,
+    /// Alpha: steps between SH degree raises.
+    pub sh_raise_every: Option<usize>,
+    /// Alpha: steps between opacity resets (0: never).
+    pub opacity_reset_every: Option<usize>,
+    /// Alpha: a densified kernel wider than this fraction of the box's diagonal is split.
+    pub percent_dense: Option<f64>,
+    /// Alpha: the σt fraction of the time range above which a kernel splits in time.
+    pub time_split_fraction: Option<f64>,
+}
+
+impl FitSettings {
+    /// The settings chosen (by name, as in [`BOTH_BLENDS`], [`ADDITIVE_ONLY`] and
+    /// [`ALPHA_ONLY`]) that only the additive fit or only the alpha fit acts on.
+    fn chosen(&self) -> (Vec<&'static str>, Vec<&'static str>) {
+        let r = &self.rates;
+        let additive = [
+            ("mode", self.mode.is_some()),
+            ("fit_velocity", self.fit_velocity),
+            ("fit_scale", self.fit_scale),
+            ("adaptive", self.adaptive),
+            ("min_improvement", self.min_improvement.is_some()),
+            ("merge_tolerance", self.merge_tolerance.is_some()),
+            ("min_scale", self.min_scale.is_some()),
+            ("box", self.bounds.is_some()),
+            ("time_range", self.time_range.is_some()),
+            ("init_scale", self.init_scale.is_some()),
+            ("init_amplitude", self.init_amplitude.is_some()),
+            ("lr_background", r.background.is_some()),
+            ("freeze_background", self.freeze_background),
+        ];
+        let alpha = [
+            ("sh", self.sh.is_some()),
+            ("sh_raise_every", self.sh_raise_every.is_some()),
+            ("lr_opacity", r.opacity.is_some()),
+            ("lr_rotation", r.rotation.is_some()),
+            ("lr_sh", r.sh.is_some()),
+            ("opacity_reset_every", self.opacity_reset_every.is_some()),
+            ("percent_dense", self.percent_dense.is_some()),
+            ("time_split_fraction", self.time_split_fraction.is_some()),
+        ];
+        let given = |list: &[(&'static str, bool)]| {
+            list.iter()
+                .filter(|(_, on)| *on)
+                .map(|(name, _)| *name)
+                .collect()
+        };
+        (given(&additive), given(&alpha))
+    }
+
+    /// An error naming the first chosen setting that `blend`'s fit cannot act on (`why`
+    /// says how the fit's blend was chosen), or `Ok`.
+    pub fn check_blend(&self, blend: Blend, why: &str) -> Result<()> {
+        let (additive, alpha) = self.chosen();
+        let (foreign, theirs) = match blend {
+            Blend::Alpha => (additive, Blend::Additive),
+            Blend::Additive => (alpha, Blend::Alpha),
+        };
+        match foreign.first() {
+            None => Ok(()),
+            Some(&field) => {
+                let note = match field {
+                    "adaptive" => " (the alpha fit always densifies and prunes)",
+                    "lr_background" | "freeze_background" => {
+                        " (the alpha fit keeps the background fixed at its start)"
+                    }
+                    _ => "",
+                };
+                Err(Error::setting(
+                    &[field],
+                    format!(
+                        "`{field}` acts on the {theirs} blend's fit{note}, and this fit's blend is {blend} ({why}): add `blend` {theirs}, or leave `{field}` out"
+                    ),
+                ))
+            }
+        }
+    }
+
+    /// Every chosen number in range for the blend it acts on (rates, fractions, counts,
+    /// the background): checked before any work, whichever blend the fit turns out to be.
+    pub fn validate(&self) -> Result<()> {
+        self.additive().validate()?;
+        validate_alpha(&self.alpha())
+    }
+
+    /// The additive fit's plan ([`FitSettings::validate`] checks its numbers); an
+    /// alpha-only setting is refused.
+    pub fn additive_plan(&self, why: &str) -> Result<FitPlan> {
+        self.check_blend(Blend::Additive, why)?;
+        Ok(self.additive())
+    }
+
+    /// The alpha fit's options ([`FitSettings::validate`] checks their numbers); an
+    /// additive-only setting is refused.
+    pub fn alpha_options(&self, why: &str) -> Result<AlphaFitOptions> {
+        self.check_blend(Blend::Alpha, why)?;
+        Ok(self.alpha())
+    }
+
+    /// The chosen settings over [`FitPlan::default`].
+    fn additive(&self) -> FitPlan {
+        let d = FitPlan::default();
+        let r = &self.rates;
+        FitPlan {
+            steps: self.steps.unwrap_or(d.steps),
+            start_kernels: self.start_kernels.unwrap_or(d.start_kernels),
+            adaptive: self.adaptive,
+            rounds: AdaptiveOptions {
+                every: self.densify_every.unwrap_or(d.rounds.every),
+                from: self.densify_from.unwrap_or(d.rounds.from),
+                until: self.densify_until.unwrap_or(d.rounds.until),
+                gradient_threshold: self
+                    .densify_threshold
+                    .unwrap_or(d.rounds.gradient_threshold),
+                prune_below: self.prune_below.unwrap_or(d.rounds.prune_below),
+                max_growth: self.max_growth.unwrap_or(d.rounds.max_growth),
+                min_improvement: self.min_improvement.unwrap_or(d.rounds.min_improvement),
+                merge_tolerance: self.merge_tolerance.unwrap_or(d.rounds.merge_tolerance),
+                max_kernels: self.max_kernels.unwrap_or(d.rounds.max_kernels),
+                ..d.rounds
+            },
+            min_scale: self.min_scale,
+            bounds: self.bounds,
+            time_range: self.time_range,
+            init_scale: self.init_scale,
+            init_amplitude: self.init_amplitude,
+            rates: LearningRates {
+                mean: r.mean.unwrap_or(d.rates.mean),
+                time: r.time.unwrap_or(d.rates.time),
+                amplitude: r.amplitude.unwrap_or(d.rates.amplitude),
+                velocity: r.velocity.unwrap_or(d.rates.velocity),
+                scale: r.scale.unwrap_or(d.rates.scale),
+                background: r.background.unwrap_or(d.rates.background),
+            },
+            final_rate_factor: self.lr_final.unwrap_or(d.final_rate_factor),
+            mode: self.mode,
+            fit_velocity: self.fit_velocity,
+            fit_scale: self.fit_scale,
+            freeze_mean: self.freeze_mean,
+            freeze_time: self.freeze_time,
+            freeze_amplitude: self.freeze_amplitude,
+            freeze_background: self.freeze_background,
+            batch_size: self.batch.unwrap_or(d.batch_size),
+            eval_every: self.eval_every.unwrap_or(d.eval_every),
+            seed: self.seed.unwrap_or(d.seed),
+            background: self.background,
+            render: self.render,
+        }
+    }
+
+    /// The chosen settings over [`DEFAULT_ALPHA`], a frozen group's rate 0.
+    fn alpha(&self) -> AlphaFitOptions {
+        let d = DEFAULT_ALPHA;
+        let r = &self.rates;
+        let frozen = |freeze: bool, rate: f64| if freeze { 0.0 } else { rate };
+        AlphaFitOptions {
+            steps: self.steps.unwrap_or(d.steps),
+            batch_size: self.batch.unwrap_or(d.batch_size),
+            rates: AlphaRates {
+                mean: frozen(self.freeze_mean, r.mean.unwrap_or(d.rates.mean)),
+                time: frozen(self.freeze_time, r.time.unwrap_or(d.rates.time)),
+                velocity: r.velocity.unwrap_or(d.rates.velocity),
+                scale: r.scale.unwrap_or(d.rates.scale),
+                rotation: r.rotation.unwrap_or(d.rates.rotation),
+                opacity: r.opacity.unwrap_or(d.rates.opacity),
+                colour: frozen(self.freeze_amplitude, r.amplitude.unwrap_or(d.rates.colour)),
+                sh: r.sh.unwrap_or(d.rates.sh),
+            },
+            final_rate_factor: self.lr_final.unwrap_or(d.final_rate_factor),
+            eval_every: self.eval_every.unwrap_or(d.eval_every),
+            seed: self.seed.unwrap_or(d.seed),
+            render: self.render,
+            start_kernels: self.start_kernels.unwrap_or(d.start_kernels),
+            sh_count: self.sh.unwrap_or(d.sh_count),
+            sh_raise_every: self.sh_raise_every.unwrap_or(d.sh_raise_every),
+            max_kernels: self.max_kernels.unwrap_or(d.max_kernels),
+            densify_every: self.densify_every.unwrap_or(d.densify_every),
+            densify_from: self.densify_from.unwrap_or(d.densify_from),
+            densify_until: self.densify_until.unwrap_or(d.densify_until),
+            densify_fraction: self.max_growth.unwrap_or(d.densify_fraction),
+            densify_threshold: self.densify_threshold.unwrap_or(d.densify_threshold),
+            percent_dense: self.percent_dense.unwrap_or(d.percent_dense),
+            prune_opacity: self.prune_below.unwrap_or(d.prune_opacity),
+            opacity_reset_every: self.opacity_reset_every.unwrap_or(d.opacity_reset_every),
+            time_split_fraction: self.time_split_fraction.unwrap_or(d.time_split_fraction),
+            ..d
+        }
+    }
+}
+
+/// The alpha options' numbers in range: rates finite, ≥ 0 and at most [`MAX_RATE`]; the
+/// density window inside the run; fractions ≥ 0; SH a count the model has; a final rate
+/// factor > 0.
+fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
+    options.render.validate()?;
+    let r = &options.rates;
+    for (field, value) in [
+        ("lr_mean", r.mean),
+        ("lr_time", r.time),
+        ("lr_velocity", r.velocity),
+        ("lr_scale", r.scale),
+        ("lr_rotation", r.rotation),
+        ("lr_opacity", r.opacity),
+        ("lr_amplitude", r.colour),
+        ("lr_sh", r.sh),
+        ("densify_threshold", options.densify_threshold),
+        ("max_growth", options.densify_fraction),
+        ("prune_below", options.prune_opacity),
+        ("percent_dense", options.percent_dense),
+        ("time_split_fraction", options.time_split_fraction),
+    ] {
+        check_non_negative_setting(field, value)?;
+        if field.starts_with("lr_") && value > MAX_RATE {
+            return Err(Error::setting(
+                &[field],
+                format!(
+                    "`{field}` {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step)"
+                ),
+            ));
+        }
+    }
+    for (field, value) in [
+        ("densify_from", options.densify_from),
+        ("densify_until", options.densify_until),
+    ] {
+        if !(0.0..=1.0).contains(&value) {
+            return Err(Error::setting(
+                &[field],
+                format!("`{field}` {value} must be in [0, 1]"),
+            ));
+        }
+    }
+    let f = options.final_rate_factor;
+    if !(f.is_finite() && f > 0.0) {
+        return Err(Error::setting(
+            &["lr_final"],
+            format!("`lr_final` {f} must be finite and > 0"),
+        ));
+    }
+    if !crate::model::scene::SH_COUNTS.contains(&options.sh_count) {
+        return Err(Error::setting(
+            &["sh"],
+            format!(
+                "`sh` {} must be one of {:?} (SH degree 0 to 3)",
+                options.sh_count,
+                crate::model::scene::SH_COUNTS
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nothing_chosen_gives_each_blends_defaults() {
+        let settings = FitSettings {
+            render: DEFAULT_ALPHA.render,
+            ..FitSettings::default()
+        };
+        assert_eq!(
+            settings.additive_plan("test").unwrap(),
+            FitPlan {
+                render: DEFAULT_ALPHA.render,
+                ..FitPlan::default()
+            }
+        );
+        assert_eq!(settings.alpha_options("test").unwrap(), DEFAULT_ALPHA);
+        settings.validate().unwrap();
+    }
+
+    #[test]
+    fn every_setting_is_of_one_kind() {
+        let mut all: Vec<&str> = BOTH_BLENDS
+            .iter()
+            .chain(&ADDITIVE_ONLY)
+            .chain(&ALPHA_ONLY)
+            .copied()
+            .collect();
+        let count = all.len();
+        all.sort_unstable();
+        all.dedup();
+        assert_eq!(all.len(), count, "a setting listed twice");
+    }
+
+    #[test]
+    fn a_setting_of_the_other_blend_is_refused_naming_it_and_the_blend() {
+        let additive = FitSettings {
+            mode: Some(FitMode::Paper),
+            ..FitSettings::default()
+        };
+        let message = additive
+            .alpha_options("the default")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("`mode` acts on the additive blend")
+                && message.contains("blend is alpha")
+                && message.contains("add `blend` additive"),
+            "{message}"
+        );
+        let alpha = FitSettings {
+            sh: Some(8),
+            ..FitSettings::default()
+        };
+        let message = alpha
+            .additive_plan("`blend` additive")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("`sh` acts on the alpha blend"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn shared_rates_and_freezes_reach_the_alpha_fit() {
+        let settings = FitSettings {
+            rates: RateSettings {
+                mean: Some(1e-3),
+                amplitude: Some(2e-3),
+                ..RateSettings::default()
+            },
+            freeze_time: true,
+            max_growth: Some(0.2),
+            prune_below: Some(0.01),
+            ..FitSettings::default()
+        };
+        let options = settings.alpha_options("test").unwrap();
+        assert_eq!(options.rates.mean, 1e-3);
+        assert_eq!(options.rates.colour, 2e-3);
+        assert_eq!(options.rates.time, 0.0);
+        assert_eq!(options.densify_fraction, 0.2);
+        assert_eq!(options.prune_opacity, 0.01);
+    }
+}

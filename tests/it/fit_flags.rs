@@ -1,0 +1,235 @@
+//! Every `fit` flag acts on the chosen blend's fit or is refused naming the flag and the
+//! blend it belongs to (`src/fit/settings.rs`): run through the binary on a small alpha
+//! dataset, each flag against the same command without it.
+
+use crate::common::run_limited;
+use std::path::Path;
+
+/// A 4-camera, 2-time, 16×16 dataset of the occluding scene (an alpha scene: the dataset
+/// records the alpha blend, the default blend of its fits).
+fn occluding_dataset(dir: &Path) {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/images/occluding_scene.json");
+    let output = run_limited(
+        &[
+            "dataset",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--views",
+            "4",
+            "--times",
+            "2",
+            "--size",
+            "16x16",
+            "--out",
+            "ds",
+        ],
+        dir,
+    );
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Density rounds from the first step, every step: so that the rounds' flags act within
+/// the few steps of a test.
+const BASE: [&str; 11] = [
+    "fit",
+    "--views",
+    "ds",
+    "--steps",
+    "4",
+    "--init",
+    "random:20",
+    "--densify-every",
+    "1",
+    "--densify-from",
+    "0",
+];
+
+/// Runs `fit` with `BASE` (its `--init` replaced when `extra` gives one, its
+/// `--densify-every` when `extra` gives one) and `extra`; the scene and log written, or the
+/// failed output.
+fn fit(dir: &Path, name: &str, extra: &[&str]) -> Result<(Vec<u8>, Vec<u8>), String> {
+    let mut args: Vec<String> = Vec::new();
+    let mut base = BASE.iter();
+    while let Some(arg) = base.next() {
+        if arg.starts_with("--") && extra.contains(arg) {
+            base.next();
+            continue;
+        }
+        args.push((*arg).to_owned());
+    }
+    args.extend(extra.iter().map(|a| (*a).to_owned()));
+    let (out, log) = (format!("{name}.json"), format!("{name}.log"));
+    args.extend(["--out".into(), out.clone(), "--log".into(), log.clone()]);
+    let output = run_limited(&args, dir);
+    if !output.status.success() {
+        return Err(format!(
+            "exit {:?}: {}",
+            output.status.code(),
+            String::from_utf8_lossy(&output.stderr)
+        ));
+    }
+    Ok((
+        std::fs::read(dir.join(out)).unwrap(),
+        std::fs::read(dir.join(log)).unwrap(),
+    ))
+}
+
+/// The log without its wall-clock `seconds`.
+fn without_seconds(log: &[u8]) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(log)
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            record.as_object_mut().unwrap().remove("seconds");
+            record
+        })
+        .collect()
+}
+
+#[test]
+fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    let (base_scene, base_log) = fit(dir.path(), "base", &[]).expect("the base fit");
+    // Flags both blends act on, and the alpha fit's own: each changes the scene or the log.
+    let acting: &[&[&str]] = &[
+        &["--steps", "5"],
+        &["--batch", "1"],
+        &["--init", "auto", "--start-kernels", "50"],
+        &["--max-kernels", "21"],
+        &["--eval-every", "1"],
+        &["--seed", "7"],
+        &["--background", "0.5,0.5,0.5"],
+        &["--lr-mean", "0.01"],
+        &["--lr-time", "0.01"],
+        &["--lr-amplitude", "0.05"],
+        &["--lr-velocity", "0.01"],
+        &["--lr-scale", "0.05"],
+        &["--lr-final", "0.5"],
+        &["--freeze-mean"],
+        &["--freeze-time"],
+        &["--freeze-amplitude"],
+        &["--densify-every", "2"],
+        &["--densify-from", "0.5"],
+        &["--densify-until", "0.1"],
+        &["--densify-threshold", "1e9"],
+        &["--max-growth", "0.5"],
+        &["--prune-below", "0.2"],
+        &["--sh", "8"],
+        &["--sh-raise-every", "1"],
+        &["--sh-raise-every", "1", "--lr-sh", "0.05"],
+        &["--lr-opacity", "0.2"],
+        &["--lr-rotation", "0.05"],
+        &["--opacity-reset-every", "2"],
+        &["--percent-dense", "0.5"],
+        &["--cutoff", "0.01"],
+        &["--dilation", "0.5"],
+    ];
+    let mut reference: Option<(Vec<u8>, Vec<u8>)> = None;
+    for extra in acting {
+        let (scene, log) =
+            fit(dir.path(), "acting", extra).unwrap_or_else(|e| panic!("{extra:?}: {e}"));
+        // `--lr-sh` is compared with `--sh-raise-every 1` alone, which it extends.
+        let (against_scene, against_log) = match extra {
+            [_, _, "--lr-sh", _] => reference.as_ref().expect("--sh-raise-every ran first"),
+            _ => &(base_scene.clone(), base_log.clone()),
+        };
+        assert!(
+            scene != *against_scene || without_seconds(&log) != without_seconds(against_log),
+            "{extra:?} changed neither the scene nor the log"
+        );
+        if extra == &["--sh-raise-every", "1"] {
+            reference = Some((scene, log));
+        }
+    }
+    // The split in time needs kernels that move: a start of the base fit's kernels, each
+    // sent across the box within its σt.
+    let mut moving: serde_json::Value = serde_json::from_slice(&base_scene).unwrap();
+    for kernel in moving["kernels"].as_array_mut().unwrap() {
+        kernel["velocity"] = serde_json::json!([8.0, 0.0, 0.0]);
+    }
+    std::fs::write(dir.path().join("moving.json"), moving.to_string()).unwrap();
+    let moving_start = ["--init", "moving.json"];
+    let (split, _) = fit(dir.path(), "split", &moving_start).unwrap();
+    let mut never = moving_start.to_vec();
+    never.extend(["--time-split-fraction", "1e9"]);
+    let (unsplit, _) = fit(dir.path(), "unsplit", &never).unwrap();
+    assert_ne!(split, unsplit, "--time-split-fraction changed nothing");
+
+    // Flags of the additive fit only: refused with the alpha blend, naming the flag.
+    let additive_only: &[&[&str]] = &[
+        &["--mode", "paper"],
+        &["--fit-velocity"],
+        &["--fit-scale"],
+        &["--adaptive"],
+        &["--min-improvement", "0.1"],
+        &["--merge-tolerance", "0.2"],
+        &["--min-scale", "0.1"],
+        &["--box", "0,0,0,1,1,1"],
+        &["--time-range", "0,1"],
+        &["--init-scale", "0.1,0.1,0.1,0.5"],
+        &["--init-amplitude", "0.5"],
+        &["--lr-background", "0.01"],
+        &["--freeze-background"],
+    ];
+    for extra in additive_only {
+        let error = fit(dir.path(), "refused", extra).expect_err("refused");
+        assert!(
+            error.starts_with("exit Some(2)")
+                && error.contains(&format!("{} acts on the additive blend", extra[0]))
+                && error.contains("--blend additive")
+                && !error.contains("panicked"),
+            "{extra:?}: {error}"
+        );
+        assert!(!dir.path().join("refused.json").exists());
+    }
+    // The alpha fit's own flags are refused with the additive blend.
+    for extra in [
+        &["--sh", "8"][..],
+        &["--sh-raise-every", "1"],
+        &["--lr-opacity", "0.2"],
+        &["--lr-rotation", "0.05"],
+        &["--lr-sh", "0.05"],
+        &["--opacity-reset-every", "2"],
+        &["--percent-dense", "0.5"],
+        &["--time-split-fraction", "0.01"],
+    ] {
+        let mut args = vec!["--blend", "additive"];
+        args.extend_from_slice(extra);
+        let error = fit(dir.path(), "refused", &args).expect_err("refused");
+        assert!(
+            error.starts_with("exit Some(2)")
+                && error.contains(&format!("{} acts on the alpha blend", extra[0])),
+            "{extra:?}: {error}"
+        );
+    }
+    // A start count with a start that has its own.
+    let error = fit(dir.path(), "refused", &["--start-kernels", "50"]).expect_err("refused");
+    assert!(
+        error.contains("--start-kernels sizes an `auto` start"),
+        "{error}"
+    );
+}
+
+#[test]
+fn the_issues_example_lr_flags_now_change_the_default_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    let a = fit(dir.path(), "a", &["--steps", "3"]).unwrap();
+    let b = fit(
+        dir.path(),
+        "b",
+        &["--steps", "3", "--lr-mean", "0.5", "--lr-amplitude", "0.5"],
+    )
+    .unwrap();
+    assert_ne!(a.0, b.0);
+    let error = fit(dir.path(), "c", &["--steps", "3", "--mode", "paper"]).expect_err("refused");
+    assert!(
+        error.contains("--mode acts on the additive blend"),
+        "{error}"
+    );
+}
