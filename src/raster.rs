@@ -46,34 +46,9 @@
 //! compiled for the same path (16 lanes a register on AVX-512, its `q`, exp and f32
 //! accumulation fused as well).
 //!
-//! **Where the rest of the ceiling goes** (100k kernels at 1920×1080, one thread, AVX-512,
-//! `perf record`; `docs/performance.md` has the method and the figures): the row loop takes
-//! about 3.5 times the tile set-up (`avx512::prepare_tile`; 38 % and 11 % of the samples of
-//! `splat4d bench --scene 100k --size 1920x1080 --threads 1 --no-dense`, beside the probe,
-//! the f64 reference and page zeroing; a frame alone measured 62 % and 17 % before the
-//! fused loops), the rest slicing, projection, binning and the row forms. Per row entry the
-//! loop runs the probe's work for 16 lanes (`q` and the polynomial `exp`: 13 vector
-//! instructions since the exp no longer forms `-½ q`) plus what the probe has not: the
-//! lanes' `t` (two additions where the probe has one), the pair test, the widening of `G` to
-//! f64 (two masked conversions and an extraction) and six f64 multiply-adds where the probe
-//! has three f32 ones, with three amplitudes broadcast: 25 vector arithmetic instructions a
-//! row entry against the probe's 17 (`objdump` of both loops: 159 instructions for four
-//! entries, 30 of them vector ones an entry with the broadcasts and register copies); and a
-//! row entry holds on average 10.3 pairs of its 16 lanes (the probe counts all 16). So the
-//! loop alone can reach about 17/25 × 10.3/16 ≈ 44 % of the probe. Most of those
-//! instructions go to the two pipes that multiply and fuse (19 of them an entry, each taking
-//! both pipes for a cycle at 512 bits); about 20 cycles an entry is what a 100k@1080p frame
-//! takes, so the loop is bound by those pipes, not by memory (each tile's blocks and lists
-//! stay in its worker's cache). An entry's `q` → exp → f64 chain is some 15 dependent
-//! steps, so the SIMD loops take a row's entries four at a time, their four `G` first and
-//! then their terms in list order (the same sums in the same order), which made frames ~3 %
-//! faster. Tile
-//! rows are the parallel unit: at 1080p the largest of the 68 is 2.5 % of the frame, so two
-//! threads finish within ~1 % of each other; many more threads would need the tile as the
-//! unit. The f64 sum is about a fifth of a frame: the same loop accumulating in f32 (tried,
-//! not kept) took a 100k@1080p frame from 30 % to 37 % of the probe at 9× the error
-//! (max 2.2e-6 → 2.0e-5), so even without it a frame stays well under half the probe;
-//! outside the raster, the bins take 9 % of that frame and 17 % of a 10k@512² one.
+//! **Where the rest of the ceiling goes**: the row loop against the ideal loop of
+//! [`crate::bench::ceiling_probe`], measured, is in `docs/performance.md` ("The ceiling
+//! probe and the raster").
 
 use std::fmt;
 use std::str::FromStr;

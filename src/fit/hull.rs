@@ -1,4 +1,4 @@
-//! A start made from the images (issue "fitting real captures", item 3): a visual hull by
+//! A start made from the images: a visual hull by
 //! voting, for views whose background is one flat colour (renders over a colour, photos
 //! with alpha composited over one, as D-NeRF ships them).
 //!

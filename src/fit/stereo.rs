@@ -1,5 +1,5 @@
-//! A start made from photos that have neither a flat background nor a point cloud (issue
-//! "fitting real captures", item 3): a **plane sweep** over neighbouring views.
+//! A start made from photos that have neither a flat background nor a point cloud: a
+//! **plane sweep** over neighbouring views.
 //!
 //! Each training view in turn is the *reference*. Its neighbours are the (at most
 //! [`NEIGHBOURS`]) other views whose optical axes are within [`MAX_AXIS_ANGLE_DEGREES`] of
