@@ -1056,13 +1056,46 @@ pub fn write_split(dir: &Path, split: &str, views: &[View], exr: bool) -> Result
     write_transforms(dir, split, &first.camera, frames, Blend::Additive)
 }
 
-/// The files a dataset in `dir` is read from: its transforms files and the images their
-/// frames name (as far as they can be read; the loader reports what cannot), and the COLMAP
-/// model's files when there is one. Outputs are checked against these before any work
-/// ([`crate::io::output`]).
+/// The files a dataset is read from, by what they hold ([`dataset_inputs`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DatasetFiles {
+    /// The transforms files, or the COLMAP model's files.
+    pub descriptions: Vec<PathBuf>,
+    /// The photos, one per frame that names one (a file named by two frames is listed
+    /// twice).
+    pub photos: Vec<PathBuf>,
+    /// The masks (`mask_path`), one per frame that names one.
+    pub masks: Vec<PathBuf>,
+    /// The point clouds (`ply_file_path`).
+    pub point_clouds: Vec<PathBuf>,
+}
+
+impl DatasetFiles {
+    /// Every file, in the order above.
+    #[must_use]
+    pub fn all(&self) -> Vec<PathBuf> {
+        [
+            &self.descriptions,
+            &self.photos,
+            &self.masks,
+            &self.point_clouds,
+        ]
+        .into_iter()
+        .flatten()
+        .cloned()
+        .collect()
+    }
+}
+
+/// The files a dataset in `dir` is read from (as far as its descriptions can be read; the
+/// loader reports what cannot): its transforms files with the photos, masks (`mask_path`)
+/// and point cloud (`ply_file_path`) they name, or the COLMAP model's files with the photos
+/// its images file names (`images/NAME`). Outputs are checked against all of these before
+/// any work ([`crate::io::output`]), and the memory estimate counts the photos and masks.
+/// Only regular files are read here (a FIFO named like a transforms file would block).
 #[must_use]
-pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
+pub fn dataset_inputs(dir: &Path) -> DatasetFiles {
+    let mut files = DatasetFiles::default();
     for name in [
         "transforms_train.json",
         "transforms_val.json",
@@ -1070,13 +1103,20 @@ pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
         "transforms.json",
     ] {
         let path = dir.join(name);
-        files.push(path.clone());
+        files.descriptions.push(path.clone());
+        if !path.is_file() {
+            continue;
+        }
         let Ok(text) = std::fs::read_to_string(&path) else {
             continue;
         };
         let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) else {
             continue;
         };
+        let named = |v: &serde_json::Value, key: &str| {
+            v.get(key).and_then(|p| p.as_str()).map(|p| dir.join(p))
+        };
+        files.point_clouds.extend(named(&value, "ply_file_path"));
         let frames = value.get("frames").and_then(|f| f.as_array());
         for frame in frames.into_iter().flatten() {
             if let Some(image) = frame
@@ -1084,12 +1124,38 @@ pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
                 .and_then(|p| p.as_str())
                 .and_then(|p| resolve_image(dir, p))
             {
-                files.push(image);
+                files.photos.push(image);
             }
+            files.masks.extend(named(frame, "mask_path"));
         }
     }
     if let Some(sparse) = colmap::find_sparse_model(dir) {
-        files.extend(colmap::model_files(&sparse).into_iter().flatten());
+        let [cameras, images, points] = colmap::model_files(&sparse);
+        files
+            .descriptions
+            .extend([cameras, images.clone(), points].into_iter().flatten());
+        // The photos its images file names, when the model is what the loader reads (no
+        // transforms file beside it; a model the loader will refuse names none).
+        let read =
+            !dir.join("transforms_train.json").is_file() && !dir.join("transforms.json").is_file();
+        let model = images.filter(|_| read).and_then(|images| {
+            let bytes = std::fs::read(&images).ok()?;
+            let origin = images.display().to_string();
+            if images.extension().is_some_and(|e| e == "bin") {
+                colmap::parse_images_bin(&bytes, &origin).ok()
+            } else {
+                colmap::parse_images_txt(std::str::from_utf8(&bytes).ok()?, &origin).ok()
+            }
+        });
+        for image in model.map(|m| m.images).unwrap_or_default() {
+            files.photos.push(dir.join("images").join(&image.name));
+        }
     }
     files
+}
+
+/// Every file of [`dataset_inputs`].
+#[must_use]
+pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
+    dataset_inputs(dir).all()
 }

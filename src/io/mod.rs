@@ -41,55 +41,189 @@ use std::path::Path;
 
 use crate::model::{Error, Result};
 
-/// The name prefix of this process's temporary files and folders: `.splat4d-PID-`. The
-/// process id lets a later run tell a leftover of a killed run (its process is gone) from
-/// the live temporary file of a concurrent one.
-#[must_use]
-pub fn temp_prefix() -> String {
-    format!(".splat4d-{}-", std::process::id())
+/// The name prefix of every temporary file and folder splat4d makes beside an output
+/// (`.splat4d-tmp-` and a random part).
+pub const TEMP_PREFIX: &str = ".splat4d-tmp-";
+
+/// The name prefix of an earlier output folder moved aside while its successor takes its
+/// place: `.splat4d-old-RANDOM-NAME` (see [`output::FolderWriter::commit`]).
+pub const ASIDE_PREFIX: &str = ".splat4d-old-";
+
+/// Takes the lock that marks a temporary as in use and says whether the temporary is still
+/// there: a clean-up ([`remove_stale_temps`]) of another run may have taken it for a killed
+/// run's leftover between its creation and this lock (then `false`: make another).
+///
+/// The lock is an exclusive `flock` on the file or folder itself (`File::lock`), held for as
+/// long as `file` stays open; it is released by the kernel however the process ends, and it
+/// is the same lock seen from every process of the machine, whatever its PID namespace (a
+/// process id is not: a container sharing the folder sees other ids). Where the file system
+/// offers no locks the temporary is left unlocked, and a clean-up, unable to lock it
+/// either, keeps it.
+fn hold(file: &std::fs::File) -> bool {
+    if file.lock().is_err() {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        file.metadata().is_ok_and(|m| m.nlink() > 0)
+    }
+    #[cfg(not(unix))]
+    true
+}
+
+/// Opens `path` (a file or a folder) to lock it, without following a symbolic link and
+/// without waiting on a FIFO.
+fn open_for_lock(path: &Path) -> std::io::Result<std::fs::File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
+    }
+    options.open(path)
+}
+
+/// How many times a temporary is made again when a concurrent clean-up removed it before it
+/// was locked (each time takes a new random name; more than once is already unlikely).
+const TEMP_TRIES: usize = 16;
+
+/// A new temporary file in `dir`, named [`TEMP_PREFIX`]…`suffix`, locked (`hold`) until it
+/// is dropped or persisted and closed.
+pub(crate) fn temp_file_in(dir: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+    for _ in 0..TEMP_TRIES {
+        let temp = tempfile::Builder::new()
+            .prefix(TEMP_PREFIX)
+            .suffix(suffix)
+            .tempfile_in(dir)?;
+        if hold(temp.as_file()) {
+            return Ok(temp);
+        }
+    }
+    Err(std::io::Error::other(
+        "the temporary file kept being removed by another run",
+    ))
+}
+
+/// A new temporary folder in `dir`, named [`TEMP_PREFIX`]`label`…, and the open folder that
+/// holds its lock (`hold`): the folder is in use until that is dropped.
+pub(crate) fn temp_dir_in(
+    dir: &Path,
+    label: &str,
+) -> std::io::Result<(tempfile::TempDir, Option<std::fs::File>)> {
+    for _ in 0..TEMP_TRIES {
+        let temp = tempfile::Builder::new()
+            .prefix(&format!("{TEMP_PREFIX}{label}"))
+            .tempdir_in(dir)?;
+        let Ok(lock) = open_for_lock(temp.path()) else {
+            // Folders cannot be opened here (not Linux or macOS): unlocked, and never taken
+            // for a leftover either.
+            return Ok((temp, None));
+        };
+        if hold(&lock) {
+            return Ok((temp, Some(lock)));
+        }
+    }
+    Err(std::io::Error::other(
+        "the temporary folder kept being removed by another run",
+    ))
+}
+
+/// Locks the folder `dir` (an output about to be moved aside, [`ASIDE_PREFIX`]) so that a
+/// concurrent clean-up leaves it to this run; `None` where folders cannot be locked.
+pub(crate) fn lock_folder(dir: &Path) -> Option<std::fs::File> {
+    let file = open_for_lock(dir).ok()?;
+    hold(&file).then_some(file)
+}
+
+/// Whether the open `file` is still what `path` names (the same device and inode; `path` not
+/// a symbolic link): a temporary renamed into place, or replaced, since it was opened is not
+/// removed by its old name.
+fn still_at(file: &std::fs::File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (file.metadata(), std::fs::symlink_metadata(path)) {
+            (Ok(open), Ok(named)) => {
+                !named.file_type().is_symlink()
+                    && open.dev() == named.dev()
+                    && open.ino() == named.ino()
+            }
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (file, path);
+        false
+    }
 }
 
 /// Removes from `dir` the temporary files and folders that runs killed before they could
-/// rename them left behind (`.splat4d-PID-*` whose process no longer runs). Linux only
-/// (processes are looked up in `/proc`); best effort, errors are ignored.
+/// rename them left behind ([`TEMP_PREFIX`]…, [`ASIDE_PREFIX`]…): those whose lock can be
+/// taken. Every temporary is locked by its run as it is made (an exclusive `flock` on the
+/// file or folder itself, released by the kernel however the run ends), so no run still
+/// writing one loses it — whatever process, PID namespace or container it runs in. An
+/// earlier output moved aside goes back to its name when nothing took its place. Best
+/// effort: errors are ignored, and what cannot be locked is kept.
 pub fn remove_stale_temps(dir: &Path) {
-    if !Path::new("/proc/self").exists() {
-        return;
-    }
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
     for entry in entries.filter_map(std::result::Result::ok) {
         let name = entry.file_name().to_string_lossy().into_owned();
-        let Some(pid) = name
-            .strip_prefix(".splat4d-")
-            .and_then(|rest| rest.split('-').next())
-            .and_then(|pid| pid.parse::<u32>().ok())
-        else {
+        let aside = name.strip_prefix(ASIDE_PREFIX);
+        if aside.is_none() && !name.starts_with(TEMP_PREFIX) {
+            continue;
+        }
+        let path = entry.path();
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
             continue;
         };
-        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
-            let path = entry.path();
-            // An earlier output moved aside by a run killed before its successor took its
-            // place: it goes back rather than away.
-            let original = name
-                .strip_prefix(".splat4d-")
-                .and_then(|rest| rest.split_once('-'))
-                .and_then(|(_, rest)| rest.strip_prefix("old-"))
-                .map(|original| dir.join(original));
-            if let Some(original) = original
-                && std::fs::symlink_metadata(&original).is_err()
-                && std::fs::rename(&path, &original).is_ok()
-            {
-                continue;
-            }
-            let _ = if path.is_dir() {
-                std::fs::remove_dir_all(&path)
-            } else {
-                std::fs::remove_file(&path)
-            };
+        // Links, FIFOs and devices are no temporaries of ours.
+        if !(meta.is_file() || meta.is_dir()) {
+            continue;
         }
+        let Ok(file) = open_for_lock(&path) else {
+            continue;
+        };
+        // Taken: another run still uses it. An error: locks are not offered here, so
+        // nothing tells a leftover from a live temporary, and it is kept.
+        if file.try_lock().is_err() || !still_at(&file, &path) {
+            continue;
+        }
+        // An earlier output moved aside by a run killed before its successor took its
+        // place: it goes back rather than away.
+        let original = aside
+            .and_then(|rest| rest.split_once('-'))
+            .map(|(_, original)| dir.join(original))
+            .filter(|_| meta.is_dir());
+        if let Some(original) = original
+            && std::fs::symlink_metadata(&original).is_err()
+            && std::fs::rename(&path, &original).is_ok()
+        {
+            continue;
+        }
+        let _ = if meta.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        // The lock goes with `file`, after the removal.
     }
+}
+
+/// A random name part (16 hex digits), for names that must not clash between runs.
+#[must_use]
+pub(crate) fn random_part() -> String {
+    use std::hash::BuildHasher;
+    let hash = std::collections::hash_map::RandomState::new().hash_one(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos()),
+    );
+    format!("{hash:016x}")
 }
 
 /// The writer handed to [`write_atomically`]'s closure (buffered, seekable).
@@ -178,7 +312,8 @@ fn refuse_folder(path: &Path) -> Result<()> {
 /// Checks, before any work, that a command may write `out`: its extension is one of
 /// `extensions` (lower case, without the dot; empty: any), it is none of the command's
 /// `inputs` (so a typo never replaces an input), and its folder can be made and written
-/// (a temporary file is created there and removed).
+/// (a temporary file is created there, or in its nearest existing parent, and removed;
+/// nothing is made yet, so a run that fails later leaves no folder behind).
 pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result<()> {
     let extension = out
         .extension()
@@ -206,16 +341,71 @@ pub fn check_output(out: &Path, extensions: &[&str], inputs: &[&Path]) -> Result
         outputs.input(input);
     }
     outputs.check()?;
+    // Its folder, or the nearest one that exists: a temporary file made there and removed
+    // says it can be written (and the missing folders made), without making anything yet.
     let parent = folder_of(out);
-    std::fs::create_dir_all(parent).map_err(|e| {
-        let message = format!("cannot create its folder {}", parent.display());
-        Error::write(out, &message, e)
-    })?;
+    let existing = parent
+        .ancestors()
+        .find(|a| a.as_os_str().is_empty() || std::fs::symlink_metadata(a).is_ok())
+        .filter(|a| !a.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !existing.is_dir() {
+        return Err(Error::write(
+            out,
+            &format!("cannot create its folder {}", parent.display()),
+            std::io::Error::other(format!("{} is not a folder", existing.display())),
+        ));
+    }
+    let what = if existing == parent {
+        "cannot write in its folder".to_string()
+    } else {
+        format!("cannot create its folder {}", parent.display())
+    };
     tempfile::Builder::new()
-        .prefix(&temp_prefix())
-        .tempfile_in(parent)
+        .prefix(TEMP_PREFIX)
+        .tempfile_in(existing)
         .map(drop)
-        .map_err(|e| Error::write(out, "cannot write in its folder", e))
+        .map_err(|e| Error::write(out, &what, e))
+}
+
+/// The folders [`make_folders`] made for an output: removed again, when still empty, unless
+/// [`MadeFolders::keep`] is called once the output is in place — a failed run leaves no
+/// folder it made.
+#[must_use = "the folders are removed again when this is dropped"]
+pub struct MadeFolders {
+    /// Deepest first.
+    made: Vec<std::path::PathBuf>,
+}
+
+impl MadeFolders {
+    /// The output is in place: the folders stay.
+    pub fn keep(mut self) {
+        self.made.clear();
+    }
+}
+
+impl Drop for MadeFolders {
+    fn drop(&mut self) {
+        // `remove_dir` removes only an empty folder: one that another run has filled
+        // meanwhile stays.
+        for dir in &self.made {
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
+}
+
+/// Makes the folder `dir` and its missing parents, remembering which it made.
+pub fn make_folders(dir: &Path) -> std::io::Result<MadeFolders> {
+    let mut made = Vec::new();
+    for ancestor in dir.ancestors() {
+        if ancestor.as_os_str().is_empty() || std::fs::symlink_metadata(ancestor).is_ok() {
+            break;
+        }
+        made.push(ancestor.to_path_buf());
+    }
+    let made = MadeFolders { made };
+    std::fs::create_dir_all(dir)?;
+    Ok(made)
 }
 
 /// Writes `bytes` to `path` with [`write_atomically`].
@@ -286,20 +476,19 @@ fn write_atomically_reserving(
 ) -> Result<()> {
     refuse_folder(path)?;
     let parent = folder_of(path);
-    std::fs::create_dir_all(parent).map_err(|e| {
+    let made = make_folders(parent).map_err(|e| {
         let message = format!("cannot create its folder {}", parent.display());
         Error::write(path, &message, e)
     })?;
-    // Inside our own temporary folders there is nothing stale to look for.
+    // Inside our own temporary folders there is nothing stale to look for (and a frame
+    // folder being written would be listed once per frame).
     let in_temp = parent
-        .file_name()
-        .is_some_and(|n| n.to_string_lossy().starts_with(".splat4d-"));
+        .components()
+        .any(|c| c.as_os_str().to_string_lossy().starts_with(TEMP_PREFIX));
     if !in_temp {
         remove_stale_temps(parent);
     }
-    let temp = tempfile::Builder::new()
-        .prefix(&temp_prefix())
-        .tempfile_in(parent)
+    let temp = temp_file_in(parent, "")
         .map_err(|e| Error::write(path, "cannot create a temporary file beside the output", e))?;
     if let Some(bytes) = reserve {
         reserve_blocks(temp.as_file(), bytes);
@@ -322,6 +511,7 @@ fn write_atomically_reserving(
     }
     temp.persist(path)
         .map_err(|e| Error::write(path, "cannot move the finished file into place", e.error))?;
+    made.keep();
     Ok(())
 }
 
@@ -402,5 +592,11 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, ["out.txt"]);
+        // A write that fails into folders it made removes them again.
+        let failed = write_atomically(&dir.path().join("new/deeper/failed.txt"), |_| {
+            Err(std::io::Error::other("the writer failed"))
+        });
+        assert!(failed.is_err());
+        assert!(!dir.path().join("new").exists());
     }
 }

@@ -9,17 +9,89 @@
 //!   renamed into place once complete. An existing folder is replaced only when it is empty
 //!   or carries the [`MARKER`] file that the same command wrote into it; any other folder is
 //!   refused (exit 2) before any work.
+//! - Files written beside an output folder for it (a video's GIF, MP4 and camera path) are
+//!   recorded in its marker with their [`Stamp`] (length, modification time, inode): a later
+//!   run replaces or removes such a file only while it is the one recorded ([`check_beside`]),
+//!   never one the user made or changed since.
+//! - Several outputs of one run into one folder (a video's, a report's) are written into a
+//!   temporary folder inside it and moved into place together at the end ([`Staging`]); a run
+//!   that fails leaves nothing it created, not even the folders it made for its output.
 //! - Names derived from labels (a path file's stem, an orbit's time) go through
 //!   [`sanitize_label`] and [`unique_names`]: never `.`, `..`, empty, hidden, a separator, or
 //!   the name of another output of the run.
+//! - Temporaries are told apart from the leftovers of killed runs by a lock held on them
+//!   ([`super::remove_stale_temps`]), not by a process id.
 
 use std::path::{Component, Path, PathBuf};
 
 use crate::model::{Error, Result};
 
-/// The marker file splat4d writes into every folder it creates as a whole; its content is
-/// the command's name.
+/// The marker file splat4d writes into every folder it creates as a whole: the command's
+/// name on the first line, then every path it wrote in the folder, then, as `../NAME` and
+/// their [`Stamp`], the files it wrote beside the folder for it.
 pub const MARKER: &str = ".splat4d-output";
+
+/// What tells a file splat4d wrote from one put in its place or changed since: its length,
+/// modification time (nanoseconds) and, on Unix, its device and inode. A rename keeps all of
+/// them, so a file staged and moved into place keeps its stamp.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stamp {
+    len: u64,
+    modified: u128,
+    device: u64,
+    inode: u64,
+}
+
+impl Stamp {
+    /// The stamp of the regular file `path` (a link is not followed), if it is one.
+    #[must_use]
+    pub fn of(path: &Path) -> Option<Stamp> {
+        let meta = std::fs::symlink_metadata(path).ok()?;
+        if !meta.is_file() {
+            return None;
+        }
+        let modified = meta
+            .modified()
+            .ok()?
+            .duration_since(std::time::UNIX_EPOCH)
+            .ok()?
+            .as_nanos();
+        #[cfg(unix)]
+        let (device, inode) = {
+            use std::os::unix::fs::MetadataExt;
+            (meta.dev(), meta.ino())
+        };
+        #[cfg(not(unix))]
+        let (device, inode) = (0, 0);
+        Some(Stamp {
+            len: meta.len(),
+            modified,
+            device,
+            inode,
+        })
+    }
+
+    fn to_line(self, name: &str) -> String {
+        format!(
+            "../{name}\t{} {} {} {}",
+            self.len, self.modified, self.device, self.inode
+        )
+    }
+
+    /// `(NAME, stamp)` of a marker line `../NAME<TAB>len modified device inode`.
+    fn from_line(line: &str) -> Option<(&str, Stamp)> {
+        let (name, numbers) = line.strip_prefix("../")?.rsplit_once('\t')?;
+        let mut numbers = numbers.split(' ');
+        let mut next = || numbers.next();
+        let stamp = Stamp {
+            len: next()?.parse().ok()?,
+            modified: next()?.parse().ok()?,
+            device: next()?.parse().ok()?,
+            inode: next()?.parse().ok()?,
+        };
+        Some((name, stamp))
+    }
+}
 
 /// `path` made absolute, with `.` and `..` resolved and the symlinks of its longest existing
 /// ancestor followed (`canonicalize`); the part that does not exist yet is resolved
@@ -183,6 +255,80 @@ fn not_replaceable(dir: &Path, command: &str) -> Option<String> {
         })
 }
 
+/// Writes the [`MARKER`] of the finished folder `dir`: `command`, every path in it, and the
+/// [`Stamp`] of each file of `beside` (files in `dir`'s own folder written for this output).
+pub fn write_marker(dir: &Path, command: &str, beside: &[PathBuf]) -> Result<()> {
+    let written = listing(dir).ok_or_else(|| {
+        Error::write(
+            dir,
+            "cannot list the finished output",
+            std::io::Error::other("read_dir failed"),
+        )
+    })?;
+    let mut marker = format!("{command}\n");
+    for path in written.iter().filter(|p| *p != MARKER) {
+        marker.push_str(path);
+        marker.push('\n');
+    }
+    for file in beside {
+        let name = file.file_name().unwrap_or_default().to_string_lossy();
+        let stamp = Stamp::of(file).ok_or_else(|| {
+            Error::write(
+                file,
+                "cannot read what was written",
+                std::io::Error::other("not a regular file"),
+            )
+        })?;
+        marker.push_str(&stamp.to_line(&name));
+        marker.push('\n');
+    }
+    super::write_bytes_atomically(&dir.join(MARKER), marker.as_bytes())
+}
+
+/// The stamp with which the marker of the output folder `dir` records `file` (beside `dir`),
+/// when `file` still has it: the file is what that run wrote, unchanged since.
+#[must_use]
+fn recorded_beside(dir: &Path, file: &Path) -> Option<Stamp> {
+    let marker = std::fs::read_to_string(dir.join(MARKER)).ok()?;
+    let name = file.file_name()?.to_str()?;
+    let now = Stamp::of(file)?;
+    marker
+        .lines()
+        .filter_map(Stamp::from_line)
+        .any(|(recorded, stamp)| recorded == name && stamp == now)
+        .then_some(now)
+}
+
+/// Checks, before any work, that `command` may write `file` beside its output folder `dir`:
+/// it is absent (`None`), or the marker of `dir` written by `command` records it unchanged
+/// (its stamp, to remove it later with [`remove_if_unchanged`] if this run does not write it
+/// again). Anything else — the user's own file, or ours changed since — is refused.
+pub fn check_beside(dir: &Path, file: &Path, command: &str) -> Result<Option<Stamp>> {
+    if std::fs::symlink_metadata(file).is_err() {
+        return Ok(None);
+    }
+    let ours = std::fs::read_to_string(dir.join(MARKER))
+        .is_ok_and(|m| m.lines().next().map(str::trim) == Some(command));
+    match recorded_beside(dir, file).filter(|_| ours) {
+        Some(stamp) => Ok(Some(stamp)),
+        None => Err(Error::usage(format!(
+            "{}: exists and is not recorded as written by `splat4d {command}` beside {} (or it was changed since), so it is not replaced; name another folder, or move it away yourself",
+            file.display(),
+            dir.display()
+        ))),
+    }
+}
+
+/// Removes `file` when it still has `stamp` (an earlier run's output, unchanged, that this run
+/// did not write again and that would otherwise pass for this run's).
+pub fn remove_if_unchanged(file: &Path, stamp: Stamp) -> Result<()> {
+    if Stamp::of(file) == Some(stamp) {
+        std::fs::remove_file(file)
+            .map_err(|e| Error::write(file, "cannot remove the earlier run's output", e))?;
+    }
+    Ok(())
+}
+
 /// Whether the folder `dir` may be replaced by `command`'s new output ([`check_replaceable`]).
 #[must_use]
 pub fn replaceable(dir: &Path, command: &str) -> bool {
@@ -311,13 +457,51 @@ impl Outputs {
     }
 }
 
+/// Moves the finished folder `new` to `target`. An earlier output there is moved aside only
+/// now (the new one complete beside it; locked meanwhile, so that a concurrent clean-up leaves
+/// it to this run), then removed; it is moved back if the new one cannot take its place.
+/// `shown` names the output in messages.
+fn replace_folder(new: &Path, target: &Path, shown: &Path) -> Result<()> {
+    if std::fs::symlink_metadata(target).is_err() {
+        return std::fs::rename(new, target)
+            .map_err(|e| Error::write(shown, "cannot move the output into place", e));
+    }
+    // Named after the target: a run killed between the two renames leaves it, and the next
+    // run's clean-up ([`super::remove_stale_temps`]) moves it back.
+    let name = target.file_name().unwrap_or_default().to_string_lossy();
+    let old = super::folder_of(target).join(format!(
+        "{}{}-{name}",
+        super::ASIDE_PREFIX,
+        super::random_part()
+    ));
+    let _held = super::lock_folder(target);
+    std::fs::rename(target, &old)
+        .map_err(|e| Error::write(shown, "cannot move the previous output aside", e))?;
+    if let Err(e) = std::fs::rename(new, target) {
+        let _ = std::fs::rename(&old, target);
+        return Err(Error::write(
+            shown,
+            "cannot move the new output into place",
+            e,
+        ));
+    }
+    std::fs::remove_dir_all(&old)
+        .map_err(|e| Error::write(&old, "cannot remove the previous output", e))
+}
+
 /// An output folder written under a temporary name beside its target and moved into place
-/// by [`FolderWriter::commit`] once complete, with the [`MARKER`] naming the command.
+/// by [`FolderWriter::commit`] once complete, with the [`MARKER`] naming the command. Dropped
+/// without a commit (a failed run), it leaves nothing: neither the temporary folder nor the
+/// folders made for it.
 pub struct FolderWriter {
     shown: PathBuf,
     target: PathBuf,
     command: String,
     temp: tempfile::TempDir,
+    /// The temporary folder's lock ([`super::remove_stale_temps`]).
+    _lock: Option<std::fs::File>,
+    /// Dropped after `temp`, so that the folders are empty by then.
+    made: super::MadeFolders,
 }
 
 impl FolderWriter {
@@ -333,7 +517,7 @@ impl FolderWriter {
             )));
         }
         let parent = super::folder_of(&target).to_path_buf();
-        std::fs::create_dir_all(&parent).map_err(|e| {
+        let made = super::make_folders(&parent).map_err(|e| {
             Error::write(
                 out,
                 &format!("cannot create its folder {}", parent.display()),
@@ -341,15 +525,15 @@ impl FolderWriter {
             )
         })?;
         super::remove_stale_temps(&parent);
-        let temp = tempfile::Builder::new()
-            .prefix(&format!("{}{command}-", super::temp_prefix()))
-            .tempdir_in(&parent)
+        let (temp, lock) = super::temp_dir_in(&parent, &format!("{command}-"))
             .map_err(|e| Error::write(out, "cannot create a temporary folder beside it", e))?;
         Ok(FolderWriter {
             shown: out.to_path_buf(),
             target,
             command: command.to_string(),
             temp,
+            _lock: lock,
+            made,
         })
     }
 
@@ -359,51 +543,121 @@ impl FolderWriter {
         self.temp.path()
     }
 
-    /// Writes the marker and moves the finished folder into place. An earlier output is moved
-    /// aside only now (the new one complete beside it), and back if the new one cannot take
-    /// its place.
+    /// Writes the marker and moves the finished folder into place: an earlier output there is
+    /// moved aside only now, the new one complete, and back if the new one cannot take its
+    /// place.
     pub fn commit(self) -> Result<()> {
-        let out = &self.shown;
         // The marker lists what was written, so that a later run can tell it from files
         // added since.
-        let written = listing(self.temp.path()).ok_or_else(|| {
-            Error::write(
-                out,
-                "cannot list the finished output",
-                std::io::Error::other("read_dir failed"),
-            )
-        })?;
-        let mut marker = format!("{}\n", self.command);
-        for path in written {
-            marker.push_str(&path);
-            marker.push('\n');
-        }
-        super::write_bytes_atomically(&self.temp.path().join(MARKER), marker.as_bytes())?;
+        write_marker(self.temp.path(), &self.command, &[])?;
         // Checked again: the folder may have appeared or changed during the work.
         check_replaceable(&self.target, &self.command)?;
-        let temp = self.temp.keep();
-        let target = &self.target;
-        if std::fs::symlink_metadata(target).is_ok() {
-            // Named after the target: a run killed between the two renames leaves it, and the
-            // next run's clean-up ([`super::remove_stale_temps`]) moves it back.
-            let name = target.file_name().unwrap_or_default().to_string_lossy();
-            let old = super::folder_of(target).join(format!("{}old-{name}", super::temp_prefix()));
-            std::fs::rename(target, &old)
-                .map_err(|e| Error::write(out, "cannot move the previous output aside", e))?;
-            if let Err(e) = std::fs::rename(&temp, target) {
-                let _ = std::fs::rename(&old, target);
-                return Err(Error::write(
-                    out,
-                    "cannot move the new output into place",
-                    e,
-                ));
-            }
-            std::fs::remove_dir_all(&old)
-                .map_err(|e| Error::write(&old, "cannot remove the previous output", e))?;
-        } else {
-            std::fs::rename(&temp, target)
-                .map_err(|e| Error::write(out, "cannot move the output into place", e))?;
+        replace_folder(self.temp.path(), &self.target, &self.shown)?;
+        // In place: nothing is left at the temporary name to remove.
+        let _ = self.temp.keep();
+        self.made.keep();
+        Ok(())
+    }
+}
+
+/// The command named by the marker of the folder `dir`, if it has one.
+fn marker_command(dir: &Path) -> Option<String> {
+    let marker = std::fs::read_to_string(dir.join(MARKER)).ok()?;
+    marker.lines().next().map(|l| l.trim().to_string())
+}
+
+/// Several outputs of one run into the folder `out` — a video's frame folders, GIFs, MP4s and
+/// camera paths, a report's files — written into a temporary folder inside `out` and moved
+/// into place together by [`Staging::commit`]: files replace files of their name, a folder
+/// (with its [`MARKER`]) replaces only an earlier output of the command its marker names.
+/// Dropped without a commit (a failed run), it leaves nothing it created: the temporary folder
+/// goes, and so do the folders made for `out` (when still empty).
+pub struct Staging {
+    shown: PathBuf,
+    target: PathBuf,
+    temp: tempfile::TempDir,
+    /// The temporary folder's lock ([`super::remove_stale_temps`]).
+    _lock: Option<std::fs::File>,
+    /// Dropped after `temp`, so that the folders are empty by then.
+    made: super::MadeFolders,
+}
+
+impl Staging {
+    /// Makes `out` (a folder, or absent) and the temporary folder inside it: a folder that
+    /// cannot be written is refused here, before any work.
+    pub fn new(out: &Path) -> Result<Self> {
+        if std::fs::metadata(out).is_ok_and(|m| !m.is_dir()) {
+            return Err(Error::usage(format!(
+                "{}: exists and is not a folder; name a folder for the output",
+                out.display()
+            )));
         }
+        let target = resolve(out);
+        let made = super::make_folders(&target)
+            .map_err(|e| Error::write(out, "cannot create the output folder", e))?;
+        super::remove_stale_temps(&target);
+        let (temp, lock) = super::temp_dir_in(&target, "stage-")
+            .map_err(|e| Error::write(out, "cannot write in the output folder", e))?;
+        Ok(Staging {
+            shown: out.to_path_buf(),
+            target,
+            temp,
+            _lock: lock,
+            made,
+        })
+    }
+
+    /// The temporary folder to fill.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        self.temp.path()
+    }
+
+    /// Moves everything in the temporary folder into `out`, the names in `last` after the
+    /// rest (`report.md`, so that it appears once all it shows is there). Every move is
+    /// checked before the first is made: a file may not take the place of a folder, and a
+    /// folder replaces only an earlier output of its command.
+    pub fn commit(self, last: &[&str]) -> Result<()> {
+        let entries = std::fs::read_dir(self.temp.path())
+            .and_then(|entries| {
+                entries
+                    .map(|e| e.map(|e| e.file_name()))
+                    .collect::<std::io::Result<Vec<_>>>()
+            })
+            .map_err(|e| Error::write(&self.shown, "cannot list the finished output", e))?;
+        let mut names: Vec<String> = entries
+            .iter()
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect();
+        names.sort_by_key(|n| (last.iter().position(|l| l == n), n.clone()));
+        let mut moves = Vec::new();
+        for name in &names {
+            let staged = self.temp.path().join(name);
+            let target = self.target.join(name);
+            let shown = self.shown.join(name);
+            if staged.is_dir() {
+                let command = marker_command(&staged).unwrap_or_default();
+                check_replaceable(&target, &command)?;
+                moves.push((staged, target, shown, true));
+            } else {
+                if std::fs::symlink_metadata(&target).is_ok_and(|m| m.is_dir()) {
+                    return Err(Error::usage(format!(
+                        "{}: is a folder, so it is not replaced; name another folder for the output, or move that one away yourself",
+                        shown.display()
+                    )));
+                }
+                moves.push((staged, target, shown, false));
+            }
+        }
+        for (staged, target, shown, folder) in moves {
+            if folder {
+                replace_folder(&staged, &target, &shown)?;
+            } else {
+                std::fs::rename(&staged, &target)
+                    .map_err(|e| Error::write(&shown, "cannot move the output into place", e))?;
+            }
+        }
+        self.made.keep();
         Ok(())
     }
 }
@@ -450,8 +704,8 @@ mod tests {
     fn an_output_moved_aside_by_a_killed_run_comes_back() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        // No process has this id (above any pid_max).
-        let aside = d.join(".splat4d-4294967295-old-ds");
+        // Left by a killed run: nobody holds its lock.
+        let aside = d.join(".splat4d-old-0123456789abcdef-ds");
         std::fs::create_dir(&aside).unwrap();
         std::fs::write(aside.join("a.txt"), "kept").unwrap();
         super::super::remove_stale_temps(d);
@@ -462,6 +716,60 @@ mod tests {
         super::super::remove_stale_temps(d);
         assert!(!aside.exists());
         assert!(d.join("ds/a.txt").exists());
+    }
+
+    #[test]
+    fn a_failed_staging_leaves_nothing_and_a_commit_moves_everything() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let out = d.join("a/b/out");
+        {
+            let staging = Staging::new(&out).unwrap();
+            std::fs::write(staging.path().join("x.txt"), "x").unwrap();
+            // Dropped without a commit: a run that failed.
+        }
+        assert!(!d.join("a").exists(), "the folders it made are gone");
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("x.txt"), "old").unwrap();
+        std::fs::write(out.join("mine.txt"), "mine").unwrap();
+        let staging = Staging::new(&out).unwrap();
+        std::fs::write(staging.path().join("x.txt"), "new").unwrap();
+        std::fs::write(staging.path().join("report.md"), "md").unwrap();
+        let frames = staging.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        std::fs::write(frames.join("f.png"), "png").unwrap();
+        write_marker(&frames, "video", &[staging.path().join("x.txt")]).unwrap();
+        staging.commit(&["report.md"]).unwrap();
+        let names = |dir: &Path| {
+            let mut names: Vec<String> = std::fs::read_dir(dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        };
+        assert_eq!(names(&out), ["frames", "mine.txt", "report.md", "x.txt"]);
+        assert_eq!(std::fs::read_to_string(out.join("x.txt")).unwrap(), "new");
+        // Moved into place, the file keeps the stamp its folder's marker recorded.
+        assert!(recorded_beside(&out.join("frames"), &out.join("x.txt")).is_some());
+        assert!(check_beside(&out.join("frames"), &out.join("x.txt"), "video").is_ok());
+        assert!(check_beside(&out.join("frames"), &out.join("mine.txt"), "video").is_err());
+        std::fs::write(out.join("x.txt"), "changed").unwrap();
+        assert!(check_beside(&out.join("frames"), &out.join("x.txt"), "video").is_err());
+        // A folder of the user's in the way: refused before anything moves.
+        std::fs::create_dir(out.join("other")).unwrap();
+        std::fs::write(out.join("other/notes.txt"), "mine").unwrap();
+        let staging = Staging::new(&out).unwrap();
+        std::fs::write(staging.path().join("y.txt"), "y").unwrap();
+        let other = staging.path().join("other");
+        std::fs::create_dir(&other).unwrap();
+        write_marker(&other, "video", &[]).unwrap();
+        assert!(staging.commit(&[]).is_err());
+        assert_eq!(
+            names(&out),
+            ["frames", "mine.txt", "other", "report.md", "x.txt"]
+        );
+        assert_eq!(names(&out.join("other")), ["notes.txt"]);
     }
 
     #[test]

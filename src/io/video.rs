@@ -16,7 +16,6 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 
 use crate::io::image_file::{BitDepth, save_image};
-use crate::io::output::FolderWriter;
 use crate::io::write_atomically;
 use crate::model::image::quantize_all;
 use crate::model::{Error, Image, Result};
@@ -69,7 +68,11 @@ fn to_rgba8(image: &Image) -> RgbaImage {
     RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
 }
 
-/// Writes `frame_count` frames into `dir/name/`, `dir/name.gif` and `dir/name.mp4`.
+/// Writes `frame_count` frames into `dir/name/`, `dir/name.gif` and `dir/name.mp4`, and the
+/// frame folder's [`MARKER`](crate::io::output::MARKER) recording the GIF, the MP4 and the
+/// files of `beside` (written into `dir` by the caller for this video, such as its camera
+/// path). `dir` is a staging folder ([`crate::io::output::Staging`]) that the caller moves
+/// into place, `shown` the folder it will be moved to (the paths returned are there).
 /// `next_frame(k, image)` fills `image` with frame `k`; it is called once per frame, in
 /// order, on the calling thread.
 ///
@@ -77,24 +80,22 @@ fn to_rgba8(image: &Image) -> RgbaImage {
 /// rendered: the files are the same bytes as when written in turn, at the cost of one more
 /// frame in memory (the channel between the two holds none: the render waits until the
 /// writer takes its frame). The first error wins: a failed frame stops the writer, a failed
-/// write stops the renders; either way nothing is renamed into place.
+/// write stops the renders; either way the staging folder holds no GIF or MP4 of the video.
 pub fn write_video(
     frame_count: usize,
     dir: &Path,
+    shown: &Path,
     name: &str,
     options: &VideoOptions,
+    beside: &[PathBuf],
     mut next_frame: impl FnMut(usize, &mut Image) -> Result<()>,
 ) -> Result<VideoFiles> {
     if options.fps == 0 {
         return Err(Error::setting(&["fps"], "`fps` must be at least 1"));
     }
     let frames_dir = dir.join(name);
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::write(dir, "cannot create the output folder", e))?;
-    // Frames go to a temporary folder renamed into place at the end: a re-run never mixes
-    // its frames with an older video's, and a failed one leaves the old video as it was.
-    // Only an earlier video's frames are ever replaced ([`crate::io::output`]).
-    let folder = FolderWriter::new(&frames_dir, "video")?;
+    std::fs::create_dir(&frames_dir)
+        .map_err(|e| Error::write(&shown.join(name), "cannot create the frame folder", e))?;
     let gif_path = options.gif.then(|| dir.join(format!("{name}.gif")));
     std::thread::scope(|scope| {
         let (to_writer, frames) = mpsc::sync_channel::<(usize, Image)>(0);
@@ -104,7 +105,7 @@ pub fn write_video(
                 frames,
                 to_renderer,
                 frame_count,
-                folder.path(),
+                &frames_dir,
                 gif_path.as_deref(),
                 options.fps,
             )
@@ -136,26 +137,21 @@ pub fn write_video(
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
         rendered.and(written)
     })?;
-    folder.commit()?;
     let (mp4, mp4_note) = if options.mp4 {
         encode_mp4(&frames_dir, dir, name, options.fps)
     } else {
         (None, None)
     };
-    // An earlier run's GIF or MP4 of this name (the output check let it through only as
-    // this command's own) would pass for one of these frames: it goes.
-    for (written, ext) in [(gif_path.is_some(), "gif"), (mp4.is_some(), "mp4")] {
-        let stale = dir.join(format!("{name}.{ext}"));
-        if !written && stale.is_file() {
-            std::fs::remove_file(&stale)
-                .map_err(|e| Error::write(&stale, "cannot remove the earlier run's video", e))?;
-        }
-    }
+    // What a later run may replace or remove as this run's: the files and their stamps.
+    let mut recorded: Vec<PathBuf> = gif_path.iter().chain(&mp4).cloned().collect();
+    recorded.extend(beside.iter().cloned());
+    crate::io::output::write_marker(&frames_dir, "video", &recorded)?;
+    let at = |path: &Path| shown.join(path.file_name().unwrap_or_default());
     Ok(VideoFiles {
-        frames_dir,
+        frames_dir: shown.join(name),
         frames: frame_count,
-        gif: gif_path,
-        mp4,
+        gif: gif_path.as_deref().map(at),
+        mp4: mp4.as_deref().map(at),
         mp4_note,
     })
 }
@@ -230,7 +226,17 @@ fn encode_mp4(
         return (None, Some("ffmpeg is not on PATH: no MP4 written (install ffmpeg for one; frames and GIF are complete)".into()));
     }
     let path = dir.join(format!("{name}.mp4"));
-    let partial = dir.join(format!(".{name}.partial.mp4"));
+    // ffmpeg writes into a temporary file of ours (locked: a run killed meanwhile leaves a
+    // leftover the next run removes), renamed into place once complete.
+    let partial = match crate::io::temp_file_in(dir, ".mp4") {
+        Ok(partial) => partial,
+        Err(e) => {
+            return (
+                None,
+                Some(format!("cannot make the MP4's temporary file: {e}")),
+            );
+        }
+    };
     let status = Command::new("ffmpeg")
         .args([
             "-y",
@@ -253,19 +259,20 @@ fn encode_mp4(
             "-movflags",
             "+faststart",
         ])
-        .arg(&partial)
+        .arg(partial.path())
         .status();
     match status {
-        Ok(s) if s.success() => match std::fs::rename(&partial, &path) {
-            Ok(()) => (Some(path), None),
-            Err(e) => (None, Some(format!("cannot move the MP4 into place: {e}"))),
-        },
-        other => {
-            let _ = std::fs::remove_file(&partial);
-            (
+        Ok(s) if s.success() => match partial.persist(&path) {
+            Ok(_) => (Some(path), None),
+            Err(e) => (
                 None,
-                Some(format!("ffmpeg failed ({other:?}): no MP4 written")),
-            )
-        }
+                Some(format!("cannot move the MP4 into place: {}", e.error)),
+            ),
+        },
+        // The temporary file goes with `partial`.
+        other => (
+            None,
+            Some(format!("ffmpeg failed ({other:?}): no MP4 written")),
+        ),
     }
 }

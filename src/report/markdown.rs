@@ -12,7 +12,7 @@ use crate::report::charts::{
     Colour, Picture, Series, SizePoint, bar_chart, line_chart, model_size_chart, scatter_chart,
     volume_slices_figure,
 };
-use crate::report::experiment::{ExperimentResults, ModelSizeRow, VolumeOf};
+use crate::report::experiment::{ExperimentConfig, ExperimentResults, ModelSizeRow, VolumeOf};
 use crate::report::methods::Method;
 
 /// The seed paper's maximum volume intensities at t = 0, 0.5, 1 (§5.2).
@@ -34,6 +34,65 @@ fn file_stem(name: &str) -> String {
         .filter(|s| !s.is_empty())
         .collect::<Vec<_>>()
         .join("_")
+}
+
+/// The charts' file names, in the order they are drawn.
+const CHARTS: [&str; 8] = [
+    "fit_vs_step.png",
+    "fit_vs_seconds.png",
+    "psnr_per_time.png",
+    "roughness.png",
+    "speed_vs_error.png",
+    "ablation_psnr.png",
+    "ablation_roughness.png",
+    "model_size.png",
+];
+
+/// The name of the animation: its frame folder, and with `.gif` its GIF.
+pub const ANIMATION: &str = "fit_vs_truth";
+
+/// The methods of the headline, the gallery and the animation (as the experiment runs them).
+const HEADLINE_METHODS: [Method; 3] = [
+    Method::Paper4d,
+    Method::FrameNearest,
+    Method::FrameInterpolation,
+];
+
+/// The gallery's four picks among the sweep's `n` times.
+fn gallery_picks(n: usize) -> [usize; 4] {
+    [0, 1, 2, 3].map(|k| (k * n.saturating_sub(1)) / 3)
+}
+
+/// The file name of a gallery picture.
+fn gallery_name(method: Method, k: usize) -> String {
+    format!("gallery_{}_{k:03}.png", file_stem(method.name()))
+}
+
+/// The file name of a volume figure.
+fn volume_name(of: VolumeOf, tau: f64) -> String {
+    format!("volume_{}_t{tau:.2}.png", file_stem(of.name()))
+}
+
+/// Every name [`report_files`] may write into the report's folder for a run of `config` —
+/// the files, the animation's frame folder and its GIF — known before the experiment runs,
+/// so that the folder can be checked first.
+#[must_use]
+pub fn report_names(config: &ExperimentConfig) -> Vec<String> {
+    let mut names: Vec<String> = CHARTS.iter().map(|s| (*s).to_string()).collect();
+    let picks = gallery_picks(config.sweep_times.max(2));
+    for method in HEADLINE_METHODS {
+        names.extend(picks.iter().map(|&k| gallery_name(method, k)));
+    }
+    for of in [VolumeOf::GroundTruth, VolumeOf::Model] {
+        names.extend(config.volume_times.iter().map(|&tau| volume_name(of, tau)));
+    }
+    names.extend([
+        ANIMATION.to_string(),
+        format!("{ANIMATION}.gif"),
+        "fitted_4d.json".into(),
+        "report.md".into(),
+    ]);
+    names
 }
 
 /// What a file of the report holds.
@@ -473,7 +532,7 @@ fn volumes_section(results: &ExperimentResults, files: &mut Vec<ReportFile>) -> 
     let _ = writeln!(w);
     write_volume_overshoot(w, results);
     for v in &results.volumes {
-        let name = format!("volume_{}_t{:.2}.png", file_stem(v.of.name()), v.tau);
+        let name = volume_name(v.of, v.tau);
         push_chart(files, &name, |file| {
             volume_slices_figure(file, v.of.name(), v.tau, &v.volume, vmax)
         })?;
@@ -677,7 +736,7 @@ fn gallery(results: &ExperimentResults, files: &mut Vec<ReportFile>, w: &mut Str
         return;
     }
     let n = truth.len();
-    let picks: Vec<usize> = (0..4).map(|k| (k * (n - 1)) / 3).collect();
+    let picks = gallery_picks(n);
     let _ = writeln!(
         w,
         "## What the fits look like
@@ -707,7 +766,7 @@ fn gallery(results: &ExperimentResults, files: &mut Vec<ReportFile>, w: &mut Str
     for m in &results.methods {
         let _ = write!(w, "| {} |", m.method);
         for &k in &picks {
-            let name = format!("gallery_{}_{k:03}.png", file_stem(m.method.name()));
+            let name = gallery_name(m.method, k);
             let (width, height, rgb) = triptych(&truth[k], &m.gallery[k]);
             let picture = Picture { width, height, rgb };
             files.push(ReportFile::new(name.clone(), Content::Picture(picture)));
@@ -735,7 +794,7 @@ fn gallery(results: &ExperimentResults, files: &mut Vec<ReportFile>, w: &mut Str
             image
         })
         .collect();
-    let name = "fit_vs_truth";
+    let name = ANIMATION;
     files.push(ReportFile::new(name, Content::Animation { frames, fps: 8 }));
     let _ = writeln!(
         w,

@@ -186,6 +186,20 @@ pub fn bench(request: &BenchRequest, progress: &mut dyn Progress) -> Result<Benc
             text: ceiling_lines(&ceilings),
         });
     }
+    if request.sweep {
+        // Before any work: the sweep's table and chart are none of the files read.
+        let mut outputs = crate::io::output::Outputs::new();
+        for name in &request.scenes {
+            outputs.input(Path::new(name));
+        }
+        if let Some(camera) = &request.camera {
+            outputs.input(camera);
+        }
+        outputs
+            .file(&request.out.join("sweep.md"))
+            .file(&request.out.join("sweep.png"));
+        outputs.check()?;
+    }
     let scenes = bench_scenes(request)?;
     let settings = |threads: usize| BenchSettings {
         tau: request.time,

@@ -106,33 +106,50 @@ impl FitProgress for Silent {
     fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
 }
 
-/// Refuses, before the dataset is decoded, a fit whose images and kernels (the start, or an
-/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image
-/// file is kept once as linear RGB, and the largest is decoded once more while it is
-/// converted; each view rendered at once (one per worker thread, up to the batch) holds its
-/// frame and its kernels' copies and gradients.
+/// Refuses, before the dataset is decoded, a fit whose images and kernels would not fit in
+/// memory ([`fit_memory`]).
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
-    use crate::io::memory::{
-        FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL, check,
-    };
+    let (bytes, what) = fit_memory(request)?;
+    crate::io::memory::check(bytes, &what)
+}
+
+/// What a fit will hold, in bytes, and what for ([`crate::io::memory`]): every photo the
+/// dataset names — transforms frames or a COLMAP model's images — is kept once per distinct
+/// file as linear RGB, and the largest image is decoded once more while it is converted;
+/// every mask is kept as one weight per pixel, per frame; the kernels (the start, or an
+/// alpha fit's budget) and each view rendered at once (one per worker thread, up to the
+/// batch) with its frame and its kernels' copies and gradients.
+fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
+    use crate::io::memory::{FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL};
     let (mut kept, mut largest, mut largest_view, mut frames) = (0_u64, 0_u64, 0_u64, 0_usize);
+    let n = u64::from(request.downscale.max(1));
+    let files = crate::io::dataset::dataset_inputs(&request.views);
+    // Sizes from the headers of regular files only (a FIFO would block).
+    let size = |file: &PathBuf| {
+        file.is_file()
+            .then(|| crate::io::image_file::image_size(file).ok())
+            .flatten()
+    };
     // Frames that name one file share its decoded image.
     let mut seen = std::collections::HashSet::new();
-    for file in crate::io::dataset::dataset_files(&request.views) {
-        if file
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
-            || !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone()))
-        {
+    for file in &files.photos {
+        if !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone())) {
             continue;
         }
-        if let Ok((w, h)) = crate::io::image_file::image_size(&file) {
+        if let Some((w, h)) = size(file) {
             let pixels = u64::from(w) * u64::from(h);
-            let n = u64::from(request.downscale.max(1));
             kept = kept.saturating_add(pixels / (n * n) * 12);
-            largest = largest.max(pixels * 16);
+            largest = largest.max(pixels.saturating_mul(16));
             largest_view = largest_view.max(pixels / (n * n));
             frames += 1;
+        }
+    }
+    // A mask becomes each frame's own pixel weights (f32).
+    for file in &files.masks {
+        if let Some((w, h)) = size(file) {
+            let pixels = u64::from(w) * u64::from(h);
+            kept = kept.saturating_add(pixels / (n * n) * 4);
+            largest = largest.max(pixels.saturating_mul(16));
         }
     }
     // The additive fit's start, and an alpha fit's budget (unless the additive blend is
@@ -155,12 +172,12 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
     let per_kernel = FIT_BYTES_PER_KERNEL + VIEW_BYTES_PER_KERNEL * side_by_side;
     let frames_held =
         side_by_side.saturating_mul(RENDER_BYTES_PER_PIXEL.saturating_mul(largest_view));
-    check(
+    Ok((
         kept.saturating_add(largest)
             .saturating_add(frames_held)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
-        &format!("fitting up to {kernels} kernels to {frames} frames"),
-    )
+        format!("fitting up to {kernels} kernels to {frames} frames"),
+    ))
 }
 
 /// Fits kernels to the dataset in `request.views` and writes the scene (and the log).
@@ -597,4 +614,82 @@ fn cameras_up(views: &[crate::model::View]) -> Option<Up> {
         return None;
     }
     Up::nearest(up)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::image_file::{BitDepth, save_image};
+    use crate::model::Image;
+
+    fn request(views: &Path) -> FitRequest {
+        FitRequest {
+            views: views.to_path_buf(),
+            downscale: 1,
+            strict: false,
+            allow_outside_images: false,
+            init: "random:10".into(),
+            settings: FitSettings::default(),
+            blend: Some(Blend::Additive),
+            out: views.join("fit.json"),
+            log: None,
+            threads: Some(1),
+            view: None,
+        }
+    }
+
+    fn photo(path: &Path) {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        save_image(&Image::filled(64, 48, [0.5; 3]), path, BitDepth::Eight).unwrap();
+    }
+
+    /// Each 64×48 photo kept as linear RGB (12 bytes a pixel), and one decoded beside it
+    /// (16 bytes a pixel).
+    const PHOTO_KEPT: u64 = 64 * 48 * 12;
+    const DECODE: u64 = 64 * 48 * 16;
+
+    #[test]
+    fn the_estimate_counts_a_colmap_models_photos() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let sparse = d.join("sparse/0");
+        std::fs::create_dir_all(&sparse).unwrap();
+        std::fs::write(sparse.join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n").unwrap();
+        std::fs::write(
+            sparse.join("images.txt"),
+            "1 1 0 0 0 0 0 4 1 a.png\n\n2 1 0 0 0 0 0 4 1 b.png\n\n3 1 0 0 0 0 0 5 1 a.png\n\n",
+        )
+        .unwrap();
+        photo(&d.join("images/a.png"));
+        photo(&d.join("images/b.png"));
+        let (with, what) = fit_memory(&request(d)).unwrap();
+        assert!(what.contains("2 frames"), "{what}");
+        std::fs::remove_dir_all(d.join("images")).unwrap();
+        let (without, _) = fit_memory(&request(d)).unwrap();
+        // Two distinct files (a.png named twice is decoded once).
+        assert!(
+            with >= without + 2 * PHOTO_KEPT + DECODE,
+            "{with} with the photos, {without} without"
+        );
+        assert!(with < without + 3 * PHOTO_KEPT + DECODE + 2 * 64 * 48 * 40);
+    }
+
+    #[test]
+    fn the_estimate_counts_every_frames_mask() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        photo(&d.join("a.png"));
+        photo(&d.join("m.png"));
+        let frame = |k: u32| {
+            serde_json::json!({"file_path": "a.png", "mask_path": "m.png", "time": k,
+                "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]})
+        };
+        let transforms = serde_json::json!({"camera_angle_x": 0.8, "frames": [frame(0), frame(1)]});
+        std::fs::write(d.join("transforms.json"), transforms.to_string()).unwrap();
+        let (with, _) = fit_memory(&request(d)).unwrap();
+        std::fs::remove_file(d.join("m.png")).unwrap();
+        let (without, _) = fit_memory(&request(d)).unwrap();
+        // One f32 weight a pixel for each of the two frames.
+        assert_eq!(with - without, 2 * 64 * 48 * 4);
+    }
 }

@@ -4,7 +4,9 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use crate::io::output::{Outputs, check_replaceable, unique_names};
+use crate::io::output::{
+    Outputs, Staging, Stamp, check_beside, check_replaceable, remove_if_unchanged, unique_names,
+};
 use crate::io::path_file::{load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
@@ -174,36 +176,50 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     Ok(videos)
 }
 
+/// What may be removed after a video is written: an earlier run's GIF or MP4 of its name,
+/// recorded unchanged, that this run may not write again.
+type Stale = Vec<(PathBuf, Stamp)>;
+
 /// Checks, before any work, every output of the videos named `names` in `out` against the
-/// inputs and each other; an existing frames folder must be an earlier video's, and an
-/// existing GIF, MP4 or camera path beside it belongs to that video.
-fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<()> {
+/// inputs and each other: an existing frames folder must be an earlier video's, and an
+/// existing GIF, MP4 or camera path this run writes must be one that video recorded,
+/// unchanged ([`check_beside`]). Returns, per video, the recorded GIF and MP4 that this run
+/// may leave unwritten (`--no-gif`, `--no-mp4`, ffmpeg failing): removed afterwards if still
+/// unchanged, so that they never pass for the new frames — and a file the user made is kept.
+fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<Vec<Stale>> {
     let mut outputs = Outputs::new();
     outputs.input(&request.scene);
     if let Some(path) = &request.path {
         outputs.input(path);
     }
+    let mut stale = Vec::new();
     for name in names {
         let frames = request.out.join(name);
         check_replaceable(&frames, "video")?;
-        let ours = frames.is_dir();
         outputs.folder(&frames);
-        for ext in ["gif", "mp4", "camera_path.json"] {
+        let mut earlier = Vec::new();
+        for (ext, written) in [
+            ("gif", request.video.gif),
+            ("mp4", request.video.mp4),
+            ("camera_path.json", true),
+        ] {
             let file = request.out.join(format!("{name}.{ext}"));
-            if file.exists() && !ours {
-                return Err(Error::setting(
-                    &["out"],
-                    format!(
-                        "{}: exists and is not part of an earlier `splat4d video` output (no {} folder of frames beside it); choose another `out`",
-                        file.display(),
-                        frames.display()
-                    ),
-                ));
+            if written {
+                check_beside(&frames, &file, "video")?;
+                outputs.file(&file);
             }
-            outputs.file(&file);
+            // Not written, or perhaps not (ffmpeg may fail): removed afterwards only when it
+            // is the earlier run's, unchanged.
+            if ext != "camera_path.json"
+                && let Ok(Some(stamp)) = check_beside(&frames, &file, "video")
+            {
+                earlier.push((file, stamp));
+            }
         }
+        stale.push(earlier);
     }
-    outputs.check()
+    outputs.check()?;
+    Ok(stale)
 }
 
 /// Renders and writes every video of `request`.
@@ -225,7 +241,10 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
     )?;
     let videos = paths(request, &scene)?;
     let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
-    check_outputs(request, &names)?;
+    let stale = check_outputs(request, &names)?;
+    // Every video is written into a temporary folder inside `out` and moved into place once
+    // all are complete: a run that fails leaves nothing it created.
+    let staging = Staging::new(&request.out)?;
     progress.start("frames", videos.iter().map(|(_, f, _)| f.len()).sum());
     let mut context = RenderContext::new();
     // One scene, many frames: each frame visits only the kernels alive at its time.
@@ -237,34 +256,53 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
             fps: fps.unwrap_or(request.video.fps),
             ..request.video
         };
-        let files = with_threads(request.threads, || {
-            write_video(frames.len(), &request.out, name, &video, |k, image| {
-                let frame = &frames[k];
-                // Without a thread count this loop runs outside the pool: the frame goes to
-                // a thread of the global pool whole, not loop by loop. (Not the whole loop:
-                // it waits on the writer thread, whose own parallel work would then find a
-                // one-thread pool busy.) With one, the loop is on that pool already.
-                with_threads_on_pool(request.threads, || {
-                    context.render_indexed(
-                        &scene,
-                        &index,
-                        &frame.camera,
-                        frame.time,
-                        &request.options,
-                    )
-                })??;
-                // The frame goes to the writer; the context renders the next into `image`'s
-                // old buffer (the writer's spare, once it has handed one back).
-                context.swap_image(image);
-                progress.tick();
-                Ok(())
-            })
-        })??;
         // The cameras as nerfstudio's camera path, so other renderers can follow them.
-        let camera_path = request.out.join(format!("{name}.camera_path.json"));
+        let camera_path = staging.path().join(format!("{name}.camera_path.json"));
         save_nerfstudio_path(frames, video.fps, &camera_path)?;
+        let beside = [camera_path];
+        let files = with_threads(request.threads, || {
+            write_video(
+                frames.len(),
+                staging.path(),
+                &request.out,
+                name,
+                &video,
+                &beside,
+                |k, image| {
+                    let frame = &frames[k];
+                    // Without a thread count this loop runs outside the pool: the frame goes to
+                    // a thread of the global pool whole, not loop by loop. (Not the whole loop:
+                    // it waits on the writer thread, whose own parallel work would then find a
+                    // one-thread pool busy.) With one, the loop is on that pool already.
+                    with_threads_on_pool(request.threads, || {
+                        context.render_indexed(
+                            &scene,
+                            &index,
+                            &frame.camera,
+                            frame.time,
+                            &request.options,
+                        )
+                    })??;
+                    // The frame goes to the writer; the context renders the next into `image`'s
+                    // old buffer (the writer's spare, once it has handed one back).
+                    context.swap_image(image);
+                    progress.tick();
+                    Ok(())
+                },
+            )
+        })??;
         written.push(files);
-        camera_paths.push(camera_path);
+        camera_paths.push(request.out.join(format!("{name}.camera_path.json")));
+    }
+    staging.commit(&[])?;
+    // An earlier run's GIF or MP4 of a name this run did not write would pass for one of
+    // these frames: it goes, when it is still what that run recorded.
+    for (files, earlier) in written.iter().zip(stale) {
+        for (file, stamp) in earlier {
+            if files.gif.as_ref() != Some(&file) && files.mp4.as_ref() != Some(&file) {
+                remove_if_unchanged(&file, stamp)?;
+            }
+        }
     }
     Ok(VideoSummary {
         videos: written,

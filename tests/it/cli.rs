@@ -177,6 +177,19 @@ fn report_quick_writes_the_report_and_its_charts() {
     assert_eq!(animations, 1);
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("report: rep/report.md"), "{stdout}");
+    // Every name written is one the folder was checked for before the experiment, and no
+    // temporary is left.
+    let checked = splat4d::report::markdown::report_names(
+        &splat4d::report::experiment::ExperimentConfig::quick(),
+    );
+    let mut written: Vec<String> = std::fs::read_dir(dir.path().join("rep"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    let mut expected = checked.clone();
+    expected.sort();
+    assert_eq!(written, expected);
 }
 
 /// Runs a render that must fail; returns its stderr after checking status 2 and that the

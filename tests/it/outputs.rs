@@ -591,17 +591,34 @@ fn outputs_are_checked_before_the_work_and_never_replace_an_input() {
     );
 }
 
+/// Temporaries are told apart by a lock held on them (issue 45), not by a process id: a
+/// run in another PID namespace (a container sharing the folder) took a live run's
+/// temporary folder for a dead run's and removed it. Here the live ones' locks are held by
+/// this test's own open files, as another process anywhere would hold them; the others
+/// are left by killed runs, and nobody holds theirs.
 #[cfg(target_os = "linux")]
 #[test]
-fn leftovers_of_killed_runs_are_removed_and_live_ones_kept() {
+fn temporaries_are_removed_only_when_their_lock_is_free() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    // A run that was killed (no process 999999999 can exist: Linux pids stop at 2^22) and
-    // a run still going (this test's own process).
-    std::fs::write(d.join(".splat4d-999999999-a1b2c3"), vec![0u8; 1000]).unwrap();
-    std::fs::create_dir(d.join(".splat4d-999999999-dataset-x")).unwrap();
-    let live = format!(".splat4d-{}-d4e5f6", std::process::id());
-    std::fs::write(d.join(&live), "in progress").unwrap();
+    // Left by killed runs.
+    std::fs::write(d.join(".splat4d-tmp-a1b2c3"), vec![0u8; 1000]).unwrap();
+    std::fs::create_dir(d.join(".splat4d-tmp-dataset-x4y5z6")).unwrap();
+    std::fs::write(d.join(".splat4d-tmp-dataset-x4y5z6/r_000.png"), "half").unwrap();
+    // An earlier output moved aside by a run killed before its successor took its place.
+    std::fs::create_dir(d.join(".splat4d-old-00aa11bb22cc33dd-ds")).unwrap();
+    std::fs::write(d.join(".splat4d-old-00aa11bb22cc33dd-ds/a.txt"), "kept").unwrap();
+    // In use: a temporary folder and a temporary file, their locks held.
+    let live_dir = d.join(".splat4d-tmp-dataset-live01");
+    std::fs::create_dir(&live_dir).unwrap();
+    std::fs::write(live_dir.join("r_000.png"), "in progress").unwrap();
+    let held_dir = std::fs::File::open(&live_dir).unwrap();
+    held_dir.lock().unwrap();
+    let live_file = d.join(".splat4d-tmp-live02");
+    std::fs::write(&live_file, "in progress").unwrap();
+    let held_file = std::fs::File::open(&live_file).unwrap();
+    held_file.lock().unwrap();
+    // Not a temporary of ours.
     std::fs::write(d.join(".splat4d-notes"), "not ours to judge").unwrap();
     let (blob, camera) = (data("blob.json"), data("blob_camera.json"));
     let render = [
@@ -615,15 +632,260 @@ fn leftovers_of_killed_runs_are_removed_and_live_ones_kept() {
         "--out",
         "r.png",
     ];
-    assert!(run_limited(&render, d).status.success());
-    let mut names: Vec<String> = std::fs::read_dir(d)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    let mut expected = vec![".splat4d-notes".to_owned(), live, "r.png".to_owned()];
-    expected.sort();
-    assert_eq!(names, expected);
+    ok(&run_limited(&render, d));
+    assert_eq!(
+        names(d),
+        [
+            ".splat4d-notes",
+            ".splat4d-tmp-dataset-live01",
+            ".splat4d-tmp-live02",
+            "ds",
+            "r.png"
+        ]
+    );
+    assert_eq!(
+        std::fs::read_to_string(live_dir.join("r_000.png")).unwrap(),
+        "in progress"
+    );
+    assert_eq!(std::fs::read_to_string(d.join("ds/a.txt")).unwrap(), "kept");
+    // Once their runs have ended (their locks released), they are leftovers too.
+    drop((held_dir, held_file));
+    ok(&run_limited(&render, d));
+    assert_eq!(names(d), [".splat4d-notes", "ds", "r.png"]);
+}
+
+/// Every path under `dir` with its bytes (`None` for a folder): the folder as it is.
+fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Option<Vec<u8>>> {
+    let mut found = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(at) = stack.pop() {
+        for entry in std::fs::read_dir(&at).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path
+                .strip_prefix(dir)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            if path.is_dir() {
+                stack.push(path);
+                found.insert(name, None);
+            } else {
+                found.insert(name, Some(std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    found
+}
+
+/// Issue 45: `video --no-mp4` (or `--no-gif`) run again deleted the MP4 (GIF) of that name
+/// that the user had encoded from the frames. A GIF or MP4 is removed or replaced only when
+/// the frame folder's marker records it as splat4d's, unchanged.
+#[test]
+fn a_video_run_again_keeps_the_gif_and_mp4_the_user_made() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    let video = |extra: &[&str]| {
+        let mut args = vec![
+            "video",
+            "--scene",
+            "s.json",
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "8x8",
+            "--out",
+            "v",
+        ];
+        args.extend(extra);
+        run(&args, d, None)
+    };
+    let (gif, mp4) = (d.join("v/orbit_t0.50.gif"), d.join("v/orbit_t0.50.mp4"));
+    ok(&video(&["--no-mp4"]));
+    assert!(gif.is_file());
+    // The user encodes an MP4 of the frames: a run without MP4s keeps it.
+    std::fs::write(&mp4, "my own mp4").unwrap();
+    ok(&video(&["--no-mp4"]));
+    assert_eq!(std::fs::read(&mp4).unwrap(), b"my own mp4");
+    // A run that would write an MP4 does not replace it: refused before any work.
+    let before = snapshot(&d.join("v"));
+    refused(&video(&[]), "orbit_t0.50.mp4");
+    assert_eq!(snapshot(&d.join("v")), before);
+    // splat4d's own GIF, unchanged, goes with `--no-gif` (it would pass for the new frames).
+    ok(&video(&["--no-mp4", "--no-gif"]));
+    assert!(!gif.exists());
+    assert_eq!(std::fs::read(&mp4).unwrap(), b"my own mp4");
+    // The user's GIF stays through `--no-gif` runs, and is not replaced by a GIF.
+    std::fs::write(&gif, "my own gif").unwrap();
+    ok(&video(&["--no-mp4", "--no-gif"]));
+    assert_eq!(std::fs::read(&gif).unwrap(), b"my own gif");
+    refused(&video(&["--no-mp4"]), "orbit_t0.50.gif");
+    assert_eq!(std::fs::read(&gif).unwrap(), b"my own gif");
+    // A GIF splat4d wrote and the user changed since is the user's.
+    std::fs::remove_file(&gif).unwrap();
+    ok(&video(&["--no-mp4"]));
+    let mut changed = std::fs::read(&gif).unwrap();
+    changed.extend_from_slice(b"edited");
+    std::fs::write(&gif, &changed).unwrap();
+    ok(&video(&["--no-mp4", "--no-gif"]));
+    assert_eq!(std::fs::read(&gif).unwrap(), changed);
+    assert_eq!(std::fs::read(&mp4).unwrap(), b"my own mp4");
+}
+
+/// Issue 45: `fit --out` or `--log` naming the dataset's point cloud, a mask or a COLMAP
+/// photo replaced it with exit 0. Every file a command reads is an input its outputs are
+/// checked against: refused (exit 2) before any work, the file unchanged byte for byte.
+#[test]
+fn outputs_never_replace_a_mask_point_cloud_colmap_photo_or_start_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    ok(&dataset(d, "s.json", "ds"));
+    // A point cloud and a mask named by the dataset.
+    let transforms = d.join("ds/transforms_train.json");
+    let mut value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&transforms).unwrap()).unwrap();
+    value["ply_file_path"] = serde_json::json!("points.ply");
+    value["frames"][1]["mask_path"] = serde_json::json!("masks/m1.png");
+    std::fs::write(&transforms, value.to_string()).unwrap();
+    std::fs::write(
+        d.join("ds/points.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0.5 0.5 0.5\n",
+    )
+    .unwrap();
+    std::fs::create_dir(d.join("ds/masks")).unwrap();
+    std::fs::copy(d.join("ds/train/r_001.png"), d.join("ds/masks/m1.png")).unwrap();
+    // A COLMAP model with its photos in images/.
+    let sparse = d.join("col/sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    std::fs::write(sparse.join("cameras.txt"), "1 PINHOLE 8 8 10 10 4 4\n").unwrap();
+    std::fs::write(
+        sparse.join("images.txt"),
+        "1 1 0 0 0 0 0 4 1 a.png\n\n2 1 0 0 0 0.1 0 4 1 sub/b.json\n\n",
+    )
+    .unwrap();
+    std::fs::create_dir_all(d.join("col/images/sub")).unwrap();
+    std::fs::copy(d.join("ds/train/r_000.png"), d.join("col/images/a.png")).unwrap();
+    std::fs::copy(
+        d.join("ds/train/r_002.png"),
+        d.join("col/images/sub/b.json"),
+    )
+    .unwrap();
+    let before = (snapshot(&d.join("ds")), snapshot(&d.join("col")));
+    let scene = std::fs::read(d.join("s.json")).unwrap();
+    for (views, out, log, init) in [
+        ("ds", "ds/points.ply", None, "auto"),
+        ("ds", "ds/masks/../points.ply", None, "auto"),
+        ("ds", "f.json", Some("ds/points.ply"), "auto"),
+        ("ds", "f.json", Some("ds/masks/m1.png"), "auto"),
+        ("col", "f.json", Some("col/images/a.png"), "auto"),
+        ("col", "col/images/sub/b.json", None, "auto"),
+        ("ds", "s.json", None, "s.json"),
+        ("ds", "f.json", Some("s.json"), "s.json"),
+    ] {
+        let mut args = vec!["fit", "--views", views, "--init", init, "--out", out];
+        if let Some(log) = log {
+            args.extend(["--log", log]);
+        }
+        let output = run(&args, d, None);
+        refused(&output, "is an input");
+        assert_eq!(
+            (snapshot(&d.join("ds")), snapshot(&d.join("col"))),
+            before,
+            "{args:?}"
+        );
+        assert_eq!(std::fs::read(d.join("s.json")).unwrap(), scene);
+        assert!(!d.join("f.json").exists());
+    }
+    // `bench --sweep` writes sweep.md and sweep.png: never over the scene it measures.
+    std::fs::create_dir(d.join("b")).unwrap();
+    blob_in(d, "b/sweep.md");
+    let output = run(
+        &["bench", "--scene", "b/sweep.md", "--sweep", "--out", "b"],
+        d,
+        None,
+    );
+    refused(&output, "is an input");
+    assert_eq!(std::fs::read(d.join("b/sweep.md")).unwrap(), scene);
+    assert_eq!(names(&d.join("b")), ["sweep.md"]);
+}
+
+/// Issue 45: `video --out NEW` that failed left an empty `NEW`. A failed video leaves nothing
+/// it created, and an earlier video as it was: here the second video of the run (a path
+/// camera too wide for a GIF) fails after the first is complete.
+#[test]
+fn a_failed_video_leaves_nothing_it_created() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    blob_in(d, "s.json");
+    let mut camera: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("blob_camera.json")).unwrap()).unwrap();
+    camera["width"] = serde_json::json!(70000);
+    camera["height"] = serde_json::json!(1);
+    camera["cx"] = serde_json::json!(35000.0);
+    camera["cy"] = serde_json::json!(0.5);
+    std::fs::write(
+        d.join("wide.json"),
+        serde_json::json!([{"camera": camera, "time": 0.5}]).to_string(),
+    )
+    .unwrap();
+    let video = |out: &str, path: bool| {
+        let mut args = vec![
+            "video",
+            "--scene",
+            "s.json",
+            "--orbit=0.5,0.5,0.5,3,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "8x8",
+            "--no-mp4",
+            "--out",
+            out,
+        ];
+        if path {
+            args.extend(["--path", "wide.json"]);
+        }
+        run(&args, d, None)
+    };
+    let before = snapshot(d);
+    refused(&video("new/videos", true), "GIF");
+    assert_eq!(snapshot(d), before);
+    // Over an earlier video (and a file of the user's): all as it was.
+    ok(&video("v", false));
+    std::fs::write(d.join("v/notes.txt"), "mine").unwrap();
+    let before = snapshot(d);
+    refused(&video("v", true), "GIF");
+    assert_eq!(snapshot(d), before);
+}
+
+/// Issue 45: `report --out` over a folder it may not write into ran the whole experiment
+/// before refusing. It is refused first: the experiment never starts (no progress), and the
+/// folder is as it was.
+#[test]
+fn report_checks_its_folder_before_the_experiment() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir_all(d.join("a/fit_vs_truth")).unwrap();
+    std::fs::write(d.join("a/fit_vs_truth/notes.txt"), "mine").unwrap();
+    std::fs::create_dir_all(d.join("b/report.md")).unwrap();
+    std::fs::create_dir_all(d.join("c")).unwrap();
+    std::fs::write(d.join("c/fit_vs_truth.gif"), "my own gif").unwrap();
+    std::fs::write(d.join("e"), "a file").unwrap();
+    let before = snapshot(d);
+    for (out, needle) in [
+        ("a", "fit_vs_truth"),
+        ("b", "report.md"),
+        ("c", "fit_vs_truth.gif"),
+        ("e", "not a folder"),
+    ] {
+        let output = run(&["report", "--quick", "--out", out], d, None);
+        refused(&output, needle);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!stderr.contains("dataset: "), "{out}: {stderr}");
+        assert_eq!(snapshot(d), before, "{out}");
+    }
 }
 
 /// Unmounts a tmpfs when dropped, also when the test fails.
@@ -694,5 +956,43 @@ fn a_full_disk_says_so_and_leaves_nothing() {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(left, ["filler"], "{out}");
+    }
+}
+
+/// Issue 45: `report --quick` on a full disk left 15 files and no `report.md`. The report is
+/// written into a temporary folder inside its own and moved into place at the end: a run
+/// that fails leaves nothing but what was there. The quick report takes about 1 MB; the
+/// 512 KiB tmpfs fills half-way through it (root only, as above).
+#[test]
+fn a_report_on_a_full_disk_leaves_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let disk = tmp.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=512k", "tmpfs"])
+        .arg(&disk)
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("cannot mount a tmpfs here (not root?): the full-disk run is skipped");
+        return;
+    }
+    let _unmount = Mounted(disk.clone());
+    std::fs::write(disk.join("notes.txt"), "mine").unwrap();
+    for out in ["new", "."] {
+        let output = run_limited(
+            &[
+                "report".as_ref(),
+                "--quick".as_ref(),
+                "--out".as_ref(),
+                disk.join(out).as_os_str(),
+            ],
+            tmp.path(),
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(3), "{out}: {stderr}");
+        assert!(stderr.contains("disk full"), "{out}: {stderr}");
+        assert_eq!(names(&disk), ["notes.txt"], "{out}");
     }
 }
