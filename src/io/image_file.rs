@@ -534,15 +534,25 @@ pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     load_image_with_alpha(path, background).map(|(image, _)| image)
 }
 
+/// A reader of the image file `path` ([`crate::io::input::open`]: a regular file), its
+/// format from its first bytes, else from its extension.
+fn open_reader(path: &Path) -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+    let file = crate::io::input::open(path, "cannot read image")?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file));
+    if let Ok(format) = ImageFormat::from_path(path) {
+        reader.set_format(format);
+    }
+    reader
+        .with_guessed_format()
+        .map_err(|e| Error::read(path, "cannot read image", e))
+}
+
 /// The size `(width, height)` an image file declares, read from its header alone (nothing
 /// is decoded); an error when it is larger than a frame may be
 /// ([`crate::model::camera::MAX_PIXELS`]), so a small file cannot make a huge allocation.
 pub fn image_size(path: &Path) -> Result<(u32, u32)> {
     let origin = path.display().to_string();
-    let (w, h) = image::ImageReader::open(path)
-        .map_err(|e| Error::read(path, "cannot read image", e))?
-        .with_guessed_format()
-        .map_err(|e| Error::read(path, "cannot read image", e))?
+    let (w, h) = open_reader(path)?
         .into_dimensions()
         .map_err(|e| Error::malformed(&origin, format!("cannot read the image header: {e}")))?;
     if u64::from(w) * u64::from(h) > crate::model::camera::MAX_PIXELS {
@@ -572,12 +582,9 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
         )));
     }
     let (w, h) = image_size(path)?;
-    let mut reader = image::ImageReader::open(path)
-        .map_err(|e| Error::read(path, "cannot read image", e))?
-        .with_guessed_format()
-        .map_err(|e| Error::read(path, "cannot read image", e))?;
+    let mut reader = open_reader(path)?;
     if reader.format() == Some(ImageFormat::Jpeg) {
-        let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read image", e))?;
+        let bytes = crate::io::input::read(path, "cannot read image")?;
         if !jpeg_is_complete(&bytes) {
             return Err(Error::malformed(
                 &origin,

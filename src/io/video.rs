@@ -110,9 +110,22 @@ pub fn write_video(
             )
         });
         let rendered = (|| {
+            let mut screen = None;
             for k in 0..frame_count {
                 let mut image = spare.try_recv().unwrap_or_default();
                 next_frame(k, &mut image)?;
+                // A GIF has one screen, the first frame's: a frame of another size would
+                // lie outside it.
+                let (w0, h0) = *screen.get_or_insert((image.width, image.height));
+                if options.gif && (image.width, image.height) != (w0, h0) {
+                    return Err(Error::setting(
+                        &["gif"],
+                        format!(
+                            "frame {k} is {}×{} but frame 0 is {w0}×{h0}: a GIF has one screen size; give every frame one size or no GIF",
+                            image.width, image.height
+                        ),
+                    ));
+                }
                 if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
                     return Err(Error::setting(
                         &["size", "gif"],

@@ -107,34 +107,17 @@ impl FitProgress for Silent {
 }
 
 /// Refuses, before the dataset is decoded, a fit whose images and kernels (the start, or an
-/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): every distinct image
-/// file is kept once as linear RGB, and the largest is decoded once more while it is
-/// converted; each view rendered at once (one per worker thread, up to the batch) holds its
-/// frame and its kernels' copies and gradients.
+/// alpha fit's budget) would not fit in memory ([`crate::io::memory`]): the photos as the
+/// loader keeps them ([`crate::io::dataset::photo_memory`]: one decode per file, one
+/// undistorted or downscaled copy per file, mask and lens, weights per frame) and what
+/// preparing the largest holds; each view rendered at once (one per worker thread, up to
+/// the batch) holds its frame and its kernels' copies and gradients.
 fn check_fit_memory(request: &FitRequest) -> Result<()> {
     use crate::io::memory::{
         FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL, check,
     };
-    let (mut kept, mut largest, mut largest_view, mut frames) = (0_u64, 0_u64, 0_u64, 0_usize);
-    // Frames that name one file share its decoded image.
-    let mut seen = std::collections::HashSet::new();
-    for file in crate::io::dataset::dataset_files(&request.views) {
-        if file
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
-            || !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone()))
-        {
-            continue;
-        }
-        if let Ok((w, h)) = crate::io::image_file::image_size(&file) {
-            let pixels = u64::from(w) * u64::from(h);
-            let n = u64::from(request.downscale.max(1));
-            kept = kept.saturating_add(pixels / (n * n) * 12);
-            largest = largest.max(pixels * 16);
-            largest_view = largest_view.max(pixels / (n * n));
-            frames += 1;
-        }
-    }
+    let photos = crate::io::dataset::photo_memory(&request.views, request.downscale);
+    let (largest_view, frames) = (photos.largest_view, photos.frames);
     let mut kernels = match Init::parse_builtin(&request.init)? {
         Some(Init::Random(n)) => n,
         Some(Init::Auto) => request.plan.start_kernels.max(1),
@@ -153,7 +136,9 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
     let frames_held =
         side_by_side.saturating_mul(RENDER_BYTES_PER_PIXEL.saturating_mul(largest_view));
     check(
-        kept.saturating_add(largest)
+        photos
+            .kept
+            .saturating_add(photos.working)
             .saturating_add(frames_held)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
         &format!("fitting up to {kernels} kernels to {frames} frames"),

@@ -5,7 +5,7 @@ use std::fmt;
 use std::path::PathBuf;
 
 use crate::io::output::{Outputs, check_replaceable, unique_names};
-use crate::io::path_file::{load_any_path, save_nerfstudio_path};
+use crate::io::path_file::{PathCamera, load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
@@ -138,6 +138,9 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
         let file = load_any_path(path)?;
+        if request.video.gif {
+            one_screen_size(&file.cameras, path)?;
+        }
         let sweep = even_times([t0, t1], file.cameras.len());
         let frames = file
             .cameras
@@ -162,6 +165,33 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
         *name = unique;
     }
     Ok(videos)
+}
+
+/// A GIF has one screen size: every camera of the path file `path` must have the first
+/// one's (frames of another size would lie outside the GIF's screen). Refused before any
+/// work, naming the first camera that differs.
+fn one_screen_size(cameras: &[PathCamera], path: &std::path::Path) -> Result<()> {
+    let Some(first) = cameras.first().map(|c| (c.camera.width, c.camera.height)) else {
+        return Ok(());
+    };
+    let Some((k, (w, h))) = cameras
+        .iter()
+        .map(|c| (c.camera.width, c.camera.height))
+        .enumerate()
+        .find(|&(_, size)| size != first)
+    else {
+        return Ok(());
+    };
+    let field = if w == first.0 { "height" } else { "width" };
+    Err(Error::setting(
+        &["path", "gif"],
+        format!(
+            "{}: frame {k}: field `camera.{field}`: its camera is {w}×{h} but frame 0's is {}×{}; a GIF has one screen size, so `gif` needs every camera of the `path` at one size (or leave the GIF out)",
+            path.display(),
+            first.0,
+            first.1
+        ),
+    ))
 }
 
 /// Checks, before any work, every output of the videos named `names` in `out` against the
