@@ -1401,8 +1401,9 @@ pub fn photo_memory(dir: &Path, downscale: u32) -> PhotoMemory {
     // and its weights; an undistorted copy's validity and the remap tables kept (16 bytes
     // a pixel and a flag each).
     let tables = lenses.len().min(KEPT_TABLES) as u64;
-    let per_pixel =
-        28 + if masked { 32 } else { 0 } + if undistorted { 4 + 17 * tables } else { 0 };
+    let per_pixel = crate::io::memory::DATASET_BYTES_PER_PIXEL
+        + if masked { 32 } else { 0 }
+        + if undistorted { 4 + 17 * tables } else { 0 };
     estimate.working = largest.saturating_mul(per_pixel);
     estimate
 }

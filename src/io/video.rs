@@ -60,12 +60,15 @@ impl Default for VideoOptions {
     }
 }
 
+/// The frame as the GIF encoder's RGBA, quantised a band at a time (no whole-frame copy of
+/// the levels beside the RGBA one: 3 bytes a pixel less at the peak).
 fn to_rgba8(image: &Image) -> RgbaImage {
-    let levels: Vec<u8> = quantize_all(&image.pixels);
-    let data = levels
-        .chunks_exact(3)
-        .flat_map(|p| [p[0], p[1], p[2], 255])
-        .collect();
+    const BAND: usize = 3 << 14;
+    let mut data = Vec::with_capacity(image.pixels.len() / 3 * 4);
+    for band in image.pixels.chunks(BAND) {
+        let levels: Vec<u8> = quantize_all(band);
+        data.extend(levels.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]));
+    }
     RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
 }
 

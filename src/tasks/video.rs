@@ -237,13 +237,24 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         ));
     }
     let scene = load_scene(&request.scene)?;
-    let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);
-    crate::io::memory::check(
-        // A render's, and the frame written while the next one renders (f32 RGB).
-        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL + 12),
-        &format!("{}×{} frames", request.lens.width, request.lens.height),
-    )?;
     let videos = paths(request, &scene)?;
+    // The largest frame of any video (a path file's cameras have their own sizes).
+    let (w, h) = videos
+        .iter()
+        .flat_map(|(_, frames, _)| frames)
+        .map(|f| (f.camera.width, f.camera.height))
+        .max_by_key(|&(w, h)| u64::from(w) * u64::from(h))
+        .unwrap_or((request.lens.width, request.lens.height));
+    let per_pixel = crate::io::memory::VIDEO_BYTES_PER_PIXEL
+        + if request.video.gif {
+            crate::io::memory::GIF_BYTES_PER_PIXEL
+        } else {
+            0
+        };
+    crate::io::memory::check(
+        (u64::from(w) * u64::from(h)).saturating_mul(per_pixel),
+        &format!("{w}×{h} frames"),
+    )?;
     let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
     check_outputs(request, &names)?;
     progress.start("frames", videos.iter().map(|(_, f, _)| f.len()).sum());

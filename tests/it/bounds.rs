@@ -528,3 +528,109 @@ fn fifos_given_as_input_files_are_refused_at_once() {
         assert!(!d.join(output).exists(), "{output}");
     }
 }
+
+/// `dataset` and `video` at the largest frame, 16384²: what they need is estimated before
+/// any work (a render's buffers, the frame at the writer, the PNG encoded in memory, the GIF
+/// frame) and refused above the bound; a path file's cameras count at their own size.
+#[test]
+fn the_largest_frames_are_estimated_before_any_work() {
+    use splat4d::io::memory::{
+        DATASET_VIEW_BYTES_PER_PIXEL, GIF_BYTES_PER_PIXEL, VIDEO_BYTES_PER_PIXEL,
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let blob = data("blob.json");
+    let blob = blob.to_str().unwrap();
+    let gb = |per_pixel: u64| format!("{:.1} GB", (per_pixel << 28) as f64 / 1e9);
+    let dataset = [
+        "dataset",
+        "--scene",
+        blob,
+        "--views",
+        "1",
+        "--times",
+        "1",
+        "--size",
+        "16384x16384",
+        "--out",
+        "ds",
+        "--max-memory",
+        "10G",
+    ];
+    refused_at_once(
+        &dataset,
+        d,
+        &[
+            "16384×16384 views",
+            &gb(DATASET_VIEW_BYTES_PER_PIXEL),
+            "--max-memory",
+        ],
+    );
+    let video = |extra: &[&str]| {
+        let mut args = vec![
+            "video",
+            "--scene",
+            blob,
+            "--orbit=0.5,0.5,0.5,4,20,2",
+            "--times",
+            "0.5",
+            "--size",
+            "16384x16384",
+            "--no-mp4",
+            "--out",
+            "v",
+            "--max-memory",
+            "1G",
+        ];
+        args.extend_from_slice(extra);
+        args.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let with_gif = video(&[]);
+    let with_gif: Vec<&str> = with_gif.iter().map(String::as_str).collect();
+    refused_at_once(
+        &with_gif,
+        d,
+        &[
+            "16384×16384 frames",
+            &gb(VIDEO_BYTES_PER_PIXEL + GIF_BYTES_PER_PIXEL),
+        ],
+    );
+    let without = video(&["--no-gif"]);
+    let without: Vec<&str> = without.iter().map(String::as_str).collect();
+    refused_at_once(&without, d, &[&gb(VIDEO_BYTES_PER_PIXEL)]);
+    // A path file's camera at 16384², whatever `--size` says.
+    let big = Camera::look_at(
+        [0.5, 0.5, 4.5],
+        [0.5; 3],
+        [0.0, 1.0, 0.0],
+        40.0,
+        16384,
+        16384,
+    )
+    .unwrap();
+    save_path(
+        &[PathFrame {
+            camera: big,
+            time: 0.5,
+        }],
+        &d.join("big.json"),
+    )
+    .unwrap();
+    refused_at_once(
+        &[
+            "video",
+            "--scene",
+            blob,
+            "--path",
+            "big.json",
+            "--no-mp4",
+            "--out",
+            "v",
+            "--max-memory",
+            "10G",
+        ],
+        d,
+        &["16384×16384 frames", "--max-memory"],
+    );
+    assert!(!d.join("ds").exists() && !d.join("v").exists());
+}
