@@ -502,6 +502,13 @@ fn prepare_photo(
 /// intrinsics and its lens (as bits).
 type PhotoKey = (PathBuf, Option<PathBuf>, [u64; 4], [u64; 5]);
 
+/// A file decoded: the decode (weak), whether a pixel was transparent, its size.
+type DecodedFile = (std::sync::Weak<Image>, bool, (u32, u32));
+
+/// What [`Photos::size`] tells of a file: its size, whether a pixel is transparent, and its
+/// decode when at hand.
+type FileSize = ((u32, u32), bool, Option<std::sync::Arc<Image>>);
+
 /// The photos of one dataset file as they load. Each distinct image file is decoded once,
 /// and frames naming one file with one mask, intrinsics and lens share one prepared photo
 /// (one undistorted or downscaled copy, [`View::image`] an `Arc` shared between them): 25
@@ -511,7 +518,7 @@ struct Photos {
     /// Decoded files by real path: the decode (weak: one that nothing keeps, a photo
     /// undistorted or downscaled into a copy, is not held while the rest load), whether a
     /// pixel was transparent, and its size.
-    decoded: std::collections::HashMap<PathBuf, (std::sync::Weak<Image>, bool, (u32, u32))>,
+    decoded: std::collections::HashMap<PathBuf, DecodedFile>,
     /// Prepared photos: the view holding it (an index into the views loaded so far) and its
     /// intrinsics.
     prepared: std::collections::HashMap<PhotoKey, (usize, [f64; 4])>,
@@ -531,11 +538,7 @@ impl Photos {
     /// The size of the image `source` names and whether a pixel is transparent; the file is
     /// decoded unless an earlier frame's decode told, and the decode returned when it is at
     /// hand (made now, or still held).
-    fn size(
-        &mut self,
-        source: &Source,
-        background: [f32; 3],
-    ) -> Result<((u32, u32), bool, Option<std::sync::Arc<Image>>)> {
+    fn size(&mut self, source: &Source, background: [f32; 3]) -> Result<FileSize> {
         if let Some((weak, alpha, size)) = self.decoded.get(&source.real) {
             return Ok((*size, *alpha, weak.upgrade()));
         }

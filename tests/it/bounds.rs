@@ -369,6 +369,9 @@ fn refused_at_once(args: &[&str], cwd: &Path, needles: &[&str]) {
     assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
 }
 
+/// A change to a JSON document.
+type Edit = fn(&mut serde_json::Value);
+
 fn edit_json(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
     let mut value: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
@@ -394,19 +397,14 @@ fn fifos_named_by_a_dataset_are_refused_at_once_by_fit_and_view() {
         "fit", "--views", "ds", "--init", "random:5", "--steps", "1", "--out", "f.json",
     ];
     let view = ["view", "--scene", blob, "--views", "ds", "--port", "0"];
-    let cases: [(&str, Box<dyn Fn(&mut serde_json::Value)>); 3] = [
-        (
-            "mask_path",
-            Box::new(|v| v["frames"][0]["mask_path"] = "pipe.png".into()),
-        ),
-        (
-            "ply_file_path",
-            Box::new(|v| v["ply_file_path"] = "pipe.ply".into()),
-        ),
-        (
-            "file_path",
-            Box::new(|v| v["frames"][1]["file_path"] = "pipe.png".into()),
-        ),
+    let cases: [(&str, Edit); 3] = [
+        ("mask_path", |v| {
+            v["frames"][0]["mask_path"] = "pipe.png".into()
+        }),
+        ("ply_file_path", |v| v["ply_file_path"] = "pipe.ply".into()),
+        ("file_path", |v| {
+            v["frames"][1]["file_path"] = "pipe.png".into()
+        }),
     ];
     for (field, edit) in cases {
         std::fs::write(&train, &original).unwrap();
