@@ -20,8 +20,14 @@ fn parse_circle(text: &str) -> std::result::Result<CircleSpec, String> {
         return Ok(CircleSpec(None));
     }
     let values = parse_list::<6>(text)?;
-    if values[5] < 1.0 || values[5].fract() != 0.0 {
-        return Err(format!("frames = {} must be a whole number ≥ 1", values[5]));
+    let most = splat4d::scenes::paths::MAX_PATH_FRAMES;
+    if !(1.0..=most as f64).contains(&values[5]) || values[5].fract() != 0.0 {
+        // As written (cut): `1e300` printed as a number has 301 digits.
+        let given = text.rsplit(',').next().unwrap_or_default().trim();
+        return Err(format!(
+            "frames = {} must be a whole number from 1 to {most}",
+            splat4d::model::error::cut(given, splat4d::model::error::MAX_QUOTE)
+        ));
     }
     Ok(CircleSpec(Some(values)))
 }

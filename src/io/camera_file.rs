@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::io::json::parse_json;
 use crate::io::write_bytes_atomically;
-use crate::model::{Camera, Error, Result};
+use crate::model::{Camera, Result};
 
 /// Parses and validates a camera JSON document.
 pub fn camera_from_json(text: &str, origin: &str) -> Result<Camera> {
@@ -23,8 +23,7 @@ pub fn camera_to_json(camera: &Camera) -> String {
 
 /// Reads a camera JSON file.
 pub fn load_camera(path: &Path) -> Result<Camera> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| Error::read(path, "cannot read camera", e))?;
+    let text = crate::io::input::read_to_string(path, "cannot read camera")?;
     camera_from_json(&text, &path.display().to_string())
 }
 

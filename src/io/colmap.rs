@@ -105,23 +105,25 @@ pub struct SparseModel {
 }
 
 /// The folder holding a sparse model under a dataset folder `dir`: `dir/sparse/0`, then
-/// `dir/sparse`, whichever has a `cameras.bin` or `cameras.txt`.
+/// `dir/sparse`, whichever has a `cameras.bin` or `cameras.txt` (of any kind: one that is
+/// not a regular file is refused when read, [`crate::io::input`]).
 #[must_use]
 pub fn find_sparse_model(dir: &Path) -> Option<PathBuf> {
     [dir.join("sparse").join("0"), dir.join("sparse")]
         .into_iter()
-        .find(|d| d.join("cameras.bin").is_file() || d.join("cameras.txt").is_file())
+        .find(|d| d.join("cameras.bin").exists() || d.join("cameras.txt").exists())
 }
 
 /// The files of the sparse model in `sparse` (binary first, then text; `points3D` may be
-/// missing), as `[cameras, images, points3D]`.
+/// missing), as `[cameras, images, points3D]`: the names that exist, whatever their kind
+/// (a FIFO or a folder is refused when read, not taken for a missing file).
 #[must_use]
 pub fn model_files(sparse: &Path) -> [Option<PathBuf>; 3] {
     ["cameras", "images", "points3D"].map(|stem| {
         ["bin", "txt"]
             .iter()
             .map(|ext| sparse.join(format!("{stem}.{ext}")))
-            .find(|p| p.is_file())
+            .find(|p| p.exists())
     })
 }
 
@@ -136,7 +138,7 @@ pub fn read_sparse_model(sparse: &Path) -> Result<SparseModel> {
     };
     let cameras = cameras.ok_or_else(|| missing("cameras"))?;
     let images = images.ok_or_else(|| missing("images"))?;
-    let read = |path: &Path| std::fs::read(path).map_err(|e| Error::read(path, "cannot read", e));
+    let read = |path: &Path| crate::io::input::read(path, "cannot read");
     let binary = |path: &Path| path.extension().is_some_and(|e| e == "bin");
     let parse = |path: &Path,
                  bin: fn(&[u8], &str) -> Result<SparseModel>,

@@ -498,6 +498,127 @@ fn prepare_photo(
     Ok((image, weights, intrinsics.map(|v| v / scale)))
 }
 
+/// A prepared photo's identity: the image file's and the mask's real paths, the photo's
+/// intrinsics and its lens (as bits).
+type PhotoKey = (PathBuf, Option<PathBuf>, [u64; 4], [u64; 5]);
+
+/// A file decoded: the decode (weak), whether a pixel was transparent, its size.
+type DecodedFile = (std::sync::Weak<Image>, bool, (u32, u32));
+
+/// What [`Photos::size`] tells of a file: its size, whether a pixel is transparent, and its
+/// decode when at hand.
+type FileSize = ((u32, u32), bool, Option<std::sync::Arc<Image>>);
+
+/// The photos of one dataset file as they load. Each distinct image file is decoded once,
+/// and frames naming one file with one mask, intrinsics and lens share one prepared photo
+/// (one undistorted or downscaled copy, [`View::image`] an `Arc` shared between them): 25
+/// frames of one photo hold one image, not 25.
+#[derive(Default)]
+struct Photos {
+    /// Decoded files by real path: the decode (weak: one that nothing keeps, a photo
+    /// undistorted or downscaled into a copy, is not held while the rest load), whether a
+    /// pixel was transparent, and its size.
+    decoded: std::collections::HashMap<PathBuf, DecodedFile>,
+    /// Prepared photos: the view holding it (an index into the views loaded so far) and its
+    /// intrinsics.
+    prepared: std::collections::HashMap<PhotoKey, (usize, [f64; 4])>,
+    undistorter: Undistorter,
+}
+
+/// A frame's photo as its file names it: the image (its path as found and its real path),
+/// the mask's path (real, checked inside the dataset), and the lens.
+struct Source<'a> {
+    image: &'a Path,
+    real: PathBuf,
+    mask: Option<PathBuf>,
+    distortion: Distortion,
+}
+
+impl Photos {
+    /// The size of the image `source` names and whether a pixel is transparent; the file is
+    /// decoded unless an earlier frame's decode told, and the decode returned when it is at
+    /// hand (made now, or still held).
+    fn size(&mut self, source: &Source, background: [f32; 3]) -> Result<FileSize> {
+        if let Some((weak, alpha, size)) = self.decoded.get(&source.real) {
+            return Ok((*size, *alpha, weak.upgrade()));
+        }
+        let (image, alpha) = self.decode(source, background)?;
+        Ok(((image.width, image.height), alpha, Some(image)))
+    }
+
+    /// Decodes the image of `source` and records it.
+    fn decode(
+        &mut self,
+        source: &Source,
+        background: [f32; 3],
+    ) -> Result<(std::sync::Arc<Image>, bool)> {
+        let (image, alpha) = load_image_with_alpha(source.image, background)?;
+        let image = std::sync::Arc::new(image);
+        let size = (image.width, image.height);
+        self.decoded.insert(
+            source.real.clone(),
+            (std::sync::Arc::downgrade(&image), alpha, size),
+        );
+        Ok((image, alpha))
+    }
+
+    /// The photo of the frame that will be `views[views.len()]`: an earlier view's when
+    /// one shares its file, mask, intrinsics `k` and lens, else undistorted, masked and
+    /// downscaled now from `decoded` (the file decoded again when nothing held it). `ctx`
+    /// is `(origin, item)` for errors.
+    #[allow(clippy::too_many_arguments)]
+    fn prepare(
+        &mut self,
+        source: Source,
+        decoded: Option<std::sync::Arc<Image>>,
+        k: [f64; 4],
+        n: u32,
+        views: &[View],
+        background: [f32; 3],
+        ctx: (&str, &str),
+    ) -> Result<PreparedPhoto> {
+        let d = &source.distortion;
+        let lens = [
+            d.radial[0].to_bits(),
+            d.radial[1].to_bits(),
+            d.radial[2].to_bits(),
+            d.tangential[0].to_bits(),
+            d.tangential[1].to_bits(),
+        ];
+        let key = (
+            source.real.clone(),
+            source.mask.clone(),
+            k.map(f64::to_bits),
+            lens,
+        );
+        if let Some(&(index, k)) = self.prepared.get(&key)
+            && let Some(view) = views.get(index)
+        {
+            if !source.distortion.is_pinhole() {
+                self.undistorter.undistorted += 1;
+            }
+            return Ok((view.image.clone(), view.weights.clone(), k));
+        }
+        let image = match decoded {
+            Some(image) => image,
+            None => self.decode(&source, background)?.0,
+        };
+        let mask = match &source.mask {
+            Some(path) => Some(load_mask(path, (image.width, image.height), ctx.0, ctx.1)?),
+            None => None,
+        };
+        let photo = Photo {
+            image,
+            mask,
+            intrinsics: k,
+            distortion: source.distortion,
+        };
+        let prepared = prepare_photo(photo, &mut self.undistorter, n, ctx)?;
+        self.prepared.insert(key, (views.len(), prepared.2));
+        Ok(prepared)
+    }
+}
+
 /// `relative` under the dataset folder `dir`, checked to lie inside it (after resolving
 /// links and `..`).
 fn inside_dataset(
@@ -525,7 +646,29 @@ fn inside_dataset(
             ),
         ));
     }
+    regular_file(&canonical, relative, (origin, item, field), true)?;
     Ok(canonical)
+}
+
+/// Refuses, naming the file `relative` (as the dataset names it), its item and field, a
+/// `path` that exists but is not a regular file: a FIFO, socket or device, and a folder
+/// when `folders` ([`crate::io::input`]). A path that does not exist passes (its reader
+/// reports it, or it is a missing frame).
+fn regular_file(
+    path: &Path,
+    relative: &str,
+    (origin, item, field): (&str, &str, &str),
+    folders: bool,
+) -> Result<()> {
+    match crate::io::input::special_kind(path).filter(|_| folders || !path.is_dir()) {
+        Some(kind) => Err(Error::invalid(
+            origin,
+            item,
+            field,
+            format!("{relative}: {}", crate::io::input::not_regular(kind)),
+        )),
+        None => Ok(()),
+    }
 }
 
 /// A mask image as pixel weights: the mean of its channels (alpha composited over black),
@@ -639,14 +782,10 @@ fn check_downscale(n: u32) -> Result<()> {
     Ok(())
 }
 
-/// A decoded image file: the (downscaled) image, whether some pixel was transparent, and
-/// the size before downscaling.
-type Decoded = (std::sync::Arc<Image>, bool, (u32, u32));
-
 /// Reads one transforms file and its images.
 fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<FileViews> {
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| Error::read(path, "cannot read", e))?;
+    let text = crate::io::input::read_to_string(path, "cannot read")?;
     let file: TransformsFile = parse_json(&text, &origin, "transforms")?;
     let n = options.downscale;
     check_downscale(n)?;
@@ -654,12 +793,18 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
     let mut views = Vec::with_capacity(file.frames.len().min(1 << 16));
     let mut transparent = false;
     let mut missing = Vec::new();
-    let mut undistorter = Undistorter::default();
-    let mut decoded: std::collections::HashMap<PathBuf, Decoded> = std::collections::HashMap::new();
+    let mut photos = Photos::default();
     for (index, frame) in file.frames.iter().enumerate() {
         let item = format!("frame {index}");
         unread.extend(frame.other.keys().map(String::as_str));
         let Some(image_path) = resolve_image(dir, &frame.file_path) else {
+            // A FIFO (or other special file) is not a missing image: refused by name.
+            regular_file(
+                &dir.join(&frame.file_path),
+                &frame.file_path,
+                (&origin, &item, "file_path"),
+                false,
+            )?;
             missing.push((item, frame.file_path.clone()));
             continue;
         };
@@ -674,37 +819,30 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 ),
             ));
         }
-        let lens = distortion(&file, frame, &origin, &item)?;
-        // Each distinct file is decoded once; frames that name it share the image.
-        let key = image_path
-            .canonicalize()
-            .unwrap_or_else(|_| image_path.clone());
-        let (image, alpha, (w, h)) = match decoded.get(&key) {
-            Some(hit) => hit.clone(),
-            None => {
-                let (image, alpha) = load_image_with_alpha(&image_path, options.background)?;
-                let size = (image.width, image.height);
-                let hit = (std::sync::Arc::new(image), alpha, size);
-                decoded.insert(key, hit.clone());
-                hit
-            }
-        };
-        transparent |= alpha;
-        let k = intrinsics(&file, frame, (w, h), &origin, &item)?;
         let mask = match &frame.mask_path {
-            Some(mask_path) => {
-                let path = inside_dataset(dir, mask_path, &origin, &item, "mask_path")?;
-                Some(load_mask(&path, (w, h), &origin, &item)?)
-            }
+            Some(mask_path) => Some(inside_dataset(dir, mask_path, &origin, &item, "mask_path")?),
             None => None,
         };
-        let photo = Photo {
-            image,
+        let source = Source {
+            image: &image_path,
+            real: image_path
+                .canonicalize()
+                .unwrap_or_else(|_| image_path.clone()),
             mask,
-            intrinsics: k,
-            distortion: lens,
+            distortion: distortion(&file, frame, &origin, &item)?,
         };
-        let (image, weights, k) = prepare_photo(photo, &mut undistorter, n, (&origin, &item))?;
+        let ((w, h), alpha, decoded) = photos.size(&source, options.background)?;
+        transparent |= alpha;
+        let k = intrinsics(&file, frame, (w, h), &origin, &item)?;
+        let (image, weights, k) = photos.prepare(
+            source,
+            decoded,
+            k,
+            n,
+            &views,
+            options.background,
+            (&origin, &item),
+        )?;
         let time = frame.time.unwrap_or(0.0);
         if !time.is_finite() {
             return Err(Error::invalid(&origin, &item, "time", "not finite"));
@@ -748,7 +886,11 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
         views.len(),
         options.strict,
     )?);
-    notes.extend(weights_note(&origin, &views, undistorter.undistorted));
+    notes.extend(weights_note(
+        &origin,
+        &views,
+        photos.undistorter.undistorted,
+    ));
     let points = match &file.ply_file_path {
         Some(ply) => {
             let path = inside_dataset(dir, ply, &origin, "transforms", "ply_file_path")?;
@@ -778,7 +920,7 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
     let mut views = Vec::with_capacity(images.len().min(1 << 16));
     let mut transparent = false;
     let mut missing = Vec::new();
-    let mut undistorter = Undistorter::default();
+    let mut photos = Photos::default();
     for entry in &images {
         let item = format!("image {} ({})", entry.id, entry.name);
         let camera = model.cameras.get(&entry.camera_id).ok_or_else(|| {
@@ -792,35 +934,42 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
         let name = format!("images/{}", entry.name);
         let path = dir.join(&name);
         if !path.is_file() {
+            regular_file(&path, &name, (&origin, &item, "name"), false)?;
             missing.push((item, name));
             continue;
         }
-        let path = inside_dataset(dir, &name, &origin, &item, "name")?;
-        let (image, alpha) = load_image_with_alpha(&path, options.background)?;
+        let real = inside_dataset(dir, &name, &origin, &item, "name")?;
+        let source = Source {
+            image: &path,
+            real: real.clone(),
+            mask: None,
+            distortion: camera.distortion,
+        };
+        let ((w, h), alpha, decoded) = photos.size(&source, options.background)?;
         transparent |= alpha;
-        if (image.width, image.height) != (camera.width, camera.height) {
+        if (w, h) != (camera.width, camera.height) {
             return Err(Error::invalid(
                 &origin,
                 &item,
                 "camera_id",
                 format!(
-                    "{} is {}×{} but camera {} is {}×{}",
-                    path.display(),
-                    image.width,
-                    image.height,
+                    "{} is {w}×{h} but camera {} is {}×{}",
+                    real.display(),
                     entry.camera_id,
                     camera.width,
                     camera.height
                 ),
             ));
         }
-        let photo = Photo {
-            image: std::sync::Arc::new(image),
-            mask: None,
-            intrinsics: camera.intrinsics,
-            distortion: camera.distortion,
-        };
-        let (image, weights, k) = prepare_photo(photo, &mut undistorter, n, (&origin, &item))?;
+        let (image, weights, k) = photos.prepare(
+            source,
+            decoded,
+            camera.intrinsics,
+            n,
+            &views,
+            options.background,
+            (&origin, &item),
+        )?;
         let w2c = colmap::world_to_camera(entry.rotation, entry.translation);
         let camera = Camera::new(image.width, image.height, k, w2c).map_err(|e| match e {
             Error::Invalid { field, message, .. } => {
@@ -838,7 +987,11 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
     }
     let notes = missing_frames(&origin, &missing, views.len(), options.strict)?
         .into_iter()
-        .chain(weights_note(&origin, &views, undistorter.undistorted))
+        .chain(weights_note(
+            &origin,
+            &views,
+            photos.undistorter.undistorted,
+        ))
         .collect();
     let points = (!model.points.is_empty()).then(|| {
         model
@@ -868,6 +1021,22 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
             &dir.display().to_string(),
             "not a folder with transforms_train.json, transforms.json or a COLMAP sparse/0",
         ));
+    }
+    // A transforms file that is a FIFO, socket, device or folder is refused, not taken for
+    // a missing one.
+    for name in [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "transforms.json",
+    ] {
+        let path = dir.join(name);
+        if let Some(kind) = crate::io::input::special_kind(&path) {
+            return Err(Error::malformed(
+                &path.display().to_string(),
+                crate::io::input::not_regular(kind),
+            ));
+        }
     }
     let mut dataset = Dataset::default();
     let train_file = dir.join("transforms_train.json");
@@ -1107,7 +1276,7 @@ pub fn dataset_inputs(dir: &Path) -> DatasetFiles {
         if !path.is_file() {
             continue;
         }
-        let Ok(text) = std::fs::read_to_string(&path) else {
+        let Ok(text) = crate::io::input::read_to_string(&path, "cannot read") else {
             continue;
         };
         let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) else {
@@ -1158,4 +1327,152 @@ pub fn dataset_inputs(dir: &Path) -> DatasetFiles {
 #[must_use]
 pub fn dataset_files(dir: &Path) -> Vec<PathBuf> {
     dataset_inputs(dir).all()
+}
+
+/// What the photos of a dataset hold in memory once loaded, estimated from the files'
+/// headers before any is decoded ([`photo_memory`], [`crate::io::memory`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PhotoMemory {
+    /// Bytes kept: every distinct photo the views hold (linear RGB f32, 12 bytes a pixel
+    /// after downscaling: one decode per file, one undistorted or downscaled copy per file,
+    /// mask and lens), and the pixel weights of every frame that has them (4 bytes a pixel,
+    /// one array per frame: undistorted or masked).
+    pub kept: u64,
+    /// Bytes held at once, beyond `kept`, while the largest photo is prepared: its decode
+    /// and linear copy, its mask's, its undistorted copy's validity and the remap tables
+    /// kept.
+    pub working: u64,
+    /// Pixels of the largest view (after downscaling).
+    pub largest_view: u64,
+    /// Frames with an image file.
+    pub frames: usize,
+    /// Distinct image files.
+    pub files: usize,
+    /// Distinct arrays of pixels the views hold (decodes shared as they are, undistorted
+    /// or downscaled copies).
+    pub copies: usize,
+}
+
+/// One frame's photo as far as the estimate needs it: the image's real path, its mask's,
+/// its lens.
+type FramePhoto = (PathBuf, Option<PathBuf>, Distortion);
+
+/// The photos of the frames of the dataset in `dir`, as the loader would read them (the
+/// split files, else `transforms.json`, else the COLMAP model), as far as they can be read:
+/// the loader reports what cannot.
+fn frame_photos(dir: &Path) -> Vec<FramePhoto> {
+    let real = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+    let split_files: Vec<PathBuf> = SPLITS
+        .iter()
+        .map(|s| dir.join(format!("transforms_{s}.json")))
+        .collect();
+    let single = dir.join("transforms.json");
+    let files = if split_files[0].is_file() {
+        split_files
+    } else if single.is_file() {
+        vec![single]
+    } else {
+        let Some(sparse) = colmap::find_sparse_model(dir) else {
+            return Vec::new();
+        };
+        let Ok(model) = colmap::read_sparse_model(&sparse) else {
+            return Vec::new();
+        };
+        return model
+            .images
+            .iter()
+            .filter_map(|image| {
+                let path = dir.join("images").join(&image.name);
+                let lens = model.cameras.get(&image.camera_id)?.distortion;
+                path.is_file().then(|| (real(&path), None, lens))
+            })
+            .collect();
+    };
+    let mut photos = Vec::new();
+    for path in files {
+        let Ok(text) = crate::io::input::read_to_string(&path, "cannot read") else {
+            continue;
+        };
+        let Ok(file) = serde_json::from_str::<TransformsFile>(&text) else {
+            continue;
+        };
+        for frame in &file.frames {
+            let Some(image) = resolve_image(dir, &frame.file_path) else {
+                continue;
+            };
+            let mask = frame.mask_path.as_ref().map(|m| real(&dir.join(m)));
+            let lens = distortion(&file, frame, "", "").unwrap_or_default();
+            photos.push((real(&image), mask, lens));
+        }
+    }
+    photos
+}
+
+/// Estimates what loading the dataset in `dir` with `downscale` holds
+/// ([`PhotoMemory`]), following the loader's sharing: frames that name one file share its
+/// decode, and frames that also share its mask and lens share one undistorted (or
+/// downscaled) copy; each frame with weights has its own. Sizes come from the image
+/// headers alone (nothing is decoded); unreadable files count nothing (the loader reports
+/// them).
+#[must_use]
+pub fn photo_memory(dir: &Path, downscale: u32) -> PhotoMemory {
+    use std::collections::{HashMap, HashSet};
+    let n = u64::from(downscale.clamp(1, MAX_DOWNSCALE));
+    let mut sizes: HashMap<PathBuf, Option<u64>> = HashMap::new();
+    let mut copies: HashSet<(PathBuf, Option<PathBuf>, [u64; 5])> = HashSet::new();
+    let mut shared: HashSet<PathBuf> = HashSet::new();
+    let mut lenses: HashSet<[u64; 5]> = HashSet::new();
+    let mut estimate = PhotoMemory::default();
+    let (mut largest, mut masked, mut undistorted) = (0_u64, false, false);
+    for (image, mask, lens) in frame_photos(dir) {
+        let pixels = *sizes.entry(image.clone()).or_insert_with(|| {
+            crate::io::image_file::image_size(&image)
+                .ok()
+                .map(|(w, h)| u64::from(w) * u64::from(h))
+        });
+        let Some(pixels) = pixels else {
+            continue;
+        };
+        let view = pixels / (n * n);
+        estimate.frames += 1;
+        largest = largest.max(pixels);
+        estimate.largest_view = estimate.largest_view.max(view);
+        let bits = [
+            lens.radial[0].to_bits(),
+            lens.radial[1].to_bits(),
+            lens.radial[2].to_bits(),
+            lens.tangential[0].to_bits(),
+            lens.tangential[1].to_bits(),
+        ];
+        let pinhole = lens.is_pinhole();
+        if !pinhole {
+            lenses.insert(bits);
+            undistorted = true;
+        }
+        masked |= mask.is_some();
+        // The decode itself is what the view holds when nothing changes its pixels (a mask
+        // only weighs them); else one copy per file, mask and lens.
+        let copy = if pinhole && n == 1 {
+            shared.insert(image.clone())
+        } else {
+            copies.insert((image, mask.clone(), bits))
+        };
+        if copy {
+            estimate.kept = estimate.kept.saturating_add(12 * view);
+            estimate.copies += 1;
+        }
+        if mask.is_some() || !pinhole {
+            estimate.kept = estimate.kept.saturating_add(4 * view);
+        }
+    }
+    estimate.files = sizes.values().filter(|s| s.is_some()).count();
+    // The decode (up to 16 bytes a pixel, RGBA f32) and its linear copy; a mask's the same
+    // and its weights; an undistorted copy's validity and the remap tables kept (16 bytes
+    // a pixel and a flag each).
+    let tables = lenses.len().min(KEPT_TABLES) as u64;
+    let per_pixel = crate::io::memory::DATASET_BYTES_PER_PIXEL
+        + if masked { 32 } else { 0 }
+        + if undistorted { 4 + 17 * tables } else { 0 };
+    estimate.working = largest.saturating_mul(per_pixel);
+    estimate
 }

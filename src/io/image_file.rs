@@ -148,14 +148,15 @@ impl NotFinite {
 /// scanlines stored uncompressed would (noise: its fixed codes spend up to 12 bits on a
 /// byte), the scanlines stored, as png's whole-image writer does; `produce` then runs a
 /// second time. Encoded in memory: png's stream writer drops an error of its last chunk's
-/// write (its chunk writer flushes on drop), which a `Vec` cannot return.
+/// write (its chunk writer flushes on drop), which a `Vec` cannot return. The memory is
+/// bounded by the stored size: the compressed encoding stops as soon as it would grow past
+/// it (instead of growing to twice that), and the stored one reuses its buffer.
 fn encode_png<T>(
     path: &Path,
     size: (u32, u32),
     depth: BitDepth,
     mut produce: impl FnMut(&mut RowSink) -> Result<T>,
 ) -> Result<EncodedPng<T>> {
-    let png = encode_png_with(path, size, depth, png::Compression::Fast, &mut produce)?;
     let channel_bytes = match depth {
         BitDepth::Eight => 1,
         BitDepth::Sixteen => 2,
@@ -165,27 +166,98 @@ fn encode_png<T>(
     // Stored: the scanlines, 5 bytes a deflate block of up to 65535, 12 a chunk of 64 KiB,
     // the zlib and PNG framing; a bound a little above.
     let stored = scanlines + scanlines / 4096 + 96;
-    // An image that is not finite is refused anyway: no second encoding for it.
-    if png.not_finite.is_none() && png.bytes.len() as u64 > stored {
-        let stored = png::Compression::NoCompression;
-        return encode_png_with(path, size, depth, stored, &mut produce);
+    // The stored encoding's own size, for the buffer's growth: 5 bytes a deflate block,
+    // 12 a 64 KiB chunk (s/13107 + s/5461 < s/2048), the framing.
+    let most = usize::try_from(scanlines + scanlines / 2048 + 256).unwrap_or(usize::MAX);
+    let mut out = Capped {
+        bytes: Vec::new(),
+        limit: usize::try_from(stored).unwrap_or(usize::MAX),
+        grow_to: most,
+        over: false,
+    };
+    let fast = encode_png_with(
+        path,
+        size,
+        depth,
+        png::Compression::Fast,
+        &mut produce,
+        &mut out,
+    );
+    if !out.over {
+        let (produced, not_finite) = fast?;
+        return Ok(EncodedPng {
+            bytes: out.bytes,
+            produced,
+            not_finite,
+        });
     }
-    Ok(png)
+    // Larger than stored (noise): stored, in the same buffer (no limit: the bound is only
+    // a little above the stored size, which it never passes).
+    out.bytes.clear();
+    out.limit = usize::MAX;
+    out.over = false;
+    let (produced, not_finite) = encode_png_with(
+        path,
+        size,
+        depth,
+        png::Compression::NoCompression,
+        &mut produce,
+        &mut out,
+    )?;
+    Ok(EncodedPng {
+        bytes: out.bytes,
+        produced,
+        not_finite,
+    })
 }
 
-/// [`encode_png`] with `compression`: the channels quantised ([`quantize_all_checked`]) as
-/// they arrive, a band at a time, and streamed into the encoder; the encoder's errors name
-/// `path`.
+/// The bytes of a PNG encoded in memory, at most `limit` of them: a write past it fails and
+/// sets `over`. The buffer grows as a `Vec` does, but not beyond `grow_to` (the size
+/// expected at most) unless a write needs more.
+struct Capped {
+    bytes: Vec<u8>,
+    limit: usize,
+    grow_to: usize,
+    over: bool,
+}
+
+impl Write for Capped {
+    fn write(&mut self, data: &[u8]) -> std::io::Result<usize> {
+        let needed = self.bytes.len().saturating_add(data.len());
+        if needed > self.limit {
+            self.over = true;
+            return Err(std::io::Error::other(
+                "the compressed PNG is larger than its scanlines stored",
+            ));
+        }
+        if needed > self.bytes.capacity() {
+            let grown = self.bytes.capacity().saturating_mul(2).min(self.grow_to);
+            self.bytes
+                .reserve_exact(grown.max(needed) - self.bytes.len());
+        }
+        self.bytes.extend_from_slice(data);
+        Ok(data.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// [`encode_png`] with `compression`, into `out`: the channels quantised
+/// ([`quantize_all_checked`]) as they arrive, a band at a time, and streamed into the
+/// encoder; the encoder's errors name `path`. Returns what `produce` returned and the first
+/// value not finite.
 fn encode_png_with<T>(
     path: &Path,
     (width, height): (u32, u32),
     depth: BitDepth,
     compression: png::Compression,
     produce: &mut impl FnMut(&mut RowSink) -> Result<T>,
-) -> Result<EncodedPng<T>> {
+    out: &mut Capped,
+) -> Result<(T, Option<NotFinite>)> {
     let cannot = |e| Error::write(path, "cannot encode", e);
-    let mut bytes = Vec::new();
-    let mut encoder = png::Encoder::new(&mut bytes, width, height);
+    let mut encoder = png::Encoder::new(out, width, height);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(match depth {
         BitDepth::Eight => png::BitDepth::Eight,
@@ -227,11 +299,7 @@ fn encode_png_with<T>(
     let produced = produce(&mut sink)?;
     stream.finish().map_err(|e| cannot(e.into()))?;
     writer.finish().map_err(|e| cannot(e.into()))?;
-    Ok(EncodedPng {
-        bytes,
-        produced,
-        not_finite,
-    })
+    Ok((produced, not_finite))
 }
 
 /// The error of an image too large for an EXR file's 32-bit sizes.
@@ -534,15 +602,25 @@ pub fn load_image(path: &Path, background: [f32; 3]) -> Result<Image> {
     load_image_with_alpha(path, background).map(|(image, _)| image)
 }
 
+/// A reader of the image file `path` ([`crate::io::input::open`]: a regular file), its
+/// format from its first bytes, else from its extension.
+fn open_reader(path: &Path) -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+    let file = crate::io::input::open(path, "cannot read image")?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file));
+    if let Ok(format) = ImageFormat::from_path(path) {
+        reader.set_format(format);
+    }
+    reader
+        .with_guessed_format()
+        .map_err(|e| Error::read(path, "cannot read image", e))
+}
+
 /// The size `(width, height)` an image file declares, read from its header alone (nothing
 /// is decoded); an error when it is larger than a frame may be
 /// ([`crate::model::camera::MAX_PIXELS`]), so a small file cannot make a huge allocation.
 pub fn image_size(path: &Path) -> Result<(u32, u32)> {
     let origin = path.display().to_string();
-    let (w, h) = image::ImageReader::open(path)
-        .map_err(|e| Error::read(path, "cannot read image", e))?
-        .with_guessed_format()
-        .map_err(|e| Error::read(path, "cannot read image", e))?
+    let (w, h) = open_reader(path)?
         .into_dimensions()
         .map_err(|e| Error::malformed(&origin, format!("cannot read the image header: {e}")))?;
     if u64::from(w) * u64::from(h) > crate::model::camera::MAX_PIXELS {
@@ -572,12 +650,9 @@ pub fn load_image_with_alpha(path: &Path, background: [f32; 3]) -> Result<(Image
         )));
     }
     let (w, h) = image_size(path)?;
-    let mut reader = image::ImageReader::open(path)
-        .map_err(|e| Error::read(path, "cannot read image", e))?
-        .with_guessed_format()
-        .map_err(|e| Error::read(path, "cannot read image", e))?;
+    let mut reader = open_reader(path)?;
     if reader.format() == Some(ImageFormat::Jpeg) {
-        let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read image", e))?;
+        let bytes = crate::io::input::read(path, "cannot read image")?;
         if !jpeg_is_complete(&bytes) {
             return Err(Error::malformed(
                 &origin,
@@ -766,6 +841,35 @@ mod tests {
         );
         assert!(!path.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    /// A PNG encoded in memory never holds more than its scanlines stored: noise, which
+    /// compresses to more than that, stops its compressed encoding at the bound and is
+    /// stored in the same buffer.
+    #[test]
+    fn a_png_in_memory_stays_within_its_stored_size() {
+        let mut noise = Image::filled(512, 300, [0.0; 3]);
+        let mut state = 0x9e37_79b9_u32;
+        for v in &mut noise.pixels {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            *v = (state >> 8) as f32 / (1 << 24) as f32;
+        }
+        let path = Path::new("noise.png");
+        for (depth, bytes) in [(BitDepth::Eight, 1), (BitDepth::Sixteen, 2)] {
+            let scanlines = 300 * (1 + 3 * bytes * 512);
+            // The scanlines, 0.1% and half a KiB of framing (a `Vec` grown by doubling
+            // held up to twice the stored size).
+            let most = scanlines + scanlines / 1000 + 512;
+            let png = encode_png(path, (512, 300), depth, |sink| image_rows(&noise, sink)).unwrap();
+            assert!(png.bytes.len() > scanlines, "{depth:?}: stored");
+            assert!(
+                png.bytes.capacity() <= most,
+                "{depth:?}: {} bytes held for at most {most}",
+                png.bytes.capacity()
+            );
+        }
     }
 
     /// Hands `image`'s rows to `sink` `rows` at a time, as a renderer would.

@@ -1,7 +1,16 @@
 //! The memory rule: a command estimates what it will hold (images, kernels × buffers,
 //! output) before the work and refuses, with the estimate and the bound named, when that is
-//! more than the machine's available memory (`MemAvailable` of `/proc/meminfo`) or the
-//! `--max-memory` the user set ([`set_limit`]).
+//! more than the memory it may take ([`room`]) or the `--max-memory` the user set
+//! ([`set_limit`]).
+//!
+//! The memory it may take is the least of: the machine's available memory (`MemAvailable`
+//! of `/proc/meminfo`); what the process's control group (a container's memory limit,
+//! cgroup v2 `memory.max` or v1 `memory.limit_in_bytes`, of its own group and those above
+//! it) leaves, counting reclaimable file pages as free as `MemAvailable` does; under strict
+//! overcommit (`vm.overcommit_memory = 2`, where an allocation beyond the commit limit
+//! fails and the process aborts) the commit limit less what is committed; and the
+//! address-space limit (`ulimit -v`) less the address space in use. Each of these, passed,
+//! ends a run by an abort or a kill in place of an error.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -24,6 +33,22 @@ pub const VIEW_BYTES_PER_KERNEL: u64 = 2048;
 /// encoder's copy.
 pub const RENDER_BYTES_PER_PIXEL: u64 = 40;
 
+/// Bytes `splat4d dataset` holds per pixel of its views: a render's
+/// ([`RENDER_BYTES_PER_PIXEL`]) and the 16-bit PNG encoded in memory before it is written
+/// (at most its scanlines stored, 6 bytes a pixel; the EXR streams to its file). Measured
+/// peak at 16384² (one kernel, 4 views): 6.7 GB, 25 bytes a pixel.
+pub const DATASET_VIEW_BYTES_PER_PIXEL: u64 = RENDER_BYTES_PER_PIXEL + 6;
+
+/// Bytes `splat4d video` holds per pixel of its frames without a GIF: a render's
+/// ([`RENDER_BYTES_PER_PIXEL`]), the frame the writer thread writes while the next renders
+/// (f32 RGB, 12) and its 8-bit PNG encoded in memory (at most 3 stored).
+pub const VIDEO_BYTES_PER_PIXEL: u64 = RENDER_BYTES_PER_PIXEL + 12 + 3;
+
+/// Bytes a GIF frame adds per pixel to [`VIDEO_BYTES_PER_PIXEL`]: the RGBA copy the
+/// encoder quantises (4), its palette indices (1) and their LZW code (at most 2). Measured
+/// peak of a GIF video at 16384² (2000 kernels, two frames): 8.0 GB, 30 bytes a pixel.
+pub const GIF_BYTES_PER_PIXEL: u64 = 7;
+
 /// Bytes one decoded dataset pixel takes: the decoded file (at most 16 bytes, RGBA f32)
 /// and the linear RGB f32 copy kept.
 pub const DATASET_BYTES_PER_PIXEL: u64 = 28;
@@ -33,13 +58,30 @@ pub fn set_limit(bytes: u64) {
     LIMIT.store(bytes, Ordering::Relaxed);
 }
 
-/// `MemAvailable` of `/proc/meminfo`, in bytes (`None` where there is none). A reading is
-/// reused for [`READING_KEPT`]: a command's checks follow each other within milliseconds
-/// (a `render` checks its scene file and then its frame), and the kernel composes the whole
-/// file for each read.
+/// The memory a command may take ([`room`]), in bytes (`None` where nothing tells).
 #[must_use]
 pub fn available() -> Option<u64> {
-    static LAST: std::sync::Mutex<Option<(std::time::Instant, Option<u64>)>> =
+    room().map(|r| r.bytes)
+}
+
+/// What bounds the memory a command may take: the bytes, and what they are, for messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Room {
+    /// Bytes the command may still take.
+    pub bytes: u64,
+    /// What bounds them: "this machine has available", "the control group's memory limit
+    /// leaves", "the commit limit leaves (strict overcommit)", "the address-space limit
+    /// (ulimit -v) leaves".
+    pub bound: &'static str,
+}
+
+/// The least of the bounds in the module docs (`None` where none can be read). A reading
+/// is reused for [`READING_KEPT`]: a command's checks follow each other within milliseconds
+/// (a `render` checks its scene file and then its frame), and the kernel composes the whole
+/// of `/proc/meminfo` for each read.
+#[must_use]
+pub fn room() -> Option<Room> {
+    static LAST: std::sync::Mutex<Option<(std::time::Instant, Option<Room>)>> =
         std::sync::Mutex::new(None);
     let mut last = LAST
         .lock()
@@ -49,7 +91,7 @@ pub fn available() -> Option<u64> {
     {
         return bytes;
     }
-    let bytes = read_available();
+    let bytes = read_room();
     *last = Some((std::time::Instant::now(), bytes));
     bytes
 }
@@ -57,19 +99,155 @@ pub fn available() -> Option<u64> {
 /// How long [`available`] reuses a reading.
 pub const READING_KEPT: std::time::Duration = std::time::Duration::from_millis(100);
 
-/// `MemAvailable` read from `/proc/meminfo`.
-fn read_available() -> Option<u64> {
+/// A `/proc` or `/sys` file's text (`None` when it cannot be read).
+fn read_text(path: &str) -> Option<String> {
     use std::io::Read;
     // Room for the whole file first: `/proc` files report no size, so reading into an
     // empty string took nine reads of growing size where this takes two.
     let mut text = String::with_capacity(8192);
-    std::fs::File::open("/proc/meminfo")
+    std::fs::File::open(path)
         .ok()?
         .read_to_string(&mut text)
         .ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kib.checked_mul(1024)
+    Some(text)
+}
+
+/// The value of `key` in a `key value [kB]` listing (`/proc/meminfo`, `memory.stat`), in
+/// bytes when `scale` is 1024 (kB) or as it is.
+fn field(text: &str, key: &str, scale: u64) -> Option<u64> {
+    let line = text
+        .lines()
+        .find(|l| l.split([':', ' ']).next() == Some(key))?;
+    let value: u64 = line
+        .trim_start_matches(key)
+        .trim_start_matches(':')
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()?;
+    value.checked_mul(scale)
+}
+
+/// The bounds of the module docs, read now; the least of them.
+fn read_room() -> Option<Room> {
+    let meminfo = read_text("/proc/meminfo");
+    let mut bounds = Vec::new();
+    if let Some(text) = &meminfo {
+        if let Some(bytes) = field(text, "MemAvailable", 1024) {
+            bounds.push(Room {
+                bytes,
+                bound: "this machine has available",
+            });
+        }
+        let strict = read_text("/proc/sys/vm/overcommit_memory").is_some_and(|m| m.trim() == "2");
+        if strict
+            && let (Some(limit), Some(committed)) = (
+                field(text, "CommitLimit", 1024),
+                field(text, "Committed_AS", 1024),
+            )
+        {
+            bounds.push(Room {
+                bytes: limit.saturating_sub(committed),
+                bound: "the commit limit leaves (strict overcommit, vm.overcommit_memory = 2)",
+            });
+        }
+    }
+    if let Some(bytes) = cgroup_room() {
+        bounds.push(Room {
+            bytes,
+            bound: "the control group's memory limit leaves (a container's limit)",
+        });
+    }
+    if let Some(bytes) = address_space_room() {
+        bounds.push(Room {
+            bytes,
+            bound: "the address-space limit leaves (ulimit -v)",
+        });
+    }
+    bounds.into_iter().min_by_key(|r| r.bytes)
+}
+
+/// What the memory limits of this process's control group and those above it leave: per
+/// group with a limit, the limit less its use, file pages counted as free (they are
+/// reclaimed before the group runs out); the least of them. cgroup v2 (`memory.max`,
+/// `memory.current`, `inactive_file` of `memory.stat`) or v1 (`memory.limit_in_bytes`,
+/// `memory.usage_in_bytes`, `total_inactive_file`).
+fn cgroup_room() -> Option<u64> {
+    cgroup_room_in(
+        &read_text("/proc/self/cgroup")?,
+        std::path::Path::new("/sys/fs/cgroup"),
+    )
+}
+
+/// [`cgroup_room`] for the groups listed in `groups` (the text of `/proc/self/cgroup`),
+/// with the hierarchies mounted under `mount` (`/sys/fs/cgroup`).
+fn cgroup_room_in(groups: &str, mount: &std::path::Path) -> Option<u64> {
+    let mut least: Option<u64> = None;
+    for line in groups.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (Some(_), Some(controllers), Some(path)) = (parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        let (root, limit_file, usage_file, inactive) = if controllers.is_empty() {
+            (
+                mount.to_path_buf(),
+                "memory.max",
+                "memory.current",
+                "inactive_file",
+            )
+        } else if controllers.split(',').any(|c| c == "memory") {
+            (
+                mount.join("memory"),
+                "memory.limit_in_bytes",
+                "memory.usage_in_bytes",
+                "total_inactive_file",
+            )
+        } else {
+            continue;
+        };
+        // The group and each above it up to the root of the hierarchy.
+        let mut dir = root.join(path.trim().trim_start_matches('/'));
+        loop {
+            let read = |name: &str| read_text(&dir.join(name).to_string_lossy());
+            if let Some(limit) = read(limit_file).and_then(|t| t.trim().parse::<u64>().ok())
+                && let Some(usage) = read(usage_file).and_then(|t| t.trim().parse::<u64>().ok())
+            {
+                let reclaimable = read("memory.stat")
+                    .and_then(|t| field(&t, inactive, 1))
+                    .unwrap_or(0);
+                let left = limit.saturating_sub(usage.saturating_sub(reclaimable));
+                least = Some(least.map_or(left, |l| l.min(left)));
+            }
+            if dir == root || !dir.pop() || !dir.starts_with(&root) {
+                break;
+            }
+        }
+    }
+    least
+}
+
+/// What the address-space limit (`RLIMIT_AS`, `ulimit -v`) leaves: the limit less this
+/// process's address space (`VmSize`); `None` without a limit.
+fn address_space_room() -> Option<u64> {
+    #[cfg(target_os = "linux")]
+    {
+        let mut limit = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: `getrlimit` writes the limit into the struct it is given.
+        if unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut limit) } != 0
+            || limit.rlim_cur == libc::RLIM_INFINITY
+        {
+            return None;
+        }
+        let size = read_text("/proc/self/status").and_then(|t| field(&t, "VmSize", 1024))?;
+        let limit: u64 = limit.rlim_cur;
+        Some(limit.saturating_sub(size))
+    }
+    #[cfg(not(target_os = "linux"))]
+    None
 }
 
 /// `bytes` for a message: `12.3 GB`.
@@ -92,13 +270,14 @@ pub fn check(need: u64, what: &str) -> Result<()> {
             ),
         ));
     }
-    if let Some(free) = available()
-        && need > free
+    if let Some(room) = room()
+        && need > room.bytes
     {
         return Err(Error::usage(format!(
-            "{what} needs about {} of memory, more than the {} this machine has available; make it smaller (or free memory)",
+            "{what} needs about {} of memory, more than the {} {}; make it smaller (or free memory)",
             show(need),
-            show(free)
+            show(room.bytes),
+            room.bound
         )));
     }
     Ok(())
@@ -141,6 +320,58 @@ pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn control_group_limits_bound_the_room_with_file_pages_counted_free() {
+        let mount = tempfile::tempdir().unwrap();
+        let m = mount.path();
+        let write = |dir: &str, files: &[(&str, &str)]| {
+            let dir = m.join(dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            for (name, text) in files {
+                std::fs::write(dir.join(name), text).unwrap();
+            }
+        };
+        // v2: the group has no limit, its parent 8 GB with 5 GB used of which 1 GB is
+        // inactive file pages; the root has no limit file.
+        write(
+            "a/b",
+            &[("memory.max", "max\n"), ("memory.current", "100\n")],
+        );
+        write(
+            "a",
+            &[
+                ("memory.max", "8000000000\n"),
+                ("memory.current", "5000000000\n"),
+                ("memory.stat", "anon 4000000000\ninactive_file 1000000000\n"),
+            ],
+        );
+        assert_eq!(cgroup_room_in("0::/a/b\n", m), Some(4_000_000_000));
+        // v1: the memory hierarchy's own mount.
+        write(
+            "memory/c",
+            &[
+                ("memory.limit_in_bytes", "2000000000\n"),
+                ("memory.usage_in_bytes", "500000000\n"),
+                ("memory.stat", "cache 10\ntotal_inactive_file 100000000\n"),
+            ],
+        );
+        assert_eq!(
+            cgroup_room_in("4:memory:/c\n1:cpu:/\n", m),
+            Some(1_600_000_000)
+        );
+        // No group with a limit: nothing to bound.
+        assert_eq!(cgroup_room_in("0::/\n", m), None);
+        assert_eq!(
+            field(
+                "MemAvailable:   123 kB\nCommitLimit: 7 kB\n",
+                "CommitLimit",
+                1024
+            ),
+            Some(7168)
+        );
+        assert_eq!(field("VmSize:\t  12 kB\n", "VmSize", 1024), Some(12288));
+    }
 
     #[test]
     fn sizes_parse_with_units() {

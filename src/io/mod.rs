@@ -16,6 +16,7 @@
 //! | [`gltf`] | glTF 2.0 models and their cameras: read, checked, handed to the scene math as plain data |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
 //! | [`json`] | JSON with errors that name the item and field |
+//! | [`input`] | every input file opened: regular files only (FIFOs, sockets, devices refused at once) |
 //!
 //! [`memory`] holds the memory rule (estimates checked against what the machine has), and
 //! [`output`] the one rule every output follows (what may be replaced, temporary
@@ -27,6 +28,7 @@ pub mod dataset;
 pub mod gltf;
 pub mod gradients_file;
 pub mod image_file;
+pub mod input;
 pub mod json;
 pub mod memory;
 pub mod output;

@@ -232,7 +232,7 @@ fn not_replaceable(dir: &Path, command: &str) -> Option<String> {
     if present.is_empty() {
         return None;
     }
-    let Ok(marker) = std::fs::read_to_string(dir.join(MARKER)) else {
+    let Ok(marker) = crate::io::input::read_to_string(&dir.join(MARKER), "cannot read") else {
         return Some(format!(
             "was not written by `splat4d {command}` (it has no {MARKER} file naming it)"
         ));

@@ -56,8 +56,7 @@ pub struct CameraPath {
 /// `camera_path.json` (a JSON object).
 pub fn load_any_path(path: &Path) -> Result<CameraPath> {
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::read(path, "cannot read camera path", e))?;
+    let text = crate::io::input::read_to_string(path, "cannot read camera path")?;
     if text
         .trim_start_matches('\u{feff}')
         .trim_start()
@@ -75,8 +74,9 @@ pub fn load_any_path(path: &Path) -> Result<CameraPath> {
     Ok(CameraPath { cameras, fps: None })
 }
 
-/// Most frames a keyframes-only path may ask for (`fps × seconds`).
-pub const MAX_PATH_FRAMES: f64 = 100_000.0;
+/// Most frames a keyframes-only path may ask for (`fps × seconds`): the cap of every
+/// camera path ([`crate::scenes::paths::MAX_PATH_FRAMES`]).
+pub const MAX_PATH_FRAMES: f64 = crate::scenes::paths::MAX_PATH_FRAMES as f64;
 
 /// Largest image side a path may ask for (as cameras elsewhere).
 const MAX_SIDE: u64 = 16_384;
@@ -438,8 +438,7 @@ pub fn save_nerfstudio_path(frames: &[PathFrame], fps: u32, path: &Path) -> Resu
 /// Reads a path file: a JSON list of `{"camera": {camera JSON}, "time": t}`.
 pub fn load_path(path: &Path) -> Result<Vec<PathFrame>> {
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::read(path, "cannot read camera path", e))?;
+    let text = crate::io::input::read_to_string(path, "cannot read camera path")?;
     load_path_text(&text, &origin)
 }
 

@@ -267,7 +267,7 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     use std::io::Read;
     let origin = path.display().to_string();
     let cannot = |e| Error::read(path, "cannot read scene", e);
-    let mut file = std::fs::File::open(path).map_err(cannot)?;
+    let mut file = crate::io::input::open(path, "cannot read scene")?;
     let length = file.metadata().map_err(cannot)?.len();
     let mut start = Vec::with_capacity(HEADER_LIMIT);
     (&mut file)

@@ -94,7 +94,7 @@ struct Element {
 
 /// Reads the point cloud in the PLY file at `path`.
 pub fn read_point_cloud(path: &Path) -> Result<Vec<DatasetPoint>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read", e))?;
+    let bytes = crate::io::input::read(path, "cannot read")?;
     parse_point_cloud(&bytes, &path.display().to_string())
 }
 

@@ -185,8 +185,7 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
     if is_ply(path) {
         return super::ply::read_scene_ply(path);
     }
-    let text =
-        std::fs::read_to_string(path).map_err(|e| Error::read(path, "cannot read scene", e))?;
+    let text = crate::io::input::read_to_string(path, "cannot read scene")?;
     scene_from_json(&text, &path.display().to_string())
 }
 

@@ -59,12 +59,15 @@ impl Default for VideoOptions {
     }
 }
 
+/// The frame as the GIF encoder's RGBA, quantised a band at a time (no whole-frame copy of
+/// the levels beside the RGBA one: 3 bytes a pixel less at the peak).
 fn to_rgba8(image: &Image) -> RgbaImage {
-    let levels: Vec<u8> = quantize_all(&image.pixels);
-    let data = levels
-        .chunks_exact(3)
-        .flat_map(|p| [p[0], p[1], p[2], 255])
-        .collect();
+    const BAND: usize = 3 << 14;
+    let mut data = Vec::with_capacity(image.pixels.len() / 3 * 4);
+    for band in image.pixels.chunks(BAND) {
+        let levels: Vec<u8> = quantize_all(band);
+        data.extend(levels.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]));
+    }
     RgbaImage::from_raw(image.width, image.height, data).expect("sizes match")
 }
 
@@ -111,9 +114,22 @@ pub fn write_video(
             )
         });
         let rendered = (|| {
+            let mut screen = None;
             for k in 0..frame_count {
                 let mut image = spare.try_recv().unwrap_or_default();
                 next_frame(k, &mut image)?;
+                // A GIF has one screen, the first frame's: a frame of another size would
+                // lie outside it.
+                let (w0, h0) = *screen.get_or_insert((image.width, image.height));
+                if options.gif && (image.width, image.height) != (w0, h0) {
+                    return Err(Error::setting(
+                        &["gif"],
+                        format!(
+                            "frame {k} is {}×{} but frame 0 is {w0}×{h0}: a GIF has one screen size; give every frame one size or no GIF",
+                            image.width, image.height
+                        ),
+                    ));
+                }
                 if options.gif && (image.width > MAX_GIF_SIDE || image.height > MAX_GIF_SIDE) {
                     return Err(Error::setting(
                         &["size", "gif"],

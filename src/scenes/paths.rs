@@ -13,6 +13,12 @@ pub use crate::model::Up;
 use crate::model::{Camera, Error, Result, Scene};
 use crate::volume::scene_sphere;
 
+/// Most frames one camera path may have: an orbit's or a spiral's `frames`, and a
+/// keyframed path file's `fps × seconds` ([`crate::io::path_file`]). Every frame is a
+/// camera kept in memory and an image written: a count from a flag or a file is checked
+/// against this before anything is sized by it.
+pub const MAX_PATH_FRAMES: usize = 100_000;
+
 /// One frame of a path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathFrame {
@@ -144,12 +150,15 @@ fn camera_at(circle: &Circle, lens: &Lens, azimuth: f64, elevation_degrees: f64)
 
 fn check(circle: &Circle) -> Result<()> {
     let origin = "<camera path>";
-    if circle.frames == 0 {
+    if !(1..=MAX_PATH_FRAMES).contains(&circle.frames) {
         return Err(Error::invalid(
             origin,
             "path",
             "frames",
-            "must be at least 1",
+            format!(
+                "{} frames; from 1 to {MAX_PATH_FRAMES} are allowed",
+                circle.frames
+            ),
         ));
     }
     if !(circle.radius.is_finite() && circle.radius > 0.0) {

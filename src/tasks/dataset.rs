@@ -63,7 +63,7 @@ pub fn write_dataset(
     let spec = &request.spec;
     let pixels = u64::from(spec.width) * u64::from(spec.height);
     crate::io::memory::check(
-        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL),
+        pixels.saturating_mul(crate::io::memory::DATASET_VIEW_BYTES_PER_PIXEL),
         &format!("{}×{} views", spec.width, spec.height),
     )?;
     let mut writer = DatasetWriter::new(&request.out, request.exr)?.with_blend(scene.blend);

@@ -113,45 +113,16 @@ fn check_fit_memory(request: &FitRequest) -> Result<()> {
     crate::io::memory::check(bytes, &what)
 }
 
-/// What a fit will hold, in bytes, and what for ([`crate::io::memory`]): every photo the
-/// dataset names — transforms frames or a COLMAP model's images — is kept once per distinct
-/// file as linear RGB, and the largest image is decoded once more while it is converted;
-/// every mask is kept as one weight per pixel, per frame; the kernels (the start, or an
-/// alpha fit's budget) and each view rendered at once (one per worker thread, up to the
-/// batch) with its frame and its kernels' copies and gradients.
+/// What a fit will hold, in bytes, and what for ([`crate::io::memory`]): the photos as the
+/// loader keeps them ([`crate::io::dataset::photo_memory`]: one decode per file, one
+/// undistorted or downscaled copy per file, mask and lens, weights per frame) and what
+/// preparing the largest holds; the kernels (the start, or an alpha fit's budget); each view
+/// rendered at once (one per worker thread, up to the batch) with its frame and its kernels'
+/// copies and gradients.
 fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
     use crate::io::memory::{FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL};
-    let (mut kept, mut largest, mut largest_view, mut frames) = (0_u64, 0_u64, 0_u64, 0_usize);
-    let n = u64::from(request.downscale.max(1));
-    let files = crate::io::dataset::dataset_inputs(&request.views);
-    // Sizes from the headers of regular files only (a FIFO would block).
-    let size = |file: &PathBuf| {
-        file.is_file()
-            .then(|| crate::io::image_file::image_size(file).ok())
-            .flatten()
-    };
-    // Frames that name one file share its decoded image.
-    let mut seen = std::collections::HashSet::new();
-    for file in &files.photos {
-        if !seen.insert(file.canonicalize().unwrap_or_else(|_| file.clone())) {
-            continue;
-        }
-        if let Some((w, h)) = size(file) {
-            let pixels = u64::from(w) * u64::from(h);
-            kept = kept.saturating_add(pixels / (n * n) * 12);
-            largest = largest.max(pixels.saturating_mul(16));
-            largest_view = largest_view.max(pixels / (n * n));
-            frames += 1;
-        }
-    }
-    // A mask becomes each frame's own pixel weights (f32).
-    for file in &files.masks {
-        if let Some((w, h)) = size(file) {
-            let pixels = u64::from(w) * u64::from(h);
-            kept = kept.saturating_add(pixels / (n * n) * 4);
-            largest = largest.max(pixels.saturating_mul(16));
-        }
-    }
+    let photos = crate::io::dataset::photo_memory(&request.views, request.downscale);
+    let (largest_view, frames) = (photos.largest_view, photos.frames);
     // The additive fit's start, and an alpha fit's budget (unless the additive blend is
     // asked for): what either may hold.
     let additive = request.settings.additive_plan("").ok();
@@ -173,7 +144,9 @@ fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
     let frames_held =
         side_by_side.saturating_mul(RENDER_BYTES_PER_PIXEL.saturating_mul(largest_view));
     Ok((
-        kept.saturating_add(largest)
+        photos
+            .kept
+            .saturating_add(photos.working)
             .saturating_add(frames_held)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
         format!("fitting up to {kernels} kernels to {frames} frames"),

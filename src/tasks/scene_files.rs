@@ -121,7 +121,7 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
 /// The external buffer files a `.gltf` model names (as far as its JSON can be read; the
 /// importer reports what cannot), beside the model.
 fn buffer_files(model: &Path) -> Vec<PathBuf> {
-    let Ok(text) = std::fs::read_to_string(model) else {
+    let Ok(text) = crate::io::input::read_to_string(model, "cannot read") else {
         return Vec::new();
     };
     let Ok(document) = serde_json::from_str::<serde_json::Value>(&text) else {

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use crate::io::output::{
     Outputs, Staging, Stamp, check_beside, check_replaceable, remove_if_unchanged, unique_names,
 };
-use crate::io::path_file::{load_any_path, save_nerfstudio_path};
+use crate::io::path_file::{PathCamera, load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
 use crate::io::video::{VideoFiles, VideoOptions, write_video};
 use crate::model::{Error, Progress, Result, Scene};
@@ -150,6 +150,9 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
         let file = load_any_path(path)?;
+        if request.video.gif {
+            one_screen_size(&file.cameras, path)?;
+        }
         let sweep = even_times([t0, t1], file.cameras.len());
         let frames = file
             .cameras
@@ -179,6 +182,33 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
 /// What may be removed after a video is written: an earlier run's GIF or MP4 of its name,
 /// recorded unchanged, that this run may not write again.
 type Stale = Vec<(PathBuf, Stamp)>;
+
+/// A GIF has one screen size: every camera of the path file `path` must have the first
+/// one's (frames of another size would lie outside the GIF's screen). Refused before any
+/// work, naming the first camera that differs.
+fn one_screen_size(cameras: &[PathCamera], path: &std::path::Path) -> Result<()> {
+    let Some(first) = cameras.first().map(|c| (c.camera.width, c.camera.height)) else {
+        return Ok(());
+    };
+    let Some((k, (w, h))) = cameras
+        .iter()
+        .map(|c| (c.camera.width, c.camera.height))
+        .enumerate()
+        .find(|&(_, size)| size != first)
+    else {
+        return Ok(());
+    };
+    let field = if w == first.0 { "height" } else { "width" };
+    Err(Error::setting(
+        &["path", "gif"],
+        format!(
+            "{}: frame {k}: field `camera.{field}`: its camera is {w}×{h} but frame 0's is {}×{}; a GIF has one screen size, so `gif` needs every camera of the `path` at one size (or leave the GIF out)",
+            path.display(),
+            first.0,
+            first.1
+        ),
+    ))
+}
 
 /// Checks, before any work, every output of the videos named `names` in `out` against the
 /// inputs and each other: an existing frames folder must be an earlier video's, and an
@@ -233,13 +263,24 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         ));
     }
     let scene = load_scene(&request.scene)?;
-    let pixels = u64::from(request.lens.width) * u64::from(request.lens.height);
-    crate::io::memory::check(
-        // A render's, and the frame written while the next one renders (f32 RGB).
-        pixels.saturating_mul(crate::io::memory::RENDER_BYTES_PER_PIXEL + 12),
-        &format!("{}×{} frames", request.lens.width, request.lens.height),
-    )?;
     let videos = paths(request, &scene)?;
+    // The largest frame of any video (a path file's cameras have their own sizes).
+    let (w, h) = videos
+        .iter()
+        .flat_map(|(_, frames, _)| frames)
+        .map(|f| (f.camera.width, f.camera.height))
+        .max_by_key(|&(w, h)| u64::from(w) * u64::from(h))
+        .unwrap_or((request.lens.width, request.lens.height));
+    let per_pixel = crate::io::memory::VIDEO_BYTES_PER_PIXEL
+        + if request.video.gif {
+            crate::io::memory::GIF_BYTES_PER_PIXEL
+        } else {
+            0
+        };
+    crate::io::memory::check(
+        (u64::from(w) * u64::from(h)).saturating_mul(per_pixel),
+        &format!("{w}×{h} frames"),
+    )?;
     let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
     let stale = check_outputs(request, &names)?;
     // Every video is written into a temporary folder inside `out` and moved into place once

@@ -50,6 +50,12 @@ pub fn view_scene(request: &ViewRequest, listening: impl FnOnce(&str)) -> Result
                 strict: false,
                 allow_outside_images: false,
             };
+            // Refused before any photo is decoded when they would not fit in memory.
+            let photos = crate::io::dataset::photo_memory(dir, 1);
+            crate::io::memory::check(
+                photos.kept.saturating_add(photos.working),
+                &format!("the {} photos of {}", photos.frames, dir.display()),
+            )?;
             let dataset = load_dataset(dir, &options)?;
             let mut views = dataset.train;
             views.extend(dataset.val);

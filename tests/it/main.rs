@@ -8,6 +8,9 @@ mod common;
 mod alpha;
 /// Malformed and invalid inputs are refused with messages naming file, item and field.
 mod bad_input;
+/// Every count bounded and every decode shared; special files refused at once; one GIF
+/// screen.
+mod bounds;
 /// Captures as shipped: float sizes, lens distortion, COLMAP text and binary, point clouds,
 /// masks, missing frames.
 mod captures;

@@ -36,9 +36,11 @@ pub(super) fn load_buffers(document: &gltf::Gltf, path: &Path) -> Result<Vec<Vec
                 }
                 gltf::buffer::Source::Uri(uri) => {
                     let file = buffer_file(dir, uri, &origin, &item)?;
-                    read_at_most(&file, buffer.length() as u64).map_err(|e| {
-                        Error::read(&file, &format!("{origin}: {item}: cannot read"), e)
-                    })?
+                    read_at_most(
+                        &file,
+                        buffer.length() as u64,
+                        &format!("{origin}: {item}: cannot read"),
+                    )?
                 }
             };
             if data.len() < buffer.length() {
@@ -81,8 +83,11 @@ fn buffer_file(dir: &Path, uri: &str, origin: &str, item: &str) -> Result<PathBu
     let file = dir.join(relative);
     let meta = std::fs::metadata(&file)
         .map_err(|e| Error::read(&file, &format!("{origin}: {item}: cannot read"), e))?;
-    if !meta.is_file() {
-        return Err(refuse(format!("{uri}: not a regular file")));
+    if let Some(kind) = crate::io::input::kind_of(&meta) {
+        return Err(refuse(format!(
+            "{uri}: {}",
+            crate::io::input::not_regular(kind)
+        )));
     }
     // By the real path too: a symlink beside the model may point anywhere.
     if !crate::io::output::inside(&file, dir) {
@@ -116,11 +121,12 @@ fn percent_decode(uri: &str) -> String {
 
 /// The first `limit` bytes of `path` (a buffer's declared `byteLength`): a file longer than
 /// its declaration is not read to its end.
-fn read_at_most(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
+fn read_at_most(path: &Path, limit: u64, message: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let mut data = Vec::new();
-    std::fs::File::open(path)?
+    crate::io::input::open(path, message)?
         .take(limit)
-        .read_to_end(&mut data)?;
+        .read_to_end(&mut data)
+        .map_err(|e| Error::read(path, message, e))?;
     Ok(data)
 }

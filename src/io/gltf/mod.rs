@@ -39,7 +39,7 @@ pub use crate::scenes::surfels::{Imported, MAX_IMPORT_KERNELS, SURFEL_OPACITY};
 
 fn parse_document(path: &Path) -> Result<gltf::Gltf> {
     let origin = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, "cannot read glTF", e))?;
+    let bytes = crate::io::input::read(path, "cannot read glTF")?;
     let malformed =
         |e: gltf::Error| Error::malformed(&origin, format!("not a valid glTF 2.0 file: {e}"));
     // Our checks first: the crate's own validation indexes arrays without bounds checks.
