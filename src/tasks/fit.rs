@@ -376,7 +376,8 @@ fn fit_alpha_dataset(
     progress: &mut dyn FitProgress,
 ) -> Result<FitSummary> {
     let options = &request.alpha;
-    let bounds = alpha_bounds(&dataset.train)?;
+    let training = crate::io::dataset::training_file(&request.views);
+    let bounds = alpha_bounds(&dataset.train, &training.display().to_string())?;
     let background = request
         .plan
         .background
