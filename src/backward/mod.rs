@@ -30,7 +30,10 @@ pub struct Gradients {
     /// `∂L/∂(sx, sy, sz, st)`, the standard deviations (in the `splat4d grad` file of alpha
     /// scenes).
     pub v_scales: Vec<[f64; 4]>,
-    /// `∂L/∂(w, x, y, z)` of the stored quaternion, through its normalisation.
+    /// `∂L/∂(w, x, y, z)` of the scene's quaternion `q`, through its normalisation
+    /// `q̂ = q/|q|`: `(I - q̂ q̂ᵀ) ∂L/∂q̂ / |q|`. A scene holds unit quaternions, so this is
+    /// `(I - q̂ q̂ᵀ) ∂L/∂q̂`; a file's stored quaternion of another length `|q|` has this
+    /// divided by `|q|` ([`Self::rotations_as_stored`]).
     pub v_rotations: Vec<[f64; 4]>,
     /// Alpha scenes: `∂L/∂o`, the peak opacity (empty for additive scenes).
     pub v_opacities: Vec<f64>,
@@ -108,6 +111,20 @@ impl Gradients {
         }
         for (total, part) in self.v_background.iter_mut().zip(other.v_background) {
             *total += part;
+        }
+    }
+
+    /// Makes the rotation gradients those of the quaternions as a file stores them, given
+    /// their norms `|q|` (one per kernel; the scene holds `q/|q|`): SPEC §8 differentiates
+    /// the stored quaternion through its normalisation, and `∂(q/|q|)/∂q = (I - q̂ q̂ᵀ)/|q|`
+    /// carries a factor `1/|q|` beside the unit quaternion's.
+    ///
+    /// # Panics
+    /// When there is not one norm per kernel.
+    pub fn rotations_as_stored(&mut self, norms: &[f64]) {
+        assert_eq!(norms.len(), self.v_rotations.len(), "one norm per kernel");
+        for (v, &norm) in self.v_rotations.iter_mut().zip(norms) {
+            *v = v.map(|g| g / norm);
         }
     }
 

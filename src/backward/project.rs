@@ -120,8 +120,11 @@ pub fn project_backward(
     out.v_amplitudes.resize(sliced.len(), [0.0; 3]);
     out.v_covariances.clear();
     out.v_covariances.resize(sliced.len(), [[0.0; 3]; 3]);
+    // Alpha frames carry `∂L/∂o(τ)` for every slice, also when no kernel reached the
+    // screen (a view that sees nothing: every entry stays zero).
+    let alpha = !screen.v_opacities.is_empty() || !sliced.opacities.is_empty();
     out.v_opacities.clear();
-    if !screen.v_opacities.is_empty() {
+    if alpha {
         out.v_opacities.resize(sliced.len(), 0.0);
     }
     let rc = camera.rotation();
@@ -158,7 +161,7 @@ pub fn project_backward(
             *v_covariance =
                 world_covariance_gradient(&rc, &projection.jacobian, screen.v_covariances[p]);
         });
-    if !screen.v_opacities.is_empty() {
+    if alpha {
         for (&p, v_opacity) in proj_from_slice.iter().zip(&mut out.v_opacities) {
             if p != CULLED {
                 *v_opacity = screen.v_opacities[p as usize];

@@ -304,9 +304,10 @@ fn colour_backward(
     std::array::from_fn(|k| (v_direction[k] - direction[k] * radial) / distance)
 }
 
-/// `∂L/∂q` of the stored quaternion `q` (unit up to rounding) from `V = ∂L/∂Σ3`, with
-/// `Σ3 = R diag(s²) Rᵀ`: `∂L/∂R = 2 V R diag(s²)`, then through the entries of `R(q̂)`
-/// (SPEC §1) and the normalisation `q̂ = q/|q|`.
+/// `∂L/∂q` of the quaternion `q` (of any length) from `V = ∂L/∂Σ3`, with
+/// `Σ3 = R diag(s²) Rᵀ` and `r = R(q̂)`: `∂L/∂R = 2 V R diag(s²)`, then through the entries
+/// of `R(q̂)` (SPEC §1) at `q̂ = q/|q|`, and through the normalisation:
+/// `∂L/∂q = (I - q̂ q̂ᵀ) ∂L/∂q̂ / |q|` (SPEC §8: the stored quaternion's gradient).
 #[must_use]
 pub fn rotation_gradient(
     q: [f64; 4],
@@ -322,7 +323,9 @@ pub fn rotation_gradient(
     let g: [[f64; 3]; 3] = std::array::from_fn(|a| {
         std::array::from_fn(|b| 2.0 * (0..3).map(|k| v_sigma[a][k] * r[k][b]).sum::<f64>() * var[b])
     });
-    let [w, x, y, z] = q;
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let unit = q.map(|v| v / norm);
+    let [w, x, y, z] = unit;
     let v_unit = [
         2.0 * (-g[0][1] * z + g[0][2] * y + g[1][0] * z - g[1][2] * x - g[2][0] * y + g[2][1] * x),
         2.0 * (g[0][1] * y + g[0][2] * z + g[1][0] * y - 2.0 * g[1][1] * x - g[1][2] * w
@@ -338,9 +341,7 @@ pub fn rotation_gradient(
             + g[2][0] * x
             + g[2][1] * y),
     ];
-    // q̂ = q/|q| with |q| = 1: ∂L/∂q = (I - q̂ q̂ᵀ) ∂L/∂q̂.
-    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let unit = q.map(|v| v / norm);
+    // q̂ = q/|q|: ∂L/∂q = (I - q̂ q̂ᵀ) ∂L/∂q̂ / |q|.
     let radial: f64 = (0..4).map(|k| unit[k] * v_unit[k]).sum();
     std::array::from_fn(|k| (v_unit[k] - unit[k] * radial) / norm)
 }

@@ -11,7 +11,10 @@
 //!
 //! **A step** draws `batch_size` training views (a seeded shuffle, epoch by epoch) and renders
 //! them side by side, one per worker thread, as the additive fit does
-//! (`fit::train::batch_gradients`: the same bits whatever the thread count).
+//! (`fit::train::batch_gradients`: the same bits whatever the thread count). A view in
+//! which no kernel reaches the screen adds a zero gradient; when no view drawn in the steps
+//! that draw every view once (or in the whole run) sees a kernel, nothing can ever move into
+//! sight, and the fit is refused with a message saying so.
 //!
 //! **SH degree** rises during the run: degree `d` of the scene's SH is fitted from step
 //! `d · sh_raise_every` (its coefficients start at zero and stay there until then).
@@ -39,7 +42,7 @@ use crate::fit::stereo::SweptPoint;
 use crate::fit::train::{
     StepRecord, ViewDraws, batch_gradients, check_fit_inputs, heldout_psnr_at, view_slots,
 };
-use crate::model::error::{Error, Result};
+use crate::model::error::{Error, MAX_QUOTE, Result, cut};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
 use crate::model::{Camera, DatasetPoint, View};
@@ -179,11 +182,12 @@ pub fn random_alpha_scene(
     colour: [f64; 3],
     options: &AlphaFitOptions,
 ) -> Result<Scene> {
+    bounds.check()?;
     let mut rng = seeded_rng(options.seed);
     let n = options.start_kernels.max(1);
     let extent: [f64; 3] = std::array::from_fn(|a| bounds.max[a] - bounds.min[a]);
     // Spread so that neighbours overlap: the side of a cell of the box shared among n.
-    let spacing = (extent[0] * extent[1] * extent[2] / n as f64).cbrt();
+    let spacing = cell_side(extent, n as f64);
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let kernels: Vec<Kernel> = (0..n)
         .map(|_| {
@@ -266,7 +270,10 @@ fn neighbour_spacings(points: &[[f64; 3]]) -> Vec<f64> {
         return vec![fallback; n];
     }
     let cell = fallback;
-    let cells: [usize; 3] = std::array::from_fn(|a| ((extent[a] / cell) as usize + 1).min(1 << 10));
+    // At most 2¹⁰ cells a side (the quotient is capped before the conversion: a cloud
+    // spanning 1e38 with a spacing of 1 would overflow the count).
+    let cells: [usize; 3] =
+        std::array::from_fn(|a| (extent[a] / cell).min(f64::from((1 << 10) - 1)) as usize + 1);
     let index = |p: &[f64; 3]| -> [usize; 3] {
         std::array::from_fn(|a| (((p[a] - lo[a]) / cell) as usize).min(cells[a] - 1))
     };
@@ -380,9 +387,12 @@ pub fn hull_alpha_scene(
     if cells.is_empty() {
         return Err(Error::usage("the visual hull kept no cell to start from"));
     }
+    bounds.check()?;
     let n = options.start_kernels.max(1);
     let volume = cells.len() as f64 * side[0] * side[1] * side[2];
-    let spacing = (volume / n as f64).cbrt();
+    let spacing = finite_or((volume / n as f64).cbrt(), || {
+        cell_side(side, n as f64 / cells.len() as f64)
+    });
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let mut rng = seeded_rng(options.seed);
     let kernels: Vec<Kernel> = (0..n)
@@ -397,6 +407,24 @@ pub fn hull_alpha_scene(
         })
         .collect();
     alpha_start(&kernels, background, options, "<visual hull start>")
+}
+
+/// The side of a cube holding `1/share` of a box of sides `sides`: `(Π sides / share)^⅓`,
+/// taken side by side when the product overflows or underflows (a box 1e150 or 1e-150
+/// wide).
+fn cell_side(sides: [f64; 3], share: f64) -> f64 {
+    finite_or((sides[0] * sides[1] * sides[2] / share).cbrt(), || {
+        sides.iter().map(|s| s.cbrt()).product::<f64>() / share.cbrt()
+    })
+}
+
+/// `value`, or `otherwise()` when it is not finite and positive.
+fn finite_or(value: f64, otherwise: impl FnOnce() -> f64) -> f64 {
+    if value.is_finite() && value > 0.0 {
+        value
+    } else {
+        otherwise()
+    }
 }
 
 /// The length scales the rates are relative to: the box's diagonal and the time range.
@@ -440,6 +468,11 @@ pub fn fit_alpha(
     // Grows with the steps actually run: a flag never decides an allocation up front.
     let mut records = Vec::with_capacity(options.steps.min(1 << 12));
     let mut drawn = Vec::with_capacity(batch);
+    // Whether some training view has seen a kernel yet (a view that sees none is a step with
+    // zero gradient; views that never see one leave nothing to fit).
+    let mut seen_any = false;
+    // Steps until every training view has been drawn once (the draws go epoch by epoch).
+    let first_epoch = train.len().div_ceil(batch);
     for step in 1..=options.steps {
         grads.reset_for_scene(scene);
         let weight = 1.0 / batch as f64;
@@ -457,9 +490,13 @@ pub fn fit_alpha(
                     let [gx, gy] = screen.v_means[p];
                     screen_gradient[k as usize] += (gx * gx + gy * gy).sqrt() / weight;
                     seen[k as usize] += 1;
+                    seen_any = true;
                 }
             },
         )?;
+        if !seen_any && (step == first_epoch || step == options.steps) {
+            return Err(nothing_in_sight(scene, train, step));
+        }
         if !train_loss.is_finite() {
             return Err(Error::Numeric(format!(
                 "fitting diverged at step {step} (training loss {train_loss}): lower the learning rates"
@@ -518,6 +555,19 @@ pub fn fit_alpha(
         records.push(record);
     }
     Ok(records)
+}
+
+/// The error of a fit whose training views saw no kernel in its first `steps` steps (every
+/// view once, or the whole run): with zero gradients nothing would ever move into sight.
+fn nothing_in_sight(scene: &Scene, train: &[View], steps: usize) -> Error {
+    Error::usage(format!(
+        "no training view drawn in the first {steps} step(s) ({} training views) sees any of the \
+         start's {} kernels, and a fit cannot move what no camera sees: check the cameras' poses \
+         and intrinsics (`transform_matrix`, `fl_x`, `fl_y`, `cx`, `cy`; COLMAP cameras and \
+         images), the point cloud the fit starts from, or the start scene",
+        train.len(),
+        scene.len(),
+    ))
 }
 
 /// One Adam step on every field, in optimisation space. `spatial` are the mean, time and
@@ -805,15 +855,76 @@ impl Moments {
 }
 
 /// The space-time box of the training cameras and times (the random start's box, and the
-/// unit of the spatial rates).
-pub fn alpha_bounds(train: &[View]) -> Result<SpaceTimeBox> {
+/// unit of the spatial rates), or an error naming `origin` (the file the training frames
+/// come from), the frame and the field when the frames' numbers give no finite box: times
+/// whose span overflows, cameras whose centres or the point they look at leave the finite
+/// numbers.
+pub fn alpha_bounds(train: &[View], origin: &str) -> Result<SpaceTimeBox> {
+    let frame = |i: usize| format!("frame `{}`", cut(&train[i].name, MAX_QUOTE));
+    let (Some(first), Some(last)) = (
+        (0..train.len()).min_by(|&a, &b| train[a].time.total_cmp(&train[b].time)),
+        (0..train.len()).max_by(|&a, &b| train[a].time.total_cmp(&train[b].time)),
+    ) else {
+        return Err(Error::usage("no training views to fit"));
+    };
+    let [lo, hi] = [train[first].time, train[last].time];
+    if !(lo.is_finite() && hi.is_finite() && (hi - lo).is_finite()) {
+        return Err(Error::invalid(
+            origin,
+            format!("{} and {}", frame(first), frame(last)),
+            "time",
+            format!(
+                "{lo:e} and {hi:e} lie further apart than the finite numbers reach (their difference overflows)"
+            ),
+        ));
+    }
     let cameras: Vec<Camera> = train.iter().map(|v| v.camera).collect();
-    let (lo, hi) = train
+    let centres: Vec<[f64; 3]> = cameras.iter().map(Camera::centre).collect();
+    if let Some(i) = centres
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v.time), hi.max(v.time))
-        });
-    box_from_cameras(&cameras, [lo, hi])
+        .position(|c| c.iter().any(|v| !v.is_finite()))
+    {
+        return Err(Error::invalid(
+            origin,
+            frame(i),
+            "transform_matrix",
+            "the camera's position comes out not finite (the matrix is too large, too small or not invertible)",
+        ));
+    }
+    let bounds = box_from_cameras(&cameras, [lo, hi])?;
+    let finite = (0..3).all(|c| {
+        let (lo, hi) = (bounds.min[c], bounds.max[c]);
+        lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()
+    });
+    if !finite {
+        // The camera farthest from the origin is the likeliest culprit.
+        let farthest = (0..train.len())
+            .max_by(|&a, &b| {
+                let norm = |c: &[f64; 3]| c.iter().map(|v| v.abs()).fold(0.0, f64::max);
+                norm(&centres[a]).total_cmp(&norm(&centres[b]))
+            })
+            .unwrap_or(0);
+        return Err(Error::invalid(
+            origin,
+            frame(farthest),
+            "transform_matrix",
+            format!(
+                "the box the training cameras look at comes out as {:.3e}..{:.3e}, {:.3e}..{:.3e}, {:.3e}..{:.3e}, \
+                 not a finite box with sides > 0 (this camera sits at {:.3e}, {:.3e}, {:.3e}): check the frames' \
+                 positions and focal lengths (`transform_matrix`, `fl_x`, `fl_y`)",
+                bounds.min[0],
+                bounds.max[0],
+                bounds.min[1],
+                bounds.max[1],
+                bounds.min[2],
+                bounds.max[2],
+                centres[farthest][0],
+                centres[farthest][1],
+                centres[farthest][2],
+            ),
+        ));
+    }
+    Ok(bounds)
 }
 
 #[cfg(test)]

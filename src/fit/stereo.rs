@@ -216,16 +216,19 @@ fn consistent_points(
     for j in (stride / 2..h).step_by(stride) {
         for i in (stride / 2..w).step_by(stride) {
             let depth = f64::from(depth_maps[r][j * w + i]);
-            if depth.is_nan() {
+            // NaN: no depth kept; a depth beyond f32 (cameras 1e40 apart) is none either.
+            if !(depth.is_finite() && depth > 0.0) {
                 continue;
             }
             let position = pixel_point(camera, &to_world, i, j, depth);
-            if confirmed(position) {
+            let spacing = depth * stride as f64 / camera.fx;
+            let finite = position.iter().all(|v| v.is_finite()) && spacing.is_finite();
+            if finite && spacing > 0.0 && confirmed(position) {
                 points.push(SweptPoint {
                     position,
                     colour: image.pixel(i as u32, j as u32),
                     time,
-                    spacing: depth * stride as f64 / camera.fx,
+                    spacing,
                 });
             }
         }

@@ -434,6 +434,9 @@ struct Photo {
     /// `[fx, fy, cx, cy]` of the photo, pixels.
     intrinsics: [f64; 4],
     distortion: Distortion,
+    /// Where the lens coefficients come from (file, item), when not the photo's own entry
+    /// (a COLMAP camera).
+    lens_origin: Option<(String, String)>,
 }
 
 /// The photo undistorted, masked and downscaled: the image, its pixel weights (`None` when
@@ -450,11 +453,27 @@ fn prepare_photo(
         mut mask,
         intrinsics,
         distortion,
+        lens_origin,
     } = photo;
     let size = (image.width, image.height);
     if !distortion.is_pinhole() {
         undistorter.undistorted += 1;
         let table = undistorter.table(size, intrinsics, &distortion);
+        if !table.any_valid() {
+            let (field, values) = lens_coefficients(&distortion);
+            let (lens_file, lens_item) =
+                lens_origin.as_ref().map_or((origin, item), |(file, item)| {
+                    (file.as_str(), item.as_str())
+                });
+            return Err(Error::invalid(
+                lens_file,
+                lens_item,
+                &field,
+                format!(
+                    "{values} leaves no pixel of the image inside the lens model's range (every ray folds back or lands outside the photo)"
+                ),
+            ));
+        }
         image = Arc::new(table.undistort_image(&image));
         mask = Some(match mask {
             Some(m) => table.undistort_weights(&m),
@@ -532,6 +551,9 @@ struct Source<'a> {
     real: PathBuf,
     mask: Option<PathBuf>,
     distortion: Distortion,
+    /// Where the lens comes from when not the frame itself (`(file, item)`: a COLMAP
+    /// camera), for errors about its coefficients.
+    lens_origin: Option<(String, String)>,
 }
 
 impl Photos {
@@ -612,11 +634,29 @@ impl Photos {
             mask,
             intrinsics: k,
             distortion: source.distortion,
+            lens_origin: source.lens_origin.clone(),
         };
         let prepared = prepare_photo(photo, &mut self.undistorter, n, ctx)?;
         self.prepared.insert(key, (views.len(), prepared.2));
         Ok(prepared)
     }
+}
+
+/// The names of a lens's non-zero coefficients (`k1, p1`) and their values
+/// (`` `k1` = 1e30, `p1` = 2 ``), for a message about the lens.
+fn lens_coefficients(distortion: &Distortion) -> (String, String) {
+    let [k1, k2, k3] = distortion.radial;
+    let [p1, p2] = distortion.tangential;
+    let set: Vec<(&str, f64)> = [("k1", k1), ("k2", k2), ("k3", k3), ("p1", p1), ("p2", p2)]
+        .into_iter()
+        .filter(|&(_, v)| v != 0.0)
+        .collect();
+    let names: Vec<&str> = set.iter().map(|&(name, _)| name).collect();
+    let values: Vec<String> = set
+        .iter()
+        .map(|&(name, v)| format!("`{name}` = {v:e}"))
+        .collect();
+    (names.join(", "), values.join(", "))
 }
 
 /// `relative` under the dataset folder `dir`, checked to lie inside it (after resolving
@@ -830,6 +870,7 @@ fn read_transforms(dir: &Path, path: &Path, options: &DatasetOptions) -> Result<
                 .unwrap_or_else(|_| image_path.clone()),
             mask,
             distortion: distortion(&file, frame, &origin, &item)?,
+            lens_origin: None,
         };
         let ((w, h), alpha, decoded) = photos.size(&source, options.background)?;
         transparent |= alpha;
@@ -912,9 +953,11 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
     let n = options.downscale;
     check_downscale(n)?;
     let model = colmap::read_sparse_model(sparse)?;
-    let [_, images_file, _] = colmap::model_files(sparse);
+    let [cameras_file, images_file, _] = colmap::model_files(sparse);
     let origin =
         images_file.map_or_else(|| sparse.display().to_string(), |p| p.display().to_string());
+    let cameras_file =
+        cameras_file.map_or_else(|| sparse.display().to_string(), |p| p.display().to_string());
     let mut images = model.images;
     images.sort_by(|a, b| a.name.cmp(&b.name));
     let mut views = Vec::with_capacity(images.len().min(1 << 16));
@@ -944,6 +987,10 @@ fn read_colmap(dir: &Path, sparse: &Path, options: &DatasetOptions) -> Result<Fi
             real: real.clone(),
             mask: None,
             distortion: camera.distortion,
+            lens_origin: Some((
+                cameras_file.clone(),
+                format!("camera {} (params)", entry.camera_id),
+            )),
         };
         let ((w, h), alpha, decoded) = photos.size(&source, options.background)?;
         transparent |= alpha;
@@ -1097,6 +1144,27 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
         });
     }
     Ok(dataset)
+}
+
+/// The file [`load_dataset`] reads the training frames of the dataset in `dir` from
+/// (`transforms_train.json`, `transforms.json`, or the COLMAP model's images file), or `dir`
+/// itself when there is none: the origin messages about those frames name.
+#[must_use]
+pub fn training_file(dir: &Path) -> PathBuf {
+    let train_file = dir.join("transforms_train.json");
+    let single = dir.join("transforms.json");
+    if train_file.is_file() {
+        return train_file;
+    }
+    if single.is_file() {
+        return single;
+    }
+    colmap::find_sparse_model(dir)
+        .and_then(|sparse| {
+            let [_, images, _] = colmap::model_files(&sparse);
+            images
+        })
+        .unwrap_or_else(|| dir.to_path_buf())
 }
 
 /// Saves the images of frame `index` of `split` under `dir` and returns its entry; `first`

@@ -264,6 +264,16 @@ struct Property {
 /// The rows are read a block at a time into one buffer and decoded in parallel straight into
 /// the scene's arrays.
 pub fn read_scene_ply(path: &Path) -> Result<Scene> {
+    read_scene_ply_as_stored(path, false).map(|(scene, _)| scene)
+}
+
+/// [`read_scene_ply`], and with `rotation_norms` the norm of each kernel's quaternion as the
+/// file stores it (the scene holds it normalised): what the gradient of the stored
+/// quaternion needs ([`crate::backward::Gradients::rotations_as_stored`]).
+pub fn read_scene_ply_as_stored(
+    path: &Path,
+    rotation_norms: bool,
+) -> Result<(Scene, Option<Vec<f64>>)> {
     use std::io::Read;
     let origin = path.display().to_string();
     let cannot = |e| Error::read(path, "cannot read scene", e);
@@ -277,7 +287,10 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
     let layout = parse_header(&start, &origin)?;
     layout.check_body_length(length.saturating_sub(layout.body_start as u64), &origin)?;
     let mut scene = layout.empty_scene(&origin)?;
-    let mut appearance = Appearance::default();
+    let mut appearance = Appearance {
+        rotation_norms: rotation_norms.then(Vec::new),
+        ..Appearance::default()
+    };
     // The rows already read, then the rest a block at a time: while one block is decoded
     // (in parallel), the next is read, so that the copy out of the file overlaps the
     // decoding on another thread (one after the other on one thread).
@@ -316,7 +329,8 @@ pub fn read_scene_ply(path: &Path) -> Result<Scene> {
         rows_read += rows_next;
         std::mem::swap(&mut block, &mut next);
     }
-    layout.finish(scene, appearance, &origin)
+    let norms = appearance.rotation_norms.take();
+    Ok((layout.finish(scene, appearance, &origin)?, norms))
 }
 
 /// Bytes of rows read at a time: large enough to amortise a parallel pass, small enough
@@ -361,6 +375,8 @@ enum PlyKind {
 struct Appearance {
     opacities: Vec<f64>,
     sh: Vec<[f64; 3]>,
+    /// When asked for: the norm of each row's quaternion as stored.
+    rotation_norms: Option<Vec<f64>>,
 }
 
 /// What a scene PLY's header says: where the rows start, how many, and where each property
@@ -749,6 +765,12 @@ impl SceneLayout {
             |i| self.kernel(&bytes[i * stride..(i + 1) * stride]),
             origin,
         )?;
+        if let Some(norms) = &mut appearance.rotation_norms {
+            norms.extend(bytes.chunks_exact(stride).take(rows).map(|row| {
+                let q = self.kernel(row).rotation;
+                q.iter().map(|v| v * v).sum::<f64>().sqrt()
+            }));
+        }
         if self.blend == Blend::Alpha {
             let triplets = self.sh.len() / 3;
             for row in bytes.chunks_exact(stride).take(rows) {

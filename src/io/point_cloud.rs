@@ -187,15 +187,14 @@ pub fn parse_point_cloud(bytes: &[u8], origin: &str) -> Result<Vec<DatasetPoint>
                 ));
             }
         }
-        for (c, field) in ["red", "green", "blue"].iter().enumerate() {
-            if !colour[c].is_finite() {
-                return Err(Error::invalid(
-                    origin,
-                    format!("vertex {i}"),
-                    field,
-                    format!("{} is not a finite colour", row[colours[c]]),
-                ));
-            }
+        // A float colour of NaN or beyond f32 would start a kernel of that colour.
+        if let Some(c) = colour.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                origin,
+                format!("vertex {i}"),
+                &vertex.properties[colours[c]].name,
+                format!("{:e} is not a finite colour", row[colours[c]]),
+            ));
         }
         points.push(DatasetPoint { position, colour });
     }

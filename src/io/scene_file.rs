@@ -79,7 +79,23 @@ fn identity_rotation() -> [f64; 4] {
 
 /// Parses and validates a scene JSON document. `origin` names it in error messages.
 pub fn scene_from_json(text: &str, origin: &str) -> Result<Scene> {
+    scene_from_json_as_stored(text, origin).map(|(scene, _)| scene)
+}
+
+/// [`scene_from_json`], and the norm of each kernel's quaternion as the document stores it
+/// (the scene holds it normalised).
+pub fn scene_from_json_as_stored(text: &str, origin: &str) -> Result<(Scene, Vec<f64>)> {
     let file: SceneFile = parse_json(text, origin, "scene")?;
+    let norms = file
+        .kernels
+        .iter()
+        .map(|k| k.rotation.iter().map(|v| v * v).sum::<f64>().sqrt())
+        .collect();
+    Ok((scene_from_file(file, origin)?, norms))
+}
+
+/// The scene of a parsed document, validated.
+fn scene_from_file(file: SceneFile, origin: &str) -> Result<Scene> {
     let kernels: Vec<Kernel> = file
         .kernels
         .iter()
@@ -182,11 +198,28 @@ pub fn scene_to_json(scene: &Scene) -> String {
 
 /// Reads a scene file: 4D scene PLY for `.ply`, JSON otherwise.
 pub fn load_scene(path: &Path) -> Result<Scene> {
+    read_scene(path, false).map(|(scene, _)| scene)
+}
+
+/// [`load_scene`], and the norm of each kernel's quaternion as the file stores it (the
+/// scene holds it normalised): `splat4d grad` gives the gradient of the stored quaternion
+/// ([`crate::backward::Gradients::rotations_as_stored`]).
+pub fn load_scene_as_stored(path: &Path) -> Result<(Scene, Vec<f64>)> {
+    read_scene(path, true).map(|(scene, norms)| (scene, norms.unwrap_or_default()))
+}
+
+/// [`load_scene`], with the stored quaternions' norms when `rotation_norms`.
+fn read_scene(path: &Path, rotation_norms: bool) -> Result<(Scene, Option<Vec<f64>>)> {
     if is_ply(path) {
-        return super::ply::read_scene_ply(path);
+        return super::ply::read_scene_ply_as_stored(path, rotation_norms);
     }
     let text = crate::io::input::read_to_string(path, "cannot read scene")?;
-    scene_from_json(&text, &path.display().to_string())
+    let origin = path.display().to_string();
+    if rotation_norms {
+        let (scene, norms) = scene_from_json_as_stored(&text, &origin)?;
+        return Ok((scene, Some(norms)));
+    }
+    Ok((scene_from_json(&text, &origin)?, None))
 }
 
 /// Writes a scene atomically: 4D scene PLY for `.ply`, JSON otherwise.

@@ -198,6 +198,13 @@ impl RemapTable {
         (self.width, self.height)
     }
 
+    /// Whether some pixel's source lies in the photo (a lens whose coefficients fold or
+    /// throw every ray outside it leaves none).
+    #[must_use]
+    pub fn any_valid(&self) -> bool {
+        self.valid.iter().any(|&v| v)
+    }
+
     /// The per-pixel validity: 1 where the pixel's source lies in the photo, 0 elsewhere.
     #[must_use]
     pub fn validity(&self) -> Vec<f32> {

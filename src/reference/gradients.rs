@@ -1,7 +1,7 @@
 //! f64 twin of the backward pass, [`crate::backward`] (SPEC §6): the loss and its exact
 //! gradient by the chain rule written with whole matrices.
 
-use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
+use glam::{DMat2, DMat3, DQuat, DVec2, DVec3, DVec4};
 
 use crate::backward::Gradients;
 use crate::model::{Camera, Scene};
@@ -30,7 +30,8 @@ pub fn mse(image: &[f64], target: &[f32]) -> f64 {
 /// ∂L/∂p  = Σ_(r,c) (∂L/∂J)_rc ∂J_rc/∂p + (∂m2/∂p)ᵀ ∂L/∂m2,   ∂L/∂m = Rcᵀ ∂L/∂p
 /// ```
 ///
-/// then through the slice as SPEC §6 lists.
+/// then through the slice as SPEC §6 lists, and to the rotation through `Σ3` (SPEC §8: the
+/// quaternion as `scene` holds it, of any length, through its normalisation).
 #[must_use]
 pub fn reference_loss_and_gradients(
     scene: &Scene,
@@ -88,8 +89,49 @@ pub fn reference_loss_and_gradients(
                 .map(|c| amplitude[c] * kernel.weight * (kernel.d * kernel.d / st) * v_a[c])
                 .sum(),
         ];
+        grads.v_rotations[i] = quaternion_gradient(scene.rotations[i], &rotation, s, v_sigma3);
     }
     (loss, grads)
+}
+
+/// `∂L/∂q` of the quaternion `q` as stored (any length; SPEC §8: through its
+/// normalisation) from `V = ∂L/∂Σ3`, with `rotation = R(q̂)` and the scales `s`:
+///
+/// ```text
+/// Σ3 = R S² Rᵀ                              ∂L/∂R = (V + Vᵀ) R S²
+/// R(q̂) = (w² - |u|²) I + 2 u uᵀ + 2 w [u]×   q̂ = (w, u) = q/|q|
+/// ∂L/∂q̂_k = ⟨∂L/∂R, ∂R/∂q̂_k⟩                ∂L/∂q = (I - q̂ q̂ᵀ) ∂L/∂q̂ / |q|
+/// ```
+///
+/// (the matrix form of R, whose derivatives differ from those of SPEC §1's entries off the
+/// unit sphere; the projection removes the difference).
+fn quaternion_gradient(q: [f64; 4], rotation: &DMat3, s: [f64; 4], v_sigma3: DMat3) -> [f64; 4] {
+    let stored = DVec4::from(q);
+    let norm = stored.length();
+    let unit = stored / norm;
+    let (w, u) = (unit.x, DVec3::new(unit.y, unit.z, unit.w));
+    let squares = DMat3::from_diagonal(DVec3::new(s[0] * s[0], s[1] * s[1], s[2] * s[2]));
+    let v_rotation = (v_sigma3 + v_sigma3.transpose()) * *rotation * squares;
+    // [a]× (its column j is a × e_j) and a bᵀ (its column j is a b_j).
+    let cross =
+        |a: DVec3| DMat3::from_cols(a.cross(DVec3::X), a.cross(DVec3::Y), a.cross(DVec3::Z));
+    let outer = |a: DVec3, b: DVec3| DMat3::from_cols(a * b.x, a * b.y, a * b.z);
+    let inner = |a: DMat3, b: DMat3| {
+        a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+    };
+    let d_w = DMat3::IDENTITY * (2.0 * w) + cross(u) * 2.0;
+    let d_u = |e: DVec3, component: f64| {
+        DMat3::IDENTITY * (-2.0 * component)
+            + (outer(e, u) + outer(u, e)) * 2.0
+            + cross(e) * (2.0 * w)
+    };
+    let v_unit = DVec4::new(
+        inner(v_rotation, d_w),
+        inner(v_rotation, d_u(DVec3::X, u.x)),
+        inner(v_rotation, d_u(DVec3::Y, u.y)),
+        inner(v_rotation, d_u(DVec3::Z, u.z)),
+    );
+    ((v_unit - unit * unit.dot(v_unit)) / norm).into()
 }
 
 /// One kernel's partials summed over the pixels it reaches: `∂L/∂Q`, `∂L/∂m2` and the

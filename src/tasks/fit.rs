@@ -385,7 +385,8 @@ fn fit_alpha_dataset(
     server: Option<Server>,
     progress: &mut dyn FitProgress,
 ) -> Result<FitSummary> {
-    let bounds = alpha_bounds(&dataset.train)?;
+    let training = crate::io::dataset::training_file(&request.views);
+    let bounds = alpha_bounds(&dataset.train, &training.display().to_string())?;
     let background = request
         .settings
         .background

@@ -12,7 +12,7 @@ use crate::io::gradients_file::gradients_to_json;
 use crate::io::image_file::{
     BitDepth, ImageKind, image_size, load_image, save_rgb8_png, save_rows,
 };
-use crate::io::scene_file::load_scene;
+use crate::io::scene_file::{load_scene, load_scene_as_stored};
 use crate::io::{check_output, write_bytes_atomically};
 use crate::model::{Camera, Error, Result, Scene};
 use crate::overlay::draw_overlay;
@@ -239,7 +239,11 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
         &["json"],
         &[&view.scene, &request.target, &view.camera.file()],
     )?;
-    let (scene, camera) = view.load()?;
+    view.options.validate()?;
+    let camera = view.camera.load()?;
+    // The gradient is of the quaternions as the file stores them (SPEC §8), not of the
+    // normalised ones the scene holds.
+    let (scene, rotation_norms) = load_scene_as_stored(&view.scene)?;
     check_render_memory(&camera, &scene)?;
     let background = scene.background.map(|b| b as f32);
     // The header first: a target of the wrong size is refused before it is decoded.
@@ -269,12 +273,25 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
             &mut grads,
         )
     })??;
+    grads.rotations_as_stored(&rotation_norms);
     // Nothing non-finite leaves (JSON would hold `null`).
+    let count = scene.sh_count;
     let bad_kernel = (0..grads.len()).find(|&i| {
         grads.v_means[i]
             .iter()
             .chain(&grads.v_amplitudes[i])
             .chain(&grads.v_velocities[i])
+            .chain(&grads.v_scales[i])
+            .chain(&grads.v_rotations[i])
+            .chain(grads.v_opacities.get(i))
+            .chain(
+                grads
+                    .v_sh
+                    .get(i * count..(i + 1) * count)
+                    .into_iter()
+                    .flatten()
+                    .flatten(),
+            )
             .any(|v| !v.is_finite())
     });
     if !loss.is_finite() || bad_kernel.is_some() {

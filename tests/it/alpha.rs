@@ -415,7 +415,7 @@ fn gradient_field(grads: &splat4d::Gradients, sh_count: usize, i: usize, p: usiz
 
 /// Moderate random alpha kernels in front of the camera: rotations, velocities, SH, some
 /// opaque (the clamp binds), some nearly transparent.
-fn random_alpha_scene(seed: u64, n: usize, sh_count: usize) -> Scene {
+pub fn random_alpha_scene(seed: u64, n: usize, sh_count: usize) -> Scene {
     let mut rng = seeded_rng(seed);
     let kernels: Vec<Kernel> = (0..n)
         .map(|_| {
@@ -453,25 +453,8 @@ const ALPHA_RTOL_FD: f64 = 2e-5;
 /// Checks every field's fast gradient against central differences of the f64 twin with
 /// pairs, order and stops held constant. Returns the worst ratio to the bound.
 fn check_alpha_gradients(what: &str, scene: &Scene, camera: &Camera, tau: f64) -> f64 {
-    use splat4d::reference::alpha::composite_traced;
     let options = RenderOptions::default();
-    let traced = render_reference_alpha(scene, camera, tau, &options);
-    let kernels = splat4d::reference::alpha::reference_alpha_kernels(scene, camera, tau, &options);
-    let order: Vec<usize> = kernels.iter().map(|k| k.kernel.index).collect();
-    // The target: the twin's render of a jittered scene.
-    let mut moved = scene.clone();
-    let mut rng = seeded_rng(5);
-    for i in 0..moved.len() {
-        for c in 0..3 {
-            moved.means[i][c] += rng.random_range(-0.05..0.05);
-            moved.amplitudes[i][c] *= rng.random_range(0.6..1.2);
-        }
-    }
-    let target: Vec<f32> = render_reference_alpha(&moved, camera, tau, &options)
-        .pixels
-        .iter()
-        .map(|&v| v as f32)
-        .collect();
+    let target = jittered_alpha_target(scene, camera, tau);
     let target_image = Image {
         width: camera.width,
         height: camera.height,
@@ -488,9 +471,50 @@ fn check_alpha_gradients(what: &str, scene: &Scene, camera: &Camera, tau: f64) -
         &mut grads,
     )
     .unwrap();
+    compare_with_the_twin(what, scene, (camera, tau), &target, &grads, true)
+}
+
+/// A target for gradient checks: the twin's render of `scene` with jittered means and
+/// amplitudes (seeded), in f32.
+pub fn jittered_alpha_target(scene: &Scene, camera: &Camera, tau: f64) -> Vec<f32> {
+    let options = RenderOptions::default();
+    // The target: the twin's render of a jittered scene.
+    let mut moved = scene.clone();
+    let mut rng = seeded_rng(5);
+    for i in 0..moved.len() {
+        for c in 0..3 {
+            moved.means[i][c] += rng.random_range(-0.05..0.05);
+            moved.amplitudes[i][c] *= rng.random_range(0.6..1.2);
+        }
+    }
+    render_reference_alpha(&moved, camera, tau, &options)
+        .pixels
+        .iter()
+        .map(|&v| v as f32)
+        .collect()
+}
+
+/// Checks every field of `grads` (of the MSE of `scene` against `target`) against central
+/// differences of the f64 twin with pairs, order and stops held constant. `scene`'s
+/// quaternions may have any length (the twin normalises them): `grads` is then the
+/// gradient of the quaternions as `scene` holds them. With `background`, `∂L/∂b` too (the
+/// `splat4d grad` file has none). Returns the worst ratio to the bound.
+pub fn compare_with_the_twin(
+    what: &str,
+    scene: &Scene,
+    (camera, tau): (&Camera, f64),
+    target: &[f32],
+    grads: &splat4d::Gradients,
+    background: bool,
+) -> f64 {
+    use splat4d::reference::alpha::composite_traced;
+    let options = RenderOptions::default();
+    let traced = render_reference_alpha(scene, camera, tau, &options);
+    let kernels = splat4d::reference::alpha::reference_alpha_kernels(scene, camera, tau, &options);
+    let order: Vec<usize> = kernels.iter().map(|k| k.kernel.index).collect();
     let loss = |scene: &Scene| {
         let pixels = composite_traced(scene, camera, tau, &options, &order, &traced.traces);
-        splat4d::reference::mse(&pixels, &target)
+        splat4d::reference::mse(&pixels, target)
     };
     let fields = field_count(scene);
     let mut fd = vec![vec![0.0; fields]; scene.len()];
@@ -521,7 +545,7 @@ fn check_alpha_gradients(what: &str, scene: &Scene, camera: &Camera, tau: f64) -
     let mut worst = 0.0_f64;
     for (i, row) in fd.iter().enumerate() {
         for (p, &f) in row.iter().enumerate() {
-            let a = gradient_field(&grads, scene.sh_count, i, p);
+            let a = gradient_field(grads, scene.sh_count, i, p);
             let bound = ALPHA_ATOL_FD * scale[p] + ALPHA_RTOL_FD * f.abs() + 1e-12;
             let delta = (a - f).abs();
             worst = worst.max(delta / bound);
@@ -533,7 +557,7 @@ fn check_alpha_gradients(what: &str, scene: &Scene, camera: &Camera, tau: f64) -
         }
     }
     // The background: ∂L/∂b = Σ v T_final.
-    for c in 0..3 {
+    for c in (0..3).filter(|_| background) {
         let h = 1e-6;
         let mut plus = scene.clone();
         plus.background[c] += h;

@@ -1047,3 +1047,97 @@ fn a_distorted_dataset_fits_as_well_as_the_pinhole_one() {
     );
     assert!(psnr >= 28.9 - 1.0, "{psnr} dB");
 }
+
+/// Lens coefficients that leave no pixel of the image inside the lens model's range are
+/// named as such (issue 45: a huge `k1` or `p1` was reported as "field `mask_path`: no
+/// pixel is left" in a dataset without masks), in `transforms.json` (the frame's entry) and
+/// in COLMAP (the camera's `params` in the cameras file).
+#[test]
+fn lens_coefficients_that_leave_no_pixel_are_named() {
+    for (opencv, named) in [
+        (
+            [1e30, 0.0, 0.0, 0.0],
+            "field `k1`: `k1` = 1e30 leaves no pixel",
+        ),
+        (
+            [0.0, 0.0, 1e30, 0.0],
+            "field `p1`: `p1` = 1e30 leaves no pixel",
+        ),
+        (
+            [-1e6, 0.0, 0.0, 0.0],
+            "field `k1`: `k1` = -1e6 leaves no pixel",
+        ),
+    ] {
+        let capture = Capture {
+            opencv,
+            ..capture()
+        };
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        write_photos(&capture, dir, &[]);
+        write_transforms_json(&capture, dir);
+        let output = splat4d(
+            &["fit", "--views", ".", "--out", "f.json", "--steps", "1"],
+            dir,
+        );
+        let err = stderr(&output);
+        assert_eq!(output.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("transforms.json: frame 4: ") && err.contains(named),
+            "{err}"
+        );
+        assert!(
+            !err.contains("mask_path") && !err.contains("panicked"),
+            "{err}"
+        );
+        let colmap = dir.join("colmap");
+        write_photos(&capture, &colmap, &[]);
+        write_colmap_text(&capture, &colmap);
+        let message = load_dataset(&colmap, &DatasetOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("cameras.txt: camera 2 (params): ") && message.contains(named),
+            "{message}"
+        );
+    }
+}
+
+/// A point cloud's colour that is not finite (a float `red` of NaN, or a double beyond
+/// f32) is refused naming the file, the vertex and the property (issue 45: the fit's
+/// start blamed "<point cloud start>").
+#[test]
+fn a_point_cloud_colour_that_is_not_finite_is_named() {
+    let capture = capture();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    write_photos(&capture, dir, &[]);
+    write_transforms_json(&capture, dir);
+    for (body, needle) in [
+        (
+            "0 0 0 0.5 nan 0.5\n",
+            "vertex 1: field `green`: NaN is not a finite colour",
+        ),
+        (
+            "0 0 0 1e300 0.5 0.5\n",
+            "vertex 1: field `red`: 1e300 is not a finite colour",
+        ),
+    ] {
+        std::fs::write(
+            dir.join("sparse_pc.ply"),
+            format!(
+                "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\n\
+                 property double z\nproperty double red\nproperty double green\n\
+                 property double blue\nend_header\n0.1 0.2 0.3 0.5 0.5 0.5\n{body}"
+            ),
+        )
+        .unwrap();
+        let message = load_dataset(dir, &DatasetOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("sparse_pc.ply: ") && message.contains(needle),
+            "{message}"
+        );
+    }
+}

@@ -56,7 +56,7 @@ fn occluding_dataset(scene: &Scene) -> (splat4d::model::Dataset, RenderOptions) 
 fn an_occluding_scene_is_recovered_from_a_random_start() {
     let scene = occluding_scene();
     let (dataset, options) = occluding_dataset(&scene);
-    let bounds = alpha_bounds(&dataset.train).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
     let fit_options = splat4d::fit::alpha::AlphaFitOptions {
         steps: 600,
         start_kernels: 300,
@@ -94,7 +94,7 @@ fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
     use splat4d::fit::hull::{flat_background, visual_hull};
     let scene = occluding_scene();
     let (dataset, _) = occluding_dataset(&scene);
-    let bounds = alpha_bounds(&dataset.train).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
     assert!(flat_background(&dataset.train, [0.0; 3]));
     let (cells, side) = visual_hull(&dataset.train, [0.0; 3], &bounds);
     // The slabs sweep through depth and the blob moves: each kernel's path at the middle
@@ -227,7 +227,7 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
         .collect();
     let train = photos;
     assert!(!flat_background(&train, [0.0; 3]));
-    let bounds = alpha_bounds(&train).unwrap();
+    let bounds = alpha_bounds(&train, "<photos>").unwrap();
     let points = plane_sweep(&train, &bounds, 4000);
     // Each point's distance to the nearer of the two surfaces (the panel only where it is).
     let off: Vec<f64> = points
@@ -289,7 +289,7 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
 fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     let scene = occluding_scene();
     let (dataset, _) = occluding_dataset(&scene);
-    let bounds = alpha_bounds(&dataset.train).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
     let fit_options = splat4d::fit::alpha::AlphaFitOptions {
         steps: 60,
         start_kernels: 100,
@@ -319,5 +319,304 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     let one = run(1);
     for threads in [2, 3] {
         assert!(run(threads) == one, "{threads} threads differ from one");
+    }
+}
+
+/// A camera at `eye` looking at the origin, or with `away` straight away from it.
+fn camera_at(eye: [f64; 3], away: bool, size: u32) -> splat4d::Camera {
+    let target = if away { eye.map(|v| 2.0 * v) } else { [0.0; 3] };
+    splat4d::Camera::look_at(eye, target, [0.0, 1.0, 0.0], 45.0, size, size).unwrap()
+}
+
+/// The alpha backward of a frame that sees no kernel (SPEC §8; issue 45: it indexed past
+/// the end of the opacities' gradient in the slice stage) is a zero gradient for every
+/// kernel, and `∂L/∂b = Σ ∂L/∂C` (T = 1 everywhere): an empty scene, every kernel behind
+/// the camera (sliced, none projected), every kernel outside its time (none sliced), with
+/// and without SH; both the backward after a render and the fused step.
+#[test]
+fn the_alpha_backward_of_a_frame_that_sees_nothing_is_zero() {
+    use splat4d::fit::loss::{view_loss_and_gradients, view_mse_gradient};
+    let occluding = occluding_scene();
+    let with_sh = crate::alpha::alpha_scene(
+        Scene::from_kernels(&occluding.kernels(), [0.2, 0.1, 0.0], "<sh>").unwrap(),
+        3,
+        8,
+    );
+    let empty = Scene::from_kernels(&[], [0.2, 0.1, 0.0], "<empty>")
+        .unwrap()
+        .into_alpha(Vec::new(), 0, Vec::new(), "<empty>")
+        .unwrap();
+    let mut short_lived = with_sh.clone();
+    for scale in &mut short_lived.scales {
+        scale[3] = 0.01;
+    }
+    let (front, away) = (
+        camera_at([0.0, 0.5, -4.0], false, 24),
+        camera_at([0.0, 0.5, -4.0], true, 24),
+    );
+    let target = splat4d::Image {
+        width: 24,
+        height: 24,
+        pixels: vec![0.35; 3 * 24 * 24],
+    };
+    for (what, scene, camera, tau, sliced) in [
+        ("empty scene", &empty, front, 0.5, false),
+        ("behind the camera", &occluding, away, 0.5, true),
+        ("behind the camera, SH", &with_sh, away, 0.5, true),
+        ("outside their time", &short_lived, front, 10.0, false),
+    ] {
+        let mut context = RenderContext::new();
+        let stats = context
+            .render_for_backward(scene, &camera, tau, &RenderOptions::default())
+            .unwrap();
+        assert_eq!((stats.sliced > 0, stats.projected), (sliced, 0), "{what}");
+        let mut grads = splat4d::Gradients::for_scene(scene);
+        let loss = view_loss_and_gradients(
+            &mut context,
+            scene,
+            &camera,
+            tau,
+            &RenderOptions::default(),
+            &target,
+            &mut grads,
+        )
+        .unwrap();
+        let view = splat4d::model::View {
+            camera,
+            time: tau,
+            image: std::sync::Arc::new(target.clone()),
+            name: what.into(),
+            weights: None,
+        };
+        let mut fused = splat4d::Gradients::for_scene(scene);
+        RenderContext::new()
+            .render_and_backward(
+                scene,
+                &camera,
+                tau,
+                &RenderOptions::default(),
+                &view_mse_gradient(&view, 1.0),
+                &mut Vec::new(),
+                &mut fused,
+            )
+            .unwrap();
+        assert_eq!(fused, grads, "{what}: the fused step");
+        let zero = splat4d::Gradients {
+            v_background: grads.v_background,
+            ..splat4d::Gradients::for_scene(scene)
+        };
+        assert_eq!(grads, zero, "{what}: every kernel's gradient is zero");
+        for c in 0..3 {
+            let b = scene.background[c];
+            let expected_loss = (0..3)
+                .map(|k| (scene.background[k] - 0.35_f32 as f64).powi(2))
+                .sum::<f64>()
+                / 3.0;
+            assert!((loss - expected_loss).abs() <= 1e-7, "{what}: loss {loss}");
+            // Σ over the pixels of 2 (b - t) / N, N = 3 · pixels.
+            let expected = 2.0 * (b - f64::from(0.35_f32)) / 3.0;
+            assert!(
+                (grads.v_background[c] - expected).abs() <= 1e-6,
+                "{what}: ∂L/∂b[{c}] = {} vs {expected}",
+                grads.v_background[c]
+            );
+        }
+    }
+}
+
+/// A fit whose training views include ones that see nothing runs on (their steps are zero
+/// gradients); a fit none of whose views ever sees a kernel is refused with a message
+/// saying so, not a panic (issue 45).
+#[test]
+fn an_alpha_fit_runs_past_views_that_see_nothing_and_refuses_views_that_never_do() {
+    use splat4d::model::View;
+    let scene = occluding_scene();
+    let eyes = [
+        [0.0, 0.5, -4.0],
+        [3.0, 0.5, -2.5],
+        [-3.0, 1.0, -2.5],
+        [0.5, 3.5, -2.0],
+    ];
+    let options = RenderOptions::default();
+    let view_of = |eye: [f64; 3], away: bool, time: f64| {
+        let camera = camera_at(eye, away, 20);
+        let mut context = RenderContext::new();
+        context.render(&scene, &camera, time, &options).unwrap();
+        View {
+            camera,
+            time,
+            image: std::sync::Arc::new(context.image().clone()),
+            name: format!("eye {eye:?}, away {away}"),
+            weights: None,
+        }
+    };
+    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 12,
+        start_kernels: 40,
+        batch_size: 2,
+        eval_every: 0,
+        ..DEFAULT_ALPHA
+    };
+    // Half the views look away.
+    let train: Vec<View> = eyes
+        .iter()
+        .enumerate()
+        .flat_map(|(k, &eye)| [view_of(eye, false, 0.3), view_of(eye, k % 2 == 0, 0.7)])
+        .collect();
+    // (A camera looking away lies on the same optical axis: the box is the one the others
+    // look at.)
+    let bounds = alpha_bounds(&train, "<views>").unwrap();
+    let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.5; 3], &fit_options).unwrap();
+    let records = fit_alpha(&mut fitted, &bounds, &train, &[], &fit_options, |_, _| {}).unwrap();
+    assert_eq!(records.len(), 12);
+    assert!(records.iter().all(|r| r.train_loss.is_finite()));
+    fitted.validate("<fitted>").unwrap();
+    // Every view looks away.
+    let blind: Vec<View> = eyes.iter().map(|&eye| view_of(eye, true, 0.5)).collect();
+    let mut start = random_alpha_scene(&bounds, [0.0; 3], [0.5; 3], &fit_options).unwrap();
+    let error = fit_alpha(&mut start, &bounds, &blind, &[], &fit_options, |_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("no training view"), "{error}");
+    assert!(error.contains("40 kernels"), "{error}");
+}
+
+/// Renders the blob as a dataset (4 cameras × 2 times, 8×8) into `dir/name` and edits its
+/// `transforms_train.json` with `edit`.
+fn edited_blob_dataset(
+    dir: &std::path::Path,
+    name: &str,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> String {
+    let output = crate::common::run_blob_dataset(dir, "4", name);
+    assert!(
+        output.status.success(),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let path = dir.join(name).join("transforms_train.json");
+    let mut file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    edit(&mut file);
+    std::fs::write(&path, serde_json::to_string_pretty(&file).unwrap()).unwrap();
+    name.to_owned()
+}
+
+/// Turns a frame's camera to look the opposite way (its right and back axes negated, a
+/// rotation about its up axis by half a turn).
+fn look_away(frame: &mut serde_json::Value) {
+    let matrix = &mut frame["transform_matrix"];
+    for r in 0..3 {
+        for c in [0, 2] {
+            let v = matrix[r][c].as_f64().unwrap();
+            matrix[r][c] = serde_json::json!(-v);
+        }
+    }
+}
+
+fn frames(file: &mut serde_json::Value) -> &mut Vec<serde_json::Value> {
+    file["frames"].as_array_mut().unwrap()
+}
+
+/// `fit --views DIR` (the alpha blend) on datasets whose views see nothing (issue 45: exit
+/// 101, an index out of bounds in the alpha backward): one camera looking away fits on;
+/// every camera looking away, a principal point at 1e308, or a point cloud at 3e38 (the
+/// start outside every view) end with exit 2 and a message saying no view sees the start,
+/// and write nothing.
+#[test]
+fn fits_whose_views_see_nothing_end_without_a_panic() {
+    use crate::common::{refused_quickly, run_limited};
+    let dir = tempfile::tempdir().unwrap();
+    let fit = |views: &str, out: &str| {
+        vec![
+            "fit".to_owned(),
+            "--views".into(),
+            views.into(),
+            "--blend".into(),
+            "alpha".into(),
+            "--steps".into(),
+            "6".into(),
+            "--start-kernels".into(),
+            "30".into(),
+            "--out".into(),
+            out.into(),
+        ]
+    };
+    let one = edited_blob_dataset(dir.path(), "one", |f| look_away(&mut frames(f)[0]));
+    let output = run_limited(&fit(&one, "one.json"), dir.path());
+    let stderr = crate::common::stderr(&output);
+    assert!(output.status.success(), "{stderr}");
+    let fitted = splat4d::io::scene_file::load_scene(&dir.path().join("one.json")).unwrap();
+    assert!(!fitted.is_empty());
+    let all = edited_blob_dataset(dir.path(), "all", |f| {
+        frames(f).iter_mut().for_each(look_away)
+    });
+    let cx = edited_blob_dataset(dir.path(), "cx", |f| f["cx"] = serde_json::json!(1e308));
+    let cloud = edited_blob_dataset(dir.path(), "cloud", |f| {
+        f["ply_file_path"] = serde_json::json!("far.ply");
+    });
+    std::fs::write(
+        dir.path().join("cloud/far.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+         property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+         end_header\n3e38 3e38 3e38 200 100 50\n3e38 -3e38 1e38 10 20 30\n",
+    )
+    .unwrap();
+    for views in [all, cx, cloud] {
+        let out = format!("{views}.json");
+        refused_quickly(&fit(&views, &out), dir.path(), 2, "no training view");
+        assert!(!dir.path().join(&out).exists(), "{views}: nothing written");
+    }
+}
+
+/// The alpha fit's start refuses, naming the file, the frame and the field, the frame
+/// numbers that give no finite box (issue 45: the random start unwrapped rand's
+/// `NonFinite`): times ±1e308 (their span overflows), a camera 1e300 away, and sheared
+/// matrices (no view sees the start) end with exit 2, never a panic.
+#[test]
+fn the_alpha_start_refuses_frames_that_give_no_finite_box() {
+    use crate::common::refused_quickly;
+    let dir = tempfile::tempdir().unwrap();
+    let times = edited_blob_dataset(dir.path(), "times", |f| {
+        frames(f)[0]["time"] = serde_json::json!(-1e308);
+        frames(f)[1]["time"] = serde_json::json!(1e308);
+    });
+    let far = edited_blob_dataset(dir.path(), "far", |f| {
+        frames(f)[0]["transform_matrix"][0][3] = serde_json::json!(-1e300);
+        frames(f)[1]["transform_matrix"][0][3] = serde_json::json!(1e300);
+    });
+    let one_far = edited_blob_dataset(dir.path(), "one_far", |f| {
+        frames(f)[0]["transform_matrix"][0][3] = serde_json::json!(1e300);
+    });
+    let sheared = edited_blob_dataset(dir.path(), "sheared", |f| {
+        for frame in frames(f) {
+            let v = frame["transform_matrix"][0][1].as_f64().unwrap();
+            frame["transform_matrix"][0][1] = serde_json::json!(v + 5.0);
+        }
+    });
+    for init in ["random:3", "auto"] {
+        let fit = |views: &str| -> Vec<String> {
+            [
+                "fit", "--views", views, "--blend", "alpha", "--init", init, "--steps", "3",
+                "--out", "o.json",
+            ]
+            .map(str::to_owned)
+            .to_vec()
+        };
+        let file = format!("times{}transforms_train.json", std::path::MAIN_SEPARATOR);
+        for needle in [
+            file.as_str(),
+            "frame `./train/r_000`",
+            "field `time`",
+            "1e308",
+        ] {
+            refused_quickly(&fit(&times), dir.path(), 2, needle);
+        }
+        for needle in ["frame `./train/r_000`", "field `transform_matrix`"] {
+            refused_quickly(&fit(&far), dir.path(), 2, needle);
+        }
+        refused_quickly(&fit(&one_far), dir.path(), 2, "error:");
+        refused_quickly(&fit(&sheared), dir.path(), 2, "error:");
+        assert!(!dir.path().join("o.json").exists());
     }
 }

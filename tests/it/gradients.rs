@@ -483,3 +483,250 @@ fn a_training_steps_render_and_backward_in_one_pass_are_the_same_bits() {
         }
     }
 }
+
+/// Lengths of the stored quaternions the rotation tests use: short, the issue's
+/// `[0.9, 0.2, -0.3, 0.1]` (0.975), long, and unit.
+const QUATERNION_NORMS: [f64; 4] = [0.5, 0.974_679_434_480_896_4, 3.0, 1.0];
+
+/// Central finite differences of the reference MSE against `target` in each component of
+/// kernel `i`'s quaternion as `scene` holds it (of any length: the reference normalises
+/// it), with every kernel's pair set frozen at `scene`'s (SPEC §6).
+fn quaternion_finite_differences(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+    target: &[f32],
+    i: usize,
+) -> [f64; 4] {
+    use splat4d::reference::{kernel_contribution, mse, reference_kernel};
+    let mut base: Vec<f64> = (0..3 * camera.pixel_count())
+        .map(|k| scene.background[k % 3])
+        .collect();
+    let mut own = None;
+    for k in 0..scene.len() {
+        if let Some(kernel) = reference_kernel(scene, k, camera, tau, options) {
+            let (image, mask) = kernel_contribution(&kernel, camera, None);
+            base.iter_mut().zip(&image).for_each(|(b, c)| *b += c);
+            if k == i {
+                own = Some((image, mask));
+            }
+        }
+    }
+    let (old, mask) = own.expect("the kernel is on screen");
+    std::array::from_fn(|c| {
+        let h = 1e-6 * scene.rotations[i][c].abs().max(0.1);
+        let loss = |delta: f64| {
+            let mut moved = scene.clone();
+            moved.rotations[i][c] += delta;
+            let kernel = reference_kernel(&moved, i, camera, tau, options).unwrap();
+            let (new, _) = kernel_contribution(&kernel, camera, Some(&mask));
+            let image: Vec<f64> = base
+                .iter()
+                .zip(&old)
+                .zip(&new)
+                .map(|((b, o), n)| b - o + n)
+                .collect();
+            mse(&image, target)
+        };
+        (loss(h) - loss(-h)) / (2.0 * h)
+    })
+}
+
+/// Rotated, anisotropic kernels in front of the test camera, moving, with unit quaternions.
+fn rotated_scene() -> Scene {
+    let mut rng = splat4d::model::random::seeded_rng(17);
+    let kernels: Vec<Kernel> = (0..8)
+        .map(|k| {
+            let x = -0.6 + 0.17 * k as f64;
+            Kernel {
+                rotation: splat4d::model::random::random_rotation(&mut rng),
+                velocity: [0.3, -0.2, 0.1],
+                ..Kernel::new(
+                    [x, 0.1 * (k % 3) as f64 - 0.1, 0.2 * (k % 2) as f64, 0.45],
+                    [0.35, 0.08, 0.15, 0.8],
+                    [0.8, -0.3, 0.5],
+                )
+            }
+        })
+        .collect();
+    Scene::from_kernels(&kernels, [0.05, 0.0, 0.1], "<rotated>").unwrap()
+}
+
+/// SPEC §8 (and §6 for the additive blend): the rotation gradient is that of the stored
+/// quaternion through its normalisation, `(I - q̂ q̂ᵀ) ∂L/∂q̂ / |q|`. On quaternions of
+/// lengths 0.5, 0.975, 3 and 1: the f64 backward's rotation gradient matches central
+/// differences of the f64 forward in the stored components; the fast backward (of the
+/// normalised scene, made the stored quaternions' by `rotations_as_stored`) matches them
+/// too; and every other field's gradient is the same as for the unit quaternions.
+#[test]
+fn rotation_gradients_of_non_unit_quaternions_match_finite_differences_of_the_twin() {
+    let camera = test_camera(48, 36);
+    let options = RenderOptions::default();
+    let tau = 0.5;
+    let unit = rotated_scene();
+    let norms: Vec<f64> = (0..unit.len())
+        .map(|i| QUATERNION_NORMS[i % QUATERNION_NORMS.len()])
+        .collect();
+    let mut stored = unit.clone();
+    for (q, &norm) in stored.rotations.iter_mut().zip(&norms) {
+        *q = q.map(|v| v * norm);
+    }
+    let target = jittered_target(&unit, &camera, tau, &options, 3);
+    let (_, of_stored) = reference_loss_and_gradients(&stored, &camera, tau, &options, &target);
+    let (_, of_unit) = reference_loss_and_gradients(&unit, &camera, tau, &options, &target);
+    let (_, mut fast) = fast_gradients(&unit, &camera, tau, &options, &target);
+    fast.rotations_as_stored(&norms);
+    let fd: Vec<[f64; 4]> = (0..unit.len())
+        .map(|i| quaternion_finite_differences(&stored, &camera, tau, &options, &target, i))
+        .collect();
+    let scale = fd.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0, "the rotations matter");
+    let (mut worst, mut worst_fast) = (0.0_f64, 0.0_f64);
+    for (i, f) in fd.iter().enumerate() {
+        for (c, &f_c) in f.iter().enumerate() {
+            let (analytic, quick) = (of_stored.v_rotations[i][c], fast.v_rotations[i][c]);
+            let bound = ATOL_FD * scale + RTOL_FD * f_c.abs() + 1e-12;
+            worst = worst.max((analytic - f_c).abs() / bound);
+            assert!(
+                (analytic - f_c).abs() <= bound,
+                "kernel {i} (|q| = {}) q[{c}]: f64 backward {analytic} vs finite difference {} (bound {bound:e})",
+                norms[i],
+                f_c
+            );
+            let fast_bound = ATOL_FAST * scale + RTOL_FAST * f_c.abs();
+            worst_fast = worst_fast.max((quick - f_c).abs() / fast_bound);
+            assert!(
+                (quick - f_c).abs() <= fast_bound,
+                "kernel {i} (|q| = {}) q[{c}]: fast {quick} vs finite difference {} (bound {fast_bound:e})",
+                norms[i],
+                f_c
+            );
+            // The stored quaternion's gradient is the unit one's over |q|.
+            let expected = of_unit.v_rotations[i][c] / norms[i];
+            assert!(
+                (analytic - expected).abs() <= 1e-9 * scale,
+                "kernel {i}: {analytic} vs {expected}"
+            );
+        }
+        // Every other field sees the same rotation.
+        let (a, b) = (grad_of(&of_stored, i), grad_of(&of_unit, i));
+        for p in 0..PARAMS {
+            assert!(
+                (a[p] - b[p]).abs() <= 1e-9 * b[p].abs() + 1e-12,
+                "kernel {i} {}: {} with |q| = {} vs {} with the unit quaternion",
+                PARAM_NAMES[p],
+                a[p],
+                norms[i],
+                b[p]
+            );
+        }
+    }
+    println!(
+        "stored quaternions: f64 backward at {worst:.3} of its bound, fast at {worst_fast:.3}"
+    );
+}
+
+/// The backward's rotation gradient of a quaternion of any length is that of its unit
+/// quaternion over the length (library level: `rotation_gradient` of `k q`).
+#[test]
+fn the_rotation_gradient_carries_the_normalisations_factor() {
+    use splat4d::backward::slice::rotation_gradient;
+    use splat4d::slice::rotation_matrix;
+    let unit = {
+        let q = [0.9, 0.2, -0.3, 0.1];
+        let norm = q.iter().map(|v: &f64| v * v).sum::<f64>().sqrt();
+        q.map(|v| v / norm)
+    };
+    let scale = [0.3, 0.1, 0.2, 1.0];
+    let r = rotation_matrix(unit);
+    let v_sigma = [[0.3, -0.1, 0.2], [-0.1, 0.5, 0.05], [0.2, 0.05, -0.4]];
+    let of_unit = rotation_gradient(unit, scale, &r, &v_sigma);
+    assert!(of_unit.iter().any(|&v| v.abs() > 1e-3), "{of_unit:?}");
+    for k in [0.5, 0.974_679_434_480_896_4, 3.0] {
+        let of_stored = rotation_gradient(unit.map(|v| v * k), scale, &r, &v_sigma);
+        for c in 0..4 {
+            assert!(
+                (of_stored[c] - of_unit[c] / k).abs() <= 1e-14,
+                "|q| = {k}, q[{c}]: {} vs {}",
+                of_stored[c],
+                of_unit[c] / k
+            );
+        }
+    }
+}
+
+/// `splat4d grad` of an alpha scene whose file stores quaternions of lengths 0.5, 0.975
+/// (the issue's `[0.9, 0.2, -0.3, 0.1]`), 3 and 1 writes, for every field, central
+/// differences of the f64 twin evaluated at the stored numbers: the rotation is the stored
+/// quaternion's (a factor 1/|q| from the unit one's), every other field is unchanged.
+#[test]
+fn grad_of_an_alpha_scene_with_non_unit_quaternions_matches_the_twin_in_every_field() {
+    use crate::alpha::{compare_with_the_twin, jittered_alpha_target, random_alpha_scene};
+    use crate::common::{splat4d, stderr};
+    let dir = tempfile::tempdir().unwrap();
+    let camera =
+        Camera::look_at([0.2, -0.3, -3.5], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 36, 28).unwrap();
+    let tau = 0.45;
+    let mut unit = random_alpha_scene(6, 12, 3);
+    unit.rotations[1] = {
+        let q = [0.9, 0.2, -0.3, 0.1];
+        let norm = q.iter().map(|v: &f64| v * v).sum::<f64>().sqrt();
+        q.map(|v| v / norm)
+    };
+    // The file: the same scene with each quaternion stretched to its length.
+    let mut file: serde_json::Value =
+        serde_json::from_str(&splat4d::io::scene_file::scene_to_json(&unit)).unwrap();
+    let mut stored = unit.clone();
+    for (i, kernel) in file["kernels"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .enumerate()
+    {
+        let norm = QUATERNION_NORMS[i % QUATERNION_NORMS.len()];
+        stored.rotations[i] = if i == 1 {
+            [0.9, 0.2, -0.3, 0.1]
+        } else {
+            unit.rotations[i].map(|v| v * norm)
+        };
+        kernel["rotation"] = serde_json::json!(stored.rotations[i]);
+    }
+    std::fs::write(dir.path().join("s.json"), file.to_string()).unwrap();
+    splat4d::io::camera_file::save_camera(&camera, &dir.path().join("c.json")).unwrap();
+    let target = jittered_alpha_target(&unit, &camera, tau);
+    let image = Image {
+        width: camera.width,
+        height: camera.height,
+        pixels: target.clone(),
+    };
+    splat4d::io::image_file::save_image(
+        &image,
+        &dir.path().join("t.exr"),
+        splat4d::io::image_file::BitDepth::Sixteen,
+    )
+    .unwrap();
+    let output = splat4d(
+        &[
+            "grad", "--scene", "s.json", "--camera", "c.json", "--time", "0.45", "--target",
+            "t.exr", "--out", "g.json",
+        ],
+        dir.path(),
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    let text = std::fs::read_to_string(dir.path().join("g.json")).unwrap();
+    let (_, grads) = splat4d::io::gradients_file::gradients_from_json(&text, "g.json").unwrap();
+    let read_back = splat4d::io::image_file::load_image(&dir.path().join("t.exr"), [0.0; 3])
+        .unwrap()
+        .pixels;
+    assert_eq!(read_back, target, "the target reads back exactly");
+    let worst = compare_with_the_twin(
+        "grad, stored quaternions",
+        &stored,
+        (&camera, tau),
+        &target,
+        &grads,
+        false,
+    );
+    assert!(worst <= 1.0);
+}
