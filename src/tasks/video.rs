@@ -92,6 +92,10 @@ impl fmt::Display for VideoSummary {
     }
 }
 
+/// Most frames the orbits of one run may have together (one orbit per time, each at most
+/// [`crate::scenes::paths::MAX_PATH_FRAMES`]).
+pub const MAX_ORBIT_FRAMES: usize = 10 * crate::scenes::paths::MAX_PATH_FRAMES;
+
 /// A named camera path, with its own frame rate when its file gives one.
 type NamedPath = (String, Vec<PathFrame>, Option<u32>);
 
@@ -124,6 +128,22 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     let nothing_asked =
         request.orbit.is_none() && request.spiral.is_none() && request.path.is_none();
     let orbit_spec = request.orbit.or(nothing_asked.then_some(CircleSpec::Auto));
+    // One orbit per time: their frames together are bounded too, before any is placed.
+    let orbit_frames = match orbit_spec {
+        Some(CircleSpec::Given(circle)) => circle.frames,
+        Some(CircleSpec::Auto) => 60,
+        None => 0,
+    };
+    let total = orbit_frames.saturating_mul(times.len());
+    if total > MAX_ORBIT_FRAMES {
+        return Err(Error::setting(
+            &["times", "orbit"],
+            format!(
+                "{} orbits (one per `times`) of {orbit_frames} frames are {total} frames, more than the {MAX_ORBIT_FRAMES} a run may render: give fewer `times` or fewer frames to `orbit`",
+                times.len()
+            ),
+        ));
+    }
     let mut videos = Vec::new();
     if let Some(spec) = &orbit_spec {
         for &tau in &times {

@@ -632,3 +632,32 @@ fn the_largest_frames_are_estimated_before_any_work() {
     );
     assert!(!d.join("ds").exists() && !d.join("v").exists());
 }
+
+/// One orbit per `--times` entry: the orbits' frames together are bounded too.
+#[test]
+fn orbits_at_many_times_are_bounded_together() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let blob = data("blob.json");
+    // Eleven orbits of the most frames one may have.
+    let times: Vec<String> = (0..11).map(|k| format!("{}", f64::from(k) * 0.1)).collect();
+    let times = times.join(",");
+    let limit = splat4d::tasks::video::MAX_ORBIT_FRAMES.to_string();
+    refused_at_once(
+        &[
+            "video",
+            "--scene",
+            blob.to_str().unwrap(),
+            "--orbit=0.5,0.5,0.5,4,20,100000",
+            "--times",
+            &times,
+            "--size",
+            "8x8",
+            "--out",
+            "v",
+        ],
+        d,
+        &["11 orbits", "--times", "--orbit", "1100000 frames", &limit],
+    );
+    assert!(!d.join("v").exists());
+}
