@@ -614,56 +614,57 @@ impl Page {
     /// `rest`: bytes that came after the request head), then requests in, frames and answers
     /// out until the page leaves or the server stops.
     fn websocket(self, mut stream: TcpStream, key: &[u8], rest: Vec<u8>) {
-        let accept = tungstenite::handshake::derive_accept_key(key);
-        let response = format!(
-            "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {accept}\r\n\r\n"
-        );
-        if stream.write_all(response.as_bytes()).is_err() {
-            return;
-        }
-        // The reader waits on the socket as long as the page stays.
+        // The socket's reader first: without a thread for it, the upgrade is answered 503.
+        // It waits on the socket as long as the page stays.
         let _ = stream.set_read_timeout(None);
-        let Ok(reading) = stream.try_clone() else {
-            return;
-        };
         let (events_in, events) = channel();
         let (credits_in, credits) = sync_channel(READ_CHUNKS_WAITING);
         for _ in 0..READ_CHUNKS_WAITING {
             let _ = credits_in.try_send(());
         }
         let feed = events_in.clone();
-        let reader = std::thread::Builder::new()
-            .name("splat4d-view-socket".into())
-            .stack_size(READER_STACK)
-            .spawn(move || read_socket(reading, &feed, &credits));
+        let reader = stream.try_clone().and_then(|reading| {
+            std::thread::Builder::new()
+                .name("splat4d-view-socket".into())
+                .stack_size(READER_STACK)
+                .spawn(move || read_socket(reading, &feed, &credits))
+        });
+        if let Err(e) = reader {
+            let why = format!("no thread to read its socket ({e})");
+            self.shared.log.refused(self.peer, "a WebSocket", &why, 503);
+            respond(
+                &mut stream,
+                "503 Service Unavailable",
+                "text/plain",
+                b"the viewer cannot serve another page now: try again later",
+            );
+            return;
+        }
+        let accept = tungstenite::handshake::derive_accept_key(key);
+        let response = format!(
+            "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {accept}\r\n\r\n"
+        );
         let config = tungstenite::protocol::WebSocketConfig::default()
             .read_buffer_size(READ_CHUNK)
             .max_message_size(Some(MAX_MESSAGE))
             .max_frame_size(Some(MAX_MESSAGE));
+        let upgraded = stream.write_all(response.as_bytes()).is_ok();
         let pipe = Pipe {
             inbox: rest.into(),
             stream,
         };
         let mut ws = WebSocket::from_raw_socket(pipe, Role::Server, Some(config));
-        match reader {
-            Ok(_) => {
-                self.shared.lock_pages().insert(self.id, events_in.clone());
-                if ws.send(Message::text(self.shared.hello.as_str())).is_ok()
-                    && self.take_messages(&mut ws, &events_in)
-                {
-                    self.converse(&mut ws, &events_in, &events, &credits_in);
-                }
-                self.shared.lock_pages().remove(&self.id);
+        if upgraded {
+            self.shared.lock_pages().insert(self.id, events_in.clone());
+            if ws.send(Message::text(self.shared.hello.as_str())).is_ok()
+                && self.take_messages(&mut ws, &events_in)
+            {
+                self.converse(&mut ws, &events_in, &events, &credits_in);
             }
-            Err(e) => {
-                let why = format!("no thread to read its socket ({e})");
-                self.shared
-                    .log
-                    .refused(self.peer, "a WebSocket", &why, 1013);
-            }
+            self.shared.lock_pages().remove(&self.id);
+            let _ = ws.close(None);
+            let _ = ws.flush();
         }
-        let _ = ws.close(None);
-        let _ = ws.flush();
         // Wakes the reader (its read ends).
         let _ = ws.get_ref().stream.shutdown(Shutdown::Both);
         self.shared.queue.forget(2 * self.id);

@@ -67,10 +67,14 @@ impl Viewer {
 
     /// Starts the viewer with its stderr (the refusals' log) sent to `log`.
     fn start_logging(args: &[&str], cwd: &Path, log: impl Into<Stdio>) -> Viewer {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_splat4d"))
-            .arg("view")
-            .args(args)
-            .args(["--port", "0"])
+        let mut command = Command::new(env!("CARGO_BIN_EXE_splat4d"));
+        command.arg("view").args(args).args(["--port", "0"]);
+        Viewer::run(command, cwd, log)
+    }
+
+    /// Runs `command` (a `splat4d view` on port 0) and reads the address it prints.
+    fn run(mut command: Command, cwd: &Path, log: impl Into<Stdio>) -> Viewer {
+        let mut child = command
             .current_dir(cwd)
             .stdout(Stdio::piped())
             .stderr(log)
@@ -80,12 +84,15 @@ impl Viewer {
         BufReader::new(child.stdout.take().unwrap())
             .read_line(&mut line)
             .unwrap();
-        let url = line
-            .split_whitespace()
-            .find(|w| w.starts_with("http://"))
-            .unwrap_or_else(|| panic!("no URL in {line:?}"))
-            .to_owned();
-        Viewer { child, url }
+        let Some(url) = line.split_whitespace().find(|w| w.starts_with("http://")) else {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("no URL in {line:?}");
+        };
+        Viewer {
+            url: url.to_owned(),
+            child,
+        }
     }
 }
 
@@ -1364,4 +1371,82 @@ fn a_thousand_connections_do_not_end_the_server() {
     assert_eq!(header["width"], 16, "{header}");
     let log = std::fs::read_to_string(d.join("view.log")).unwrap();
     assert!(log.contains("with 503"), "{log}");
+}
+
+/// Under an address-space cap (`ulimit -v`) 64 MiB above what the idle server maps, the
+/// operating system soon refuses the threads of new pages: 200 WebSocket upgrades are each
+/// answered 101 or 503 (the log says no thread could be had), never a panic, and the server
+/// serves its page and socket once they close.
+#[cfg(target_os = "linux")]
+#[test]
+fn pages_the_system_refuses_a_thread_are_answered_503() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = crate::common::data("blob.json");
+    let args = ["--scene", blob.to_str().unwrap()];
+    let mapped_kib = {
+        let viewer = Viewer::start(&args, d);
+        let status =
+            std::fs::read_to_string(format!("/proc/{}/status", viewer.child.id())).unwrap();
+        let line = status.lines().find(|l| l.starts_with("VmSize:")).unwrap();
+        line.split_whitespace()
+            .nth(1)
+            .unwrap()
+            .parse::<u64>()
+            .unwrap()
+    };
+    let cap_kib = mapped_kib + 64 * 1024;
+    let mut command = Command::new("sh");
+    command.args([
+        "-c",
+        &format!("ulimit -v {cap_kib} && exec \"$0\" \"$@\""),
+        env!("CARGO_BIN_EXE_splat4d"),
+        "view",
+    ]);
+    command.args(args).args(["--port", "0"]);
+    let log = std::fs::File::create(d.join("view.log")).unwrap();
+    let mut viewer = Viewer::run(command, d, log);
+    let port = port_of(&viewer.url);
+    let token = token_of(&viewer.url);
+    let own = format!("127.0.0.1:{port}");
+    let upgrade = upgrade_request(&own, None, &token);
+    let (mut upgraded, mut busy) = (0, 0);
+    let mut held = Vec::new();
+    for k in 0..200 {
+        use std::io::Write;
+        let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        stream.write_all(upgrade.as_bytes()).unwrap();
+        let (status, _) = answer_head(&mut stream);
+        if status.contains(" 101 ") {
+            upgraded += 1;
+        } else {
+            assert!(status.contains(" 503 "), "upgrade {k}: {status:?}");
+            busy += 1;
+        }
+        held.push(stream);
+    }
+    assert!(
+        viewer.child.try_wait().unwrap().is_none(),
+        "the server ended"
+    );
+    let log = std::fs::read_to_string(d.join("view.log")).unwrap();
+    println!("under {cap_kib} KiB of address space: {upgraded} pages served, {busy} answered 503");
+    assert!(log.contains("no thread"), "no thread was refused: {log}");
+    drop(held);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !http(
+        port,
+        &request(&format!("/?token={token}"), Some(&own), None, false),
+    )
+    .0
+    .contains(" 200 ")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "still busy 30 s after the pages left"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (mut socket, _) = tungstenite::connect(ws_url(&viewer.url).as_str()).unwrap();
+    assert_eq!(next_text(&mut socket)["type"], "hello");
 }
