@@ -17,8 +17,8 @@ pub struct ViewArgs {
     /// Port to serve on (0: any free port).
     #[arg(long, default_value_t = 8080)]
     port: u16,
-    /// Address to listen on; the default is reachable from this machine only (use SSH port
-    /// forwarding from another one).
+    /// Address to listen on; the default is reachable from this machine only (from another
+    /// one, forward the same port over SSH: `ssh -L 8080:localhost:8080 HOST`).
     #[arg(long, default_value = "127.0.0.1")]
     host: String,
 }

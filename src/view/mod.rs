@@ -2,7 +2,10 @@
 //! draws the scene as the server renders it, frame by frame.
 //!
 //! - [`server`]: the HTTP listener (the page's assets, compiled in) and one WebSocket per
-//!   page; it reads the page's requests and sends back encoded frames.
+//!   page, at most [`server::MAX_CONNECTIONS`] connections at once; it reads the page's
+//!   requests and sends back encoded frames.
+//! - [`access`]: who may connect: a `Host` naming the server, the viewer's own `Origin`, the
+//!   run's secret token (the address printed carries it); 403 otherwise.
 //! - [`render_thread`]: the one thread that renders, owning the [`crate::RenderContext`];
 //!   each page's newest request replaces its pending one (latest wins, no stale queue).
 //! - [`protocol`]: the messages, checked field by field (a malformed message is answered
@@ -13,6 +16,7 @@
 //! Camera paths placed on the page are interpolated here by
 //! [`crate::scenes::keyframes`], the interpolation `splat4d video --path` uses.
 
+pub mod access;
 pub mod live;
 pub mod protocol;
 pub mod render_thread;

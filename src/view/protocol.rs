@@ -19,7 +19,7 @@ use serde::Deserialize;
 
 use crate::io::path_file::keyframes_file_json;
 use crate::model::{Camera, Error, Result};
-use crate::scenes::keyframes::{Keyframe, check_keyframes, interpolate};
+use crate::scenes::keyframes::{Keyframe, Pose, check_keyframes, interpolate};
 use crate::view::MAX_SIDE;
 
 /// Most frames a page's path may ask for.
@@ -160,7 +160,9 @@ impl FrameRequest {
 
 impl PathRequest {
     /// The `path` answer: the interpolated frames (`c2w`, `fov`, `time`) and the nerfstudio
-    /// `camera_path.json` of the path.
+    /// `camera_path.json` of the path. Every number in it is finite: keyframes too far apart
+    /// for the interpolation in doubles (times of ±1e308, say) are refused, naming the field,
+    /// rather than answered with numbers JSON can only write as `null`.
     pub fn answer(&self) -> Result<serde_json::Value> {
         let keyframes = self
             .keyframes
@@ -193,6 +195,19 @@ impl PathRequest {
             ));
         }
         let poses = interpolate(&keyframes, frames as usize);
+        check_poses(&poses)?;
+        let seconds = frames / self.fps;
+        if !seconds.is_finite() {
+            return Err(Error::invalid(
+                ORIGIN,
+                item,
+                "fps",
+                format!(
+                    "{frames} frames at {} frames per second last longer than a double holds",
+                    self.fps
+                ),
+            ));
+        }
         let list: Vec<serde_json::Value> = poses
             .iter()
             .map(|p| {
@@ -209,6 +224,34 @@ impl PathRequest {
             "file": keyframes_file_json(&keyframes, &poses, [width, height], self.fps),
         }))
     }
+}
+
+/// Errors naming the first pose with a number that is not finite (the keyframes' times or
+/// positions are too far apart for the interpolation's arithmetic).
+fn check_poses(poses: &[Pose]) -> Result<()> {
+    for (k, pose) in poses.iter().enumerate() {
+        let item = format!("path frame {k}");
+        let apart = |what: &str| {
+            format!(
+                "is not finite: the keyframes' {what} are too far apart to interpolate in double precision"
+            )
+        };
+        if pose
+            .camera_to_world
+            .iter()
+            .flatten()
+            .any(|v| !v.is_finite())
+        {
+            return Err(Error::invalid(ORIGIN, item, "c2w", apart("positions")));
+        }
+        if !pose.fov_y_degrees.is_finite() {
+            return Err(Error::invalid(ORIGIN, item, "fov", apart("fields of view")));
+        }
+        if pose.time.is_some_and(|t| !t.is_finite()) {
+            return Err(Error::invalid(ORIGIN, item, "time", apart("times")));
+        }
+    }
+    Ok(())
 }
 
 /// An 8-bit RGB image.
@@ -320,6 +363,73 @@ mod tests {
             let message = bad.camera().unwrap_err().to_string();
             assert!(message.contains(field), "{message}");
         }
+    }
+
+    /// Every number of a path's answer, `None` where JSON holds something else (`null`).
+    fn numbers(value: &serde_json::Value, out: &mut Vec<Option<f64>>) {
+        match value {
+            serde_json::Value::Number(n) => out.push(n.as_f64()),
+            serde_json::Value::Null => out.push(None),
+            serde_json::Value::Array(a) => a.iter().for_each(|v| numbers(v, out)),
+            serde_json::Value::Object(o) => o.values().for_each(|v| numbers(v, out)),
+            _ => {}
+        }
+    }
+
+    #[test]
+    fn a_path_answer_holds_finite_numbers_or_is_refused_naming_the_field() {
+        let key = |x: f64, t: f64| {
+            json_value(&format!(
+                r#"{{"c2w":[1,0,0,{x}, 0,1,0,0, 0,0,1,5, 0,0,0,1],"fov":40,"time":{t}}}"#
+            ))
+        };
+        let path = |keys: Vec<serde_json::Value>, fps: f64, seconds: f64| {
+            let text = serde_json::json!({"type": "path", "keyframes": keys, "fps": fps,
+                "seconds": seconds, "width": 32, "height": 24})
+            .to_string();
+            let Request::Path(p) = parse_request(&text).unwrap() else {
+                panic!("not a path")
+            };
+            p.answer()
+        };
+        // Finite keyframes far apart: refused naming the field, never `null`s.
+        for (keys, field) in [
+            (vec![key(0.0, -1e308), key(1.0, 1e308)], "time"),
+            (
+                vec![key(0.0, 1e308), key(1.0, -1e308), key(0.0, 1e308)],
+                "time",
+            ),
+            (vec![key(-1e308, 0.0), key(1e308, 1.0)], "c2w"),
+            (
+                vec![key(-1e308, 0.0), key(1e308, 1.0), key(-1e308, 2.0)],
+                "c2w",
+            ),
+        ] {
+            let message = path(keys, 10.0, 1.0).unwrap_err().to_string();
+            assert!(
+                message.contains(&format!("`{field}`")) || message.contains(field),
+                "{message}"
+            );
+            assert!(message.contains("too far apart"), "{message}");
+        }
+        // An fps so small that the path's length overflows.
+        let message = path(vec![key(0.0, 0.0)], 3e-309, 1.7e308)
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("fps"), "{message}");
+        // A path that can be answered holds only finite numbers.
+        let answer = path(vec![key(0.0, -1e300), key(1.0, 1e300)], 10.0, 1.0).unwrap();
+        let mut all = Vec::new();
+        numbers(&answer, &mut all);
+        assert!(all.len() > 100);
+        assert!(
+            all.iter().all(|v| v.is_some_and(f64::is_finite)),
+            "{answer}"
+        );
+    }
+
+    fn json_value(text: &str) -> serde_json::Value {
+        serde_json::from_str(text).unwrap()
     }
 
     #[test]

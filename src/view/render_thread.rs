@@ -1,14 +1,14 @@
 //! The render thread: one render at a time, owning the [`RenderContext`] and the scene's
 //! temporal index. Pages submit jobs to a [`Queue`]; a page's newest job replaces its pending
 //! one, so a page that asks faster than frames are made gets the latest view, never a queue
-//! of stale ones.
+//! of stale ones. A job's answer goes to the [`Reply`] it came with (the page's connection
+//! wakes on it: no one polls for finished frames).
 
-use std::sync::mpsc::Sender;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use crate::fit::loss::{mse, psnr};
-use crate::model::{Camera, Image, Result, Scene};
+use crate::model::{Camera, Error, Image, Result, Scene};
 use crate::render::RenderContext;
 use crate::slice::TemporalIndex;
 use crate::view::Showing;
@@ -81,10 +81,13 @@ pub enum Output {
     },
 }
 
+/// Where a job's output goes (called once, on the render thread; it must not block).
+pub type Reply = Box<dyn FnOnce(Output) + Send>;
+
 struct Pending {
     page: u64,
     job: Job,
-    reply: Sender<Output>,
+    reply: Reply,
 }
 
 #[derive(Default)]
@@ -108,7 +111,7 @@ impl Queue {
     }
 
     /// Submits `page`'s job, replacing its pending one.
-    pub fn submit(&self, page: u64, job: Job, reply: Sender<Output>) {
+    pub fn submit(&self, page: u64, job: Job, reply: Reply) {
         let mut slots = self.lock();
         slots.pending.retain(|p| p.page != page);
         slots.pending.push(Pending { page, job, reply });
@@ -153,31 +156,34 @@ struct Renderer {
     context: RenderContext,
 }
 
-/// Starts the render thread for `showing`; it runs until [`Queue::stop`].
-#[must_use]
-pub fn spawn(showing: Showing) -> Arc<Queue> {
+/// Starts the render thread for `showing`; it runs until [`Queue::stop`]. An error when the
+/// operating system refuses a thread.
+pub fn spawn(showing: Showing) -> Result<Arc<Queue>> {
     let queue = Arc::new(Queue::default());
     let jobs = Arc::clone(&queue);
-    std::thread::spawn(move || {
-        let scene = Arc::clone(&showing.scene);
-        let index = TemporalIndex::new(&scene, showing.options.cutoff);
-        let mut renderer = Renderer {
-            showing,
-            scene,
-            version: 0,
-            index,
-            context: RenderContext::new(),
-        };
-        while let Some(pending) = jobs.take() {
-            let start = Instant::now();
-            renderer.refresh_scene();
-            let output = renderer.run(pending.job);
-            // A page that left drops its answers.
-            let _ = pending.reply.send(output);
-            std::thread::sleep(rest_after(start.elapsed(), renderer.showing.duty));
-        }
-    });
-    queue
+    let started = std::thread::Builder::new()
+        .name("splat4d-view-render".into())
+        .spawn(move || {
+            let scene = Arc::clone(&showing.scene);
+            let index = TemporalIndex::new(&scene, showing.options.cutoff);
+            let mut renderer = Renderer {
+                showing,
+                scene,
+                version: 0,
+                index,
+                context: RenderContext::new(),
+            };
+            while let Some(pending) = jobs.take() {
+                let start = Instant::now();
+                renderer.refresh_scene();
+                let output = renderer.run(pending.job);
+                // A page that left drops its answers.
+                (pending.reply)(output);
+                std::thread::sleep(rest_after(start.elapsed(), renderer.showing.duty));
+            }
+        });
+    started.map_err(|e| Error::usage(format!("cannot start the viewer's render thread: {e}")))?;
+    Ok(queue)
 }
 
 impl Renderer {

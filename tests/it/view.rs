@@ -3,7 +3,11 @@
 //! time slider change it, a dataset camera is chosen and compared, a frame at a known camera
 //! and time equals `splat4d render` of it (exactly with lossless frames, within the JPEG
 //! tolerance otherwise), the server answers on loopback only, and frames per second are
-//! measured on 10k and 100k kernels; `fit --view` shows the running fit. Skipped, saying so, where no browser is installed.
+//! measured on 10k and 100k kernels; `fit --view` shows the running fit. A page on another
+//! origin cannot open the viewer's socket, forged `Host` and `Origin` headers and missing
+//! tokens are refused with 403, and 1000 connections at once are answered 503 beyond the
+//! bound without ending the server. Browser tests are skipped, saying so, where no browser
+//! is installed.
 
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
@@ -52,30 +56,43 @@ fn browser_binary() -> Option<PathBuf> {
 /// A `splat4d view` process, killed on drop.
 struct Viewer {
     child: Child,
+    /// The address it printed, with its token.
     url: String,
 }
 
 impl Viewer {
     fn start(args: &[&str], cwd: &Path) -> Viewer {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_splat4d"))
-            .arg("view")
-            .args(args)
-            .args(["--port", "0"])
+        Viewer::start_logging(args, cwd, Stdio::inherit())
+    }
+
+    /// Starts the viewer with its stderr (the refusals' log) sent to `log`.
+    fn start_logging(args: &[&str], cwd: &Path, log: impl Into<Stdio>) -> Viewer {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_splat4d"));
+        command.arg("view").args(args).args(["--port", "0"]);
+        Viewer::run(command, cwd, log)
+    }
+
+    /// Runs `command` (a `splat4d view` on port 0) and reads the address it prints.
+    fn run(mut command: Command, cwd: &Path, log: impl Into<Stdio>) -> Viewer {
+        let mut child = command
             .current_dir(cwd)
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(log)
             .spawn()
             .expect("splat4d runs");
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap())
             .read_line(&mut line)
             .unwrap();
-        let url = line
-            .split_whitespace()
-            .find(|w| w.starts_with("http://"))
-            .unwrap_or_else(|| panic!("no URL in {line:?}"))
-            .to_owned();
-        Viewer { child, url }
+        let Some(url) = line.split_whitespace().find(|w| w.starts_with("http://")) else {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("no URL in {line:?}");
+        };
+        Viewer {
+            url: url.to_owned(),
+            child,
+        }
     }
 }
 
@@ -84,6 +101,27 @@ impl Drop for Viewer {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// The port of a viewer's address (`http://127.0.0.1:PORT/?token=…`).
+fn port_of(url: &str) -> u16 {
+    let authority = url.trim_start_matches("http://").split('/').next().unwrap();
+    authority.rsplit(':').next().unwrap().parse().unwrap()
+}
+
+/// The token of a viewer's address.
+fn token_of(url: &str) -> String {
+    let token = url
+        .split("token=")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no token in {url}"));
+    assert!(token.len() >= 32, "a token of 128 bits or more: {token}");
+    token.to_owned()
+}
+
+/// The address of a viewer's socket, with its token.
+fn ws_url(url: &str) -> String {
+    format!("ws://127.0.0.1:{}/ws?token={}", port_of(url), token_of(url))
 }
 
 type Socket = tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<TcpStream>>;
@@ -387,14 +425,7 @@ fn the_page_draws_orbits_scrubs_compares_and_matches_render() {
     let d = dir.path();
     scene_and_dataset(d, (400, 7), "3", "64x48");
     let viewer = Viewer::start(&["--scene", "scene.json", "--views", "ds"], d);
-    let port: u16 = viewer
-        .url
-        .trim_end_matches('/')
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let port = port_of(&viewer.url);
     if let Some(ip) = non_loopback_address() {
         let reached = TcpStream::connect_timeout(&(ip, port).into(), Duration::from_secs(1));
         assert!(reached.is_err(), "the server answers on {ip}");
@@ -657,8 +688,19 @@ fn a_running_fit_is_shown_with_its_chart() {
 #[test]
 fn a_fit_on_a_one_thread_pool_still_serves_its_viewer() {
     let mut fit = ViewedFit::start("100000000", true);
-    let ws_url = format!("{}ws", fit.url.replace("http://", "ws://"));
-    let (mut socket, _) = tungstenite::connect(ws_url.as_str()).unwrap();
+    // The fit's viewer is the same server: a forged Origin is refused there too.
+    let port = port_of(&fit.url);
+    let token = token_of(&fit.url);
+    let (status, _) = http(
+        port,
+        &upgrade_request(
+            &format!("127.0.0.1:{port}"),
+            Some("http://evil.example"),
+            &token,
+        ),
+    );
+    assert!(status.contains(" 403 "), "{status}");
+    let (mut socket, _) = tungstenite::connect(ws_url(&fit.url).as_str()).unwrap();
     if let tungstenite::stream::MaybeTlsStream::Plain(stream) = socket.get_ref() {
         stream
             .set_read_timeout(Some(Duration::from_secs(30)))
@@ -799,8 +841,7 @@ fn the_socket_serves_alpha_and_3dgs_scenes_and_survives_malformed_messages() {
     );
     for name in ["alpha.ply", "g.ply"] {
         let viewer = Viewer::start(&["--scene", name], d);
-        let ws_url = format!("{}ws", viewer.url.replace("http://", "ws://"));
-        let (mut socket, _) = tungstenite::connect(ws_url.as_str()).unwrap();
+        let (mut socket, _) = tungstenite::connect(ws_url(&viewer.url).as_str()).unwrap();
         let hello = next_text(&mut socket);
         assert_eq!(hello["type"], "hello");
         assert_eq!(hello["scene"]["blend"], "alpha", "{name}");
@@ -886,4 +927,526 @@ fn the_socket_serves_alpha_and_3dgs_scenes_and_survives_malformed_messages() {
         assert_eq!(path["file"]["camera_path"].as_array().unwrap().len(), 6);
         assert_eq!(path["file"]["keyframes"].as_array().unwrap().len(), 2);
     }
+}
+
+/// An HTTP request head for `target` with these `Host` and `Origin` headers (`None`: none),
+/// asking for a WebSocket when `upgrade`.
+fn request(target: &str, host: Option<&str>, origin: Option<&str>, upgrade: bool) -> String {
+    let mut head = format!("GET {target} HTTP/1.1\r\n");
+    if let Some(host) = host {
+        head += &format!("Host: {host}\r\n");
+    }
+    if let Some(origin) = origin {
+        head += &format!("Origin: {origin}\r\n");
+    }
+    if upgrade {
+        head += "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n";
+    }
+    head + "\r\n"
+}
+
+/// A WebSocket upgrade of the viewer's socket with the run's token.
+fn upgrade_request(host: &str, origin: Option<&str>, token: &str) -> String {
+    request(&format!("/ws?token={token}"), Some(host), origin, true)
+}
+
+/// Reads an answer's head (up to the blank line, at most 20 s); its status line and the
+/// rest read with it.
+fn answer_head(stream: &mut TcpStream) -> (String, String) {
+    use std::io::Read;
+    stream
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut got = Vec::new();
+    let mut buf = [0_u8; 4096];
+    while !got.windows(4).any(|w| w == b"\r\n\r\n") {
+        match stream.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+        }
+    }
+    let text = String::from_utf8_lossy(&got).into_owned();
+    let (status, rest) = text.split_once("\r\n").unwrap_or((&text, ""));
+    (status.to_owned(), rest.to_owned())
+}
+
+/// Sends `head` to the viewer on `port`; the answer's status line and everything after it
+/// until the server closes (for a 101: until the end of its head).
+fn http(port: u16, head: &str) -> (String, String) {
+    use std::io::{Read, Write};
+    let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream.write_all(head.as_bytes()).unwrap();
+    let (status, mut rest) = answer_head(&mut stream);
+    if !status.contains(" 101 ") {
+        let mut more = String::new();
+        let _ = stream.read_to_string(&mut more);
+        rest += &more;
+    }
+    (status, rest)
+}
+
+/// Forged `Host` headers (DNS rebinding), foreign `Origin`s and requests without the run's
+/// token are answered 403, each with a line on stderr that never shows the token; the
+/// viewer's own addresses (`127.0.0.1`, `localhost`, `[::1]` with its port) are served. The
+/// socket refuses a camera path whose numbers cannot be interpolated instead of answering
+/// it with `null`s.
+#[test]
+fn forged_hosts_foreign_origins_and_missing_tokens_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let log = std::fs::File::create(d.join("view.log")).unwrap();
+    let blob = crate::common::data("blob.json");
+    let viewer = Viewer::start_logging(&["--scene", blob.to_str().unwrap()], d, log);
+    let port = port_of(&viewer.url);
+    let token = token_of(&viewer.url);
+    let own = format!("127.0.0.1:{port}");
+    let own_origin = format!("http://{own}");
+    let t = format!("token={token}");
+    let next_port = port.wrapping_add(1);
+    // Target, Host, Origin, upgrade, the status expected.
+    let cases: Vec<(String, String, Option<String>, bool, u16)> = vec![
+        (format!("/?{t}"), own.clone(), None, false, 200),
+        (
+            format!("/app.js?{t}"),
+            format!("localhost:{port}"),
+            None,
+            false,
+            200,
+        ),
+        (
+            format!("/style.css?{t}"),
+            format!("[::1]:{port}"),
+            None,
+            false,
+            200,
+        ),
+        (
+            format!("/ws?{t}"),
+            own.clone(),
+            Some(own_origin.clone()),
+            true,
+            101,
+        ),
+        (
+            format!("/ws?{t}"),
+            format!("localhost:{port}"),
+            Some(format!("http://localhost:{port}")),
+            true,
+            101,
+        ),
+        // A site's own name re-pointed at 127.0.0.1 (DNS rebinding).
+        (
+            format!("/?{t}"),
+            format!("evil.example:{port}"),
+            None,
+            false,
+            403,
+        ),
+        (
+            format!("/ws?{t}"),
+            format!("evil.example:{port}"),
+            Some(format!("http://evil.example:{port}")),
+            true,
+            403,
+        ),
+        (
+            format!("/first.jpg?width=8&height=8&{t}"),
+            "evil.example".into(),
+            None,
+            false,
+            403,
+        ),
+        (
+            format!("/?{t}"),
+            format!("127.0.0.1:{next_port}"),
+            None,
+            false,
+            403,
+        ),
+        // Another page's socket.
+        (
+            format!("/ws?{t}"),
+            own.clone(),
+            Some("http://evil.example".into()),
+            true,
+            403,
+        ),
+        (
+            format!("/ws?{t}"),
+            own.clone(),
+            Some(format!("http://127.0.0.1:{next_port}")),
+            true,
+            403,
+        ),
+        (
+            format!("/ws?{t}"),
+            own.clone(),
+            Some("null".into()),
+            true,
+            403,
+        ),
+        // No token, or a wrong one.
+        ("/".into(), own.clone(), None, false, 403),
+        (
+            "/ws".into(),
+            own.clone(),
+            Some(own_origin.clone()),
+            true,
+            403,
+        ),
+        (
+            "/first.jpg?width=8&height=8".into(),
+            own.clone(),
+            None,
+            false,
+            403,
+        ),
+        (
+            format!("/ws?token={}", "0".repeat(token.len())),
+            own.clone(),
+            Some(own_origin.clone()),
+            true,
+            403,
+        ),
+    ];
+    for (target, host, origin, upgrade, expected) in &cases {
+        let (status, rest) = http(
+            port,
+            &request(target, Some(host), origin.as_deref(), *upgrade),
+        );
+        assert!(
+            status.contains(&format!(" {expected} ")),
+            "{target}, Host {host}, Origin {origin:?}: {status}\n{rest}"
+        );
+    }
+    let (status, _) = http(port, &request(&format!("/?{t}"), None, None, false));
+    assert!(status.contains(" 403 "), "no Host: {status}");
+    let (_, page) = http(port, &request(&format!("/?{t}"), Some(&own), None, false));
+    assert!(
+        page.contains(&format!("/app.js?token={token}")),
+        "the page loads its script with the token: {page}"
+    );
+    let log = std::fs::read_to_string(d.join("view.log")).unwrap();
+    let refused = cases.iter().filter(|c| c.4 == 403).count() + 1;
+    assert_eq!(log.matches("refused").count(), refused, "{log}");
+    for expected in [
+        "evil.example",
+        "`Origin`",
+        "`Host`",
+        "no token",
+        "wrong token",
+    ] {
+        assert!(log.contains(expected), "{expected}: {log}");
+    }
+    assert!(!log.contains(&token), "the log shows the token: {log}");
+
+    // The socket answers a camera path only with finite numbers: keyframes whose times or
+    // positions are too far apart for doubles are refused, naming the field.
+    let (mut socket, _) = tungstenite::connect(ws_url(&viewer.url).as_str()).unwrap();
+    assert_eq!(next_text(&mut socket)["type"], "hello");
+    let key =
+        |x: f64, t: f64| json!({"c2w": [1,0,0,x, 0,1,0,0, 0,0,1,5, 0,0,0,1], "fov": 40, "time": t});
+    for (keys, field) in [
+        (vec![key(0.0, -1e308), key(1.0, 1e308)], "time"),
+        (vec![key(-1e308, 0.0), key(1e308, 1.0)], "c2w"),
+    ] {
+        let path =
+            json!({"type":"path","keyframes":keys,"fps":10,"seconds":1,"width":32,"height":24});
+        socket
+            .send(tungstenite::Message::text(path.to_string()))
+            .unwrap();
+        let answer = next_text(&mut socket);
+        assert_eq!(answer["type"], "error", "{answer}");
+        let message = answer["message"].as_str().unwrap();
+        assert!(
+            message.contains(field) && message.contains("too far apart"),
+            "{message}"
+        );
+    }
+}
+
+/// A web page served from elsewhere (another local port), visited in the same browser,
+/// tries to open the viewer's socket, with the run's token (as if it had learnt it) and
+/// without: every try is refused by the server (its log names the page's origin), while
+/// the same browser on the viewer's own address connects and draws.
+#[test]
+fn a_page_on_another_origin_cannot_open_the_viewers_socket() {
+    let Some(binary) = browser_binary() else {
+        println!("SKIPPED: no browser (chromium) found; `.ci/run` installs Debian's chromium");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    scene_and_dataset(d, (100, 7), "2", "32x24");
+    let log = std::fs::File::create(d.join("view.log")).unwrap();
+    let viewer = Viewer::start_logging(&["--scene", "scene.json", "--views", "ds"], d, log);
+    let port = port_of(&viewer.url);
+    let token = token_of(&viewer.url);
+    let page = format!(
+        r"<!doctype html><title>trying</title><script>
+const tries = {{ token: 'ws://127.0.0.1:{port}/ws?token={token}', none: 'ws://127.0.0.1:{port}/ws',
+  localhost: 'ws://localhost:{port}/ws?token={token}' }};
+window.outcome = {{}};
+const attempt = (name, url) => new Promise((done) => {{
+  let opened = false;
+  const end = (how) => {{ if (!(name in window.outcome)) window.outcome[name] = how; done(); }};
+  const ws = new WebSocket(url);
+  ws.onopen = () => {{ opened = true; }};
+  ws.onmessage = () => end('message');
+  ws.onerror = () => end(opened ? 'opened' : 'refused');
+  ws.onclose = () => end(opened ? 'opened' : 'refused');
+  setTimeout(() => end(opened ? 'opened' : 'pending'), 15000);
+}});
+Promise.all(Object.entries(tries).map(([n, u]) => attempt(n, u)))
+  .then(() => {{ document.title = 'done'; }});
+</script>"
+    );
+    let other = OtherSite::serve(page);
+    let mut browser = Browser::launch(&binary, &other.url, [400, 300]);
+    browser.wait_for("document.title === 'done'", "the other page's tries");
+    let outcome = browser.eval("window.outcome");
+    for name in ["token", "none", "localhost"] {
+        assert_eq!(outcome[name], "refused", "{name}: {outcome}");
+    }
+    let log = std::fs::read_to_string(d.join("view.log")).unwrap();
+    assert!(
+        log.contains(&format!("`Origin` \"http://127.0.0.1:{}\"", other.port)),
+        "the server refused the other page's origin: {log}"
+    );
+    // The same browser connects from the viewer's own page.
+    browser.call("Page.navigate", json!({"url": viewer.url}));
+    browser.wait_for(
+        "!!window.splat4dLast",
+        "a frame over the viewer's own socket",
+    );
+}
+
+/// A web site on another local port: answers every request with `page`; stops when dropped.
+struct OtherSite {
+    url: String,
+    port: u16,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl OtherSite {
+    fn serve(page: String) -> OtherSite {
+        use std::io::{Read, Write};
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        listener.set_nonblocking(true).unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = std::sync::Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                let Ok((mut stream, _)) = listener.accept() else {
+                    std::thread::sleep(Duration::from_millis(10));
+                    continue;
+                };
+                let _ = stream.set_nonblocking(false);
+                let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
+                let mut head = Vec::new();
+                let mut buf = [0_u8; 1024];
+                while !head.windows(4).any(|w| w == b"\r\n\r\n") {
+                    match stream.read(&mut buf) {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => head.extend_from_slice(&buf[..n]),
+                    }
+                }
+                let _ = write!(
+                    stream,
+                    "HTTP/1.1 200 OK\r\nContent-Type: text/html\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{page}",
+                    page.len()
+                );
+            }
+        });
+        OtherSite {
+            url: format!("http://127.0.0.1:{port}/"),
+            port,
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for OtherSite {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// How many descriptors this process may open (`/proc/self/limits`; 1024 where unknown).
+fn descriptor_limit() -> usize {
+    std::fs::read_to_string("/proc/self/limits")
+        .ok()
+        .and_then(|limits| {
+            let line = limits.lines().find(|l| l.starts_with("Max open files"))?;
+            line.split_whitespace().nth(3)?.parse().ok()
+        })
+        .unwrap_or(1024)
+}
+
+/// 1000 connections at once, half of them WebSocket upgrades held open and half silent
+/// (they never send a request): the server serves at most its bound, answers the rest 503
+/// and goes on; once they close, it serves its page and its socket again.
+#[test]
+fn a_thousand_connections_do_not_end_the_server() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let log = std::fs::File::create(d.join("view.log")).unwrap();
+    let blob = crate::common::data("blob.json");
+    let mut viewer = Viewer::start_logging(&["--scene", blob.to_str().unwrap()], d, log);
+    let port = port_of(&viewer.url);
+    let token = token_of(&viewer.url);
+    let own = format!("127.0.0.1:{port}");
+    let upgrade = upgrade_request(&own, Some(&format!("http://{own}")), &token);
+    // Held at once: 1000, or as many as this process may open (other tests run beside).
+    let at_once = 1000.min(descriptor_limit().saturating_sub(300)).max(200);
+    let bound = splat4d::view::server::MAX_CONNECTIONS;
+    let (mut upgraded, mut busy, mut opened) = (0, 0, 0);
+    while opened < 1000 {
+        let mut held = Vec::new();
+        let mut round_upgraded = 0;
+        for k in 0..at_once.min(1000 - opened) {
+            let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+            if k % 2 == 0 {
+                stream.write_all(upgrade.as_bytes()).unwrap();
+                let (status, _) = answer_head(&mut stream);
+                if status.contains(" 101 ") {
+                    round_upgraded += 1;
+                } else {
+                    assert!(status.contains(" 503 "), "connection {k}: {status:?}");
+                    busy += 1;
+                }
+            }
+            held.push(stream);
+        }
+        assert!(
+            round_upgraded <= bound,
+            "{round_upgraded} WebSockets open at once, beyond the bound {bound}"
+        );
+        assert!(
+            viewer.child.try_wait().unwrap().is_none(),
+            "the server ended"
+        );
+        opened += held.len();
+        upgraded += round_upgraded;
+        drop(held);
+    }
+    assert!(
+        upgraded > 0 && busy > 0,
+        "{upgraded} upgraded, {busy} refused"
+    );
+    println!("1000 connections: {upgraded} WebSockets served, {busy} upgrades answered 503");
+    // The connections closed, the server serves its page and its socket again.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let (status, body) = http(
+            port,
+            &request(&format!("/?token={token}"), Some(&own), None, false),
+        );
+        if status.contains(" 200 ") {
+            assert!(body.contains("app.js"), "{body}");
+            break;
+        }
+        assert!(status.contains(" 503 "), "{status}");
+        assert!(
+            Instant::now() < deadline,
+            "still busy 30 s after the connections closed"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (mut socket, _) = tungstenite::connect(ws_url(&viewer.url).as_str()).unwrap();
+    let hello = next_text(&mut socket);
+    let c2w = &hello["camera"]["c2w"];
+    let frame = json!({"type":"frame","id":1,"c2w":c2w,"fov":40,"width":16,"height":12,"time":0});
+    socket
+        .send(tungstenite::Message::text(frame.to_string()))
+        .unwrap();
+    let (header, _) = next_binary(&mut socket);
+    assert_eq!(header["width"], 16, "{header}");
+    let log = std::fs::read_to_string(d.join("view.log")).unwrap();
+    assert!(log.contains("with 503"), "{log}");
+}
+
+/// Under an address-space cap (`ulimit -v`) 64 MiB above what the idle server maps, the
+/// operating system soon refuses the threads of new pages: 200 WebSocket upgrades are each
+/// answered 101 or 503 (the log says no thread could be had), never a panic, and the server
+/// serves its page and socket once they close.
+#[cfg(target_os = "linux")]
+#[test]
+fn pages_the_system_refuses_a_thread_are_answered_503() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let blob = crate::common::data("blob.json");
+    let args = ["--scene", blob.to_str().unwrap()];
+    let mapped_kib = {
+        let viewer = Viewer::start(&args, d);
+        let status =
+            std::fs::read_to_string(format!("/proc/{}/status", viewer.child.id())).unwrap();
+        let line = status.lines().find(|l| l.starts_with("VmSize:")).unwrap();
+        line.split_whitespace()
+            .nth(1)
+            .unwrap()
+            .parse::<u64>()
+            .unwrap()
+    };
+    let cap_kib = mapped_kib + 64 * 1024;
+    let mut command = Command::new("sh");
+    command.args([
+        "-c",
+        &format!("ulimit -v {cap_kib} && exec \"$0\" \"$@\""),
+        env!("CARGO_BIN_EXE_splat4d"),
+        "view",
+    ]);
+    command.args(args).args(["--port", "0"]);
+    let log = std::fs::File::create(d.join("view.log")).unwrap();
+    let mut viewer = Viewer::run(command, d, log);
+    let port = port_of(&viewer.url);
+    let token = token_of(&viewer.url);
+    let own = format!("127.0.0.1:{port}");
+    let upgrade = upgrade_request(&own, None, &token);
+    let (mut upgraded, mut busy) = (0, 0);
+    let mut held = Vec::new();
+    for k in 0..200 {
+        use std::io::Write;
+        let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        stream.write_all(upgrade.as_bytes()).unwrap();
+        let (status, _) = answer_head(&mut stream);
+        if status.contains(" 101 ") {
+            upgraded += 1;
+        } else {
+            assert!(status.contains(" 503 "), "upgrade {k}: {status:?}");
+            busy += 1;
+        }
+        held.push(stream);
+    }
+    assert!(
+        viewer.child.try_wait().unwrap().is_none(),
+        "the server ended"
+    );
+    let log = std::fs::read_to_string(d.join("view.log")).unwrap();
+    println!("under {cap_kib} KiB of address space: {upgraded} pages served, {busy} answered 503");
+    assert!(log.contains("no thread"), "no thread was refused: {log}");
+    drop(held);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !http(
+        port,
+        &request(&format!("/?token={token}"), Some(&own), None, false),
+    )
+    .0
+    .contains(" 200 ")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "still busy 30 s after the pages left"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (mut socket, _) = tungstenite::connect(ws_url(&viewer.url).as_str()).unwrap();
+    assert_eq!(next_text(&mut socket)["type"], "hello");
 }

@@ -3,6 +3,9 @@
 'use strict';
 
 const $ = (id) => document.getElementById(id);
+// The run's secret, from the address the command printed: the server answers only requests
+// that carry it.
+const TOKEN = encodeURIComponent(new URLSearchParams(location.search).get('token') || '');
 window.splat4dFrames = 0;
 
 // Camera: eye and an orthonormal OpenGL basis (x right, y up, z backward), orbiting `centre`.
@@ -86,7 +89,7 @@ function setPlaying(on) {
 // --- the socket ----------------------------------------------------------------------------
 let ws = null;
 function connect() {
-  ws = new WebSocket(`ws://${location.host}/ws`);
+  ws = new WebSocket(`ws://${location.host}/ws?token=${TOKEN}`);
   ws.binaryType = 'arraybuffer';
   ws.onmessage = (ev) => (typeof ev.data === 'string' ? onText(JSON.parse(ev.data)) : onBinary(ev.data));
   ws.onclose = () => { $('status').textContent = 'disconnected'; };
@@ -156,7 +159,9 @@ function onBinary(buffer) {
       if (img.src) URL.revokeObjectURL(img.src);
       img.src = URL.createObjectURL(parts[name]);
     }
-    $('psnr').textContent = `${st.views[header.view].name}: PSNR ${header.psnr.toFixed(2)} dB`;
+    // An exact match has an infinite PSNR, which JSON carries as null.
+    const psnr = header.psnr === null ? '∞' : header.psnr.toFixed(2);
+    $('psnr').textContent = `${st.views[header.view].name}: PSNR ${psnr} dB`;
     $('compare').hidden = false;
   }
 }
@@ -430,7 +435,7 @@ function firstFrame() {
     canvas.getContext('2d').drawImage(img, 0, 0, w, h);
     window.splat4dFrames += 1;
   };
-  img.src = `/first.jpg?width=${w}&height=${h}`;
+  img.src = `/first.jpg?width=${w}&height=${h}&token=${TOKEN}`;
   // Shown over the canvas until the socket's first frame (an image is on screen as soon as
   // it loads; a canvas may be presented a frame later).
   canvas.after(img);
