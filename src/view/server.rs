@@ -335,7 +335,7 @@ fn start_view(showing: &Showing) -> (Option<[[f64; 4]; 4]>, crate::scenes::paths
     };
     let circle = framing_circle(
         scene,
-        &[t0, 0.5 * (t0 + t1), t1],
+        &[t0, crate::scenes::paths::lerp(t0, t1, 0.5), t1],
         showing.options.cutoff,
         &lens,
         scene.up.unwrap_or_default(),
