@@ -637,7 +637,7 @@ mod tests {
         photo(&d.join("images/a.png"));
         photo(&d.join("images/b.png"));
         let (with, what) = fit_memory(&request(d)).unwrap();
-        assert!(what.contains("2 frames"), "{what}");
+        assert!(what.contains("3 frames"), "{what}");
         std::fs::remove_dir_all(d.join("images")).unwrap();
         let (without, _) = fit_memory(&request(d)).unwrap();
         // Two distinct files (a.png named twice is decoded once).
@@ -661,9 +661,16 @@ mod tests {
         let transforms = serde_json::json!({"camera_angle_x": 0.8, "frames": [frame(0), frame(1)]});
         std::fs::write(d.join("transforms.json"), transforms.to_string()).unwrap();
         let (with, _) = fit_memory(&request(d)).unwrap();
-        std::fs::remove_file(d.join("m.png")).unwrap();
+        let unmasked = |k: u32| {
+            serde_json::json!({"file_path": "a.png", "time": k,
+                "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]})
+        };
+        let transforms =
+            serde_json::json!({"camera_angle_x": 0.8, "frames": [unmasked(0), unmasked(1)]});
+        std::fs::write(d.join("transforms.json"), transforms.to_string()).unwrap();
         let (without, _) = fit_memory(&request(d)).unwrap();
-        // One f32 weight a pixel for each of the two frames.
-        assert_eq!(with - without, 2 * 64 * 48 * 4);
+        // One f32 weight a pixel for each of the two frames, and the mask's decode and
+        // weights while the largest photo is prepared (32 bytes a pixel).
+        assert_eq!(with - without, 2 * 64 * 48 * 4 + 32 * 64 * 48);
     }
 }
