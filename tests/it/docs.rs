@@ -172,3 +172,27 @@ fn the_fitting_manuals_defaults_are_the_codes() {
         }
     }
 }
+
+/// README reads as a map: at most 200 lines, no table cell over 400 characters.
+#[test]
+fn the_readme_is_short_and_its_cells_too() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    assert!(
+        readme.lines().count() <= 200,
+        "{} lines",
+        readme.lines().count()
+    );
+    for (n, line) in readme.lines().enumerate() {
+        if line.starts_with('|') {
+            for cell in line.split('|') {
+                assert!(
+                    cell.chars().count() <= 400,
+                    "README.md line {}: a cell of {} characters",
+                    n + 1,
+                    cell.chars().count()
+                );
+            }
+        }
+    }
+}
