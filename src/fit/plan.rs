@@ -187,49 +187,23 @@ impl FitPlan {
     /// the rounds' window inside the run; a final rate factor > 0.
     fn validate_rates(&self) -> Result<()> {
         let r = &self.rates;
-        for (field, value) in [
-            ("lr_mean", r.mean),
-            ("lr_time", r.time),
-            ("lr_amplitude", r.amplitude),
-            ("lr_velocity", r.velocity),
-            ("lr_scale", r.scale),
-            ("lr_background", r.background),
-            ("densify_threshold", self.rounds.gradient_threshold),
-            ("merge_tolerance", self.rounds.merge_tolerance),
-            ("max_growth", self.rounds.max_growth),
-            ("prune_below", self.rounds.prune_below),
-            ("min_scale", self.min_scale.unwrap_or(0.0)),
-        ] {
-            check_non_negative_setting(field, value)?;
-            // Adam moves a parameter by about its rate each step: beyond this every
-            // parameter leaves the finite numbers within a few steps.
-            if field.starts_with("lr_") && value > MAX_RATE {
-                return Err(Error::setting(
-                    &[field],
-                    format!(
-                        "`{field}` {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step; the defaults are around 1e-2)"
-                    ),
-                ));
-            }
-        }
-        for (field, value) in [
-            ("densify_from", self.rounds.from),
-            ("densify_until", self.rounds.until),
-        ] {
-            if !(0.0..=1.0).contains(&value) {
-                return Err(Error::setting(
-                    &[field],
-                    format!("`{field}` {value} must be in [0, 1]"),
-                ));
-            }
-        }
-        let f = self.final_rate_factor;
-        if !(f.is_finite() && f > 0.0) {
-            return Err(Error::setting(
-                &["lr_final"],
-                format!("`lr_final` {f} must be finite and > 0"),
-            ));
-        }
+        check_fit_numbers(
+            &[
+                ("lr_mean", r.mean),
+                ("lr_time", r.time),
+                ("lr_amplitude", r.amplitude),
+                ("lr_velocity", r.velocity),
+                ("lr_scale", r.scale),
+                ("lr_background", r.background),
+                ("densify_threshold", self.rounds.gradient_threshold),
+                ("merge_tolerance", self.rounds.merge_tolerance),
+                ("max_growth", self.rounds.max_growth),
+                ("prune_below", self.rounds.prune_below),
+                ("min_scale", self.min_scale.unwrap_or(0.0)),
+            ],
+            [self.rounds.from, self.rounds.until],
+            self.final_rate_factor,
+        )?;
         if !self.rounds.min_improvement.is_finite() {
             return Err(Error::setting(
                 &["min_improvement"],
@@ -430,6 +404,44 @@ impl FitPlan {
             }
         }
     }
+}
+
+/// The checks every fit's numbers pass, whichever blend: each of `non_negative` finite and
+/// ≥ 0, a rate (`lr_*`) at most [`MAX_RATE`]; the density rounds' window `[from, until]`
+/// inside the run; the final rate factor finite and > 0. Errors name the setting.
+pub fn check_fit_numbers(
+    non_negative: &[(&'static str, f64)],
+    [from, until]: [f64; 2],
+    final_rate_factor: f64,
+) -> Result<()> {
+    for &(field, value) in non_negative {
+        check_non_negative_setting(field, value)?;
+        // Adam moves a parameter by about its rate each step: beyond this every parameter
+        // leaves the finite numbers within a few steps.
+        if field.starts_with("lr_") && value > MAX_RATE {
+            return Err(Error::setting(
+                &[field],
+                format!(
+                    "`{field}` {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step; the defaults are around 1e-2)"
+                ),
+            ));
+        }
+    }
+    for (field, value) in [("densify_from", from), ("densify_until", until)] {
+        if !(0.0..=1.0).contains(&value) {
+            return Err(Error::setting(
+                &[field],
+                format!("`{field}` {value} must be in [0, 1]"),
+            ));
+        }
+    }
+    if !(final_rate_factor.is_finite() && final_rate_factor > 0.0) {
+        return Err(Error::setting(
+            &["lr_final"],
+            format!("`lr_final` {final_rate_factor} must be finite and > 0"),
+        ));
+    }
+    Ok(())
 }
 
 /// The per-channel median of the border pixels (the outermost row and column on each

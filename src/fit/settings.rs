@@ -32,9 +32,9 @@
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
-use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, MAX_RATE};
+use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, check_fit_numbers};
 use crate::fit::train::FitMode;
-use crate::model::{Blend, Error, Result, check_non_negative_setting};
+use crate::model::{Blend, Error, Result};
 use crate::render::RenderOptions;
 
 /// Settings every blend's fit acts on.
@@ -373,55 +373,30 @@ impl FitSettings {
     }
 }
 
-/// The alpha options' numbers in range: rates finite, ≥ 0 and at most [`MAX_RATE`]; the
-/// density window inside the run; fractions ≥ 0; SH a count the model has; a final rate
-/// factor > 0.
+/// The alpha options' numbers in range ([`check_fit_numbers`]) and SH a count the model
+/// has.
 fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
     options.render.validate()?;
     let r = &options.rates;
-    for (field, value) in [
-        ("lr_mean", r.mean),
-        ("lr_time", r.time),
-        ("lr_velocity", r.velocity),
-        ("lr_scale", r.scale),
-        ("lr_rotation", r.rotation),
-        ("lr_opacity", r.opacity),
-        ("lr_amplitude", r.colour),
-        ("lr_sh", r.sh),
-        ("densify_threshold", options.densify_threshold),
-        ("max_growth", options.densify_fraction),
-        ("prune_below", options.prune_opacity),
-        ("percent_dense", options.percent_dense),
-        ("time_split_fraction", options.time_split_fraction),
-    ] {
-        check_non_negative_setting(field, value)?;
-        if field.starts_with("lr_") && value > MAX_RATE {
-            return Err(Error::setting(
-                &[field],
-                format!(
-                    "`{field}` {value:e} is more than {MAX_RATE} (Adam moves a parameter by about the rate each step)"
-                ),
-            ));
-        }
-    }
-    for (field, value) in [
-        ("densify_from", options.densify_from),
-        ("densify_until", options.densify_until),
-    ] {
-        if !(0.0..=1.0).contains(&value) {
-            return Err(Error::setting(
-                &[field],
-                format!("`{field}` {value} must be in [0, 1]"),
-            ));
-        }
-    }
-    let f = options.final_rate_factor;
-    if !(f.is_finite() && f > 0.0) {
-        return Err(Error::setting(
-            &["lr_final"],
-            format!("`lr_final` {f} must be finite and > 0"),
-        ));
-    }
+    check_fit_numbers(
+        &[
+            ("lr_mean", r.mean),
+            ("lr_time", r.time),
+            ("lr_velocity", r.velocity),
+            ("lr_scale", r.scale),
+            ("lr_rotation", r.rotation),
+            ("lr_opacity", r.opacity),
+            ("lr_amplitude", r.colour),
+            ("lr_sh", r.sh),
+            ("densify_threshold", options.densify_threshold),
+            ("max_growth", options.densify_fraction),
+            ("prune_below", options.prune_opacity),
+            ("percent_dense", options.percent_dense),
+            ("time_split_fraction", options.time_split_fraction),
+        ],
+        [options.densify_from, options.densify_until],
+        options.final_rate_factor,
+    )?;
     if !crate::model::scene::SH_COUNTS.contains(&options.sh_count) {
         return Err(Error::setting(
             &["sh"],

@@ -65,6 +65,14 @@ use crate::model::distortion::{Distortion, RemapTable};
 use crate::model::error::{Error, MAX_QUOTE, Result, check_finite, cut};
 use crate::model::{Blend, Dataset, DatasetPoint, Image, View};
 
+/// The transforms files a dataset folder may hold: the three splits', then the single one.
+const TRANSFORMS_FILES: [&str; 4] = [
+    "transforms_train.json",
+    "transforms_val.json",
+    "transforms_test.json",
+    "transforms.json",
+];
+
 /// The three splits, in file order.
 pub const SPLITS: [&str; 3] = ["train", "val", "test"];
 
@@ -1071,12 +1079,7 @@ pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {
     }
     // A transforms file that is a FIFO, socket, device or folder is refused, not taken for
     // a missing one.
-    for name in [
-        "transforms_train.json",
-        "transforms_val.json",
-        "transforms_test.json",
-        "transforms.json",
-    ] {
+    for name in TRANSFORMS_FILES {
         let path = dir.join(name);
         if let Some(kind) = crate::io::input::special_kind(&path) {
             return Err(Error::malformed(
@@ -1333,12 +1336,7 @@ impl DatasetFiles {
 #[must_use]
 pub fn dataset_inputs(dir: &Path) -> DatasetFiles {
     let mut files = DatasetFiles::default();
-    for name in [
-        "transforms_train.json",
-        "transforms_val.json",
-        "transforms_test.json",
-        "transforms.json",
-    ] {
+    for name in TRANSFORMS_FILES {
         let path = dir.join(name);
         files.descriptions.push(path.clone());
         if !path.is_file() {
