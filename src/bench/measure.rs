@@ -16,7 +16,7 @@ use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::Scene;
 use crate::model::{Blend, Image};
-use crate::reference::alpha::reference_alpha_at_pixels;
+use crate::reference::composite::reference_alpha_at_pixels;
 use crate::reference::dense::dense_render;
 use crate::reference::{ERROR_BOUND, reference_at_pixels};
 use crate::render::{RenderContext, RenderOptions};

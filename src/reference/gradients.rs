@@ -5,7 +5,7 @@ use glam::{DMat2, DMat3, DQuat, DVec2, DVec3, DVec4};
 
 use crate::backward::Gradients;
 use crate::model::{Camera, Scene};
-use crate::reference::pixels::{quadratic_form, render_reference};
+use crate::reference::raster::{quadratic_form, render_reference};
 use crate::reference::{ReferenceKernel, reference_kernels};
 use crate::render::RenderOptions;
 

@@ -6,25 +6,28 @@
 //! |---|---|
 //! | [`crate::slice`] (SPEC §2) | [`slice::reference_slice`] |
 //! | [`crate::project`] (SPEC §4) | [`project::reference_project`] |
-//! | [`crate::tiles`] + [`crate::raster`] (SPEC §5) | [`pixels::render_reference`], [`pixels::reference_at_pixels`] |
+//! | [`crate::tiles`] + [`crate::raster`] (SPEC §5) | [`raster::render_reference`], [`raster::reference_at_pixels`] |
+//! | [`crate::colour`] (SPEC §8) | [`colour::reference_alpha_kernels`] |
+//! | [`crate::composite`] (SPEC §8) | [`composite::render_reference_alpha`], [`composite::composite_traced`] |
 //! | [`crate::backward`] (SPEC §6) | [`gradients::reference_loss_and_gradients`] |
 //!
 //! [`dense`] is the seed-style baseline the benches time against the tiles (every kernel at
 //! every pixel, but the fast f32 arithmetic): a speed reference, not an accuracy one.
 
-pub mod alpha;
+pub mod colour;
+pub mod composite;
 pub mod dense;
 pub mod gradients;
-pub mod pixels;
 pub mod project;
+pub mod raster;
 pub mod slice;
 
 pub use gradients::{mse, reference_loss_and_gradients};
-pub use pixels::{
+pub use project::{ReferenceKernel, reference_project};
+pub use raster::{
     BORDERLINE_BAND, ERROR_BOUND, ErrorBound, PairMask, ReferenceImage, is_borderline,
     kernel_contribution, quadratic_form, reference_at_pixels, render_reference,
 };
-pub use project::{ReferenceKernel, reference_project};
 pub use slice::{ReferenceSlice, reference_slice};
 
 use crate::model::{Camera, Scene};

@@ -3,7 +3,7 @@
 
 use rand::RngExt;
 use splat4d::model::random::seeded_rng;
-use splat4d::reference::alpha::{ReferenceAlphaImage, render_reference_alpha};
+use splat4d::reference::composite::{ReferenceAlphaImage, render_reference_alpha};
 use splat4d::render::{RenderContext, RenderOptions};
 use splat4d::{Blend, Camera, Image, Kernel, Scene};
 
@@ -507,10 +507,10 @@ pub fn compare_with_the_twin(
     grads: &splat4d::Gradients,
     background: bool,
 ) -> f64 {
-    use splat4d::reference::alpha::composite_traced;
+    use splat4d::reference::composite::composite_traced;
     let options = RenderOptions::default();
     let traced = render_reference_alpha(scene, camera, tau, &options);
-    let kernels = splat4d::reference::alpha::reference_alpha_kernels(scene, camera, tau, &options);
+    let kernels = splat4d::reference::colour::reference_alpha_kernels(scene, camera, tau, &options);
     let order: Vec<usize> = kernels.iter().map(|k| k.kernel.index).collect();
     let loss = |scene: &Scene| {
         let pixels = composite_traced(scene, camera, tau, &options, &order, &traced.traces);
