@@ -183,6 +183,17 @@ pub fn sanitize_label(label: &str, fallback: &str) -> String {
     }
 }
 
+/// A scene time `tau` for a file name: two decimals (`0.50`), or in scientific form beyond a
+/// million (`1.00e308`, where two decimals would be a 312-character name).
+#[must_use]
+pub fn time_label(tau: f64) -> String {
+    if tau.abs() < 1e6 {
+        format!("{tau:.2}")
+    } else {
+        format!("{tau:.2e}")
+    }
+}
+
 /// `names` made distinct: a name seen before gets `_2`, `_3`, … (compared without case, so
 /// they stay distinct on case-insensitive file systems too).
 #[must_use]
@@ -668,6 +679,8 @@ mod tests {
 
     #[test]
     fn labels_become_safe_distinct_names() {
+        assert_eq!(time_label(0.5), "0.50");
+        assert_eq!(time_label(-1e308), "-1.00e308");
         assert_eq!(sanitize_label("..", "path"), "path");
         assert_eq!(sanitize_label(".", "path"), "path");
         assert_eq!(sanitize_label("", "path"), "path");

@@ -5,7 +5,8 @@ use std::fmt;
 use std::path::PathBuf;
 
 use crate::io::output::{
-    Outputs, Staging, Stamp, check_beside, check_replaceable, remove_if_unchanged, unique_names,
+    Outputs, Staging, Stamp, check_beside, check_replaceable, remove_if_unchanged, time_label,
+    unique_names,
 };
 use crate::io::path_file::{PathCamera, load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
@@ -98,16 +99,6 @@ pub const MAX_ORBIT_FRAMES: usize = 10 * crate::scenes::paths::MAX_PATH_FRAMES;
 
 /// A named camera path, with its own frame rate when its file gives one.
 type NamedPath = (String, Vec<PathFrame>, Option<u32>);
-
-/// `tau` for a file name: two decimals (`0.50`), or in scientific form beyond a million
-/// (`1.00e308`, where two decimals would be a 312-character name).
-fn time_label(tau: f64) -> String {
-    if tau.abs() < 1e6 {
-        format!("{tau:.2}")
-    } else {
-        format!("{tau:.2e}")
-    }
-}
 
 /// The named camera paths of `request`.
 fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {

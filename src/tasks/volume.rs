@@ -85,7 +85,10 @@ pub fn write_volumes(request: &VolumeRequest) -> Result<VolumeSummary> {
             .times
             .iter()
             .map(|tau| {
-                crate::io::output::sanitize_label(&format!("{name}_volume_t{tau:.2}"), "volume")
+                crate::io::output::sanitize_label(
+                    &format!("{name}_volume_t{}", crate::io::output::time_label(*tau)),
+                    "volume",
+                )
             })
             .collect::<Vec<_>>(),
     );
