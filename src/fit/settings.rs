@@ -199,38 +199,41 @@ impl FitSettings {
     /// [`ALPHA_ONLY`]) that only the additive fit or only the alpha fit acts on.
     fn chosen(&self) -> (Vec<&'static str>, Vec<&'static str>) {
         let r = &self.rates;
+        // In the order of [`ADDITIVE_ONLY`] and [`ALPHA_ONLY`], whose names these are.
         let additive = [
-            ("mode", self.mode.is_some()),
-            ("fit_velocity", self.fit_velocity),
-            ("fit_scale", self.fit_scale),
-            ("adaptive", self.adaptive),
-            ("min_improvement", self.min_improvement.is_some()),
-            ("merge_tolerance", self.merge_tolerance.is_some()),
-            ("min_scale", self.min_scale.is_some()),
-            ("box", self.bounds.is_some()),
-            ("time_range", self.time_range.is_some()),
-            ("init_scale", self.init_scale.is_some()),
-            ("init_amplitude", self.init_amplitude.is_some()),
-            ("lr_background", r.background.is_some()),
-            ("freeze_background", self.freeze_background),
+            self.mode.is_some(),
+            self.fit_velocity,
+            self.fit_scale,
+            self.adaptive,
+            self.min_improvement.is_some(),
+            self.merge_tolerance.is_some(),
+            self.min_scale.is_some(),
+            self.bounds.is_some(),
+            self.time_range.is_some(),
+            self.init_scale.is_some(),
+            self.init_amplitude.is_some(),
+            r.background.is_some(),
+            self.freeze_background,
         ];
         let alpha = [
-            ("sh", self.sh.is_some()),
-            ("sh_raise_every", self.sh_raise_every.is_some()),
-            ("lr_opacity", r.opacity.is_some()),
-            ("lr_rotation", r.rotation.is_some()),
-            ("lr_sh", r.sh.is_some()),
-            ("opacity_reset_every", self.opacity_reset_every.is_some()),
-            ("percent_dense", self.percent_dense.is_some()),
-            ("time_split_fraction", self.time_split_fraction.is_some()),
+            self.sh.is_some(),
+            self.sh_raise_every.is_some(),
+            r.opacity.is_some(),
+            r.rotation.is_some(),
+            r.sh.is_some(),
+            self.opacity_reset_every.is_some(),
+            self.percent_dense.is_some(),
+            self.time_split_fraction.is_some(),
         ];
-        let given = |list: &[(&'static str, bool)]| {
-            list.iter()
-                .filter(|(_, on)| *on)
+        let given = |names: &[&'static str], on: &[bool]| {
+            names
+                .iter()
+                .zip(on)
+                .filter(|(_, on)| **on)
                 .map(|(name, _)| *name)
                 .collect()
         };
-        (given(&additive), given(&alpha))
+        (given(&ADDITIVE_ONLY, &additive), given(&ALPHA_ONLY, &alpha))
     }
 
     /// An error naming the first chosen setting that `blend`'s fit cannot act on (`why`
