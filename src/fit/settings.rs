@@ -32,8 +32,9 @@
 use crate::fit::adam::LearningRates;
 use crate::fit::adaptive::AdaptiveOptions;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
-use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, check_fit_numbers};
+use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, Init, check_fit_numbers};
 use crate::fit::train::FitMode;
+use crate::model::error::{MAX_QUOTE, cut};
 use crate::model::{Blend, Error, Result};
 use crate::render::RenderOptions;
 
@@ -262,6 +263,99 @@ impl FitSettings {
                 ))
             }
         }
+    }
+
+    /// An error naming the first chosen setting that the start `init` (`init_text` as the
+    /// caller wrote it) leaves without effect in `blend`'s fit, or `Ok`: a start count with
+    /// a start that has its own; the additive random start's shape with a scene start; the
+    /// additive density rounds' settings where they do not run (a random or scene start
+    /// without `adaptive`); a rate of a group the additive mode does not fit; the SH's rate
+    /// and schedule of an alpha fit without SH.
+    pub fn check_start(&self, blend: Blend, init: &Init, init_text: &str) -> Result<()> {
+        let init_text = cut(init_text, MAX_QUOTE);
+        let refuse = |field: &'static str, why: String| {
+            Err(Error::setting(
+                &[field],
+                format!("`{field}` {why}, or leave `{field}` out"),
+            ))
+        };
+        if self.start_kernels.is_some() && *init != Init::Auto {
+            return refuse(
+                "start_kernels",
+                format!(
+                    "sizes an `auto` start, and `init` is {init_text}: give random:N for N kernels"
+                ),
+            );
+        }
+        if blend == Blend::Alpha {
+            let sh_count = self.sh.unwrap_or(DEFAULT_ALPHA.sh_count);
+            let sh_settings = [
+                ("lr_sh", self.rates.sh.is_some()),
+                ("sh_raise_every", self.sh_raise_every.is_some()),
+            ];
+            return match sh_settings.iter().find(|(_, given)| *given) {
+                Some(&(field, _)) if sh_count == 0 => refuse(
+                    field,
+                    "acts on the SH coefficients, and `sh` is 0: give `sh` 3, 8 or 15".into(),
+                ),
+                _ => Ok(()),
+            };
+        }
+        let start_shape = [
+            ("box", self.bounds.is_some()),
+            ("time_range", self.time_range.is_some()),
+            ("init_scale", self.init_scale.is_some()),
+            ("init_amplitude", self.init_amplitude.is_some()),
+        ];
+        if matches!(init, Init::Scene(_))
+            && let Some(&(field, _)) = start_shape.iter().find(|(_, given)| *given)
+        {
+            return refuse(
+                field,
+                format!("shapes a random or `auto` start, and `init` is {init_text}"),
+            );
+        }
+        let rounds = [
+            ("densify_every", self.densify_every.is_some()),
+            ("densify_from", self.densify_from.is_some()),
+            ("densify_until", self.densify_until.is_some()),
+            ("densify_threshold", self.densify_threshold.is_some()),
+            ("max_growth", self.max_growth.is_some()),
+            ("prune_below", self.prune_below.is_some()),
+            ("max_kernels", self.max_kernels.is_some()),
+            ("min_improvement", self.min_improvement.is_some()),
+            ("merge_tolerance", self.merge_tolerance.is_some()),
+            ("min_scale", self.min_scale.is_some()),
+        ];
+        if *init != Init::Auto
+            && !self.adaptive
+            && let Some(&(field, _)) = rounds.iter().find(|(_, given)| *given)
+        {
+            return refuse(
+                field,
+                format!(
+                    "acts on the density rounds, which an additive fit from `init` {init_text} runs only with `adaptive`: add `adaptive`"
+                ),
+            );
+        }
+        let mode = self.additive().mode_for(init);
+        if self.rates.velocity.is_some() && !self.fit_velocity && mode != FitMode::Velocity {
+            return refuse(
+                "lr_velocity",
+                format!(
+                    "acts when the velocities are fitted, and this additive fit's mode is {mode}: add `fit_velocity` or `mode` velocity"
+                ),
+            );
+        }
+        if self.rates.scale.is_some() && !self.fit_scale && mode == FitMode::Paper {
+            return refuse(
+                "lr_scale",
+                format!(
+                    "acts when the scales are fitted, and this additive fit's mode is {mode}: add `fit_scale` or `mode` static"
+                ),
+            );
+        }
+        Ok(())
     }
 
     /// Every chosen number in range for the blend it acts on (rates, fractions, counts,

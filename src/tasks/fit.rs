@@ -209,15 +209,6 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
     };
-    if request.settings.start_kernels.is_some() && !matches!(init, Init::Auto) {
-        return Err(crate::model::Error::setting(
-            &["start_kernels"],
-            format!(
-                "`start_kernels` sizes an `auto` start, and `init` is {}: give random:N for N kernels, or leave `start_kernels` out",
-                crate::model::error::cut(&request.init, crate::model::error::MAX_QUOTE)
-            ),
-        ));
-    }
     let (blend, why) = match (request.blend, &init, dataset.blend) {
         (Some(blend), _, _) => (blend, "`blend` chose it"),
         (None, Init::Scene(scene), _) => (scene.blend, "the start scene's"),
@@ -234,10 +225,12 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     }
     if blend == Blend::Alpha {
         let options = request.settings.alpha_options(why)?;
+        request.settings.check_start(blend, &init, &request.init)?;
         progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
         return fit_alpha_dataset(request, &options, &dataset, init, up, server, progress);
     }
     let plan = &request.settings.additive_plan(why)?;
+    request.settings.check_start(blend, &init, &request.init)?;
     let prepared = plan.prepare(init, &dataset.train)?;
     let mut scene = prepared.scene;
     let up = up.or(scene.up);

@@ -233,3 +233,80 @@ fn the_issues_example_lr_flags_now_change_the_default_fit() {
         "{error}"
     );
 }
+
+/// A flag that the start leaves without effect is refused naming it: the additive density
+/// rounds' flags without `--adaptive` from a random start, the random start's shape with a
+/// scene start, the rates of groups the additive mode does not fit, the SH's rate and
+/// schedule without SH.
+#[test]
+fn flags_the_start_or_mode_leaves_without_effect_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    let additive = |extra: &[&'static str]| -> Vec<&'static str> {
+        let mut args = vec!["--blend", "additive", "--init", "random:20"];
+        args.extend_from_slice(extra);
+        args
+    };
+    // BASE gives --densify-every and --densify-from: an additive random start runs rounds
+    // only with --adaptive, so these are refused there and act with it.
+    let error = fit(dir.path(), "r", &additive(&[])).expect_err("refused");
+    assert!(
+        error.contains("--densify-every acts on the density rounds")
+            && error.contains("add --adaptive"),
+        "{error}"
+    );
+    fit(dir.path(), "r", &additive(&["--adaptive"])).expect("rounds run with --adaptive");
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--adaptive", "--lr-velocity", "0.01"],
+            "--lr-velocity acts when the velocities",
+        ),
+        (
+            &["--adaptive", "--lr-scale", "0.01"],
+            "--lr-scale acts when the scales",
+        ),
+        (
+            &["--blend", "alpha", "--sh", "0", "--lr-sh", "0.01"],
+            "--lr-sh acts on the SH",
+        ),
+        (
+            &["--blend", "alpha", "--sh", "0", "--sh-raise-every", "1"],
+            "--sh-raise-every acts",
+        ),
+    ];
+    for (extra, needle) in cases {
+        let args = if extra[0] == "--blend" {
+            extra.to_vec()
+        } else {
+            additive(extra)
+        };
+        let error = fit(dir.path(), "r", &args).expect_err("refused");
+        assert!(
+            error.starts_with("exit Some(2)") && error.contains(needle),
+            "{extra:?}: {error}"
+        );
+    }
+    // The modes that fit those groups take the same rates.
+    for extra in [
+        &["--adaptive", "--fit-velocity", "--lr-velocity", "0.01"][..],
+        &["--adaptive", "--mode", "static", "--lr-scale", "0.01"],
+    ] {
+        fit(dir.path(), "r", &additive(extra)).unwrap_or_else(|e| panic!("{extra:?}: {e}"));
+    }
+    // A scene start has no random start to shape.
+    let (additive_start, _) = fit(dir.path(), "r", &additive(&["--adaptive"])).unwrap();
+    std::fs::write(dir.path().join("additive_start.json"), additive_start).unwrap();
+    let from_scene = [
+        "--blend",
+        "additive",
+        "--init",
+        "additive_start.json",
+        "--box",
+        "0,0,0,1,1,1",
+    ];
+    let error = fit(dir.path(), "r", &from_scene).expect_err("refused");
+    assert!(
+        error.contains("--box shapes a random or `auto` start"),
+        "{error}"
+    );
+}
