@@ -7,7 +7,8 @@
 use std::time::Instant;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use splat4d::fit::adam::{Adam, AdamConfig, LearningRates};
+use splat4d::fit::adam::{Adam, AdamConfig};
+use splat4d::fit::additive::{AdditiveFitOptions, LearningRates};
 use splat4d::fit::loss::mse_with_gradient;
 use splat4d::scenes::synthetic::{bench_camera, bench_scene};
 use splat4d::{Gradients, RenderContext, RenderOptions};
@@ -26,14 +27,18 @@ fn training_step(c: &mut Criterion) {
 fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
     let camera = bench_camera(w, h);
     let options = RenderOptions::default();
-    let rates = LearningRates {
-        mean: 1e-3,
-        time: 1e-3,
-        amplitude: 1e-3,
-        velocity: 1e-3,
-        scale: 0.0,
-        background: 0.0,
-    };
+    let groups = AdditiveFitOptions {
+        learning_rates: LearningRates {
+            mean: 1e-3,
+            time: 1e-3,
+            amplitude: 1e-3,
+            velocity: 1e-3,
+            scale: 0.0,
+            background: 0.0,
+        },
+        ..AdditiveFitOptions::default()
+    }
+    .groups();
     let mut group = c.benchmark_group(format!("train_{w}x{h}"));
     group.sample_size(10);
     for n in SIZES {
@@ -95,7 +100,7 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
                 })
             });
             let mut fitted = scene.clone();
-            let mut adam = Adam::new(n, AdamConfig::default());
+            let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
             group.bench_function(id("step"), |b| {
                 pool.install(|| {
                     b.iter(|| {
@@ -105,7 +110,7 @@ fn training_step_at(c: &mut Criterion, w: u32, h: u32) {
                         mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
                         grads.reset(n);
                         context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
-                        adam.step(&mut fitted, &grads, &rates);
+                        adam.step(&mut fitted, &grads, 1, 1.0);
                     })
                 })
             });

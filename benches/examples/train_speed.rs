@@ -12,7 +12,8 @@
 
 use std::time::Instant;
 
-use splat4d::fit::adam::{Adam, AdamConfig, LearningRates};
+use splat4d::fit::adam::{Adam, AdamConfig};
+use splat4d::fit::additive::{AdditiveFitOptions, LearningRates};
 use splat4d::fit::loss::{mse, mse_with_gradient};
 use splat4d::scenes::synthetic::{bench_camera, bench_scene};
 use splat4d::{Gradients, RenderContext, RenderOptions};
@@ -58,20 +59,24 @@ fn main() {
         .unwrap();
     let camera = bench_camera(w, h);
     let options = RenderOptions::default();
-    let rates = LearningRates {
-        mean: 1e-3,
-        time: 1e-3,
-        amplitude: 1e-3,
-        velocity: 1e-3,
-        scale: 0.0,
-        background: 0.0,
-    };
+    let groups = AdditiveFitOptions {
+        learning_rates: LearningRates {
+            mean: 1e-3,
+            time: 1e-3,
+            amplitude: 1e-3,
+            velocity: 1e-3,
+            scale: 0.0,
+            background: 0.0,
+        },
+        ..AdditiveFitOptions::default()
+    }
+    .groups();
     let scene = bench_scene(n, 42);
     let mut context = RenderContext::new();
     let mut v_image = Vec::new();
     let mut grads = Gradients::zeros(n);
     let mut fitted = scene.clone();
-    let mut adam = Adam::new(n, AdamConfig::default());
+    let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
     // [forward alone, step, its zeroing, render and backward, loss, Adam, separate step]
     let mut times: [Vec<f64>; 7] = Default::default();
     // CPU seconds of [forward alone, step, its render and backward, separate step].
@@ -118,7 +123,7 @@ fn main() {
             let cpu_fused = cpu_seconds() - cpu_fused;
             std::hint::black_box(mse(context.image(), &target));
             marks[3] = Instant::now();
-            adam.step(&mut fitted, &grads, &rates);
+            adam.step(&mut fitted, &grads, 1, 1.0);
             marks[4] = Instant::now();
             let cpu_step = cpu_seconds() - cpu_step;
             // The same step with the render and the backward one after the other.
@@ -129,7 +134,7 @@ fn main() {
                 .unwrap();
             mse_with_gradient(context.image(), &target, 1.0, &mut v_image);
             context.backward(&fitted, &camera, TAU, &options, &v_image, &mut grads);
-            adam.step(&mut fitted, &grads, &rates);
+            adam.step(&mut fitted, &grads, 1, 1.0);
             let separate = separate.elapsed().as_secs_f64();
             let cpu_separate = cpu_seconds() - cpu_separate;
             if round == 0 {

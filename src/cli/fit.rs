@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use splat4d::Blend;
 use splat4d::Result;
+use splat4d::fit::additive::FitMode;
 use splat4d::fit::settings::{FitSettings, RateSettings};
-use splat4d::fit::train::FitMode;
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
 use super::args::{RenderFlags, parse_list};

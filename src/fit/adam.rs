@@ -1,4 +1,4 @@
-//! Adam with bias correction (SPEC §6) and one learning rate per parameter group.
+//! Adam with bias correction (SPEC §6) over a table of parameter groups, for both blends.
 //!
 //! For each parameter θ with gradient g at step k (1-based):
 //!
@@ -7,48 +7,32 @@
 //! θ ← θ - lr · (m / (1 - β1^k)) / (√(v / (1 - β2^k)) + ε)
 //! ```
 //!
-//! Groups: spatial mean (x, y, z), time (t), amplitude (r, g, b), velocity (vx, vy, vz),
-//! scale (sx, sy, sz, st), and the scene's background colour (r, g, b), one for the scene. A group with learning rate 0 is frozen and its moments are not
-//! updated. Scales are optimised as `ln s` (gradient `s ∂L/∂s`, update `s ← s e^(-Δ)`), so
-//! they stay positive and a rate is a relative change; they are frozen by default, as the
-//! seed paper fixes σ "for stability" (SPEC §6). Rotation is never changed.
+//! A [`ParameterGroup`] is one row of the table: a [`Field`] of the scene (the same columns of
+//! every kernel's array, or the scene's background), the [`Transform`] it is optimised
+//! through, and its learning rate and schedule. The blends differ only in their tables
+//! (`crate::fit::additive`, `crate::fit::alpha`): the additive fit moves means, times,
+//! amplitudes, velocities, log scales and the background; the alpha fit also rotations,
+//! opacity logits and SH coefficients, degree by degree. A group whose rate is 0 at a step
+//! (frozen, or not yet started) is left as it is, its moments too.
+//!
+//! **Transforms**: θ is updated in the space where the group is best optimised, and the
+//! stored value follows:
+//!
+//! | transform | optimised | gradient | stored value after the step |
+//! |---|---|---|---|
+//! | [`Transform::Identity`] | θ | g | θ - Δ |
+//! | [`Transform::Log`] | ln s | s g | s e^(-Δ) (stays > 0) |
+//! | [`Transform::Logit`] | logit o | o (1 - o) g (o clamped to [1e-6, 1 - 1e-6]) | σ(logit o - Δ) |
+//! | [`Transform::UnitQuaternion`] | q as stored | g | (q - Δ)/‖q - Δ‖ (kept when that norm is 0 or not finite) |
+//!
+//! Each parameter's update reads and writes only its own value and moments (a quaternion,
+//! its own four), so the rows run in parallel and the result does not depend on the thread
+//! count.
 
 use rayon::prelude::*;
 
 use crate::backward::Gradients;
 use crate::model::scene::Scene;
-
-/// Learning rate per parameter group; 0 freezes a group.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LearningRates {
-    /// Spatial mean `(x, y, z)`, world units per step.
-    pub mean: f64,
-    /// Time mean `t`.
-    pub time: f64,
-    /// Amplitude `(r, g, b)`.
-    pub amplitude: f64,
-    /// Velocity `(vx, vy, vz)`.
-    pub velocity: f64,
-    /// Scales `(sx, sy, sz, st)`, in `ln s` (a relative change per step).
-    pub scale: f64,
-    /// The scene's background colour `(r, g, b)` (SPEC §5).
-    pub background: f64,
-}
-
-impl LearningRates {
-    /// Every rate times `factor` (a schedule).
-    #[must_use]
-    pub fn scaled(&self, factor: f64) -> Self {
-        LearningRates {
-            mean: self.mean * factor,
-            time: self.time * factor,
-            amplitude: self.amplitude * factor,
-            velocity: self.velocity * factor,
-            scale: self.scale * factor,
-            background: self.background * factor,
-        }
-    }
-}
 
 /// Adam's constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,6 +46,7 @@ pub struct AdamConfig {
 }
 
 impl Default for AdamConfig {
+    /// Kingma and Ba's constants.
     fn default() -> Self {
         AdamConfig {
             beta1: 0.9,
@@ -71,157 +56,438 @@ impl Default for AdamConfig {
     }
 }
 
-/// Parameters per kernel, in Adam's layout: x y z t r g b vx vy vz.
-const PARAMS: usize = 14;
+/// A field of the scene that a group moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Field {
+    /// Spatial means `(x, y, z)`.
+    Mean,
+    /// Time means `t`.
+    Time,
+    /// Velocities `(vx, vy, vz)`.
+    Velocity,
+    /// Scales `(sx, sy, sz, st)`.
+    Scale,
+    /// Rotation quaternions.
+    Rotation,
+    /// Opacities (alpha scenes).
+    Opacity,
+    /// Amplitudes: the additive colour, the alpha colour's base.
+    Amplitude,
+    /// SH triplets `from..to` of every kernel (clipped to the scene's count).
+    Sh {
+        /// First triplet.
+        from: usize,
+        /// One past the last triplet.
+        to: usize,
+    },
+    /// The scene's background colour: one row for the scene.
+    Background,
+}
 
-/// Adam's state for one scene.
+impl Field {
+    /// The transform a field is optimised through (see the module docs).
+    #[must_use]
+    pub fn transform(self) -> Transform {
+        match self {
+            Field::Scale => Transform::Log,
+            Field::Opacity => Transform::Logit,
+            Field::Rotation => Transform::UnitQuaternion,
+            _ => Transform::Identity,
+        }
+    }
+
+    /// Whether each kernel has a row (else the scene has one).
+    fn per_kernel(self) -> bool {
+        self != Field::Background
+    }
+
+    /// `(values, gradients, stride, columns)`: the field's array and its gradient's,
+    /// flattened, `stride` numbers a row, the group's numbers at `columns` of each row.
+    fn arrays<'a>(
+        self,
+        scene: &'a mut Scene,
+        grads: &'a Gradients,
+    ) -> (&'a mut [f64], &'a [f64], usize, std::ops::Range<usize>) {
+        let sh = scene.sh_count;
+        match self {
+            Field::Mean => (
+                scene.means.as_flattened_mut(),
+                grads.v_means.as_flattened(),
+                4,
+                0..3,
+            ),
+            Field::Time => (
+                scene.means.as_flattened_mut(),
+                grads.v_means.as_flattened(),
+                4,
+                3..4,
+            ),
+            Field::Velocity => (
+                scene.velocities.as_flattened_mut(),
+                grads.v_velocities.as_flattened(),
+                3,
+                0..3,
+            ),
+            Field::Scale => (
+                scene.scales.as_flattened_mut(),
+                grads.v_scales.as_flattened(),
+                4,
+                0..4,
+            ),
+            Field::Rotation => (
+                scene.rotations.as_flattened_mut(),
+                grads.v_rotations.as_flattened(),
+                4,
+                0..4,
+            ),
+            Field::Opacity => (&mut scene.opacities, &grads.v_opacities, 1, 0..1),
+            Field::Amplitude => (
+                scene.amplitudes.as_flattened_mut(),
+                grads.v_amplitudes.as_flattened(),
+                3,
+                0..3,
+            ),
+            Field::Sh { from, to } => (
+                scene.sh.as_flattened_mut(),
+                grads.v_sh.as_flattened(),
+                3 * sh,
+                3 * from.min(sh)..3 * to.min(sh),
+            ),
+            Field::Background => (&mut scene.background, &grads.v_background, 3, 0..3),
+        }
+    }
+}
+
+/// The space a group is optimised in (see the module docs' table).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transform {
+    /// As stored.
+    Identity,
+    /// `ln s`.
+    Log,
+    /// `logit o`.
+    Logit,
+    /// The quaternion as stored, renormalised after the step.
+    UnitQuaternion,
+}
+
+/// One row of the parameter table: a field, its rate and its schedule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParameterGroup {
+    /// What it moves.
+    pub field: Field,
+    /// The name of its rate's setting (`lr_mean`, …), for messages.
+    pub rate_setting: &'static str,
+    /// Initial learning rate, in `unit`s per step.
+    pub rate: f64,
+    /// What the rate is relative to (1, or the cameras' box diagonal, the time range, …).
+    pub unit: f64,
+    /// Whether the rate follows the schedule's decay (else it stays constant).
+    pub decays: bool,
+    /// The first step (1-based) at which the group moves.
+    pub from_step: usize,
+}
+
+impl ParameterGroup {
+    /// A group of `field` at `rate` per step, decaying, from the first step.
+    #[must_use]
+    pub fn new(field: Field, rate_setting: &'static str, rate: f64) -> Self {
+        ParameterGroup {
+            field,
+            rate_setting,
+            rate,
+            unit: 1.0,
+            decays: true,
+            from_step: 0,
+        }
+    }
+
+    /// The learning rate at `step`, with the schedule's decay factor `decay`.
+    #[must_use]
+    pub fn rate_at(&self, step: usize, decay: f64) -> f64 {
+        if step < self.from_step {
+            return 0.0;
+        }
+        let factor = if self.decays { decay } else { 1.0 };
+        self.rate * (self.unit * factor)
+    }
+}
+
+/// A group's moments: `width` numbers a row.
 #[derive(Clone, Debug)]
-pub struct Adam {
-    config: AdamConfig,
-    steps: i32,
-    /// Kernels' moments, [`PARAMS`] per kernel, then the background's three.
+struct Moments {
+    width: usize,
     first: Vec<f64>,
     second: Vec<f64>,
 }
 
+/// Adam's state for one scene and one table.
+#[derive(Clone, Debug)]
+pub struct Adam {
+    config: AdamConfig,
+    steps: i32,
+    groups: Vec<ParameterGroup>,
+    moments: Vec<Moments>,
+}
+
 impl Adam {
-    /// Fresh state for `kernels` kernels.
+    /// Fresh state for `groups` of `scene`.
     #[must_use]
-    pub fn new(kernels: usize, config: AdamConfig) -> Self {
+    pub fn new(scene: &Scene, groups: &[ParameterGroup], config: AdamConfig) -> Self {
+        let moments = groups
+            .iter()
+            .map(|group| {
+                let width = group_width(group.field, scene.sh_count);
+                let rows = if group.field.per_kernel() {
+                    scene.len()
+                } else {
+                    1
+                };
+                Moments {
+                    width,
+                    first: vec![0.0; width * rows],
+                    second: vec![0.0; width * rows],
+                }
+            })
+            .collect();
         Adam {
             config,
             steps: 0,
-            first: vec![0.0; PARAMS * kernels + 3],
-            second: vec![0.0; PARAMS * kernels + 3],
+            groups: groups.to_vec(),
+            moments,
         }
+    }
+
+    /// The table.
+    #[must_use]
+    pub fn groups(&self) -> &[ParameterGroup] {
+        &self.groups
     }
 
     /// The state after the scene's kernels changed: kernel `i` of the new scene takes the
     /// moments of old kernel `sources[i]`, or zeros when it is `None` (a new kernel). The
-    /// step count, and so the bias correction, carries on.
+    /// scene's own rows (the background) and the step count, and so the bias correction,
+    /// carry on.
     pub fn remap(&mut self, sources: &[Option<usize>]) {
-        let kernels = PARAMS * sources.len();
-        let mut first = vec![0.0; kernels + 3];
-        let mut second = vec![0.0; kernels + 3];
-        let old = self.first.len() - 3;
-        first[kernels..].copy_from_slice(&self.first[old..]);
-        second[kernels..].copy_from_slice(&self.second[old..]);
-        for (i, source) in sources.iter().enumerate() {
-            if let Some(old) = *source {
-                first[PARAMS * i..PARAMS * (i + 1)]
-                    .copy_from_slice(&self.first[PARAMS * old..PARAMS * (old + 1)]);
-                second[PARAMS * i..PARAMS * (i + 1)]
-                    .copy_from_slice(&self.second[PARAMS * old..PARAMS * (old + 1)]);
+        for (group, moments) in self.groups.iter().zip(&mut self.moments) {
+            if !group.field.per_kernel() {
+                continue;
             }
+            let w = moments.width;
+            let mut first = vec![0.0; w * sources.len()];
+            let mut second = vec![0.0; w * sources.len()];
+            for (i, source) in sources.iter().enumerate() {
+                if let Some(old) = *source {
+                    first[w * i..w * (i + 1)]
+                        .copy_from_slice(&moments.first[w * old..w * (old + 1)]);
+                    second[w * i..w * (i + 1)]
+                        .copy_from_slice(&moments.second[w * old..w * (old + 1)]);
+                }
+            }
+            moments.first = first;
+            moments.second = second;
         }
-        self.first = first;
-        self.second = second;
     }
 
-    /// One update of `scene` with `grads` (sized for the scene).
-    pub fn step(&mut self, scene: &mut Scene, grads: &Gradients, rates: &LearningRates) {
+    /// Clears the moments of every group of `field` (an opacity reset).
+    pub fn clear(&mut self, field: Field) {
+        for (group, moments) in self.groups.iter().zip(&mut self.moments) {
+            if group.field == field {
+                moments.first.fill(0.0);
+                moments.second.fill(0.0);
+            }
+        }
+    }
+
+    /// One update of `scene` with `grads` (sized for the scene) at `step` (1-based), the
+    /// rates decayed by `decay`.
+    pub fn step(&mut self, scene: &mut Scene, grads: &Gradients, step: usize, decay: f64) {
         assert_eq!(grads.len(), scene.len(), "gradients sized for the scene");
-        assert_eq!(
-            self.first.len(),
-            PARAMS * scene.len() + 3,
-            "Adam state sized for the scene"
-        );
         self.steps += 1;
         let config = self.config;
         let corrections = (
             1.0 - config.beta1.powi(self.steps),
             1.0 - config.beta2.powi(self.steps),
         );
-        let update = |m: &mut f64, v: &mut f64, grad: f64, rate: f64| {
-            advance(config, corrections, (m, v), grad, rate)
-        };
-        let kernels = scene.len();
-        // Kernel by kernel in parallel: each parameter's update reads and writes only its
-        // own value and moments, so the result does not depend on the thread count.
-        let moments1 = &mut self.first[..PARAMS * kernels];
-        let moments2 = &mut self.second[..PARAMS * kernels];
-        (
-            scene.means.par_iter_mut(),
-            scene.amplitudes.par_iter_mut(),
-            scene.velocities.par_iter_mut(),
-            scene.scales.par_iter_mut(),
-            moments1.par_chunks_mut(PARAMS),
-            moments2.par_chunks_mut(PARAMS),
-        )
-            .into_par_iter()
-            .enumerate()
-            .with_min_len(1024)
-            .for_each(
-                |(i, ([x, y, z, t], [r, g, b], [vx, vy, vz], scales, first, second))| {
-                    let params: [(&mut f64, f64, f64); 10] = [
-                        (x, grads.v_means[i][0], rates.mean),
-                        (y, grads.v_means[i][1], rates.mean),
-                        (z, grads.v_means[i][2], rates.mean),
-                        (t, grads.v_means[i][3], rates.time),
-                        (r, grads.v_amplitudes[i][0], rates.amplitude),
-                        (g, grads.v_amplitudes[i][1], rates.amplitude),
-                        (b, grads.v_amplitudes[i][2], rates.amplitude),
-                        (vx, grads.v_velocities[i][0], rates.velocity),
-                        (vy, grads.v_velocities[i][1], rates.velocity),
-                        (vz, grads.v_velocities[i][2], rates.velocity),
-                    ];
-                    for (k, (value, grad, rate)) in params.into_iter().enumerate() {
-                        if rate == 0.0 {
-                            continue;
-                        }
-                        *value -= update(&mut first[k], &mut second[k], grad, rate);
-                    }
-                    if rates.scale != 0.0 {
-                        for (k, s) in scales.iter_mut().enumerate() {
-                            // In ln s: the gradient is s ∂L/∂s.
-                            let grad = *s * grads.v_scales[i][k];
-                            let step =
-                                update(&mut first[10 + k], &mut second[10 + k], grad, rates.scale);
-                            *s *= (-step).exp();
-                        }
-                    }
-                },
+        for (group, moments) in self.groups.iter().zip(&mut self.moments) {
+            let rate = group.rate_at(step, decay);
+            if rate == 0.0 || moments.width == 0 {
+                continue;
+            }
+            let transform = group.field.transform();
+            let (values, gradients, stride, columns) = group.field.arrays(scene, grads);
+            assert_eq!(
+                moments.first.len() / moments.width,
+                values.len() / stride,
+                "Adam state sized for the scene"
             );
-        if rates.background != 0.0 {
-            let base = PARAMS * scene.len();
-            for c in 0..3 {
-                let grad = grads.v_background[c];
-                scene.background[c] -= update(
-                    &mut self.first[base + c],
-                    &mut self.second[base + c],
-                    grad,
-                    rates.background,
-                );
+            let update = Update {
+                config,
+                corrections,
+                rate,
+                transform,
+            };
+            let width = moments.width;
+            (
+                values.par_chunks_mut(stride),
+                gradients.par_chunks(stride),
+                moments.first.par_chunks_mut(width),
+                moments.second.par_chunks_mut(width),
+            )
+                .into_par_iter()
+                .with_min_len(1024)
+                .for_each(|(row, gradient, first, second)| {
+                    update.row(
+                        &mut row[columns.clone()],
+                        &gradient[columns.clone()],
+                        first,
+                        second,
+                    );
+                });
+        }
+    }
+}
+
+/// Numbers a row of `field` holds (SH: the triplets that exist in a scene of `sh_count`).
+fn group_width(field: Field, sh_count: usize) -> usize {
+    match field {
+        Field::Time | Field::Opacity => 1,
+        Field::Mean | Field::Velocity | Field::Amplitude | Field::Background => 3,
+        Field::Scale | Field::Rotation => 4,
+        Field::Sh { from, to } => 3 * (to.min(sh_count).saturating_sub(from.min(sh_count))),
+    }
+}
+
+/// One step's update of a group's rows.
+#[derive(Clone, Copy)]
+struct Update {
+    config: AdamConfig,
+    /// `(1 - β1^k, 1 - β2^k)`.
+    corrections: (f64, f64),
+    rate: f64,
+    transform: Transform,
+}
+
+impl Update {
+    /// Advances one parameter's moments `(m, v)` with `grad` and returns the step to take.
+    fn advance(&self, first: &mut f64, second: &mut f64, grad: f64) -> f64 {
+        let AdamConfig {
+            beta1,
+            beta2,
+            epsilon,
+        } = self.config;
+        let (correction1, correction2) = self.corrections;
+        let m = beta1 * *first + (1.0 - beta1) * grad;
+        let v = beta2 * *second + (1.0 - beta2) * grad * grad;
+        *first = m;
+        *second = v;
+        self.rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
+    }
+
+    /// Updates one row's `values` (the group's columns) from their `gradients`.
+    fn row(&self, values: &mut [f64], gradients: &[f64], first: &mut [f64], second: &mut [f64]) {
+        let moments = first.iter_mut().zip(second.iter_mut());
+        match self.transform {
+            Transform::Identity => {
+                for ((value, &g), (m, v)) in values.iter_mut().zip(gradients).zip(moments) {
+                    *value -= self.advance(m, v, g);
+                }
+            }
+            Transform::Log => {
+                for ((s, &g), (m, v)) in values.iter_mut().zip(gradients).zip(moments) {
+                    // In ln s: the gradient is s ∂L/∂s.
+                    let delta = self.advance(m, v, *s * g);
+                    *s *= (-delta).exp();
+                }
+            }
+            Transform::Logit => {
+                for ((opacity, &g), (m, v)) in values.iter_mut().zip(gradients).zip(moments) {
+                    let o = opacity.clamp(1e-6, 1.0 - 1e-6);
+                    let delta = self.advance(m, v, o * (1.0 - o) * g);
+                    let logit = (o / (1.0 - o)).ln() - delta;
+                    *opacity = 1.0 / (1.0 + (-logit).exp());
+                }
+            }
+            Transform::UnitQuaternion => {
+                let mut q = [0.0; 4];
+                for (((q, &value), &g), (m, v)) in
+                    q.iter_mut().zip(&*values).zip(gradients).zip(moments)
+                {
+                    *q = value - self.advance(m, v, g);
+                }
+                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if norm > 0.0 && norm.is_finite() {
+                    for (value, q) in values.iter_mut().zip(q) {
+                        *value = q / norm;
+                    }
+                }
             }
         }
     }
 }
 
-/// One parameter's Adam update with bias corrections `(1 - β1^k, 1 - β2^k)`: its moments
-/// `(m, v)` are advanced with `grad`, and the step to subtract is returned.
-fn advance(
-    config: AdamConfig,
-    (correction1, correction2): (f64, f64),
-    (first, second): (&mut f64, &mut f64),
-    grad: f64,
-    rate: f64,
-) -> f64 {
-    let AdamConfig {
-        beta1,
-        beta2,
-        epsilon,
-    } = config;
-    let m = beta1 * *first + (1.0 - beta1) * grad;
-    let v = beta2 * *second + (1.0 - beta2) * grad * grad;
-    *first = m;
-    *second = v;
-    rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
+/// The first parameter of `scene` that left the finite numbers (or a scale no longer
+/// positive), named by kernel, field and the setting of its rate in `groups` (the
+/// command line shows it as its flag).
+#[must_use]
+pub fn non_finite_parameter(scene: &Scene, groups: &[ParameterGroup]) -> Option<String> {
+    let rate_of = |field: Field| {
+        groups
+            .iter()
+            .find(|g| std::mem::discriminant(&g.field) == std::mem::discriminant(&field))
+            .map_or("none: this fit does not move it".to_string(), |g| {
+                format!("`{}`", g.rate_setting)
+            })
+    };
+    let bad = |values: &[f64]| values.iter().any(|v| !v.is_finite());
+    let sh = scene.sh_count;
+    for i in 0..scene.len() {
+        let found = if bad(&scene.means[i][..3]) {
+            Some(("mean", Field::Mean))
+        } else if bad(&scene.means[i][3..]) {
+            Some(("time", Field::Time))
+        } else if bad(&scene.scales[i]) || scene.scales[i].iter().any(|&s| s <= 0.0) {
+            Some(("scale", Field::Scale))
+        } else if bad(&scene.amplitudes[i]) {
+            Some(("amplitude", Field::Amplitude))
+        } else if bad(&scene.velocities[i]) {
+            Some(("velocity", Field::Velocity))
+        } else if bad(&scene.rotations[i]) {
+            Some(("rotation", Field::Rotation))
+        } else if scene.opacities.get(i).is_some_and(|o| !o.is_finite()) {
+            Some(("opacity", Field::Opacity))
+        } else if scene
+            .sh
+            .get(i * sh..(i + 1) * sh)
+            .is_some_and(|t| bad(t.as_flattened()))
+        {
+            Some(("SH", Field::Sh { from: 0, to: 0 }))
+        } else {
+            None
+        };
+        if let Some((name, field)) = found {
+            return Some(format!(
+                "kernel {i}'s {name} is no longer finite (its rate: {})",
+                rate_of(field)
+            ));
+        }
+    }
+    bad(&scene.background).then(|| {
+        format!(
+            "the background is no longer finite (its rate: {})",
+            rate_of(Field::Background)
+        )
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::model::scene::Kernel;
+
+    fn group(field: Field, rate: f64) -> ParameterGroup {
+        ParameterGroup::new(field, "lr_test", rate)
+    }
 
     #[test]
     fn first_step_moves_each_live_parameter_by_its_rate_against_the_gradient_sign() {
@@ -231,15 +497,13 @@ mod tests {
         grads.v_means[0] = [2.0, -3.0, 0.5, 1.0];
         grads.v_amplitudes[0] = [-1.0, 1e-3, 0.0];
         grads.v_velocities[0] = [1.0, 1.0, 1.0];
-        let rates = LearningRates {
-            mean: 0.1,
-            time: 0.0,
-            amplitude: 0.01,
-            velocity: 0.0,
-            scale: 0.0,
-            background: 0.0,
-        };
-        Adam::new(1, AdamConfig::default()).step(&mut scene, &grads, &rates);
+        let groups = [
+            group(Field::Mean, 0.1),
+            group(Field::Time, 0.0),
+            group(Field::Amplitude, 0.01),
+            group(Field::Velocity, 0.0),
+        ];
+        Adam::new(&scene, &groups, AdamConfig::default()).step(&mut scene, &grads, 1, 1.0);
         // With bias correction the first step is lr · g/(|g| + ε/…): ±lr.
         let m = scene.means[0];
         assert!(
@@ -255,22 +519,15 @@ mod tests {
     fn minimises_a_quadratic() {
         let kernel = Kernel::new([3.0, -2.0, 1.0, 0.0], [1.0; 4], [0.0; 3]);
         let mut scene = Scene::from_kernels(&[kernel], [0.0; 3], "<test>").unwrap();
-        let mut adam = Adam::new(1, AdamConfig::default());
-        let rates = LearningRates {
-            mean: 0.05,
-            time: 0.0,
-            amplitude: 0.0,
-            velocity: 0.0,
-            scale: 0.0,
-            background: 0.0,
-        };
+        let groups = [group(Field::Mean, 0.05)];
+        let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
         for k in 0..2000 {
             let mut grads = Gradients::zeros(1);
             // L = ½ |m - (1, 1, 1)|²
             for c in 0..3 {
                 grads.v_means[0][c] = scene.means[0][c] - 1.0;
             }
-            adam.step(&mut scene, &grads, &rates.scaled(0.999_f64.powi(k)));
+            adam.step(&mut scene, &grads, k + 1, 0.998_f64.powi(k as i32));
         }
         for c in 0..3 {
             assert!(
@@ -287,26 +544,79 @@ mod tests {
         let mut scene = Scene::from_kernels(&[kernel], [0.0; 3], "<test>").unwrap();
         let mut grads = Gradients::zeros(1);
         grads.v_scales[0] = [5.0, -1.0, 0.0, 1e6];
-        let rates = LearningRates {
-            mean: 0.0,
-            time: 0.0,
-            amplitude: 0.0,
-            velocity: 0.0,
-            scale: 0.5,
-            background: 0.0,
-        };
-        let mut adam = Adam::new(1, AdamConfig::default());
-        adam.step(&mut scene, &grads, &rates);
+        let groups = [group(Field::Mean, 0.0), group(Field::Scale, 0.5)];
+        let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
+        adam.step(&mut scene, &grads, 1, 1.0);
         let s = scene.scales[0];
         // First step: ln s moves by ∓0.5 whatever the gradient's size (up to Adam's ε/|g|).
         assert!((s[0] - 0.1 * (-0.5_f64).exp()).abs() < 1e-6, "{s:?}");
         assert!((s[1] - 0.2 * 0.5_f64.exp()).abs() < 1e-6, "{s:?}");
         assert_eq!(s[2], 0.3);
-        for _ in 0..200 {
-            adam.step(&mut scene, &grads, &rates);
+        for k in 0..200 {
+            adam.step(&mut scene, &grads, k + 2, 1.0);
         }
         assert!(scene.scales[0].iter().all(|&v| v > 0.0 && v.is_finite()));
         assert_eq!(scene.means[0], [0.0; 4], "other groups frozen");
+    }
+
+    /// One alpha kernel with opacity `o`, rotation `q` and two SH triplets.
+    fn alpha_scene(o: f64, q: [f64; 4]) -> Scene {
+        let mut kernel = Kernel::new([0.0; 4], [1.0; 4], [1.0; 3]);
+        kernel.rotation = q;
+        Scene::from_kernels(&[kernel], [0.0; 3], "<test>")
+            .unwrap()
+            .into_alpha(vec![o], 3, vec![[0.5; 3]; 3], "<test>")
+            .unwrap()
+    }
+
+    #[test]
+    fn opacities_move_in_logit_space_and_rotations_stay_unit() {
+        let mut scene = alpha_scene(0.5, [1.0, 0.0, 0.0, 0.0]);
+        let mut grads = Gradients::for_scene(&scene);
+        grads.v_opacities[0] = -4.0;
+        grads.v_rotations[0] = [0.0, -1.0, 0.0, 0.0];
+        let groups = [group(Field::Opacity, 0.5), group(Field::Rotation, 0.1)];
+        let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
+        adam.step(&mut scene, &grads, 1, 1.0);
+        // logit 0.5 = 0 moves by +0.5: σ(0.5).
+        let expected = 1.0 / (1.0 + (-0.5_f64).exp());
+        assert!((scene.opacities[0] - expected).abs() < 1e-6);
+        // q = (1, 0.1, 0, 0) normalised.
+        let q = scene.rotations[0];
+        let norm = (1.0_f64 + 0.01).sqrt();
+        assert!((q[0] - 1.0 / norm).abs() < 1e-6 && (q[1] - 0.1 / norm).abs() < 1e-6);
+        for k in 0..500 {
+            adam.step(&mut scene, &grads, k + 2, 1.0);
+        }
+        let o = scene.opacities[0];
+        assert!(o > 0.0 && o < 1.0, "{o}");
+        let norm = scene.rotations[0].iter().map(|v| v * v).sum::<f64>();
+        assert!((norm - 1.0).abs() < 1e-12, "{norm}");
+    }
+
+    #[test]
+    fn an_sh_degree_moves_only_from_its_step_and_resets_clear_only_their_field() {
+        let mut scene = alpha_scene(0.5, [1.0, 0.0, 0.0, 0.0]);
+        let mut grads = Gradients::for_scene(&scene);
+        grads.v_sh.iter_mut().for_each(|t| *t = [1.0; 3]);
+        grads.v_opacities[0] = 1.0;
+        let groups = [
+            ParameterGroup {
+                from_step: 3,
+                ..group(Field::Sh { from: 0, to: 3 }, 0.1)
+            },
+            group(Field::Opacity, 0.1),
+        ];
+        let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
+        for step in 1..=2 {
+            adam.step(&mut scene, &grads, step, 1.0);
+        }
+        assert!(scene.sh.iter().all(|t| *t == [0.5; 3]), "not yet");
+        adam.step(&mut scene, &grads, 3, 1.0);
+        assert!(scene.sh.iter().all(|t| t.iter().all(|&v| v < 0.5)));
+        adam.clear(Field::Opacity);
+        assert!(adam.moments[1].first.iter().all(|&m| m == 0.0));
+        assert!(adam.moments[0].first.iter().all(|&m| m != 0.0));
     }
 
     #[test]
@@ -315,16 +625,9 @@ mod tests {
         let mut scene = Scene::from_kernels(&[kernel], [0.5; 3], "<test>").unwrap();
         let mut grads = Gradients::zeros(1);
         grads.v_background = [1.0, -1.0, 0.0];
-        let rates = LearningRates {
-            mean: 0.0,
-            time: 0.0,
-            amplitude: 0.0,
-            velocity: 0.0,
-            scale: 0.0,
-            background: 0.01,
-        };
-        let mut adam = Adam::new(1, AdamConfig::default());
-        adam.step(&mut scene, &grads, &rates);
+        let groups = [group(Field::Amplitude, 0.0), group(Field::Background, 0.01)];
+        let mut adam = Adam::new(&scene, &groups, AdamConfig::default());
+        adam.step(&mut scene, &grads, 1, 1.0);
         let b = scene.background;
         assert!((b[0] - 0.49).abs() < 1e-6 && (b[1] - 0.51).abs() < 1e-6 && b[2] == 0.5);
         assert_eq!(scene.amplitudes[0], [1.0; 3], "kernels frozen");
@@ -334,11 +637,43 @@ mod tests {
         scene = Scene::from_kernels(&[kernel, kernel], scene.background, "<test>").unwrap();
         let mut grads = Gradients::zeros(2);
         grads.v_background = [1.0, -1.0, 0.0];
-        adam.step(&mut scene, &grads, &rates);
+        adam.step(&mut scene, &grads, 2, 1.0);
         assert!(
             (scene.background[0] - 0.48).abs() < 1e-6,
             "{:?}",
             scene.background
+        );
+    }
+
+    #[test]
+    fn a_non_finite_parameter_is_named_with_its_rate() {
+        let kernel = Kernel::new([0.0; 4], [0.1; 4], [0.5; 3]);
+        let mut scene = Scene::from_kernels(&[kernel, kernel], [0.0; 3], "<test>").unwrap();
+        let groups = [
+            ParameterGroup::new(Field::Amplitude, "lr_amplitude", 0.1),
+            ParameterGroup::new(Field::Scale, "lr_scale", 0.1),
+            ParameterGroup::new(Field::Background, "lr_background", 0.1),
+        ];
+        assert_eq!(non_finite_parameter(&scene, &groups), None);
+        scene.amplitudes[1][2] = f64::NAN;
+        let why = non_finite_parameter(&scene, &groups).unwrap();
+        assert!(
+            why.contains("kernel 1") && why.contains("`lr_amplitude`"),
+            "{why}"
+        );
+        scene.amplitudes[1][2] = 0.5;
+        scene.scales[0][3] = 0.0;
+        assert!(
+            non_finite_parameter(&scene, &groups)
+                .unwrap()
+                .contains("`lr_scale`")
+        );
+        scene.scales[0][3] = 0.1;
+        scene.background[0] = f64::INFINITY;
+        assert!(
+            non_finite_parameter(&scene, &groups)
+                .unwrap()
+                .contains("`lr_background`")
         );
     }
 }

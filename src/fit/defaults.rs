@@ -4,10 +4,11 @@
 //! module only names numbers (each with the measurement behind it), and the training
 //! stages below it never read it.
 
-use crate::fit::adam::{AdamConfig, LearningRates};
-use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::adam::AdamConfig;
+use crate::fit::additive::LearningRates;
+use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
-use crate::fit::train::{FitMode, FitOptions};
+use crate::fit::density::AdditiveRules;
 use crate::render::RenderOptions;
 
 /// Adam steps of a fit (`splat4d fit` without `--steps`).
@@ -46,8 +47,8 @@ pub const DEFAULT_RATES: LearningRates = LearningRates {
     background: 2e-3,
 };
 
-/// The adaptive rounds (densify, prune, merge; [`crate::fit::adaptive`]).
-pub const DEFAULT_ROUNDS: AdaptiveOptions = AdaptiveOptions {
+/// The adaptive rounds (densify, prune, merge; [`crate::fit::density::additive`]).
+pub const DEFAULT_ROUNDS: AdditiveRules = AdditiveRules {
     every: 50,
     from: 0.3,
     until: 0.7,
@@ -72,7 +73,7 @@ pub const MAX_BACKGROUND: f64 = 1e6;
 pub const MAX_START_KERNELS: usize = 1_000_000;
 
 /// A velocity kernel whose `st` exceeds this many training-time spacings is split in time
-/// by the adaptive rounds ([`crate::fit::adaptive`]).
+/// by the adaptive rounds ([`crate::fit::density::additive`]).
 pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
 
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
@@ -127,9 +128,9 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.
-impl Default for FitOptions {
+impl Default for AdditiveFitOptions {
     fn default() -> Self {
-        FitOptions {
+        AdditiveFitOptions {
             steps: DEFAULT_STEPS,
             batch_size: DEFAULT_BATCH_SIZE,
             // The paper fits no background.
@@ -148,7 +149,7 @@ impl Default for FitOptions {
 }
 
 /// [`DEFAULT_ROUNDS`].
-impl Default for AdaptiveOptions {
+impl Default for AdditiveRules {
     fn default() -> Self {
         DEFAULT_ROUNDS
     }

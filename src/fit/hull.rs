@@ -9,7 +9,7 @@
 //! when at least [`MIN_VIEWS`] views see it and at least [`HULL_VOTE`] of them cover it:
 //! the strict hull (covered in every view) of a moving object keeps only what never moves,
 //! a vote keeps what is there for much of the time. The kept cells' colour is the mean of
-//! the covered pixels. A scene is started from them by [`crate::fit::alpha`]; the vote is
+//! the covered pixels. A scene is started from them by [`crate::fit::alpha_start`]; the vote is
 //! a start, not a model: the fit moves, prunes and densifies from there.
 //!
 //! Whether the background is flat is itself measured ([`flat_background`]): at least

@@ -1,11 +1,15 @@
-//! Fitting kernels to images (SPEC §6, §8): the loss, Adam, initial scenes, the training
-//! loops of both blends, their defaults ([`defaults`]) and the policy that chooses them
-//! ([`plan`]).
+//! Fitting kernels to images (SPEC §6, §8): the loss, one Adam over a table of parameter
+//! groups ([`adam`]), one training loop ([`train`]) and the density rules ([`density`]) for
+//! both blends, each blend's table and options ([`additive`], [`alpha`]), the starts
+//! ([`init`], [`alpha_start`], [`hull`], [`stereo`]), the defaults ([`defaults`]) and the
+//! policy that chooses among them ([`plan`], from the caller's [`settings`]).
 
 pub mod adam;
-pub mod adaptive;
+pub mod additive;
 pub mod alpha;
+pub mod alpha_start;
 pub mod defaults;
+pub mod density;
 pub mod hull;
 pub mod init;
 pub mod loss;

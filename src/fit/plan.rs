@@ -1,34 +1,50 @@
-//! The fit plan: every default of a fit and the automatic policy, in one place, used by the
-//! command line (`splat4d fit`) and the report alike.
+//! The fit plan: every default of a fit and the automatic policy of both blends, in one
+//! place, used by the command line (`splat4d fit`) and the report alike. The plan decides;
+//! the training loop ([`crate::fit::train`]) obeys.
 //!
-//! A [`FitPlan`] is what a user asks for (every field has its default in
-//! [`FitPlan::default`]); [`FitPlan::prepare`] turns it and the training views into the
-//! initial scene and the [`FitOptions`] of the training loop:
+//! **Which blend** ([`fit_blend`]): the one asked for, else the start scene's, else the one a
+//! splat4d dataset records, else alpha (what real captures need).
+//!
+//! **The additive fit**: a [`FitPlan`] is what a user asks for (every field has its default
+//! in [`FitPlan::default`]); [`FitPlan::prepare`] turns it and the training views into the
+//! initial scene and the [`AdditiveFitOptions`] of the training loop:
 //!
 //! - **start**: [`Init::Auto`] is [`DEFAULT_START_KERNELS`] kernels spread at random in the
 //!   box the cameras look at (`start_kernels = 1`: one at its centre), then densify, prune
-//!   and merge so the count follows the data; [`Init::Random`] is N kernels at random in the box, a fixed count
-//!   unless `adaptive`; [`Init::Scene`] starts from a given scene.
+//!   and merge so the count follows the data; [`Init::Random`] is N kernels at random in the
+//!   box, a fixed count unless `adaptive`; [`Init::Scene`] starts from a given scene.
 //! - **mode**: what the fit moves ([`FitMode`]); by default `velocity` for `Auto` (the most
 //!   compact models in the report) and `paper` otherwise.
 //! - **splitting**: densified kernels are split only when the scales are fixed (the fit
 //!   cannot shrink them), above an eighth of the largest initial scale; otherwise cloned.
-//! - **numbers**: every default (steps, rates, batch, the adaptive rounds, the alpha fit)
-//!   is a constant of [`crate::fit::defaults`], re-exported here.
 //! - **background** `b` (SPEC §5): a fitted parameter group (its own learning rate,
 //!   `freeze_background` keeps it), starting from the one given, else from the data: the
 //!   median of the training images' border pixels ([`border_median`]). A start from a
 //!   scene keeps the scene's own background unless one is given.
 //! - **amplitudes** of a random or automatic start: the data's mean colour above the
 //!   background ([`start_amplitude`]), so the sign follows the data.
+//!
+//! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud,
+//! else a visual hull, else a plane sweep, else kernels at random, in the training cameras'
+//! box, over the given background or the border median (kept fixed).
+//!
+//! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
+//! constant of [`crate::fit::defaults`], re-exported here.
 
-use crate::fit::adam::LearningRates;
-use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::additive::{AdditiveFitOptions, FitMode, LearningRates};
+use crate::fit::alpha::{AlphaFitOptions, alpha_bounds};
+use crate::fit::alpha_start::{
+    hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene, swept_alpha_scene,
+};
 pub use crate::fit::defaults::*;
-use crate::fit::hull::is_foreground;
+use crate::fit::density::AdditiveRules;
+use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
-use crate::fit::train::{FitMode, FitOptions};
-use crate::model::{Camera, Error, Result, Scene, View, check_non_negative_setting};
+use crate::fit::stereo::plane_sweep;
+use crate::fit::train::{StepRecord, Training, fit};
+use crate::model::{
+    Blend, Camera, Dataset, Error, Result, Scene, Up, View, check_non_negative_setting,
+};
 use crate::render::RenderOptions;
 
 /// Where a fit starts.
@@ -82,7 +98,7 @@ pub struct FitPlan {
     pub adaptive: bool,
     /// The adaptive rounds' settings (`min_scale` is decided by the policy unless
     /// [`FitPlan::min_scale`] is given).
-    pub rounds: AdaptiveOptions,
+    pub rounds: AdditiveRules,
     /// Densified kernels above this mean spatial scale are split, the others cloned.
     pub min_scale: Option<f64>,
     /// Box of the random start `x0,y0,z0,x1,y1,z1` (default: from the cameras).
@@ -160,7 +176,7 @@ pub struct PreparedFit {
     /// The scene the fit starts from.
     pub scene: Scene,
     /// The training loop's options.
-    pub options: FitOptions,
+    pub options: AdditiveFitOptions,
     /// What the fit moves.
     pub mode: FitMode,
 }
@@ -326,7 +342,7 @@ impl FitPlan {
             } else {
                 f64::INFINITY
             };
-            AdaptiveOptions {
+            AdditiveRules {
                 max_kernels: self.rounds.max_kernels.max(1),
                 min_scale: self.min_scale.unwrap_or(split_above),
                 min_time_scale: self.rounds.min_time_scale.min(split_time_above),
@@ -337,7 +353,7 @@ impl FitPlan {
             scene.background = background;
         }
         let rate = |frozen: bool, lr: f64| if frozen { 0.0 } else { lr };
-        let options = FitOptions {
+        let options = AdditiveFitOptions {
             steps: self.steps,
             batch_size: self.batch_size,
             learning_rates: LearningRates {
@@ -356,7 +372,7 @@ impl FitPlan {
             seed: self.seed,
             render: self.render,
             adaptive,
-            ..FitOptions::default()
+            ..AdditiveFitOptions::default()
         };
         Ok(PreparedFit {
             scene,
@@ -404,6 +420,277 @@ impl FitPlan {
             }
         }
     }
+}
+
+/// A fit ready to run, whichever the blend: its start, the training loop's input, and what
+/// the plan chose that a user should know (one line each).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReadyFit {
+    /// The scene the fit starts from.
+    pub scene: Scene,
+    /// The training loop's input.
+    pub training: Training,
+    /// What was chosen, for the user.
+    pub notes: Vec<String>,
+    /// What the fitted scene records of the data ([`ReadyFit::record_data`]).
+    recorded: DataFacts,
+}
+
+/// What a fitted scene records of its data, for the viewer and videos of it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct DataFacts {
+    /// The world axis nearest the cameras' mean up, else the start scene's.
+    up: Option<Up>,
+    /// The range of every view's time.
+    time_range: Option<[f64; 2]>,
+    /// The sphere the training cameras look at.
+    framing: Option<([f64; 3], f64)>,
+}
+
+impl ReadyFit {
+    /// A fit of `scene` with `training`, and `notes` to show.
+    fn new(scene: Scene, training: Training, notes: Vec<String>) -> Self {
+        ReadyFit {
+            scene,
+            training,
+            notes,
+            recorded: DataFacts::default(),
+        }
+    }
+
+    /// Records what the fitted scene will carry of `dataset`: its cameras' up axis (noted
+    /// when it is not +y), the range of its times and the sphere its cameras look at.
+    #[must_use]
+    pub fn record_data(mut self, dataset: &Dataset) -> Self {
+        let up = cameras_up(&dataset.train);
+        if let Some(up) = up
+            && up != Up::Y
+        {
+            self.notes.push(format!(
+                "the cameras' mean up is {up}: the fitted scene records it, and videos of it turn about it"
+            ));
+        }
+        self.recorded = DataFacts {
+            up: up.or(self.scene.up),
+            time_range: data_time_range(dataset),
+            framing: data_framing(dataset),
+        };
+        self
+    }
+
+    /// `scene` with what it records of the data.
+    fn dress(&self, scene: &mut Scene) {
+        scene.up = self.recorded.up;
+        scene.time_range = self.recorded.time_range;
+        scene.framing = self.recorded.framing;
+    }
+
+    /// The start scene as the fitted one will be framed (for a viewer of the running fit).
+    #[must_use]
+    pub fn framed_start(&self) -> Scene {
+        let mut start = self.scene.clone();
+        self.dress(&mut start);
+        start
+    }
+
+    /// Runs the fit ([`fit`]) on `train`, evaluating on `heldout`; `scene` is then the
+    /// fitted scene, with what it records of the data. Returns every step's record.
+    pub fn run(
+        &mut self,
+        train: &[View],
+        heldout: &[View],
+        on_step: impl FnMut(&StepRecord, &Scene),
+    ) -> Result<Vec<StepRecord>> {
+        let records = fit(&mut self.scene, train, heldout, &self.training, on_step)?;
+        let mut fitted = std::mem::take(&mut self.scene);
+        self.dress(&mut fitted);
+        self.scene = fitted;
+        Ok(records)
+    }
+}
+
+/// The blend of a fit from `init` (named `init_name`, a start scene's file): the one
+/// `asked`, else the start scene's, else the one a dataset `recorded`, else alpha; with why.
+/// A start scene of another blend than the one asked is refused.
+pub fn fit_blend(
+    asked: Option<Blend>,
+    init: &Init,
+    init_name: &str,
+    recorded: Option<Blend>,
+) -> Result<(Blend, &'static str)> {
+    let (blend, why) = match (asked, init, recorded) {
+        (Some(blend), _, _) => (blend, "`blend` chose it"),
+        (None, Init::Scene(scene), _) => (scene.blend, "the start scene's"),
+        (None, _, Some(blend)) => (blend, "the one the dataset records"),
+        (None, _, None) => (Blend::Alpha, "the default for a dataset"),
+    };
+    if let Init::Scene(scene) = init
+        && scene.blend != blend
+    {
+        return Err(Error::usage(format!(
+            "{init_name}: the start scene's blend is {}, the fit's {blend}",
+            scene.blend
+        )));
+    }
+    Ok((blend, why))
+}
+
+impl FitPlan {
+    /// The additive fit from `init` to `train`, ready to run.
+    pub fn ready(&self, init: Init, train: &[View]) -> Result<ReadyFit> {
+        let prepared = self.prepare(init, train)?;
+        let [r, g, b] = prepared.scene.background;
+        let fitted = if prepared.options.learning_rates.background > 0.0 {
+            "fitted from"
+        } else {
+            "fixed at"
+        };
+        let note = format!("background {fitted} ({r:.4}, {g:.4}, {b:.4})");
+        Ok(ReadyFit::new(
+            prepared.scene,
+            prepared.options.training(),
+            vec![note],
+        ))
+    }
+}
+
+/// Fewer points than this from the plane sweep, and an alpha fit starts at random instead.
+pub const MIN_SWEPT_POINTS: usize = 100;
+
+/// The alpha fit of SPEC §8 from `init` to `dataset`, ready to run: over `background` (else
+/// the median of the training images' border pixels), in the box of the training cameras
+/// ([`alpha_bounds`]; `origin` names the file the frames come from in its errors).
+///
+/// An automatic start takes, in this order, the first that gives kernels: the dataset's
+/// point cloud; the visual hull of the training views where their background is flat
+/// ([`crate::fit::hull`]); a plane sweep over neighbouring views ([`crate::fit::stereo`]),
+/// when it keeps at least [`MIN_SWEPT_POINTS`] points; kernels at random in the box.
+pub fn prepare_alpha(
+    options: &AlphaFitOptions,
+    init: Init,
+    dataset: &Dataset,
+    background: Option<[f64; 3]>,
+    origin: &str,
+) -> Result<ReadyFit> {
+    let train = &dataset.train;
+    let bounds = alpha_bounds(train, origin)?;
+    let background = background.unwrap_or_else(|| border_median(train));
+    let colour = start_amplitude(train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
+    let mut notes =
+        vec!["fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)".into()];
+    let scene = match init {
+        Init::Scene(scene) => scene,
+        Init::Random(n) => random_alpha_scene(
+            &bounds,
+            background,
+            colour,
+            &AlphaFitOptions {
+                start_kernels: n,
+                ..*options
+            },
+        )?,
+        Init::Auto => {
+            let (scene, note) = alpha_auto_start(dataset, &bounds, background, colour, options)?;
+            notes.push(note);
+            scene
+        }
+    };
+    Ok(ReadyFit::new(scene, options.training(&bounds), notes))
+}
+
+/// The automatic alpha start (see [`prepare_alpha`]) and a note saying which it is.
+fn alpha_auto_start(
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    colour: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<(Scene, String)> {
+    let train = &dataset.train;
+    if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
+        let note = format!(
+            "starting from the dataset's point cloud ({} points)",
+            points.len()
+        );
+        return Ok((
+            point_cloud_alpha_scene(points, bounds, background, options)?,
+            note,
+        ));
+    }
+    if flat_background(train, background) {
+        let (cells, side) = visual_hull(train, background, bounds);
+        if !cells.is_empty() {
+            let note = format!(
+                "starting from the visual hull of the training views ({} of {} cells kept)",
+                cells.len(),
+                HULL_GRID.pow(3)
+            );
+            return Ok((
+                hull_alpha_scene(&cells, side, bounds, background, options)?,
+                note,
+            ));
+        }
+    }
+    let points = plane_sweep(train, bounds, options.start_kernels);
+    if points.len() >= MIN_SWEPT_POINTS {
+        let note = format!(
+            "starting from a plane sweep over neighbouring training views ({} points)",
+            points.len()
+        );
+        return Ok((
+            swept_alpha_scene(&points, bounds, background, options)?,
+            note,
+        ));
+    }
+    Ok((
+        random_alpha_scene(bounds, background, colour, options)?,
+        "starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from, no depth the views agree on)".into(),
+    ))
+}
+
+/// The sphere the training cameras look at ([`box_from_cameras`]: the
+/// point nearest their optical axes, half as wide as the median camera sees), if they say.
+pub fn data_framing(dataset: &Dataset) -> Option<([f64; 3], f64)> {
+    let cameras: Vec<Camera> = dataset.train.iter().map(|v| v.camera).collect();
+    let bounds = box_from_cameras(&cameras, [0.0, 0.0]).ok()?;
+    let centre = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    let radius = 0.5
+        * (0..3)
+            .map(|a| (bounds.max[a] - bounds.min[a]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+    (radius > 0.0 && radius.is_finite()).then_some((centre, radius))
+}
+
+/// The range of every view's time (train, val and test): what the data shows.
+pub fn data_time_range(dataset: &Dataset) -> Option<[f64; 2]> {
+    let times = dataset
+        .train
+        .iter()
+        .chain(&dataset.val)
+        .chain(&dataset.test)
+        .map(|v| v.time);
+    times.fold(None, |range, t| {
+        Some(range.map_or([t, t], |[lo, hi]: [f64; 2]| [lo.min(t), hi.max(t)]))
+    })
+}
+
+/// The world axis nearest the training cameras' mean up direction (image up, the camera's
+/// -y in OpenCV axes); `None` when the ups cancel out.
+pub fn cameras_up(views: &[View]) -> Option<Up> {
+    let mut up = [0.0_f64; 3];
+    for view in views {
+        let down = view.camera.rotation()[1];
+        let norm = down.iter().map(|v| v * v).sum::<f64>().sqrt();
+        for c in 0..3 {
+            up[c] -= down[c] / norm;
+        }
+    }
+    let largest = up.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if largest < 1e-9 * views.len() as f64 {
+        return None;
+    }
+    Up::nearest(up)
 }
 
 /// The checks every fit's numbers pass, whichever blend: each of `non_negative` finite and

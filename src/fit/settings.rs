@@ -23,19 +23,21 @@
 //!
 //! The rates' units follow each model's parameters: the alpha fit's spatial rates are
 //! fractions of the cameras' box per step ([`crate::fit::alpha::AlphaRates`]), the
-//! additive fit's are absolute ([`crate::fit::adam::LearningRates`]); the density threshold
+//! additive fit's are absolute ([`crate::fit::additive::LearningRates`]); the density threshold
 //! is a mean positional gradient per standard deviation for the additive fit and a mean
 //! screen gradient per pixel for the alpha fit; `prune_below` a peak amplitude for the
 //! additive fit and an opacity for the alpha fit; `max_growth` the largest fraction of the
 //! kernels a round densifies in both.
 
-use crate::fit::adam::LearningRates;
-use crate::fit::adaptive::AdaptiveOptions;
+use crate::fit::additive::FitMode;
+use crate::fit::additive::LearningRates;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
-use crate::fit::plan::{DEFAULT_ALPHA, FitPlan, Init, check_fit_numbers};
-use crate::fit::train::FitMode;
+use crate::fit::density::AdditiveRules;
+use crate::fit::plan::{
+    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
+};
 use crate::model::error::{MAX_QUOTE, cut};
-use crate::model::{Blend, Error, Result};
+use crate::model::{Blend, Dataset, Error, Result};
 use crate::render::RenderOptions;
 
 /// Settings every blend's fit acts on.
@@ -379,6 +381,34 @@ impl FitSettings {
         Ok(self.alpha())
     }
 
+    /// The fit of `dataset` from `init` (named `init_name`), ready to run: the blend chosen
+    /// ([`fit_blend`] from `blend`), every setting checked against it and the start, and the
+    /// plan of that blend. `origin` names the file the training frames come from.
+    pub fn prepare(
+        &self,
+        blend: Option<Blend>,
+        init: Init,
+        init_name: &str,
+        dataset: &Dataset,
+        origin: &str,
+    ) -> Result<ReadyFit> {
+        let (blend, why) = fit_blend(blend, &init, init_name, dataset.blend)?;
+        match blend {
+            Blend::Alpha => {
+                let options = self.alpha_options(why)?;
+                self.check_start(blend, &init, init_name)?;
+                prepare_alpha(&options, init, dataset, self.background, origin)
+                    .map(|ready| ready.record_data(dataset))
+            }
+            Blend::Additive => {
+                let plan = self.additive_plan(why)?;
+                self.check_start(blend, &init, init_name)?;
+                plan.ready(init, &dataset.train)
+                    .map(|ready| ready.record_data(dataset))
+            }
+        }
+    }
+
     /// The chosen settings over [`FitPlan::default`].
     fn additive(&self) -> FitPlan {
         let d = FitPlan::default();
@@ -387,7 +417,7 @@ impl FitSettings {
             steps: self.steps.unwrap_or(d.steps),
             start_kernels: self.start_kernels.unwrap_or(d.start_kernels),
             adaptive: self.adaptive,
-            rounds: AdaptiveOptions {
+            rounds: AdditiveRules {
                 every: self.densify_every.unwrap_or(d.rounds.every),
                 from: self.densify_from.unwrap_or(d.rounds.from),
                 until: self.densify_until.unwrap_or(d.rounds.until),

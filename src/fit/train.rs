@@ -1,10 +1,18 @@
-//! The training loop: Adam on the mean MSE over mini-batches of views (SPEC §6).
+//! The training loop of both blends: Adam on the mean MSE over mini-batches of views
+//! (SPEC §6, §8).
 //!
 //! Each step draws `batch_size` training views (a seeded shuffle, epoch by epoch), renders
 //! each, accumulates `∂(mean over the batch of MSE)/∂θ` through the backward pass, and takes
-//! one Adam step with the scheduled learning rates: `lr_k = lr · final_factor^(k/(steps-1))`
-//! (exponential decay; `final_factor = 1` keeps them constant). Every `eval_every` steps and
-//! at the last, the mean MSE over the held-out views is measured.
+//! one Adam step over the blend's parameter table ([`crate::fit::adam`]) with the scheduled
+//! learning rates: a decaying group's rate at step k of K is
+//! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant). The blend's
+//! density rules ([`crate::fit::density`]) then change the kernels when a round is due.
+//! Every `eval_every` steps and at the last, the mean MSE over the held-out views is
+//! measured.
+//!
+//! A view in which no kernel reaches the screen adds a zero gradient; when no view drawn in
+//! the steps that draw every view once (or in the whole run) sees a kernel, nothing can ever
+//! move into sight, and the fit is refused with a message saying so.
 //!
 //! A batch's views run side by side, one per worker thread (`batch_gradients`), each
 //! rendered and differentiated in its own slot; their gradients are added in view order.
@@ -18,97 +26,48 @@ use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
 use crate::backward::Gradients;
-use crate::fit::adam::{Adam, AdamConfig, LearningRates};
-use crate::fit::adaptive::{AdaptiveOptions, DensityStats, densify_and_prune};
+use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
+use crate::fit::density::{DensityRules, DensityStats};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
-use crate::model::View;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::Scene;
+use crate::model::{Dataset, View};
 use crate::render::{RenderContext, RenderOptions};
 
-/// Which parameter groups a fit moves.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FitMode {
-    /// The seed paper's: means `(x, y, z, t)` and amplitudes; kernels static in space, scales
-    /// fixed (SPEC §6).
-    Paper,
-    /// Also the scales `(sx, sy, sz, st)` (in log space); kernels still static in space.
-    Static,
-    /// Also the velocities and the scales: kernels that move (SPEC §1).
-    Velocity,
-}
-
-impl FitMode {
-    /// Every mode.
-    pub const ALL: [FitMode; 3] = [FitMode::Paper, FitMode::Static, FitMode::Velocity];
-
-    /// `rates` with the groups this mode does not fit set to 0.
-    #[must_use]
-    pub fn learning_rates(self, rates: LearningRates) -> LearningRates {
-        LearningRates {
-            velocity: if self == FitMode::Velocity {
-                rates.velocity
-            } else {
-                0.0
-            },
-            scale: if self == FitMode::Paper {
-                0.0
-            } else {
-                rates.scale
-            },
-            ..rates
-        }
-    }
-
-    /// Numbers stored per kernel: mean 4, scale 4, amplitude 3, and velocity 3 when moving.
-    #[must_use]
-    pub fn parameters_per_kernel(self) -> usize {
-        if self == FitMode::Velocity { 14 } else { 11 }
-    }
-}
-
-impl std::fmt::Display for FitMode {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            FitMode::Paper => "paper",
-            FitMode::Static => "static",
-            FitMode::Velocity => "velocity",
-        })
-    }
-}
-
-impl std::str::FromStr for FitMode {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        FitMode::ALL
-            .into_iter()
-            .find(|m| m.to_string() == s)
-            .ok_or_else(|| format!("unknown fit mode {s:?} (expected paper, static or velocity)"))
-    }
-}
-
-/// How to fit.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FitOptions {
+/// The training loop's input, whichever the blend: its schedule, its parameter table and
+/// its density rules (made by `crate::fit::additive` and `crate::fit::alpha` from the
+/// blends' options).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Training {
     /// Adam steps.
     pub steps: usize,
     /// Views per step.
     pub batch_size: usize,
-    /// Initial learning rate per group (0 freezes a group).
-    pub learning_rates: LearningRates,
-    /// Learning rates at the last step, as a fraction of the initial ones.
-    pub final_rate_factor: f64,
-    /// Adam's constants.
-    pub adam: AdamConfig,
     /// Held-out evaluation period, in steps (0: only at the end).
     pub eval_every: usize,
     /// Seed of the batch order.
-    pub seed: u64,
+    pub draw_seed: u64,
     /// Rendering options used in fitting and evaluation.
     pub render: RenderOptions,
-    /// Densify and prune on a schedule ([`crate::fit::adaptive`]); `None` keeps the count.
-    pub adaptive: Option<AdaptiveOptions>,
+    /// Adam's constants.
+    pub adam: AdamConfig,
+    /// What the fit moves, and how fast.
+    pub groups: Vec<ParameterGroup>,
+    /// The decaying groups' rates at the last step, as a fraction of their first.
+    pub final_rate_factor: f64,
+    /// Density control between steps; `None` keeps the kernel count.
+    pub density: Option<DensityRules>,
+}
+
+impl Training {
+    /// The decay factor of the rates at step `step` (1-based): `final_rate_factor^p`, `p`
+    /// from 0 at the first step to 1 at the last.
+    #[must_use]
+    pub fn decay(&self, step: usize) -> f64 {
+        let progress = (step - 1) as f64 / (self.steps.max(2) - 1) as f64;
+        self.final_rate_factor.powf(progress)
+    }
 }
 
 /// One step of the run.
@@ -183,6 +142,50 @@ pub fn evaluate(
         total += view_mse(context.image(), view);
     }
     Ok(total / views.len().max(1) as f64)
+}
+
+/// The score of a fitted scene on one split of a dataset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SplitScore {
+    /// `train`, `val` or `test`.
+    pub split: &'static str,
+    /// Views in the split.
+    pub views: usize,
+    /// Mean MSE over them.
+    pub mse: f64,
+}
+
+impl SplitScore {
+    /// The PSNR of the mean MSE.
+    #[must_use]
+    pub fn psnr(&self) -> f64 {
+        psnr(self.mse)
+    }
+}
+
+/// The score of `scene` on every non-empty split of `dataset` ([`evaluate`]).
+pub fn evaluate_splits(
+    scene: &Scene,
+    dataset: &Dataset,
+    options: &RenderOptions,
+) -> Result<Vec<SplitScore>> {
+    let mut context = RenderContext::new();
+    let splits = [
+        ("train", &dataset.train),
+        ("val", &dataset.val),
+        ("test", &dataset.test),
+    ];
+    let mut scores = Vec::new();
+    for (split, views) in splits {
+        if !views.is_empty() {
+            scores.push(SplitScore {
+                split,
+                views: views.len(),
+                mse: evaluate(scene, views, options, &mut context)?,
+            });
+        }
+    }
+    Ok(scores)
 }
 
 /// Mean MSE of `scene` over `views`, as [`evaluate`] gives it (the same sum in view order,
@@ -300,6 +303,23 @@ impl ViewSlot {
         )?;
         Ok(view_mse(self.context.image(), view))
     }
+
+    /// Whether the last view rendered here projected some kernel onto its screen.
+    fn sees_a_kernel(&self) -> bool {
+        !self.context.projected.kernel_from_proj.is_empty()
+    }
+
+    /// The last view's screen-space positional gradients: `(kernel, ∂L/∂m2)` for every
+    /// kernel it projected.
+    fn screen_gradients(&self) -> impl Iterator<Item = (usize, [f64; 2])> + '_ {
+        let screen = &self.context.backward.screen.v_means;
+        self.context
+            .projected
+            .kernel_from_proj
+            .iter()
+            .enumerate()
+            .map(|(p, &k)| (k as usize, screen[p]))
+    }
 }
 
 /// The slots a fit renders a step's views in: one per worker thread, at most `batch`.
@@ -341,86 +361,95 @@ pub(crate) fn batch_gradients(
     Ok(loss)
 }
 
-/// Fits `scene` in place to `train`, evaluating on `heldout`; calls `on_step` after each
-/// step with its record and the scene. Returns every step's record. With `options.adaptive` the scene's kernels change
-/// between steps (densify and prune); otherwise only their parameters do.
+/// Fits `scene` in place to `train`, evaluating on `heldout`, as `training` says; calls
+/// `on_step` after each step with its record and the scene. Returns every step's record.
+/// With density rules the scene's kernels change between steps; otherwise only their
+/// parameters do.
+///
+/// A step: draw the batch, render and differentiate its views (the screen gradients go to
+/// the density statistics), one Adam step over the parameter table, the finite check, the
+/// density rules, the held-out evaluation when due.
 pub fn fit(
     scene: &mut Scene,
     train: &[View],
     heldout: &[View],
-    options: &FitOptions,
+    training: &Training,
     mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
-    check_fit_inputs(train, heldout, &options.render)?;
+    check_fit_inputs(train, heldout, &training.render)?;
+    scene.validate("<fit start>")?;
     let start = Instant::now();
-    let mut adam = Adam::new(scene.len(), options.adam);
-    let mut grads = Gradients::zeros(scene.len());
-    let mut stats = DensityStats::new(scene.len());
-    let mut draws = ViewDraws::new(train.len(), options.seed);
-    let batch_size = options.batch_size.clamp(1, train.len());
+    let steps = training.steps;
+    let render = &training.render;
+    let batch = training.batch_size.clamp(1, train.len());
     // The batch's views run side by side, one per worker thread (`batch_gradients`).
-    let mut slots = view_slots(scene, batch_size);
-    let mut drawn = Vec::with_capacity(batch_size);
+    let mut slots = view_slots(scene, batch);
+    let mut grads = Gradients::for_scene(scene);
+    let mut adam = Adam::new(scene, &training.groups, training.adam);
+    let mut stats = DensityStats::new(scene.len());
+    let mut draws = ViewDraws::new(train.len(), training.draw_seed);
+    let mut drawn = Vec::with_capacity(batch);
     // Grows with the steps actually run: a flag never decides an allocation up front.
-    let mut records = Vec::with_capacity(options.steps.min(1 << 12));
-    for step in 1..=options.steps {
-        grads.reset(scene.len());
-        draws.next_batch(batch_size, &mut drawn);
-        let batch_loss = batch_gradients(
+    let mut records = Vec::with_capacity(steps.min(1 << 12));
+    // Whether some training view has seen a kernel yet (a view that sees none is a step with
+    // zero gradient; views that never see one leave nothing to fit).
+    let mut seen_any = false;
+    // Steps until every training view has been drawn once (the draws go epoch by epoch).
+    let first_epoch = train.len().div_ceil(batch);
+    for step in 1..=steps {
+        grads.reset_for_scene(scene);
+        draws.next_batch(batch, &mut drawn);
+        let weight = 1.0 / batch as f64;
+        let train_loss = batch_gradients(
             &mut slots,
             scene,
             train,
             &drawn,
-            &options.render,
+            render,
             &mut grads,
-            |_| {},
+            |slot| {
+                seen_any |= slot.sees_a_kernel();
+                stats.add_view(slot.screen_gradients(), weight);
+            },
         )?;
-        if !batch_loss.is_finite() {
+        if !seen_any && (step == first_epoch || step == steps) {
+            return Err(nothing_in_sight(scene, train, step));
+        }
+        if !train_loss.is_finite() {
             return Err(Error::Numeric(format!(
-                "fitting diverged at step {step}: the loss is {batch_loss}; lower the learning rates"
+                "fitting diverged at step {step}: the loss is {train_loss}; lower the learning rates"
             )));
         }
-        let progress = if options.steps > 1 {
-            (step - 1) as f64 / (options.steps - 1) as f64
-        } else {
-            1.0
-        };
-        let rates = options
-            .learning_rates
-            .scaled(options.final_rate_factor.powf(progress));
-        adam.step(scene, &grads, &rates);
-        if let Some(why) = non_finite_parameter(scene) {
+        adam.step(scene, &grads, step, training.decay(step));
+        if let Some(why) = non_finite_parameter(scene, adam.groups()) {
             return Err(Error::Numeric(format!(
                 "fitting diverged at step {step}: {why}; lower that learning rate, or check the dataset's focal lengths (fl_x, fl_y) and background"
             )));
         }
-        if let Some(adaptive) = &options.adaptive {
-            stats.accumulate(scene, &grads);
-            if adaptive.round_after(step, options.steps) {
-                stats.record_loss(evaluate_in(scene, train, &options.render, &mut slots)?);
-                let round = if adaptive.last_round_after(step, options.steps) {
-                    adaptive.without_growth()
-                } else {
-                    *adaptive
-                };
-                let (next, sources, _) = densify_and_prune(scene, &stats, &round)?;
-                *scene = next;
+        if let Some(rules) = &training.density {
+            stats.add_step(scene, &grads);
+            let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
+                evaluate_in(scene, train, render, &mut slots)
+            })?;
+            if change.opacities_reset {
+                adam.clear(Field::Opacity);
+            }
+            if let Some(sources) = change.sources {
                 adam.remap(&sources);
-                stats = stats.next_window(scene.len());
             }
         }
         let heldout_psnr = heldout_psnr_at(
             step,
-            (options.steps, options.eval_every),
+            (steps, training.eval_every),
             scene,
             heldout,
-            &options.render,
+            render,
             &mut slots,
         )?;
         let record = StepRecord {
             step,
             seconds: start.elapsed().as_secs_f64(),
-            train_loss: batch_loss,
+            train_loss,
             heldout_psnr,
             kernels: scene.len(),
         };
@@ -430,62 +459,15 @@ pub fn fit(
     Ok(records)
 }
 
-/// The first parameter of `scene` that left the finite numbers (or a scale that is no
-/// longer positive), named by its group and the field of that group's learning rate
-/// (`` `lr_mean` ``, which the command line shows as its flag).
-#[must_use]
-pub fn non_finite_parameter(scene: &Scene) -> Option<String> {
-    let bad = |values: &[f64]| values.iter().any(|v| !v.is_finite());
-    for i in 0..scene.len() {
-        let found = if bad(&scene.means[i][..3]) {
-            Some(("mean", "`lr_mean`"))
-        } else if bad(&scene.means[i][3..]) {
-            Some(("time", "`lr_time`"))
-        } else if bad(&scene.scales[i]) || scene.scales[i].iter().any(|&s| s <= 0.0) {
-            Some(("scale", "`lr_scale`"))
-        } else if bad(&scene.amplitudes[i]) {
-            Some(("amplitude", "`lr_amplitude`"))
-        } else if bad(&scene.velocities[i]) {
-            Some(("velocity", "`lr_velocity`"))
-        } else if bad(&scene.rotations[i]) {
-            Some(("rotation", "none: rotations come from the start"))
-        } else {
-            None
-        };
-        if let Some((group, flag)) = found {
-            return Some(format!(
-                "kernel {i}'s {group} is no longer finite (its rate: {flag})"
-            ));
-        }
-    }
-    bad(&scene.background)
-        .then(|| "the background is no longer finite (its rate: `lr_background`)".to_string())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_non_finite_parameter_is_named_with_its_rate() {
-        let kernel = crate::model::scene::Kernel::new([0.0; 4], [0.1; 4], [0.5; 3]);
-        let mut scene = Scene::from_kernels(&[kernel, kernel], [0.0; 3], "<test>").unwrap();
-        assert_eq!(non_finite_parameter(&scene), None);
-        scene.amplitudes[1][2] = f64::NAN;
-        let why = non_finite_parameter(&scene).unwrap();
-        assert!(
-            why.contains("kernel 1") && why.contains("`lr_amplitude`"),
-            "{why}"
-        );
-        scene.amplitudes[1][2] = 0.5;
-        scene.scales[0][3] = 0.0;
-        assert!(non_finite_parameter(&scene).unwrap().contains("`lr_scale`"));
-        scene.scales[0][3] = 0.1;
-        scene.background[0] = f64::INFINITY;
-        assert!(
-            non_finite_parameter(&scene)
-                .unwrap()
-                .contains("`lr_background`")
-        );
-    }
+/// The error of a fit whose training views saw no kernel in its first `steps` steps (every
+/// view once, or the whole run): with zero gradients nothing would ever move into sight.
+fn nothing_in_sight(scene: &Scene, train: &[View], steps: usize) -> Error {
+    Error::usage(format!(
+        "no training view drawn in the first {steps} step(s) ({} training views) sees any of the \
+         start's {} kernels, and a fit cannot move what no camera sees: check the cameras' poses \
+         and intrinsics (`transform_matrix`, `fl_x`, `fl_y`, `cx`, `cy`; COLMAP cameras and \
+         images), the point cloud the fit starts from, or the start scene",
+        train.len(),
+        scene.len(),
+    ))
 }

@@ -15,12 +15,13 @@
 
 use std::time::Instant;
 
-use crate::fit::adam::LearningRates;
+use crate::fit::additive::LearningRates;
+use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, random_scene};
 use crate::fit::loss::{mse, psnr, ssim};
 use crate::fit::plan::{DEFAULT_INIT_AMPLITUDE, DEFAULT_RATES};
 use crate::fit::plan::{FitPlan, Init, PreparedFit};
-use crate::fit::train::{FitMode, FitOptions, StepRecord, fit};
+use crate::fit::train::{StepRecord, fit};
 use crate::model::Image;
 use crate::model::Progress;
 use crate::model::error::Result;
@@ -385,13 +386,13 @@ fn sweep_metrics(
     })
 }
 
-fn fit_options(steps: usize, seed: u64, rates: LearningRates) -> FitOptions {
-    FitOptions {
+fn fit_options(steps: usize, seed: u64, rates: LearningRates) -> AdditiveFitOptions {
+    AdditiveFitOptions {
         steps,
         learning_rates: rates,
         eval_every: (steps / 30).max(1),
         seed,
-        ..FitOptions::default()
+        ..AdditiveFitOptions::default()
     }
 }
 
@@ -436,7 +437,7 @@ fn fit_adaptive(
         &mut scene,
         &dataset.train,
         &dataset.val,
-        &options,
+        &options.training(),
         |_, _| progress.tick(),
     )?;
     Ok((scene, start.elapsed().as_secs_f64()))
@@ -501,7 +502,7 @@ fn synthetic_model_size(
         &mut fixed,
         &dataset.train,
         &dataset.val,
-        &fit_options(config.adaptive_steps, config.seed, model_rates()),
+        &fit_options(config.adaptive_steps, config.seed, model_rates()).training(),
         |_, _| progress.tick(),
     )?;
     let fixed_seconds = start.elapsed().as_secs_f64();
@@ -535,7 +536,7 @@ fn fit_4d(
         &mut scene,
         &dataset.train,
         &dataset.val,
-        &options,
+        &options.training(),
         |_, _| progress.tick(),
     )?;
     Ok((scene, log, start.elapsed().as_secs_f64()))
@@ -670,7 +671,7 @@ fn fit_frame_baselines(
             &mut scene,
             &views,
             &[],
-            &fit_options(config.frame_steps, config.seed, frame_rates()),
+            &fit_options(config.frame_steps, config.seed, frame_rates()).training(),
             |_, _| progress.tick(),
         )?;
         scenes.push(scene);

@@ -563,7 +563,7 @@ fn model_size_section(
     let _ = writeln!(w, "## Model size: only the kernels a scene needs\n");
     let _ = writeln!(
         w,
-        "Adaptive fits start from {} kernels spread at random (seeded) in the cameras' box and run {} steps with densify/prune/merge rounds and, for velocity kernels, splits in time (`src/fit/adaptive.rs`), \
+        "Adaptive fits start from {} kernels spread at random (seeded) in the cameras' box and run {} steps with densify/prune/merge rounds and, for velocity kernels, splits in time (`src/fit/density/additive.rs`), \
          as `splat4d fit` does without `--init`: *static kernels* fit means, amplitudes and scales; *velocity kernels* also velocities. \
          The fixed-count model is the paper's ({} kernels, scales fixed). Parameters: 11 per static 4D kernel (mean 4, σ 4, amplitude 3), 14 per velocity kernel, 9 per frame kernel. \
          Held-out = new cameras at times between the training times. The seed blob: the continuous object behind the points (one velocity kernel, SPEC §7), {} views × {} times at {}×{}. \

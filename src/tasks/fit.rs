@@ -6,22 +6,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::fit::alpha::{
-    AlphaFitOptions, alpha_bounds, fit_alpha, hull_alpha_scene, point_cloud_alpha_scene,
-    random_alpha_scene, swept_alpha_scene,
-};
-use crate::fit::hull::{HULL_GRID, flat_background, visual_hull};
-use crate::fit::init::SpaceTimeBox;
-use crate::fit::loss::psnr;
-use crate::fit::plan::{Init, border_median, start_amplitude};
+use crate::fit::plan::Init;
 use crate::fit::settings::FitSettings;
-use crate::fit::stereo::plane_sweep;
-use crate::fit::train::{StepRecord, evaluate, fit};
+use crate::fit::train::{SplitScore, StepRecord, evaluate_splits};
 use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
-use crate::model::{Blend, Result, Scene, Silent, Up};
-use crate::render::RenderContext;
+use crate::model::{Blend, Dataset, Result, Scene, Silent};
 use crate::tasks::{with_threads_on_pool, with_threads_on_pool_unless_shared};
 use crate::view::live::StepPoint;
 use crate::view::{Live, Server, Showing};
@@ -62,8 +53,8 @@ pub struct FitSummary {
     steps: usize,
     seconds: f64,
     background: [f64; 3],
-    /// `(split, views, MSE)` for every non-empty split.
-    pub splits: Vec<(&'static str, usize, f64)>,
+    /// The score of every non-empty split.
+    pub splits: Vec<SplitScore>,
 }
 
 impl fmt::Display for FitSummary {
@@ -79,11 +70,14 @@ impl fmt::Display for FitSummary {
             self.background[1],
             self.background[2]
         )?;
-        for (split, views, mse) in &self.splits {
+        for score in &self.splits {
             write!(
                 f,
-                "\n  {split}: {views} views, MSE {mse:.3e}, PSNR {:.2} dB",
-                psnr(*mse)
+                "\n  {}: {} views, MSE {:.3e}, PSNR {:.2} dB",
+                score.split,
+                score.views,
+                score.mse,
+                score.psnr()
             )?;
         }
         Ok(())
@@ -153,12 +147,86 @@ fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
     ))
 }
 
-/// Fits kernels to the dataset in `request.views` and writes the scene (and the log).
+/// Fits kernels to the dataset in `request.views` and writes the scene (and the log):
+/// checks the outputs and the memory, reads the dataset and the start, asks the plan,
+/// runs the fit, writes.
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
     request.settings.validate()?;
-    // Outputs are checked before the work: a fit is never lost to an unwritable path, and
-    // never replaces its dataset or its start.
-    // Every file the fit reads: the transforms files, the images they name, the start.
+    check_fit_outputs(request)?;
+    check_fit_memory(request)?;
+    // A busy port is refused before the dataset is read.
+    let server = request
+        .view
+        .map(|port| Server::bind("127.0.0.1", port))
+        .transpose()?;
+    let dataset = read_dataset(request, progress)?;
+    let init = match Init::parse_builtin(&request.init)? {
+        Some(init) => init,
+        None => Init::Scene(load_scene(Path::new(&request.init))?),
+    };
+    let origin = crate::io::dataset::training_file(&request.views);
+    let mut ready = request.settings.prepare(
+        request.blend,
+        init,
+        &request.init,
+        &dataset,
+        &origin.display().to_string(),
+    )?;
+    for note in &ready.notes {
+        progress.note(note);
+    }
+    let (steps, render) = (ready.training.steps, ready.training.render);
+    let heldout = if dataset.val.is_empty() {
+        &dataset.test
+    } else {
+        &dataset.val
+    };
+    let viewer = server.map(|server| {
+        FitViewer::start(
+            server,
+            &ready.framed_start(),
+            &dataset,
+            &render,
+            steps,
+            progress,
+        )
+    });
+    progress.start(steps);
+    let mut last_heldout = None;
+    // Without a thread count the steps run on a thread of the global pool, so each step's
+    // parallel loops start there instead of being handed over one by one; not with a live
+    // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
+    // the viewer a snapshot: nothing here waits on another thread.
+    let records = with_threads_on_pool_unless_shared(request.threads, viewer.is_some(), || {
+        ready.run(&dataset.train, heldout, |record, scene| {
+            if record.heldout_psnr.is_some() {
+                last_heldout = record.heldout_psnr;
+            }
+            progress.step(record, last_heldout);
+            if let Some(viewer) = &viewer {
+                viewer.step(record, scene);
+            }
+        })
+    })??;
+    drop(viewer);
+    let scene = &ready.scene;
+    write_fit(request, scene, &records)?;
+    let splits = with_threads_on_pool(request.threads, || {
+        evaluate_splits(scene, &dataset, &render)
+    })??;
+    Ok(FitSummary {
+        out: request.out.clone(),
+        kernels: scene.len(),
+        steps,
+        seconds: records.last().map_or(0.0, |r| r.seconds),
+        background: scene.background,
+        splits,
+    })
+}
+
+/// Refuses, before any work, outputs that cannot be written or that would replace an input
+/// (the dataset's files, the start): a fit is never lost to an unwritable path.
+fn check_fit_outputs(request: &FitRequest) -> Result<()> {
     let mut inputs = dataset_files(&request.views);
     inputs.push(PathBuf::from(&request.init));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
@@ -172,12 +240,12 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             ));
         }
     }
-    check_fit_memory(request)?;
-    // A busy port is refused before the dataset is read.
-    let server = request
-        .view
-        .map(|port| Server::bind("127.0.0.1", port))
-        .transpose()?;
+    Ok(())
+}
+
+/// The dataset, read as the request says; its notes, and what the user should know about
+/// its images and cameras, shown.
+fn read_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<Dataset> {
     let options = DatasetOptions {
         background: request
             .settings
@@ -197,104 +265,11 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             "images with transparency were composited over black (`background` chooses the colour)",
         );
     }
-    let up = cameras_up(&dataset.train);
-    if let Some(up) = up
-        && up != Up::Y
-    {
-        progress.note(&format!(
-            "the cameras' mean up is {up}: the fitted scene records it, and videos of it turn about it"
-        ));
-    }
-    let init = match Init::parse_builtin(&request.init)? {
-        Some(init) => init,
-        None => Init::Scene(load_scene(Path::new(&request.init))?),
-    };
-    let (blend, why) = match (request.blend, &init, dataset.blend) {
-        (Some(blend), _, _) => (blend, "`blend` chose it"),
-        (None, Init::Scene(scene), _) => (scene.blend, "the start scene's"),
-        (None, _, Some(blend)) => (blend, "the one the dataset records"),
-        (None, _, None) => (Blend::Alpha, "the default for a dataset"),
-    };
-    if let Init::Scene(scene) = &init
-        && scene.blend != blend
-    {
-        return Err(crate::model::Error::usage(format!(
-            "{}: the start scene's blend is {}, the fit's {blend}",
-            request.init, scene.blend
-        )));
-    }
-    if blend == Blend::Alpha {
-        let options = request.settings.alpha_options(why)?;
-        request.settings.check_start(blend, &init, &request.init)?;
-        progress.note("fitting the alpha blend (SPEC §8: opacity, SH colour, depth order)");
-        return fit_alpha_dataset(request, &options, &dataset, init, up, server, progress);
-    }
-    let plan = &request.settings.additive_plan(why)?;
-    request.settings.check_start(blend, &init, &request.init)?;
-    let prepared = plan.prepare(init, &dataset.train)?;
-    let mut scene = prepared.scene;
-    let up = up.or(scene.up);
-    let [r, g, b] = scene.background;
-    let fitted = if prepared.options.learning_rates.background > 0.0 {
-        "fitted from"
-    } else {
-        "fixed at"
-    };
-    progress.note(&format!("background {fitted} ({r:.4}, {g:.4}, {b:.4})"));
-    let heldout = if dataset.val.is_empty() {
-        &dataset.test
-    } else {
-        &dataset.val
-    };
-    let viewer = server.map(|server| {
-        FitViewer::start(server, &scene, &dataset, &plan.render, plan.steps, progress)
-    });
-    progress.start(plan.steps);
-    let mut last_heldout = None;
-    // Without a thread count the steps run on a thread of the global pool, so each step's
-    // parallel loops start there instead of being handed over one by one; not with a live
-    // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
-    // the viewer a snapshot: nothing here waits on another thread.
-    let records = with_threads_on_pool_unless_shared(request.threads, viewer.is_some(), || {
-        fit(
-            &mut scene,
-            &dataset.train,
-            heldout,
-            &prepared.options,
-            |record, scene| {
-                if record.heldout_psnr.is_some() {
-                    last_heldout = record.heldout_psnr;
-                }
-                progress.step(record, last_heldout);
-                if let Some(viewer) = &viewer {
-                    viewer.step(record, scene);
-                }
-            },
-        )
-    })??;
-    drop(viewer);
-    scene.up = up;
-    scene.time_range = data_time_range(&dataset);
-    scene.framing = data_framing(&dataset);
-    finish_fit(
-        request,
-        &dataset,
-        &scene,
-        &records,
-        &plan.render,
-        plan.steps,
-    )
+    Ok(dataset)
 }
 
-/// Writes the fitted scene and the log, and evaluates every split.
-fn finish_fit(
-    request: &FitRequest,
-    dataset: &crate::model::Dataset,
-    scene: &crate::model::Scene,
-    records: &[StepRecord],
-    render: &crate::render::RenderOptions,
-    steps: usize,
-) -> Result<FitSummary> {
+/// Writes the fitted scene and the log.
+fn write_fit(request: &FitRequest, scene: &Scene, records: &[StepRecord]) -> Result<()> {
     save_scene(scene, &request.out)?;
     if let Some(log) = &request.log {
         let mut lines = String::new();
@@ -304,161 +279,7 @@ fn finish_fit(
         }
         write_bytes_atomically(log, lines.as_bytes())?;
     }
-    let mut context = RenderContext::new();
-    let mut splits = Vec::new();
-    for (split, views) in [
-        ("train", &dataset.train),
-        ("val", &dataset.val),
-        ("test", &dataset.test),
-    ] {
-        if !views.is_empty() {
-            let mse = with_threads_on_pool(request.threads, || {
-                evaluate(scene, views, render, &mut context)
-            })??;
-            splits.push((split, views.len(), mse));
-        }
-    }
-    Ok(FitSummary {
-        out: request.out.clone(),
-        kernels: scene.len(),
-        steps,
-        seconds: records.last().map_or(0.0, |r| r.seconds),
-        background: scene.background,
-        splits,
-    })
-}
-
-/// Fewer points than this from the plane sweep, and the fit starts at random instead.
-const MIN_SWEPT_POINTS: usize = 100;
-
-/// The alpha fit's start when the dataset has no point cloud: the visual hull of the
-/// training views where their background is flat ([`crate::fit::hull`]), else a plane sweep
-/// over neighbouring views ([`crate::fit::stereo`]), else kernels at random in the cameras'
-/// box.
-fn start_from_images(
-    dataset: &crate::model::Dataset,
-    bounds: &SpaceTimeBox,
-    background: [f64; 3],
-    colour: [f64; 3],
-    options: &AlphaFitOptions,
-    progress: &mut dyn FitProgress,
-) -> Result<Scene> {
-    if flat_background(&dataset.train, background) {
-        let (cells, side) = visual_hull(&dataset.train, background, bounds);
-        if !cells.is_empty() {
-            progress.note(&format!(
-                "starting from the visual hull of the training views ({} of {} cells kept)",
-                cells.len(),
-                HULL_GRID.pow(3)
-            ));
-            return hull_alpha_scene(&cells, side, bounds, background, options);
-        }
-    }
-    let points = plane_sweep(&dataset.train, bounds, options.start_kernels);
-    if points.len() >= MIN_SWEPT_POINTS {
-        progress.note(&format!(
-            "starting from a plane sweep over neighbouring training views ({} points)",
-            points.len()
-        ));
-        return swept_alpha_scene(&points, bounds, background, options);
-    }
-    progress.note("starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from, no depth the views agree on)");
-    random_alpha_scene(bounds, background, colour, options)
-}
-
-/// The alpha fit of SPEC §8 ([`crate::fit::alpha`]): a random start in the cameras' box (or
-/// the given alpha scene), over the given background or the median of the training images'
-/// border pixels.
-fn fit_alpha_dataset(
-    request: &FitRequest,
-    options: &AlphaFitOptions,
-    dataset: &crate::model::Dataset,
-    init: Init,
-    up: Option<Up>,
-    server: Option<Server>,
-    progress: &mut dyn FitProgress,
-) -> Result<FitSummary> {
-    let training = crate::io::dataset::training_file(&request.views);
-    let bounds = alpha_bounds(&dataset.train, &training.display().to_string())?;
-    let background = request
-        .settings
-        .background
-        .unwrap_or_else(|| border_median(&dataset.train));
-    let colour =
-        start_amplitude(&dataset.train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
-    let mut scene = match init {
-        Init::Scene(scene) => scene,
-        Init::Auto => match &dataset.points {
-            Some(points) if !points.is_empty() => {
-                progress.note(&format!(
-                    "starting from the dataset's point cloud ({} points)",
-                    points.len()
-                ));
-                point_cloud_alpha_scene(points, &bounds, background, options)?
-            }
-            _ => start_from_images(dataset, &bounds, background, colour, options, progress)?,
-        },
-        Init::Random(n) => random_alpha_scene(
-            &bounds,
-            background,
-            colour,
-            &AlphaFitOptions {
-                start_kernels: n,
-                ..*options
-            },
-        )?,
-    };
-    let heldout = if dataset.val.is_empty() {
-        &dataset.test
-    } else {
-        &dataset.val
-    };
-    let viewer = server.map(|server| {
-        FitViewer::start(
-            server,
-            &scene,
-            dataset,
-            &options.render,
-            options.steps,
-            progress,
-        )
-    });
-    progress.start(options.steps);
-    let mut last_heldout = None;
-    // Without a thread count the steps run on a thread of the global pool, so each step's
-    // parallel loops start there instead of being handed over one by one; not with a live
-    // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
-    // the viewer a snapshot: nothing here waits on another thread.
-    let records = with_threads_on_pool_unless_shared(request.threads, viewer.is_some(), || {
-        fit_alpha(
-            &mut scene,
-            &bounds,
-            &dataset.train,
-            heldout,
-            options,
-            |record, scene| {
-                if record.heldout_psnr.is_some() {
-                    last_heldout = record.heldout_psnr;
-                }
-                progress.step(record, last_heldout);
-                if let Some(viewer) = &viewer {
-                    viewer.step(record, scene);
-                }
-            },
-        )
-    })??;
-    drop(viewer);
-    scene.up = up.or(scene.up);
-    scene.time_range = data_time_range(dataset);
-    scene.framing = data_framing(dataset);
-    finish_fit(
-        request,
-        dataset,
-        &scene,
-        &records,
-        &options.render,
-        options.steps,
-    )
+    Ok(())
 }
 
 /// How often a running fit hands its viewer a copy of its scene.
@@ -475,6 +296,7 @@ struct FitViewer {
 }
 
 impl FitViewer {
+    /// Serves `scene` (the start, framed as the fitted scene will be) and `dataset`'s views.
     fn start(
         server: Server,
         scene: &Scene,
@@ -491,13 +313,9 @@ impl FitViewer {
             .chain(&dataset.test)
             .cloned()
             .collect();
-        // Framed on what the cameras look at, over the data's times (as the fitted scene).
-        let mut start = scene.clone();
-        start.framing = data_framing(dataset);
-        start.time_range = data_time_range(dataset);
         let showing = Showing {
             title: "fit".into(),
-            scene: Arc::new(start),
+            scene: Arc::new(scene.clone()),
             views: Arc::new(views),
             options: *render,
             live: Some(Arc::clone(&live)),
@@ -536,51 +354,6 @@ impl Drop for FitViewer {
             let _ = thread.join();
         }
     }
-}
-
-/// The sphere the training cameras look at ([`crate::fit::init::box_from_cameras`]: the
-/// point nearest their optical axes, half as wide as the median camera sees), if they say.
-fn data_framing(dataset: &crate::model::Dataset) -> Option<([f64; 3], f64)> {
-    let cameras: Vec<crate::model::Camera> = dataset.train.iter().map(|v| v.camera).collect();
-    let bounds = crate::fit::init::box_from_cameras(&cameras, [0.0, 0.0]).ok()?;
-    let centre = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
-    let radius = 0.5
-        * (0..3)
-            .map(|a| (bounds.max[a] - bounds.min[a]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-    (radius > 0.0 && radius.is_finite()).then_some((centre, radius))
-}
-
-/// The range of every view's time (train, val and test): what the data shows.
-fn data_time_range(dataset: &crate::model::Dataset) -> Option<[f64; 2]> {
-    let times = dataset
-        .train
-        .iter()
-        .chain(&dataset.val)
-        .chain(&dataset.test)
-        .map(|v| v.time);
-    times.fold(None, |range, t| {
-        Some(range.map_or([t, t], |[lo, hi]: [f64; 2]| [lo.min(t), hi.max(t)]))
-    })
-}
-
-/// The world axis nearest the training cameras' mean up direction (image up, the camera's
-/// -y in OpenCV axes); `None` when the ups cancel out.
-fn cameras_up(views: &[crate::model::View]) -> Option<Up> {
-    let mut up = [0.0_f64; 3];
-    for view in views {
-        let down = view.camera.rotation()[1];
-        let norm = down.iter().map(|v| v * v).sum::<f64>().sqrt();
-        for c in 0..3 {
-            up[c] -= down[c] / norm;
-        }
-    }
-    let largest = up.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    if largest < 1e-9 * views.len() as f64 {
-        return None;
-    }
-    Up::nearest(up)
 }
 
 #[cfg(test)]

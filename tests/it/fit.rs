@@ -2,10 +2,11 @@
 //! images of 8 views at 5 times, and generalises to unseen cameras at unseen times; the
 //! adaptive velocity fit ends with the kernels a scene needs.
 
-use splat4d::fit::adam::LearningRates;
+use splat4d::fit::additive::LearningRates;
+use splat4d::fit::additive::{AdditiveFitOptions, FitMode};
 use splat4d::fit::loss::psnr;
 use splat4d::fit::plan::{FitPlan, Init, PreparedFit};
-use splat4d::fit::train::{FitMode, FitOptions, evaluate, fit};
+use splat4d::fit::train::{evaluate, fit};
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
 use splat4d::{RenderContext, RenderOptions, Scene};
 
@@ -30,7 +31,7 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
     let mut scene = truth.clone();
     scene.means[0] = [0.55, 0.46, 0.53, 0.5];
     scene.amplitudes[0] = [0.7, 1.3, 0.75];
-    let options = FitOptions {
+    let options = AdditiveFitOptions {
         steps: 300,
         learning_rates: LearningRates {
             mean: 5e-3,
@@ -41,13 +42,13 @@ fn recovers_the_seed_blob_from_a_perturbed_start() {
             background: 0.0,
         },
         final_rate_factor: 0.01,
-        ..FitOptions::default()
+        ..AdditiveFitOptions::default()
     };
     let records = fit(
         &mut scene,
         &dataset.train,
         &dataset.val,
-        &options,
+        &options.training(),
         |_, _| {},
     )
     .unwrap();
@@ -86,7 +87,7 @@ fn a_diverging_fit_stops_with_an_error() {
     };
     let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
     let mut scene = truth.clone();
-    let options = FitOptions {
+    let options = AdditiveFitOptions {
         steps: 50,
         learning_rates: LearningRates {
             mean: 0.0,
@@ -96,12 +97,18 @@ fn a_diverging_fit_stops_with_an_error() {
             scale: 0.0,
             background: 0.0,
         },
-        ..FitOptions::default()
+        ..AdditiveFitOptions::default()
     };
     scene.amplitudes[0] = [0.5; 3];
-    let error = fit(&mut scene, &dataset.train, &[], &options, |_, _| {})
-        .unwrap_err()
-        .to_string();
+    let error = fit(
+        &mut scene,
+        &dataset.train,
+        &[],
+        &options.training(),
+        |_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
     assert!(
         error.contains("diverged") && error.contains("learning rates"),
         "{error}"
@@ -132,7 +139,7 @@ fn adaptive_fit(truth: &Scene, mode: FitMode, steps: usize) -> (Scene, f64) {
         &mut scene,
         &dataset.train,
         &dataset.val,
-        &options,
+        &options.training(),
         |_, _| {},
     )
     .unwrap();
@@ -203,7 +210,14 @@ fn an_adaptive_fit_is_the_same_bits_for_any_thread_count() {
             let PreparedFit {
                 mut scene, options, ..
             } = plan.prepare(Init::Auto, &dataset.train).unwrap();
-            let records = fit(&mut scene, &dataset.train, &[], &options, |_, _| {}).unwrap();
+            let records = fit(
+                &mut scene,
+                &dataset.train,
+                &[],
+                &options.training(),
+                |_, _| {},
+            )
+            .unwrap();
             let losses: Vec<u64> = records.iter().map(|r| r.train_loss.to_bits()).collect();
             (splat4d::io::scene_file::scene_to_json(&scene), losses)
         })

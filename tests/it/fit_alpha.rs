@@ -1,10 +1,11 @@
 //! The alpha fit (SPEC §8, `fit::alpha`): an occluding scene rendered into a dataset is
 //! recovered from a random start, where the additive sum cannot represent it.
 
-use splat4d::fit::alpha::{alpha_bounds, fit_alpha, random_alpha_scene};
+use splat4d::fit::alpha::alpha_bounds;
+use splat4d::fit::alpha_start::random_alpha_scene;
 use splat4d::fit::loss::psnr;
 use splat4d::fit::plan::DEFAULT_ALPHA;
-use splat4d::fit::train::evaluate;
+use splat4d::fit::train::{evaluate, fit};
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
 use splat4d::{Kernel, RenderContext, RenderOptions, Scene};
 
@@ -65,12 +66,11 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
         ..DEFAULT_ALPHA
     };
     let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
-    let records = fit_alpha(
+    let records = fit(
         &mut fitted,
-        &bounds,
         &dataset.train,
         &dataset.test,
-        &fit_options,
+        &fit_options.training(&bounds),
         |_, _| {},
     )
     .unwrap();
@@ -90,7 +90,7 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
 /// scene (printed beside the random start's, the same steps and kernel budget).
 #[test]
 fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
-    use splat4d::fit::alpha::hull_alpha_scene;
+    use splat4d::fit::alpha_start::hull_alpha_scene;
     use splat4d::fit::hull::{flat_background, visual_hull};
     let scene = occluding_scene();
     let (dataset, _) = occluding_dataset(&scene);
@@ -114,12 +114,11 @@ fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
         ..DEFAULT_ALPHA
     };
     let heldout = |mut start: Scene| {
-        let records = fit_alpha(
+        let records = fit(
             &mut start,
-            &bounds,
             &dataset.train,
             &dataset.test,
-            &fit_options,
+            &fit_options.training(&bounds),
             |_, _| {},
         )
         .unwrap();
@@ -215,7 +214,7 @@ fn room_photos(scene: &Scene, count: usize) -> Vec<splat4d::model::View> {
 /// on held-out photos at the same steps.
 #[test]
 fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
-    use splat4d::fit::alpha::swept_alpha_scene;
+    use splat4d::fit::alpha_start::swept_alpha_scene;
     use splat4d::fit::hull::flat_background;
     use splat4d::fit::stereo::plane_sweep;
     let scene = textured_room();
@@ -269,8 +268,14 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
         ..DEFAULT_ALPHA
     };
     let heldout_psnr = |mut start: Scene| {
-        let records =
-            fit_alpha(&mut start, &bounds, &train, &heldout, &options, |_, _| {}).unwrap();
+        let records = fit(
+            &mut start,
+            &train,
+            &heldout,
+            &options.training(&bounds),
+            |_, _| {},
+        )
+        .unwrap();
         records.last().unwrap().heldout_psnr.unwrap()
     };
     let swept = heldout_psnr(swept_alpha_scene(&points, &bounds, [0.0; 3], &options).unwrap());
@@ -303,12 +308,11 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     let run = |threads: usize| {
         crate::common::on_threads(threads, || {
             let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
-            let records = fit_alpha(
+            let records = fit(
                 &mut fitted,
-                &bounds,
                 &dataset.train,
                 &dataset.test,
-                &fit_options,
+                &fit_options.training(&bounds),
                 |_, _| {},
             )
             .unwrap();
@@ -428,7 +432,7 @@ fn the_alpha_backward_of_a_frame_that_sees_nothing_is_zero() {
 /// gradients); a fit none of whose views ever sees a kernel is refused with a message
 /// saying so, not a panic (issue 45).
 #[test]
-fn an_alpha_fit_runs_past_views_that_see_nothing_and_refuses_views_that_never_do() {
+fn a_fit_runs_past_views_that_see_nothing_and_refuses_views_that_never_do() {
     use splat4d::model::View;
     let scene = occluding_scene();
     let eyes = [
@@ -467,18 +471,44 @@ fn an_alpha_fit_runs_past_views_that_see_nothing_and_refuses_views_that_never_do
     // look at.)
     let bounds = alpha_bounds(&train, "<views>").unwrap();
     let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.5; 3], &fit_options).unwrap();
-    let records = fit_alpha(&mut fitted, &bounds, &train, &[], &fit_options, |_, _| {}).unwrap();
+    let records = fit(
+        &mut fitted,
+        &train,
+        &[],
+        &fit_options.training(&bounds),
+        |_, _| {},
+    )
+    .unwrap();
     assert_eq!(records.len(), 12);
     assert!(records.iter().all(|r| r.train_loss.is_finite()));
     fitted.validate("<fitted>").unwrap();
     // Every view looks away.
     let blind: Vec<View> = eyes.iter().map(|&eye| view_of(eye, true, 0.5)).collect();
     let mut start = random_alpha_scene(&bounds, [0.0; 3], [0.5; 3], &fit_options).unwrap();
-    let error = fit_alpha(&mut start, &bounds, &blind, &[], &fit_options, |_, _| {})
+    let error = fit(
+        &mut start,
+        &blind,
+        &[],
+        &fit_options.training(&bounds),
+        |_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(error.contains("no training view"), "{error}");
+    assert!(error.contains("40 kernels"), "{error}");
+    // The additive fit runs the same loop: blind views are refused there too (it exited 0
+    // with an unchanged scene before the two fits became one).
+    let additive = splat4d::fit::additive::AdditiveFitOptions {
+        steps: 12,
+        batch_size: 2,
+        eval_every: 0,
+        ..Default::default()
+    };
+    let mut start = splat4d::fit::init::random_scene(40, &bounds, None, 0.5, 3).unwrap();
+    let error = fit(&mut start, &blind, &[], &additive.training(), |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(error.contains("no training view"), "{error}");
-    assert!(error.contains("40 kernels"), "{error}");
 }
 
 /// Renders the blob as a dataset (4 cameras × 2 times, 8×8) into `dir/name` and edits its

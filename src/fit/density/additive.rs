@@ -45,13 +45,13 @@
 //! No randomness: the result depends only on the data and the step schedule. Adam's
 //! moments follow the kernels (a clone starts from zero moments).
 
-use crate::backward::Gradients;
+use crate::fit::density::DensityStats;
 use crate::model::error::Result;
 use crate::model::scene::{Kernel, Scene};
 
-/// When and how to densify and prune.
+/// The additive rule set: when and how to densify, prune and merge.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AdaptiveOptions {
+pub struct AdditiveRules {
     /// Steps between rounds.
     pub every: usize,
     /// Fraction of the steps before the first round.
@@ -80,7 +80,7 @@ pub struct AdaptiveOptions {
     pub min_time_scale: f64,
 }
 
-impl AdaptiveOptions {
+impl AdditiveRules {
     /// Whether a round runs after `step` (1-based) of `steps`.
     #[must_use]
     pub fn round_after(&self, step: usize, steps: usize) -> bool {
@@ -92,7 +92,7 @@ impl AdaptiveOptions {
     }
 
     /// Whether the round after `step` is the schedule's last: it only prunes and merges
-    /// ([`AdaptiveOptions::without_growth`]), so that kernels split before it and left on one
+    /// ([`AdditiveRules::without_growth`]), so that kernels split before it and left on one
     /// path by the fit are rejoined rather than kept for the refining steps.
     #[must_use]
     pub fn last_round_after(&self, step: usize, steps: usize) -> bool {
@@ -102,7 +102,7 @@ impl AdaptiveOptions {
     /// These options with no room to add kernels (prune and merge only).
     #[must_use]
     pub fn without_growth(&self) -> Self {
-        AdaptiveOptions {
+        AdditiveRules {
             max_kernels: 0,
             ..*self
         }
@@ -125,95 +125,13 @@ pub struct RoundReport {
 /// Spatial scales of a split kernel's halves, as a divisor (3D Gaussian splatting's value).
 pub const SPLIT_FACTOR: f64 = 1.6;
 
-/// Per-kernel gradient statistics between rounds.
-#[derive(Clone, Debug, Default)]
-pub struct DensityStats {
-    /// `Σ g̃` (for the direction of a clone).
-    sum: Vec<[f64; 4]>,
-    /// `Σ |g̃|`.
-    sum_norm: Vec<f64>,
-    /// Steps with a non-zero gradient.
-    seen: Vec<u32>,
-    /// Training loss at this round.
-    loss: Option<f64>,
-    /// Training loss at the round before.
-    previous_loss: Option<f64>,
-}
-
-impl DensityStats {
-    /// Statistics for `n` kernels, all zero.
-    #[must_use]
-    pub fn new(n: usize) -> Self {
-        DensityStats {
-            sum: vec![[0.0; 4]; n],
-            sum_norm: vec![0.0; n],
-            seen: vec![0; n],
-            loss: None,
-            previous_loss: None,
-        }
-    }
-
-    /// Statistics for `n` kernels after a round: per-kernel sums cleared, this round's loss
-    /// becomes the previous one.
-    #[must_use]
-    pub fn next_window(&self, n: usize) -> Self {
-        DensityStats {
-            previous_loss: self.loss,
-            ..DensityStats::new(n)
-        }
-    }
-
-    /// Records the training loss at this round.
-    pub fn record_loss(&mut self, loss: f64) {
-        self.loss = Some(loss);
-    }
-
-    /// Whether the loss fell by less than `min_improvement` since the round before.
-    #[must_use]
-    pub fn stalled(&self, min_improvement: f64) -> bool {
-        match (self.previous_loss, self.loss) {
-            // A loss that rose is still settling after the last round: not stalled.
-            (Some(before), Some(now)) => (0.0..min_improvement * before).contains(&(before - now)),
-            _ => false,
-        }
-    }
-
-    /// Adds one step's gradients.
-    pub fn accumulate(&mut self, scene: &Scene, grads: &Gradients) {
-        for i in 0..scene.len() {
-            let g = grads.v_means[i];
-            if g == [0.0; 4] {
-                continue;
-            }
-            let st = scene.scales[i][3];
-            let s = mean_spatial_scale(scene.scales[i]);
-            let scaled = [s * g[0], s * g[1], s * g[2], st * g[3]];
-            for (acc, v) in self.sum[i].iter_mut().zip(scaled) {
-                *acc += v;
-            }
-            self.sum_norm[i] += scaled.iter().map(|v| v * v).sum::<f64>().sqrt();
-            self.seen[i] += 1;
-        }
-    }
-
-    /// Mean `|g̃|` of kernel `i` over the steps it was seen.
-    #[must_use]
-    pub fn mean_norm(&self, i: usize) -> f64 {
-        if self.seen[i] == 0 {
-            0.0
-        } else {
-            self.sum_norm[i] / f64::from(self.seen[i])
-        }
-    }
-}
-
 /// Runs one round on `scene`: prunes, merges, then densifies. Returns the new scene, for
 /// each of its kernels the index of the old kernel whose optimiser state it keeps (`None`
 /// for a new one), and what was done.
 pub fn densify_and_prune(
     scene: &Scene,
     stats: &DensityStats,
-    options: &AdaptiveOptions,
+    options: &AdditiveRules,
 ) -> Result<(Scene, Vec<Option<usize>>, RoundReport)> {
     let keep = prune(scene, options.prune_below);
     let pruned = scene.len() - keep.len();
@@ -312,20 +230,20 @@ fn densify(
     mut kernels: Vec<Kernel>,
     keep: &[usize],
     stats: &DensityStats,
-    options: &AdaptiveOptions,
+    options: &AdditiveRules,
 ) -> (Vec<Kernel>, Vec<Option<usize>>, usize, usize) {
     let mut candidates: Vec<usize> = keep
         .iter()
         .copied()
         .filter(|&i| {
             stats.stalled(options.min_improvement)
-                && stats.mean_norm(i) >= options.gradient_threshold
+                && stats.mean_position_gradient(i) >= options.gradient_threshold
         })
         .collect();
     candidates.sort_by(|&a, &b| {
         stats
-            .mean_norm(b)
-            .total_cmp(&stats.mean_norm(a))
+            .mean_position_gradient(b)
+            .total_cmp(&stats.mean_position_gradient(a))
             .then(a.cmp(&b))
     });
     let growth = ((options.max_growth * keep.len() as f64).ceil() as usize).max(1);
@@ -353,7 +271,7 @@ fn densify(
             }
             split += 1;
         }
-        let clone = clone_down_gradient(parent, stats.sum[i]);
+        let clone = clone_down_gradient(parent, stats.position_sum(i));
         kernels.push(clone);
         sources.push(None);
     }
@@ -440,7 +358,7 @@ fn on_one_line(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
 }
 
 /// `s̄ = (sx sy sz)^(1/3)`, the geometric mean of a kernel's spatial scales.
-fn mean_spatial_scale([sx, sy, sz, _]: [f64; 4]) -> f64 {
+pub(crate) fn mean_spatial_scale([sx, sy, sz, _]: [f64; 4]) -> f64 {
     (sx * sy * sz).cbrt()
 }
 
@@ -500,6 +418,7 @@ fn merge_into(kernel: &mut Kernel, other: &Kernel) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backward::Gradients;
 
     fn scene(amplitudes: &[f64]) -> Scene {
         let kernels: Vec<Kernel> = amplitudes
@@ -609,11 +528,11 @@ mod tests {
         grads.v_means[1] = [1.0, 0.0, 0.0, 0.0]; // faint: pruned first
         grads.v_means[2] = [0.0, -3e-3, 0.0, 0.0]; // |g̃| = 3e-4
         grads.v_means[3] = [1e-5, 0.0, 0.0, 0.0]; // below the threshold
-        stats.accumulate(&scene, &grads);
-        let options = AdaptiveOptions {
+        stats.add_step(&scene, &grads);
+        let options = AdditiveRules {
             gradient_threshold: 5e-5,
             max_kernels: 4,
-            ..AdaptiveOptions::default()
+            ..AdditiveRules::default()
         };
         let (next, sources, report) = densify_and_prune(&scene, &stats, &options).unwrap();
         assert_eq!(
@@ -639,7 +558,7 @@ mod tests {
         let (next, _, report) = densify_and_prune(
             &scene,
             &stats,
-            &AdaptiveOptions {
+            &AdditiveRules {
                 max_kernels: 10,
                 ..options
             },
@@ -650,7 +569,7 @@ mod tests {
         let (next, _, report) = densify_and_prune(
             &scene,
             &stats,
-            &AdaptiveOptions {
+            &AdditiveRules {
                 max_kernels: 10,
                 min_scale: 0.05,
                 ..options
@@ -668,12 +587,12 @@ mod tests {
         let scene = scene(&[0.5]);
         let mut grads = Gradients::zeros(1);
         grads.v_means[0] = [1e-2, 0.0, 0.0, 0.0];
-        let options = AdaptiveOptions::default();
+        let options = AdditiveRules::default();
         let run = |losses: [f64; 2]| {
             let mut stats = DensityStats::new(1);
             stats.record_loss(losses[0]);
             let mut stats = stats.next_window(1);
-            stats.accumulate(&scene, &grads);
+            stats.add_step(&scene, &grads);
             stats.record_loss(losses[1]);
             densify_and_prune(&scene, &stats, &options).unwrap().2.added
         };
@@ -684,7 +603,7 @@ mod tests {
         assert_eq!(run([1.0, 1.5]), 0);
         // No window before: not judged.
         let mut stats = DensityStats::new(1);
-        stats.accumulate(&scene, &grads);
+        stats.add_step(&scene, &grads);
         stats.record_loss(1.0);
         assert_eq!(
             densify_and_prune(&scene, &stats, &options).unwrap().2.added,
@@ -704,7 +623,7 @@ mod tests {
         apart.mean[1] += 0.05; // 0.5 σ
         let scene = Scene::from_kernels(&[base, twin, moving, apart], [0.0; 3], "<test>").unwrap();
         let (next, sources, report) =
-            densify_and_prune(&scene, &DensityStats::new(4), &AdaptiveOptions::default()).unwrap();
+            densify_and_prune(&scene, &DensityStats::new(4), &AdditiveRules::default()).unwrap();
         assert_eq!(report.merged, 1);
         assert_eq!(sources, [Some(0), Some(2), Some(3)]);
         assert_eq!(next.amplitudes[0], [0.4; 3]);
@@ -721,13 +640,13 @@ mod tests {
         let scene = scene(&[1e-4, 2e-4]);
         let stats = DensityStats::new(2);
         let (next, sources, _) =
-            densify_and_prune(&scene, &stats, &AdaptiveOptions::default()).unwrap();
+            densify_and_prune(&scene, &stats, &AdditiveRules::default()).unwrap();
         assert_eq!((next.len(), sources), (1, vec![Some(1)]));
-        let options = AdaptiveOptions {
+        let options = AdditiveRules {
             every: 10,
             from: 0.2,
             until: 0.5,
-            ..AdaptiveOptions::default()
+            ..AdditiveRules::default()
         };
         let rounds: Vec<usize> = (1..=100).filter(|&s| options.round_after(s, 100)).collect();
         assert_eq!(rounds, [20, 30, 40, 50]);

@@ -1,0 +1,320 @@
+//! The alpha blend's density rules (SPEC §8; 3D Gaussian splatting's, with 4DGS's split in
+//! time): clone, split, split in time, prune by opacity, opacity reset.
+//!
+//! Every `every` steps while the run's progress `(step - 1)/(steps - 1)` lies in
+//! `[from, until]`, the kernels whose mean screen-space positional gradient `|∂L/∂m2|`
+//! over the views that saw them is among the largest `fraction` of the visible kernels (and
+//! at least `threshold`; ties by index; never beyond `max_kernels`) grow:
+//!
+//! - **split in time** when the kernel spans motion: σt above `time_split_fraction` of the
+//!   time range and `|v| σt` above its largest spatial σ. Two children at `t ± σt/2`, σt / 1.6
+//!   each, their means moved along the velocity so that both follow the parent's path.
+//!   (The additive rule, [`super::additive`], splits at `±st/√2` and keeps the temporal
+//!   integral, because additive kernels add; opaque children each cover the parent.)
+//! - **split** when its largest σ exceeds `percent_dense` of the box's diagonal: two
+//!   children one σ apart along that axis, spatial σ / 1.6 each.
+//! - **clone** otherwise: a copy in place, with fresh optimiser moments.
+//!
+//! Kernels whose opacity fell below `prune_opacity` are removed. Every
+//! `opacity_reset_every` steps while the rounds run (never at the last step), every opacity
+//! is lowered to at most `reset_opacity`: what the views need regains its opacity, the rest
+//! fades below `prune_opacity` and is pruned.
+
+use crate::fit::density::DensityStats;
+use crate::model::scene::{Kernel, Scene};
+
+/// The alpha rule set (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlphaRules {
+    /// Steps between rounds.
+    pub every: usize,
+    /// Rounds from this fraction of the run …
+    pub from: f64,
+    /// … until this one.
+    pub until: f64,
+    /// Fraction of the visible kernels densified per round, at most.
+    pub fraction: f64,
+    /// Smallest mean `|∂L/∂m2|` (per pixel) that densifies.
+    pub threshold: f64,
+    /// Upper bound on the kernel count.
+    pub max_kernels: usize,
+    /// A kernel is split rather than cloned when its largest σ exceeds this fraction of
+    /// `diagonal`.
+    pub percent_dense: f64,
+    /// A densified kernel whose σt exceeds this fraction of `time_range`, and which moves
+    /// further than its largest spatial σ within one σt, is split in time.
+    pub time_split_fraction: f64,
+    /// Kernels below this opacity are pruned.
+    pub prune_opacity: f64,
+    /// Steps between opacity resets while rounds run (0: never).
+    pub opacity_reset_every: usize,
+    /// The opacity a reset lowers every kernel to, at most.
+    pub reset_opacity: f64,
+    /// The cameras' box diagonal: the unit of `percent_dense`.
+    pub diagonal: f64,
+    /// The training times' range: the unit of `time_split_fraction`.
+    pub time_range: f64,
+}
+
+impl AlphaRules {
+    /// The run's progress after step `step` of `steps`: 0 at the first, 1 at the last.
+    fn progress(step: usize, steps: usize) -> f64 {
+        (step - 1) as f64 / (steps.max(2) - 1) as f64
+    }
+
+    /// Whether a round runs after `step` of `steps`.
+    #[must_use]
+    pub fn round_due(&self, step: usize, steps: usize) -> bool {
+        let progress = Self::progress(step, steps);
+        self.every > 0
+            && step.is_multiple_of(self.every)
+            && progress >= self.from
+            && progress <= self.until
+    }
+
+    /// Whether the opacities are reset after `step` of `steps`: every
+    /// `opacity_reset_every` steps while the rounds run, never at the last step.
+    #[must_use]
+    pub fn reset_due(&self, step: usize, steps: usize) -> bool {
+        self.opacity_reset_every > 0
+            && step.is_multiple_of(self.opacity_reset_every)
+            && Self::progress(step, steps) <= self.until
+            && step < steps
+    }
+}
+
+/// Lowers every opacity to at most `ceiling`.
+pub fn reset_opacities(scene: &mut Scene, ceiling: f64) {
+    for opacity in &mut scene.opacities {
+        *opacity = opacity.min(ceiling);
+    }
+}
+
+/// One round: prune transparent kernels, then clone, split or split in time the ones with
+/// the largest mean screen-space gradient. Returns, per kernel of the new scene, the old
+/// kernel whose optimiser state it keeps (`None`: fresh).
+pub fn densify_and_prune(
+    scene: &mut Scene,
+    stats: &DensityStats,
+    rules: &AlphaRules,
+) -> Vec<Option<usize>> {
+    let n = scene.len();
+    let keep: Vec<usize> = (0..n)
+        .filter(|&i| scene.opacities[i] >= rules.prune_opacity)
+        .collect();
+    let grow = chosen_to_grow(&keep, stats, rules, n);
+    let mut next = Scene {
+        background: scene.background,
+        up: scene.up,
+        ..Scene::default()
+    };
+    let (mut opacities, mut sh, mut sources) = (Vec::new(), Vec::new(), Vec::new());
+    let mut push = |kernel: Kernel, i: usize, source: Option<usize>, next: &mut Scene| {
+        next.means.push(kernel.mean);
+        next.scales.push(kernel.scale);
+        next.amplitudes.push(kernel.amplitude);
+        next.rotations.push(kernel.rotation);
+        next.velocities.push(kernel.velocity);
+        opacities.push(scene.opacities[i]);
+        sh.extend_from_slice(scene.sh_of(i));
+        sources.push(source);
+    };
+    for &i in &keep {
+        let kernel = scene.kernel(i);
+        if !grow[i] {
+            push(kernel, i, Some(i), &mut next);
+            continue;
+        }
+        let largest = largest_axis(&kernel);
+        if spans_motion(&kernel, largest, rules) {
+            for child in split_in_time(kernel) {
+                push(child, i, None, &mut next);
+            }
+        } else if kernel.scale[largest] > rules.percent_dense * rules.diagonal {
+            for child in split(kernel, largest) {
+                push(child, i, None, &mut next);
+            }
+        } else {
+            // Clone: the original keeps its moments, the copy starts fresh.
+            push(kernel, i, Some(i), &mut next);
+            push(kernel, i, None, &mut next);
+        }
+    }
+    next.blend = scene.blend;
+    next.opacities = opacities;
+    next.sh_count = scene.sh_count;
+    next.sh = sh;
+    *scene = next;
+    sources
+}
+
+/// Per kernel, whether it grows this round: of the kept ones, the largest mean screen
+/// gradients at or above the threshold, ties by index, at most `fraction` of the visible
+/// kept kernels and never beyond `max_kernels`.
+fn chosen_to_grow(keep: &[usize], stats: &DensityStats, rules: &AlphaRules, n: usize) -> Vec<bool> {
+    let mut candidates: Vec<usize> = keep
+        .iter()
+        .copied()
+        .filter(|&i| stats.mean_screen_gradient(i) >= rules.threshold)
+        .collect();
+    candidates.sort_by(|&a, &b| {
+        stats
+            .mean_screen_gradient(b)
+            .total_cmp(&stats.mean_screen_gradient(a))
+            .then(a.cmp(&b))
+    });
+    let visible = keep.iter().filter(|&&i| stats.seen_on_screen(i)).count();
+    let budget = ((rules.fraction * visible as f64) as usize)
+        .min(rules.max_kernels.saturating_sub(keep.len()));
+    candidates.truncate(budget);
+    let mut grow = vec![false; n];
+    for &i in &candidates {
+        grow[i] = true;
+    }
+    grow
+}
+
+/// The spatial axis of the kernel's largest σ.
+fn largest_axis(kernel: &Kernel) -> usize {
+    (0..3)
+        .max_by(|&a, &b| kernel.scale[a].total_cmp(&kernel.scale[b]))
+        .expect("three axes")
+}
+
+/// Whether `kernel` spans motion: σt above the rules' share of the time range, and it moves
+/// further than its largest σ (along axis `largest`) within one σt.
+fn spans_motion(kernel: &Kernel, largest: usize, rules: &AlphaRules) -> bool {
+    let speed = kernel.velocity.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let time_sigma = kernel.scale[3];
+    time_sigma > rules.time_split_fraction * rules.time_range
+        && speed * time_sigma > kernel.scale[largest]
+}
+
+/// The two children of a split along axis `largest`: one σ apart, σ / 1.6 each.
+fn split(kernel: Kernel, largest: usize) -> [Kernel; 2] {
+    let r = crate::slice::rotation_matrix(kernel.rotation);
+    let sigma = kernel.scale[largest];
+    let mut child = kernel;
+    for a in 0..3 {
+        child.scale[a] /= 1.6;
+    }
+    [-0.5, 0.5].map(|sign| {
+        let mut placed = child;
+        for (mean, row) in placed.mean.iter_mut().zip(&r) {
+            *mean += sign * sigma * row[largest];
+        }
+        placed
+    })
+}
+
+/// The two children of a split in time: σt / 2 either side of the parent's time mean,
+/// σt / 1.6 each, their means moved along the velocity so that both follow its path.
+fn split_in_time(kernel: Kernel) -> [Kernel; 2] {
+    let time_sigma = kernel.scale[3];
+    [-0.5, 0.5].map(|sign| {
+        let mut child = kernel;
+        child.scale[3] /= 1.6;
+        let dt = sign * time_sigma;
+        child.mean[3] += dt;
+        for a in 0..3 {
+            child.mean[a] += kernel.velocity[a] * dt;
+        }
+        child
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rules with every visible kernel allowed to grow, in a unit box and time range.
+    fn grow_all() -> AlphaRules {
+        AlphaRules {
+            every: 100,
+            from: 0.0,
+            until: 1.0,
+            fraction: 1.0,
+            threshold: 0.0,
+            max_kernels: 100,
+            percent_dense: 0.01,
+            time_split_fraction: 0.05,
+            prune_opacity: 0.005,
+            opacity_reset_every: 0,
+            reset_opacity: 0.01,
+            diagonal: 1.0,
+            time_range: 1.0,
+        }
+    }
+
+    /// One alpha kernel with `velocity` and σt `time_sigma`, opacity 0.8.
+    fn one_kernel(velocity: [f64; 3], time_sigma: f64) -> Scene {
+        let mut kernel = Kernel::new(
+            [0.1, 0.2, 0.3, 0.5],
+            [0.01, 0.01, 0.01, time_sigma],
+            [0.5; 3],
+        );
+        kernel.velocity = velocity;
+        Scene::from_kernels(&[kernel], [0.0; 3], "<test>")
+            .unwrap()
+            .into_alpha(vec![0.8], 0, Vec::new(), "<test>")
+            .unwrap()
+    }
+
+    /// Statistics in which kernel 0 was seen once with a screen gradient of 1.
+    fn seen_once() -> DensityStats {
+        let mut stats = DensityStats::new(1);
+        stats.add_view([(0, [1.0, 0.0])].into_iter(), 1.0);
+        stats
+    }
+
+    /// The slice centre of kernel `i` at `tau` (SPEC §2: `m + v (τ - t)`).
+    fn centre_at(scene: &Scene, i: usize, tau: f64) -> [f64; 3] {
+        std::array::from_fn(|a| {
+            scene.means[i][a] + scene.velocities[i][a] * (tau - scene.means[i][3])
+        })
+    }
+
+    #[test]
+    fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
+        let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
+        let sources = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+        assert_eq!(sources, vec![None, None]);
+        assert_eq!(scene.len(), 2);
+        let times = [scene.means[0][3], scene.means[1][3]];
+        assert!((times[0] - 0.35).abs() < 1e-12 && (times[1] - 0.65).abs() < 1e-12);
+        for i in 0..2 {
+            assert!((scene.scales[i][3] - 0.3 / 1.6).abs() < 1e-12);
+            for tau in [0.0, 0.5, 1.0] {
+                let [a, b] = [
+                    centre_at(&scene, i, tau),
+                    centre_at(&one_kernel([1.0, 0.0, -0.5], 0.3), 0, tau),
+                ];
+                assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-12), "{a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
+        for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
+            let mut scene = one_kernel(velocity, time_sigma);
+            let sources = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+            assert_eq!(sources, vec![Some(0), None]);
+            assert_eq!(scene.means[0], scene.means[1]);
+        }
+    }
+
+    #[test]
+    fn a_reset_lowers_every_opacity_to_the_ceiling_and_is_due_only_while_rounds_run() {
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        reset_opacities(&mut scene, 0.01);
+        assert_eq!(scene.opacities, vec![0.01]);
+        let rules = AlphaRules {
+            opacity_reset_every: 10,
+            until: 0.5,
+            ..grow_all()
+        };
+        let due: Vec<usize> = (1..=101).filter(|&s| rules.reset_due(s, 101)).collect();
+        assert_eq!(due, [10, 20, 30, 40, 50]);
+    }
+}
