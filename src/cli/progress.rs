@@ -22,6 +22,9 @@ struct PhaseLog {
     total: usize,
     started: Instant,
     last: Instant,
+    /// The phase's own estimate of its time left (else a straight line through the time so
+    /// far).
+    left: Option<f64>,
 }
 
 impl PhaseLog {
@@ -29,14 +32,12 @@ impl PhaseLog {
     fn line(&self) -> String {
         let fraction = self.done as f64 / self.total.max(1) as f64;
         let elapsed = self.started.elapsed().as_secs_f64();
-        let left = if self.done > 0 {
-            format!(
-                ", about {:.0} s left",
-                elapsed * (self.total.saturating_sub(self.done)) as f64 / self.done as f64
-            )
-        } else {
-            String::new()
-        };
+        let straight = (self.done > 0)
+            .then(|| elapsed * (self.total.saturating_sub(self.done)) as f64 / self.done as f64);
+        let left = self
+            .left
+            .or(straight)
+            .map_or(String::new(), |s| format!(", about {s:.0} s left"));
         format!(
             "{}: {}/{} ({:.0} %){left}",
             self.phase,
@@ -122,6 +123,7 @@ impl Progress for Bars {
                 total,
                 started: Instant::now(),
                 last: Instant::now(),
+                left: None,
             });
         }
     }
@@ -150,17 +152,31 @@ impl Progress for Bars {
 impl FitProgress for Bars {
     fn start(&mut self, steps: usize) {
         Progress::start(self, "fit", steps);
+        // The fit's own estimate of the time left replaces the bar's straight line.
+        if let Some(bar) = &self.bar {
+            bar.set_style(
+                ProgressStyle::with_template("{prefix} {bar:20} {pos}/{len} {elapsed} {wide_msg}")
+                    .expect("a valid template"),
+            );
+        }
     }
 
     fn note(&mut self, text: &str) {
         Progress::note(self, text);
     }
 
-    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>) {
+    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>, seconds_left: Option<f64>) {
         let heldout = heldout_psnr.map_or(String::new(), |p| format!(", held-out {p:.2} dB"));
+        if let Some(log) = &mut self.log {
+            log.left = seconds_left;
+        }
+        let left = match (&self.bar, seconds_left) {
+            (Some(_), Some(s)) => format!("about {s:.0} s left, "),
+            _ => String::new(),
+        };
         self.tick();
         self.message(format!(
-            "{} kernels, loss {:.3e}, PSNR {:.2} dB{heldout}",
+            "{left}{} kernels, loss {:.3e}, PSNR {:.2} dB{heldout}",
             record.kernels,
             record.train_loss,
             psnr(record.train_loss)
@@ -181,10 +197,14 @@ mod tests {
             total: 400,
             started: ten_seconds_ago,
             last: ten_seconds_ago,
+            left: None,
         };
         assert_eq!(log.line(), "fit: 0/400 (0 %)");
         log.done = 100;
         // 100 in 10 s: 300 more take about 30 s.
         assert_eq!(log.line(), "fit: 100/400 (25 %), about 30 s left");
+        // A phase's own estimate replaces the straight line.
+        log.left = Some(52.4);
+        assert_eq!(log.line(), "fit: 100/400 (25 %), about 52 s left");
     }
 }

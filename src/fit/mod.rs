@@ -2,7 +2,8 @@
 //! groups ([`adam`]), one training loop ([`train`]) and the density rules ([`density`]) for
 //! both blends, each blend's table and options ([`additive`], [`alpha`]), the starts
 //! ([`init`], [`alpha_start`], [`hull`], [`stereo`]), the defaults ([`defaults`]) and the
-//! policy that chooses among them ([`plan`], from the caller's [`settings`]).
+//! policy that chooses among them ([`plan`], from the caller's [`settings`]), and the
+//! estimate of a running fit's time left ([`time_left`]).
 
 pub mod adam;
 pub mod additive;
@@ -16,4 +17,5 @@ pub mod loss;
 pub mod plan;
 pub mod settings;
 pub mod stereo;
+pub mod time_left;
 pub mod train;

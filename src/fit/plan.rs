@@ -41,6 +41,7 @@ use crate::fit::density::AdditiveRules;
 use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::stereo::plane_sweep;
+use crate::fit::time_left::TimeLeft;
 use crate::fit::train::{StepRecord, Training, fit};
 use crate::model::{
     Blend, Camera, Dataset, Error, Result, Scene, Up, View, check_non_negative_setting,
@@ -491,6 +492,12 @@ impl ReadyFit {
         let mut start = self.scene.clone();
         self.dress(&mut start);
         start
+    }
+
+    /// The estimate of the time this fit has left, to be given each step's record.
+    #[must_use]
+    pub fn time_left(&self) -> TimeLeft {
+        TimeLeft::new(&self.training)
     }
 
     /// Runs the fit ([`fit`]) on `train`, evaluating on `heldout`; `scene` is then the

@@ -90,14 +90,15 @@ pub trait FitProgress: Send {
     fn start(&mut self, steps: usize);
     /// Something the user should know before the fit runs.
     fn note(&mut self, text: &str);
-    /// A step is done; `heldout_psnr` is the latest held-out PSNR measured.
-    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>);
+    /// A step is done; `heldout_psnr` is the latest held-out PSNR measured, `seconds_left`
+    /// the estimate of the time the fit has left ([`crate::fit::time_left`]).
+    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>, seconds_left: Option<f64>);
 }
 
 impl FitProgress for Silent {
     fn start(&mut self, _: usize) {}
     fn note(&mut self, _: &str) {}
-    fn step(&mut self, _: &StepRecord, _: Option<f64>) {}
+    fn step(&mut self, _: &StepRecord, _: Option<f64>, _: Option<f64>) {}
 }
 
 /// Refuses, before the dataset is decoded, a fit whose images and kernels would not fit in
@@ -193,6 +194,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     });
     progress.start(steps);
     let mut last_heldout = None;
+    let mut time_left = ready.time_left();
     // Without a thread count the steps run on a thread of the global pool, so each step's
     // parallel loops start there instead of being handed over one by one; not with a live
     // viewer, whose render thread needs the pool meanwhile. The step's callback only hands
@@ -202,7 +204,8 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
             if record.heldout_psnr.is_some() {
                 last_heldout = record.heldout_psnr;
             }
-            progress.step(record, last_heldout);
+            time_left.record(record);
+            progress.step(record, last_heldout, time_left.seconds_left());
             if let Some(viewer) = &viewer {
                 viewer.step(record, scene);
             }

@@ -170,6 +170,25 @@ pub struct DensityChange {
 }
 
 impl DensityRules {
+    /// The last step (1-based) of a run of `steps` after which a round may add kernels.
+    #[must_use]
+    pub fn growth_ends(&self, steps: usize) -> usize {
+        let until = match self {
+            DensityRules::Additive(rules) => rules.until * steps as f64,
+            DensityRules::Alpha(rules) => rules.until * (steps.max(2) - 1) as f64 + 1.0,
+        };
+        (until.max(0.0) as usize).min(steps)
+    }
+
+    /// The most kernels the rules may reach.
+    #[must_use]
+    pub fn max_kernels(&self) -> usize {
+        match self {
+            DensityRules::Additive(rules) => rules.max_kernels,
+            DensityRules::Alpha(rules) => rules.max_kernels,
+        }
+    }
+
     /// The rules' work after step `step` (1-based) of `steps`: a round when one is due
     /// (then `stats` start a new window), an opacity reset when one is due.
     /// `training_loss` measures the loss over every training view, for rules that judge by
