@@ -34,6 +34,7 @@ pub mod memory;
 pub mod output;
 pub mod path_file;
 pub mod ply;
+pub mod ply_header;
 pub mod point_cloud;
 pub mod scene_file;
 pub mod video;
