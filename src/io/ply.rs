@@ -22,6 +22,9 @@
 //! rot_0 rot_1 rot_2 rot_3 vx vy vz` (σ linear, rotation w first), the background as
 //! `comment background r g b`, the up axis when known as `comment up z`. Exact: every f64 round-trips. 144 bytes a kernel, against about
 //! 600 in JSON. Float properties are accepted too; other properties are ignored.
+//!
+//! Both are read through the shared header reader ([`super::ply_header`]); a scene PLY is
+//! binary little endian 1.0 with one `vertex` element of scalar properties.
 
 use std::io::Write;
 use std::path::Path;

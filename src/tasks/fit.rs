@@ -157,8 +157,8 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     request.settings.validate()?;
     // Outputs are checked before the work: a fit is never lost to an unwritable path, and
     // never replaces its dataset or its start.
-    // Every file the fit reads: the transforms files, the images they name, the start. The
-    // dataset's description is read once, for these, the memory estimate and the views.
+    // Every file the fit reads: the transforms files, the images they name, the start (the
+    // dataset's description read once, for these, the memory estimate and the views).
     let source = DatasetSource::open(&request.views);
     let mut inputs = source.files().all();
     inputs.push(PathBuf::from(&request.init));

@@ -1,5 +1,5 @@
 //! Multi-view datasets in the layouts dynamic and static splatting tools write, one file per
-//! layout, tried in the order of [`FORMATS`]:
+//! layout, tried in the order of `FORMATS`:
 //!
 //! ```text
 //! D-NeRF / Blender          (blender)     DIR/transforms_{train,val,test}.json  DIR/train/r_000.png ...
@@ -7,8 +7,8 @@
 //! COLMAP                    (colmap)      DIR/sparse/0/{cameras,images,points3D}.{bin,txt}  DIR/images/NAME
 //! ```
 //!
-//! Each format answers for a folder "not mine" or "mine" ([`Format::claims`]), and then reads
-//! its description ([`Format::read`]): what its files name (photos, masks, point clouds), and
+//! Each format answers for a folder "not mine" or "mine" (`Format::claims`), and then reads
+//! its description (`Format::read`): what its files name (photos, masks, point clouds), and
 //! its views split into train, val and test. The first format that claims the folder reads
 //! it; a file any format reads its description from that is a FIFO, socket, device or folder
 //! is refused, not taken for a missing one ([`crate::io::input`]). The description is read
@@ -58,7 +58,7 @@ pub use write::{DatasetWriter, write_split};
 const FORMATS: [&dyn Format; 3] = [&blender::Blender, &nerfstudio::Nerfstudio, &colmap::Colmap];
 
 /// A dataset layout: which folders are its own, and how it reads them.
-trait Format: Sync {
+trait Format {
     /// What marks a folder as this format's, for messages: `transforms_train.json`.
     fn sign(&self) -> &'static str;
 
@@ -168,7 +168,7 @@ fn signs() -> String {
     }
 }
 
-/// The format of the dataset in `dir`: the first of [`FORMATS`] that claims it, with the
+/// The format of the dataset in `dir`: the first of `FORMATS` that claims it, with the
 /// file its training frames are read from (`None`: no format does). A description file of
 /// any format that is not a regular file is refused.
 fn find_format(dir: &Path) -> Result<Option<(&'static dyn Format, PathBuf)>> {
@@ -249,7 +249,7 @@ impl DatasetSource {
     }
 }
 
-/// Reads every split of the dataset in `dir`, in the first of its [`FORMATS`] that claims
+/// Reads every split of the dataset in `dir`, in the first of its `FORMATS` that claims
 /// it: `transforms_{train,val,test}.json`, or one `transforms.json` split every
 /// [`HOLDOUT`]-th frame, or a COLMAP model (`sparse/0`) split the same way.
 pub fn load_dataset(dir: &Path, options: &DatasetOptions) -> Result<Dataset> {

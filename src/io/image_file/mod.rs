@@ -188,8 +188,8 @@ impl<'a> RowCount<'a> {
 /// whose rows `produce` hands to its sink, in order and each once ([`RowSink`]), and returns
 /// what `produce` returned. The image never needs to be whole in memory: a PNG is encoded
 /// as its rows arrive, its levels a band at a time, then written
-/// ([`png::save_png_rows`]); an EXR's rows go into its temporary file as they arrive
-/// ([`exr::save_exr_rows`]). Nothing non-finite leaves: an EXR would hold inf, a PNG a
+/// (`png::save_png_rows`); an EXR's rows go into its temporary file as they arrive
+/// (`exr::save_exr_rows`). Nothing non-finite leaves: an EXR would hold inf, a PNG a
 /// clamped lie; the first such value is named in the error, and nothing is written. Both
 /// are written with their length known beforehand ([`crate::io::write_atomically_sized`]).
 pub fn save_rows<T>(
