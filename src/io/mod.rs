@@ -8,9 +8,10 @@
 //! | [`camera_file`] | camera JSON (SPEC §3) |
 //! | [`path_file`] | camera path JSON |
 //! | [`gradients_file`] | the `splat4d grad` JSON |
-//! | [`image_file`] | PNG (8/16 bit) and EXR images (SPEC §5: linear, no sRGB curve) |
+//! | [`image_file`] | PNG (8/16 bit) and EXR images (SPEC §5: linear, no sRGB curve): `png`, `exr`, `read` |
 //! | [`ply`] | 3DGS slice PLY for splat viewers, 4D scene PLY |
-//! | [`dataset`] | D-NeRF / Blender `transforms_*.json`, nerfstudio `transforms.json` and COLMAP datasets |
+//! | [`ply_header`] | the PLY header every PLY reader reads first (format, elements, property types, counts against the file's length) |
+//! | [`dataset`] | multi-view datasets, one file per layout tried in order (D-NeRF / Blender `transforms_*.json`, nerfstudio `transforms.json`, COLMAP), the steps they share (undistortion, masks, downscaling), and writing the D-NeRF layout |
 //! | [`colmap`] | COLMAP sparse models, text and binary |
 //! | [`point_cloud`] | PLY point clouds shipped with datasets |
 //! | [`gltf`] | glTF 2.0 models and their cameras: read, checked, handed to the scene math as plain data |
@@ -34,6 +35,7 @@ pub mod memory;
 pub mod output;
 pub mod path_file;
 pub mod ply;
+pub mod ply_header;
 pub mod point_cloud;
 pub mod scene_file;
 pub mod video;

@@ -57,11 +57,7 @@ pub struct CameraPath {
 pub fn load_any_path(path: &Path) -> Result<CameraPath> {
     let origin = path.display().to_string();
     let text = crate::io::input::read_to_string(path, "cannot read camera path")?;
-    if text
-        .trim_start_matches('\u{feff}')
-        .trim_start()
-        .starts_with('{')
-    {
+    if looks_like_json_object(&text) {
         return nerfstudio_path(&text, &origin);
     }
     let cameras = load_path_text(&text, &origin)?
@@ -72,6 +68,18 @@ pub fn load_any_path(path: &Path) -> Result<CameraPath> {
         })
         .collect();
     Ok(CameraPath { cameras, fps: None })
+}
+
+/// What opens a JSON object: nerfstudio's path files are objects, splat4d's are lists.
+const OBJECT_OPENER: char = '{';
+
+/// Whether `text` holds a JSON object (its first character past a byte-order mark and white
+/// space opens one).
+fn looks_like_json_object(text: &str) -> bool {
+    let byte_order_mark = '\u{feff}';
+    text.trim_start_matches(byte_order_mark)
+        .trim_start()
+        .starts_with(OBJECT_OPENER)
 }
 
 /// Most frames a keyframes-only path may ask for (`fps × seconds`): the cap of every

@@ -22,10 +22,14 @@
 //! rot_0 rot_1 rot_2 rot_3 vx vy vz` (σ linear, rotation w first), the background as
 //! `comment background r g b`, the up axis when known as `comment up z`. Exact: every f64 round-trips. 144 bytes a kernel, against about
 //! 600 in JSON. Float properties are accepted too; other properties are ignored.
+//!
+//! Both are read through the shared header reader ([`super::ply_header`]); a scene PLY is
+//! binary little endian 1.0 with one `vertex` element of scalar properties.
 
 use std::io::Write;
 use std::path::Path;
 
+use crate::io::ply_header::{Encoding, Header, MAX_HEADER, read_header};
 use crate::io::write_atomically;
 use crate::model::Up;
 use crate::model::error::{Error, Result};
@@ -249,15 +253,6 @@ pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
     })
 }
 
-/// A property of the vertex element: its name, byte size and whether it is a float type
-/// (only float and double properties are read; others are skipped).
-struct Property {
-    name: String,
-    kind: String,
-    size: usize,
-    float: bool,
-}
-
 /// Reads a 4D scene PLY, or a graphdeco 3DGS PLY as an alpha scene of static kernels (SPEC
 /// §8). Every problem is an error naming the file (and the vertex and field for bad values);
 /// nothing is allocated before the header's counts are checked against the file's length.
@@ -279,9 +274,9 @@ pub fn read_scene_ply_as_stored(
     let cannot = |e| Error::read(path, "cannot read scene", e);
     let mut file = crate::io::input::open(path, "cannot read scene")?;
     let length = file.metadata().map_err(cannot)?.len();
-    let mut start = Vec::with_capacity(HEADER_LIMIT);
+    let mut start = Vec::with_capacity(MAX_HEADER);
     (&mut file)
-        .take(HEADER_LIMIT as u64)
+        .take(MAX_HEADER as u64)
         .read_to_end(&mut start)
         .map_err(cannot)?;
     let layout = parse_header(&start, &origin)?;
@@ -337,9 +332,6 @@ pub fn read_scene_ply_as_stored(
 /// that the block being decoded and the one being read stay in cache together.
 const BLOCK_BYTES: usize = 1 << 18;
 
-/// Where the header must end.
-const HEADER_LIMIT: usize = 64 * 1024;
-
 /// [`read_scene_ply`] on bytes in memory.
 pub fn parse_scene_ply(bytes: &[u8], origin: &str) -> Result<Scene> {
     let layout = parse_header(bytes, origin)?;
@@ -382,6 +374,8 @@ struct Appearance {
 /// What a scene PLY's header says: where the rows start, how many, and where each property
 /// sits in a row (byte offset and size, 4 or 8).
 struct SceneLayout {
+    /// The header as read.
+    header: Header,
     body_start: usize,
     count: usize,
     stride: usize,
@@ -399,168 +393,123 @@ struct SceneLayout {
     framing: Option<([f64; 3], f64)>,
 }
 
-/// The size of a PLY scalar type, and whether it is a float type.
-fn scalar_type(kind: &str) -> Option<(usize, bool)> {
-    Some(match kind {
-        "double" | "float64" => (8, true),
-        "float" | "float32" => (4, true),
-        "char" | "uchar" | "int8" | "uint8" => (1, false),
-        "short" | "ushort" | "int16" | "uint16" => (2, false),
-        "int" | "uint" | "int32" | "uint32" => (4, false),
-        _ => return None,
-    })
-}
-
 /// The header at the start of `bytes` (which holds at least its first 64 KiB, or the whole
-/// file when shorter).
+/// file when shorter), read by [`super::ply_header`]: a scene PLY is binary little endian
+/// 1.0 with one `vertex` element of scalar properties.
 fn parse_header(bytes: &[u8], origin: &str) -> Result<SceneLayout> {
-    let bad = |message: String| bad_ply(origin, message);
-    const END: &[u8] = b"end_header\n";
-    let limit = bytes.len().min(HEADER_LIMIT);
-    let end = bytes[..limit]
-        .windows(END.len())
-        .position(|w| w == END)
-        .ok_or_else(|| bad("no `end_header` line in the first 64 KiB".into()))?;
-    let text =
-        std::str::from_utf8(&bytes[..end]).map_err(|_| bad("the header is not text".into()))?;
-    let mut lines = text.lines();
-    if lines.next() != Some("ply") {
-        return Err(bad("the file does not start with `ply`".into()));
+    let header = read_header(bytes, origin)?;
+    if (header.encoding, header.version.as_str()) != (Encoding::BinaryLittleEndian, "1.0") {
+        return Err(bad_ply(
+            origin,
+            format!(
+                "format `{} {}` is not supported (only `binary_little_endian 1.0`)",
+                header.encoding.name(),
+                header.version
+            ),
+        ));
     }
-    let header = read_header_lines(lines, origin)?;
-    header_layout(header, end + END.len(), origin)
+    match header.elements.as_slice() {
+        [] => return Err(bad_ply(origin, "no `element vertex` line".into())),
+        [vertex] if vertex.name == "vertex" => {}
+        elements => {
+            let other = elements
+                .iter()
+                .skip(1)
+                .chain(elements)
+                .find(|e| e.name != "vertex");
+            let name = other.map_or("vertex", |e| e.name.as_str());
+            return Err(bad_ply(
+                origin,
+                format!("element `{name}` is not supported (one `vertex` element only)"),
+            ));
+        }
+    }
+    if let Some(list) = header.elements[0]
+        .properties
+        .iter()
+        .find(|p| p.list.is_some())
+    {
+        return Err(bad_ply(
+            origin,
+            format!(
+                "property `{}` is a list (a scalar type: float, double or an integer)",
+                list.name
+            ),
+        ));
+    }
+    let comments = SceneComments::read(&header.comments, origin)?;
+    header_layout(header, comments, origin)
 }
 
-/// What the lines of a header say, before the properties are checked.
-struct HeaderLines {
-    count: Option<usize>,
-    properties: Vec<Property>,
+/// What the comments of a scene PLY's header say.
+#[derive(Default)]
+struct SceneComments {
     background: [f64; 3],
     up: Option<Up>,
     blend: Blend,
     time_range: Option<[f64; 2]>,
     framing: Option<([f64; 3], f64)>,
-    format_seen: bool,
 }
 
-/// Reads the header's lines after `ply`, one by one.
-fn read_header_lines<'a>(
-    lines: impl Iterator<Item = &'a str>,
-    origin: &str,
-) -> Result<HeaderLines> {
-    let bad = |message: String| bad_ply(origin, message);
-    let mut count: Option<usize> = None;
-    let mut properties: Vec<Property> = Vec::new();
-    let mut background = [0.0; 3];
-    let mut up = None;
-    let mut blend = Blend::Additive;
-    let mut time_range = None;
-    let mut framing = None;
-    let mut format_seen = false;
-    for line in lines {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["format", "binary_little_endian", "1.0"] => format_seen = true,
-            ["format", rest @ ..] => {
-                return Err(bad(format!(
-                    "format `{}` is not supported (only `binary_little_endian 1.0`)",
-                    rest.join(" ")
-                )));
-            }
-            ["comment", "up", axis] => {
-                up = Some(
-                    axis.parse::<Up>()
-                        .map_err(|e| bad(format!("up axis: {e}")))?,
-                );
-            }
-            ["comment", "time_range", t0, t1] => {
-                let parse = |v: &str| {
-                    v.parse::<f64>()
-                        .map_err(|_| bad(format!("time range value `{v}` is not a number")))
-                };
-                time_range = Some([parse(t0)?, parse(t1)?]);
-            }
-            ["comment", "framing", x, y, z, r] => {
-                let parse = |v: &str| {
-                    v.parse::<f64>()
-                        .map_err(|_| bad(format!("framing value `{v}` is not a number")))
-                };
-                framing = Some(([parse(x)?, parse(y)?, parse(z)?], parse(r)?));
-            }
-            ["comment", "blend", name] => {
-                blend = name.parse().map_err(|e| bad(format!("blend: {e}")))?;
-            }
-            ["comment", "background", r, g, b] => {
-                for (slot, v) in background.iter_mut().zip([r, g, b]) {
-                    *slot = v
-                        .parse()
-                        .map_err(|_| bad(format!("background value `{v}` is not a number")))?;
+impl SceneComments {
+    /// Reads `comments` (the text after `comment`); those it does not know are skipped.
+    fn read(comments: &[String], origin: &str) -> Result<Self> {
+        let bad = |message: String| bad_ply(origin, message);
+        let number = |what: &str, v: &str| {
+            v.parse::<f64>()
+                .map_err(|_| bad(format!("{what} value `{v}` is not a number")))
+        };
+        let mut read = SceneComments::default();
+        for comment in comments {
+            let words: Vec<&str> = comment.split_whitespace().collect();
+            match words.as_slice() {
+                ["up", axis] => {
+                    let up = axis.parse::<Up>();
+                    read.up = Some(up.map_err(|e| bad(format!("up axis: {e}")))?);
                 }
+                ["time_range", t0, t1] => {
+                    read.time_range = Some([number("time range", t0)?, number("time range", t1)?]);
+                }
+                ["framing", x, y, z, r] => {
+                    let centre = [x, y, z].map(|v| number("framing", v));
+                    let [x, y, z] = centre;
+                    read.framing = Some(([x?, y?, z?], number("framing", r)?));
+                }
+                ["blend", name] => {
+                    read.blend = name.parse().map_err(|e| bad(format!("blend: {e}")))?;
+                }
+                ["background", r, g, b] => {
+                    for (slot, v) in read.background.iter_mut().zip([r, g, b]) {
+                        *slot = number("background", v)?;
+                    }
+                }
+                _ => {}
             }
-            ["comment", ..] | ["obj_info", ..] | [] => {}
-            ["element", "vertex", n] if count.is_none() => {
-                count = Some(
-                    n.parse()
-                        .map_err(|_| bad(format!("vertex count `{n}` is not a whole number")))?,
-                );
-            }
-            ["element", name, ..] => {
-                return Err(bad(format!(
-                    "element `{name}` is not supported (one `vertex` element only)"
-                )));
-            }
-            ["property", kind, name] if count.is_some() => {
-                let (size, float) = scalar_type(kind).ok_or_else(|| {
-                    bad(format!(
-                        "property `{name}` has type `{kind}` (a scalar type: float, double or an integer)"
-                    ))
-                })?;
-                properties.push(Property {
-                    name: (*name).to_owned(),
-                    kind: (*kind).to_owned(),
-                    size,
-                    float,
-                });
-            }
-            _ => return Err(bad(format!("unexpected header line `{line}`"))),
         }
+        Ok(read)
     }
-    Ok(HeaderLines {
-        count,
-        properties,
-        background,
-        up,
-        blend,
-        time_range,
-        framing,
-        format_seen,
-    })
 }
 
-/// The layout of a scene's rows from its header's lines; the rows start at `body_start`.
-fn header_layout(header: HeaderLines, body_start: usize, origin: &str) -> Result<SceneLayout> {
+/// The layout of a scene's rows from its header (one `vertex` element of scalars) and what
+/// its comments say.
+fn header_layout(header: Header, comments: SceneComments, origin: &str) -> Result<SceneLayout> {
     let bad = |message: String| bad_ply(origin, message);
-    let HeaderLines {
-        count,
-        properties,
+    let SceneComments {
         background,
         up,
         mut blend,
         time_range,
         framing,
-        format_seen,
-    } = header;
-    if !format_seen {
-        return Err(bad("no `format` line".into()));
-    }
-    let count = count.ok_or_else(|| bad("no `element vertex` line".into()))?;
-    let stride: usize = properties.iter().map(|p| p.size).sum();
+    } = comments;
+    let vertex = &header.elements[0];
+    let (count, properties) = (vertex.count, &vertex.properties);
+    let stride: usize = properties.iter().map(|p| p.scalar.size()).sum();
     let find = |name: &str| -> Option<Result<(usize, usize)>> {
         let index = properties.iter().position(|p| p.name == name)?;
-        Some(if properties[index].float {
+        Some(if properties[index].scalar.is_float() {
             Ok((
-                properties[..index].iter().map(|p| p.size).sum(),
-                properties[index].size,
+                properties[..index].iter().map(|p| p.scalar.size()).sum(),
+                properties[index].scalar.size(),
             ))
         } else {
             Err(bad(format!(
@@ -611,7 +560,8 @@ fn header_layout(header: HeaderLines, body_start: usize, origin: &str) -> Result
         )));
     }
     Ok(SceneLayout {
-        body_start,
+        body_start: header.body_start,
+        header,
         count,
         stride,
         kind,
@@ -644,14 +594,9 @@ fn sigmoid(x: f64) -> f64 {
 impl SceneLayout {
     /// The rows must fill the rest of the file exactly (before anything is allocated).
     fn check_body_length(&self, body: u64, origin: &str) -> Result<()> {
-        let (count, stride) = (self.count, self.stride);
-        let expected = (count as u64).checked_mul(stride as u64).ok_or_else(|| {
-            bad_ply(
-                origin,
-                format!("{count} vertices of {stride} bytes overflow"),
-            )
-        })?;
+        let (_, expected) = self.header.binary_rows(0, body, origin)?;
         if body != expected {
+            let (count, stride) = (self.count, self.stride);
             return Err(bad_ply(
                 origin,
                 format!(

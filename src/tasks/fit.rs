@@ -9,7 +9,7 @@ use std::time::Duration;
 use crate::fit::plan::Init;
 use crate::fit::settings::FitSettings;
 use crate::fit::train::{SplitScore, StepRecord, evaluate_splits};
-use crate::io::dataset::{DatasetOptions, dataset_files, load_dataset};
+use crate::io::dataset::{DatasetOptions, DatasetSource, PhotoMemory};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Dataset, Result, Scene, Silent};
@@ -101,22 +101,21 @@ impl FitProgress for Silent {
     fn step(&mut self, _: &StepRecord, _: Option<f64>, _: Option<f64>) {}
 }
 
-/// Refuses, before the dataset is decoded, a fit whose images and kernels would not fit in
-/// memory ([`fit_memory`]).
-fn check_fit_memory(request: &FitRequest) -> Result<()> {
-    let (bytes, what) = fit_memory(request)?;
+/// Refuses, before the dataset is decoded, a fit whose images (`photos`) and kernels would
+/// not fit in memory ([`fit_memory`]).
+fn check_fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<()> {
+    let (bytes, what) = fit_memory(request, photos)?;
     crate::io::memory::check(bytes, &what)
 }
 
 /// What a fit will hold, in bytes, and what for ([`crate::io::memory`]): the photos as the
-/// loader keeps them ([`crate::io::dataset::photo_memory`]: one decode per file, one
+/// loader keeps them (`photos`, [`crate::io::dataset::photo_memory`]: one decode per file, one
 /// undistorted or downscaled copy per file, mask and lens, weights per frame) and what
 /// preparing the largest holds; the kernels (the start, or an alpha fit's budget); each view
 /// rendered at once (one per worker thread, up to the batch) with its frame and its kernels'
 /// copies and gradients.
-fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
+fn fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<(u64, String)> {
     use crate::io::memory::{FIT_BYTES_PER_KERNEL, RENDER_BYTES_PER_PIXEL, VIEW_BYTES_PER_KERNEL};
-    let photos = crate::io::dataset::photo_memory(&request.views, request.downscale);
     let (largest_view, frames) = (photos.largest_view, photos.frames);
     // The additive fit's start, and an alpha fit's budget (unless the additive blend is
     // asked for): what either may hold.
@@ -153,14 +152,17 @@ fn fit_memory(request: &FitRequest) -> Result<(u64, String)> {
 /// runs the fit, writes.
 pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<FitSummary> {
     request.settings.validate()?;
-    check_fit_outputs(request)?;
-    check_fit_memory(request)?;
+    // The dataset's description is read once, for its files, the memory estimate and the
+    // views.
+    let source = DatasetSource::open(&request.views);
+    check_fit_outputs(request, &source)?;
+    check_fit_memory(request, source.photo_memory(request.downscale))?;
     // A busy port is refused before the dataset is read.
     let server = request
         .view
         .map(|port| Server::bind("127.0.0.1", port))
         .transpose()?;
-    let dataset = read_dataset(request, progress)?;
+    let dataset = read_dataset(request, source, progress)?;
     let init = match Init::parse_builtin(&request.init)? {
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
@@ -229,8 +231,8 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
 
 /// Refuses, before any work, outputs that cannot be written or that would replace an input
 /// (the dataset's files, the start): a fit is never lost to an unwritable path.
-fn check_fit_outputs(request: &FitRequest) -> Result<()> {
-    let mut inputs = dataset_files(&request.views);
+fn check_fit_outputs(request: &FitRequest, source: &DatasetSource) -> Result<()> {
+    let mut inputs = source.files().all();
     inputs.push(PathBuf::from(&request.init));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     check_output(&request.out, &["json", "ply"], &inputs)?;
@@ -248,7 +250,11 @@ fn check_fit_outputs(request: &FitRequest) -> Result<()> {
 
 /// The dataset, read as the request says; its notes, and what the user should know about
 /// its images and cameras, shown.
-fn read_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<Dataset> {
+fn read_dataset(
+    request: &FitRequest,
+    source: DatasetSource,
+    progress: &mut dyn FitProgress,
+) -> Result<Dataset> {
     let options = DatasetOptions {
         background: request
             .settings
@@ -259,7 +265,7 @@ fn read_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Result<
         strict: request.strict,
         allow_outside_images: request.allow_outside_images,
     };
-    let dataset = load_dataset(&request.views, &options)?;
+    let dataset = source.load(&options)?;
     for note in &dataset.notes {
         progress.note(note);
     }
@@ -365,6 +371,13 @@ mod tests {
     use crate::io::image_file::{BitDepth, save_image};
     use crate::model::Image;
 
+    /// [`fit_memory`] of the dataset in `views` as a fit reads it.
+    fn estimate(views: &Path) -> Result<(u64, String)> {
+        let request = request(views);
+        let photos = crate::io::dataset::photo_memory(views, request.downscale);
+        fit_memory(&request, photos)
+    }
+
     fn request(views: &Path) -> FitRequest {
         FitRequest {
             views: views.to_path_buf(),
@@ -405,10 +418,10 @@ mod tests {
         .unwrap();
         photo(&d.join("images/a.png"));
         photo(&d.join("images/b.png"));
-        let (with, what) = fit_memory(&request(d)).unwrap();
+        let (with, what) = estimate(d).unwrap();
         assert!(what.contains("3 frames"), "{what}");
         std::fs::remove_dir_all(d.join("images")).unwrap();
-        let (without, _) = fit_memory(&request(d)).unwrap();
+        let (without, _) = estimate(d).unwrap();
         // Two distinct files (a.png named twice is decoded once).
         assert!(
             with >= without + 2 * PHOTO_KEPT + DECODE,
@@ -429,7 +442,7 @@ mod tests {
         };
         let transforms = serde_json::json!({"camera_angle_x": 0.8, "frames": [frame(0), frame(1)]});
         std::fs::write(d.join("transforms.json"), transforms.to_string()).unwrap();
-        let (with, _) = fit_memory(&request(d)).unwrap();
+        let (with, _) = estimate(d).unwrap();
         let unmasked = |k: u32| {
             serde_json::json!({"file_path": "a.png", "time": k,
                 "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]})
@@ -437,7 +450,7 @@ mod tests {
         let transforms =
             serde_json::json!({"camera_angle_x": 0.8, "frames": [unmasked(0), unmasked(1)]});
         std::fs::write(d.join("transforms.json"), transforms.to_string()).unwrap();
-        let (without, _) = fit_memory(&request(d)).unwrap();
+        let (without, _) = estimate(d).unwrap();
         // One f32 weight a pixel for each of the two frames, and the mask's decode and
         // weights while the largest photo is prepared (32 bytes a pixel).
         assert_eq!(with - without, 2 * 64 * 48 * 4 + 32 * 64 * 48);

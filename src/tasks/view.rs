@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::io::dataset::{DatasetOptions, load_dataset};
+use crate::io::dataset::{DatasetOptions, DatasetSource};
 use crate::io::scene_file::load_scene;
 use crate::model::{Error, Result};
 use crate::render::RenderOptions;
@@ -51,12 +51,13 @@ pub fn view_scene(request: &ViewRequest, listening: impl FnOnce(&str)) -> Result
                 allow_outside_images: false,
             };
             // Refused before any photo is decoded when they would not fit in memory.
-            let photos = crate::io::dataset::photo_memory(dir, 1);
+            let source = DatasetSource::open(dir);
+            let photos = source.photo_memory(1);
             crate::io::memory::check(
                 photos.kept.saturating_add(photos.working),
                 &format!("the {} photos of {}", photos.frames, dir.display()),
             )?;
-            let dataset = load_dataset(dir, &options)?;
+            let dataset = source.load(&options)?;
             let mut views = dataset.train;
             views.extend(dataset.val);
             views.extend(dataset.test);
