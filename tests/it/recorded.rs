@@ -68,8 +68,8 @@ fn every_recorded_command_writes_the_same_bytes() {
     written.retain(|name, _| !name.ends_with(".splat4d-output"));
     assert_eq!(
         markers - written.len(),
-        3,
-        "dataset and two video folders carry a marker"
+        4,
+        "the two datasets and the two video folders carry a marker"
     );
     assert_eq!(
         written.keys().collect::<Vec<_>>(),
