@@ -22,18 +22,17 @@ use crate::backward::raster::{PixelGradient, rasterize_backward, rasterize_with_
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
 use crate::colour::{order_by_depth, shade};
-use crate::composite::{composite, composite_in_bands_on};
+use crate::composite::{composite, composite_in_bands};
+use crate::model::Image;
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result, check_non_negative_setting};
 use crate::model::scene::{Blend, Scene};
 use crate::parallel::{Drain, GroupBuffers};
 use crate::project::{ProjectedKernels, project, slice_and_project, slice_candidates_and_project};
+use crate::raster::{TileScratchPool, rasterize, rasterize_in_bands};
+use crate::simd::{BinnedFrame, ExpMode, RowForm};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
-use crate::{
-    model::Image,
-    raster::{ExpMode, SimdPath, rasterize, rasterize_in_bands_on},
-};
 
 /// Default dilation `s` of SPEC §4, px².
 pub const DEFAULT_DILATION: f64 = 0.3;
@@ -121,9 +120,11 @@ pub struct RenderContext {
     pub bins: TileBins,
     /// Buffers of the backward pass.
     pub backward: BackwardBuffers,
-    row_forms: Vec<crate::raster::RowForm>,
+    /// The row forms of the frame last rendered (stage 4 of either blend; its backward reads
+    /// them).
+    row_forms: Vec<RowForm>,
     /// The additive raster's per-tile scratch.
-    tile_scratch: crate::raster::TileScratchPool,
+    tile_scratch: TileScratchPool,
     /// Scratch of the depth order (alpha scenes).
     depth_keys: Vec<(f64, u32, u32)>,
     /// Alpha frames: each pixel's final transmittance and stop, for the backward; kept by
@@ -203,29 +204,17 @@ impl RenderContext {
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, false);
-        let background = scene.background.map(|b| b as f32);
-        let path = SimdPath::detect();
+        let frame = BinnedFrame::new(
+            &self.projected,
+            &self.bins,
+            &mut self.row_forms,
+            scene.background.map(|b| b as f32),
+            options.exp,
+        );
+        let groups = &mut self.row_groups;
         let pairs = match scene.blend {
-            Blend::Additive => rasterize_in_bands_on(
-                path,
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                (&mut self.row_forms, &self.tile_scratch),
-                &mut self.row_groups,
-                drain,
-            ),
-            Blend::Alpha => composite_in_bands_on(
-                path,
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                &mut self.row_forms,
-                &mut self.row_groups,
-                drain,
-            ),
+            Blend::Additive => rasterize_in_bands(&frame, &self.tile_scratch, groups, drain),
+            Blend::Alpha => composite_in_bands(&frame, groups, drain),
         }?;
         Ok(self.stats(alive, pairs))
     }
@@ -328,22 +317,17 @@ impl RenderContext {
         alive: usize,
     ) -> RenderStats {
         self.ready_for_backward = for_backward;
-        let background = scene.background.map(|b| b as f32);
+        let frame = BinnedFrame::new(
+            &self.projected,
+            &self.bins,
+            &mut self.row_forms,
+            scene.background.map(|b| b as f32),
+            options.exp,
+        );
         let pairs = match scene.blend {
-            Blend::Additive => rasterize(
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                (&mut self.row_forms, &self.tile_scratch),
-                &mut self.image,
-            ),
+            Blend::Additive => rasterize(&frame, &self.tile_scratch, &mut self.image),
             Blend::Alpha => composite(
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                &mut self.row_forms,
+                &frame,
                 &mut self.image,
                 for_backward.then_some(&mut self.pixel_stops),
             ),
@@ -375,28 +359,23 @@ impl RenderContext {
             "RenderContext::backward: the last frame was not rendered by render_for_backward"
         );
         let buffers = &mut self.backward;
+        let frame = BinnedFrame::with_forms(
+            &self.projected,
+            &self.bins,
+            &self.row_forms,
+            scene.background.map(|b| b as f32),
+            options.exp,
+        );
         let v_background = match scene.blend {
             Blend::Additive => {
-                rasterize_backward(
-                    &self.projected,
-                    &self.bins,
-                    &self.row_forms,
-                    v_image,
-                    options.exp,
-                    &mut buffers.entry_partials,
-                    &mut buffers.kernel_sums,
-                    &mut buffers.screen,
-                );
+                let partials = &mut buffers.raster_partials;
+                rasterize_backward(&frame, v_image, partials, &mut buffers.screen);
                 background_gradient(v_image)
             }
             Blend::Alpha => composite_backward(
-                &self.projected,
-                &self.bins,
-                &self.row_forms,
+                &frame,
                 &self.pixel_stops,
-                scene.background.map(|b| b as f32),
                 v_image,
-                options.exp,
                 &mut buffers.alpha_partials,
                 &mut buffers.screen,
             ),
@@ -433,16 +412,19 @@ impl RenderContext {
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, true);
         self.ready_for_backward = true;
         let buffers = &mut self.backward;
-        let pairs = rasterize_with_backward(
+        let frame = BinnedFrame::new(
             &self.projected,
             &self.bins,
+            &mut self.row_forms,
             scene.background.map(|b| b as f32),
             options.exp,
-            &mut self.row_forms,
+        );
+        let pairs = rasterize_with_backward(
+            &frame,
             &mut self.image,
             gradient,
             v_image,
-            (&mut buffers.entry_partials, &mut buffers.kernel_sums),
+            &mut buffers.raster_partials,
             &mut buffers.screen,
         );
         let v_background = background_gradient(v_image);

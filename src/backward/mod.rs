@@ -144,12 +144,11 @@ impl Gradients {
 /// Reusable buffers of the backward pass.
 #[derive(Debug, Default)]
 pub struct BackwardBuffers {
-    /// Per (tile, kernel) entry: partial sums of one tile.
-    pub(crate) entry_partials: Vec<[f32; 8]>,
-    /// The same for alpha frames.
+    /// Additive frames: per (tile, kernel) entry the partial sums of one tile, and their
+    /// reduction per projected kernel.
+    pub(crate) raster_partials: raster::RasterPartials,
+    /// Alpha frames: per (tile, kernel) entry the partial sums of one tile.
     pub(crate) alpha_partials: Vec<composite::AlphaPartial>,
-    /// Per projected kernel: the entries' partial sums reduced in f64.
-    pub(crate) kernel_sums: Vec<[f64; 8]>,
     /// Stage 1 output.
     pub screen: raster::ScreenGradients,
     /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.
