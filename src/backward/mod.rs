@@ -144,11 +144,6 @@ impl Gradients {
 /// Reusable buffers of the backward pass.
 #[derive(Debug, Default)]
 pub struct BackwardBuffers {
-    /// Additive frames: per (tile, kernel) entry the partial sums of one tile, and their
-    /// reduction per projected kernel.
-    pub(crate) raster_partials: raster::RasterPartials,
-    /// Alpha frames: per (tile, kernel) entry the partial sums of one tile.
-    pub(crate) alpha_partials: Vec<composite::AlphaPartial>,
     /// Stage 1 output.
     pub screen: raster::ScreenGradients,
     /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.
