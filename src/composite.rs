@@ -11,15 +11,14 @@
 //! pixel = C + T b
 //! ```
 //!
-//! The layout is the additive raster's ([`crate::raster`]): the same per-tile set-up
-//! (`raster::prepare_tile_range`) gives per half row (8 pixels) the entries of the
-//! kernels reaching it, in list order, with the same `q` and `G = exp(-½ q)` in f32
-//! (`raster::RowEntry::lane`). A tile's list is set up a chunk at a time (32 kernels, then
-//! twice as many each time) and composited onto the half rows still alive, so a tile stops
-//! setting up kernels when all its pixels have stopped: on the 100k bench scene at opacity
-//! 0.5 (1080p) only about a quarter of the (kernel, tile) set-ups are ever reached. The
-//! chunks build the same lists in the same order as the whole list at once (tested), so the
-//! image does not depend on them. `α̂`, `T` and `C` are f64 per lane, so the
+//! The layout is the additive raster's: the same per-tile set-up ([`crate::simd`]'s
+//! `prepare_tile_range`) gives per half row (8 pixels) the entries of the kernels reaching
+//! it, in list order, with the same `q` and `G = exp(-½ q)` in f32 (`RowEntry::lane`). A
+//! tile's list is set up a chunk at a time (32 kernels, then twice as many each time) and
+//! composited onto the half rows still alive, so a tile stops setting up kernels when all
+//! its pixels have stopped (how many set-ups that saves: `docs/performance.md`, "The alpha
+//! blend"). The chunks build the same lists in the same order as the whole list at once
+//! (tested), so the image does not depend on them. `α̂`, `T` and `C` are f64 per lane, so the
 //! transmittance's product keeps its precision over long lists and the stop decision
 //! follows the f64 model; a half row ends when all its lanes have stopped. The loop is one
 //! portable function compiled for each [`SimdPath`] (its fused multiply-adds are the
@@ -28,14 +27,13 @@
 
 use rayon::prelude::*;
 
-use crate::model::Image;
-use crate::parallel::{Drain, GroupBuffers};
-use crate::project::ProjectedKernels;
 use std::ops::Range;
 
-use crate::raster::{
-    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch, half_rows,
-    prepare_tile_range, row_forms, size_image, stream_tile_rows,
+use crate::model::Image;
+use crate::parallel::{Drain, GroupBuffers};
+use crate::simd::{
+    BinnedFrame, ExpMode, HalfRow, LANES, ROW, RowEntry, SimdPath, TileKernel, TileScratch,
+    half_rows, prepare_tile_range, size_image, stream_tile_rows,
 };
 use crate::tiles::TileBins;
 
@@ -78,24 +76,22 @@ pub(crate) fn start_alpha_tile(bins: &TileBins, t: usize, scratch: &mut Composit
     scratch.opacities.clear();
 }
 
-/// Sets up the kernels at positions `range` of tile `t`'s list ([`prepare_tile_range`]),
-/// with the opacity of each tile kernel.
+/// Sets up the kernels at positions `range` of tile `t`'s list of `frame`
+/// ([`prepare_tile_range`]), with the opacity of each tile kernel.
 #[inline(always)]
 pub(crate) fn prepare_alpha_range(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    forms: &[RowForm],
+    frame: &BinnedFrame,
     t: usize,
     range: Range<usize>,
     scratch: &mut CompositeScratch,
 ) {
     let before = scratch.tile.kernels.len();
-    prepare_tile_range(bins, forms, t, range, &mut scratch.tile);
-    let entries = bins.tile_entries(t);
+    prepare_tile_range(frame.bins, frame.forms, t, range, &mut scratch.tile);
+    let entries = frame.bins.tile_entries(t);
     scratch.opacities.extend(
         scratch.tile.entry_of[before..]
             .iter()
-            .map(|&n| proj.opacities[entries[n as usize] as usize]),
+            .map(|&n| frame.proj.opacities[entries[n as usize] as usize]),
     );
 }
 
@@ -126,61 +122,33 @@ pub(crate) fn clamped_alpha(opacity: f64, g: f32) -> f64 {
     if alpha < MAX_ALPHA { alpha } else { MAX_ALPHA }
 }
 
-/// Composites the binned kernels (binned in depth order) into `image` (resized to the bins'
-/// size) over `background`, on the widest [`SimdPath`] the CPU has. `forms` is scratch for
-/// [`row_forms`]; `stops`, when given, receives each pixel's [`PixelStop`] (row-major, for
-/// the backward; a frame only looked at needs none, and writing them was 16 bytes a pixel).
-/// Returns the number of (pixel, kernel) pairs composited (before each pixel's stop).
-pub fn composite(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    forms: &mut Vec<RowForm>,
-    image: &mut Image,
-    stops: Option<&mut Vec<PixelStop>>,
-) -> u64 {
-    composite_on(
-        SimdPath::detect(),
-        proj,
-        bins,
-        background,
-        exp,
-        forms,
-        image,
-        stops,
-    )
-}
-
-/// [`composite`] on a chosen path (which the CPU must have: see [`SimdPath::available`]).
+/// Composites `frame`'s binned kernels (binned in depth order) into `image` (resized to the
+/// bins' size) over its background, on its path. `stops`, when given, receives each
+/// pixel's [`PixelStop`] (row-major, for the backward; a frame only looked at needs none,
+/// and writing them is 16 bytes a pixel). Returns the number of (pixel, kernel) pairs
+/// composited (before each pixel's stop).
 ///
 /// # Panics
-/// When the CPU lacks `path`'s instructions.
-#[allow(clippy::too_many_arguments)]
-pub fn composite_on(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+/// When the frame's kernels have no opacities.
+pub fn composite(
+    frame: &BinnedFrame,
     image: &mut Image,
     stops: Option<&mut Vec<PixelStop>>,
 ) -> u64 {
-    let frame = AlphaFrame::prepare(path, proj, bins, forms, background);
-    let pixels = size_image(bins, image);
-    let w = bins.width as usize;
+    check_alpha_frame(frame);
+    let pixels = size_image(frame.bins, image);
+    let (w, h) = (frame.bins.width as usize, frame.bins.height as usize);
     let composite_band = |ty: usize, band: &mut [f32], band_stops: Option<&mut [PixelStop]>| {
         SCRATCH.with(|cell| {
             let scratch = &mut *cell.borrow_mut();
-            tile_row(path, exp, &frame, ty, scratch, band, band_stops)
+            tile_row(frame, ty, scratch, band, band_stops)
         })
     };
     let bands = image.pixels.par_chunks_mut(3 * w * ROW).enumerate();
     match stops {
         Some(stops) => {
             stops.clear();
-            stops.resize(w * bins.height as usize, PixelStop::default());
+            stops.resize(w * h, PixelStop::default());
             if !pixels {
                 return 0;
             }
@@ -194,33 +162,27 @@ pub fn composite_on(
     }
 }
 
-/// [`composite_on`] without an image: the frame's rows are handed to `drain` in order, a
-/// group of tile rows at a time (its first row and its RGB values), while the next group is
-/// composited ([`crate::parallel::fill_and_drain_in_order`]); the pixels' stops, which only a backward reads,
-/// are not kept. The same values as [`composite_on`]'s image. Returns the pairs composited,
-/// or `drain`'s first error.
+/// [`composite`] without an image: the frame's rows are handed to `drain` in order, a group
+/// of tile rows at a time (its first row and its RGB values), while the next group is
+/// composited ([`crate::parallel::fill_and_drain_in_order`]); the pixels' stops, which only
+/// a backward reads, are not kept. The same values as [`composite`]'s image. Returns the
+/// pairs composited, or `drain`'s first error.
 ///
 /// # Panics
-/// When the CPU lacks `path`'s instructions.
-#[allow(clippy::too_many_arguments)]
-pub fn composite_in_bands_on<E: Send>(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    forms: &mut Vec<RowForm>,
+/// When the frame's kernels have no opacities.
+pub fn composite_in_bands<E: Send>(
+    frame: &BinnedFrame,
     groups: &mut GroupBuffers,
     drain: &mut Drain<E>,
 ) -> Result<u64, E> {
-    let frame = AlphaFrame::prepare(path, proj, bins, forms, background);
+    check_alpha_frame(frame);
     stream_tile_rows(
-        bins,
+        frame.bins,
         groups,
         |ty, band| {
             SCRATCH.with(|cell| {
                 let scratch = &mut *cell.borrow_mut();
-                tile_row(path, exp, &frame, ty, scratch, band, None)
+                tile_row(frame, ty, scratch, band, None)
             })
         },
         drain,
@@ -230,9 +192,7 @@ pub fn composite_in_bands_on<E: Send>(
 /// Composites tile row `ty` of `frame` into `band` (its 16 image rows, or fewer at the
 /// bottom) and, when given, their pixels' `stops`; returns its pairs.
 fn tile_row(
-    path: SimdPath,
-    exp: ExpMode,
-    frame: &AlphaFrame,
+    frame: &BinnedFrame,
     ty: usize,
     scratch: &mut CompositeScratch,
     band: &mut [f32],
@@ -245,49 +205,18 @@ fn tile_row(
                 pixels: band,
                 stops: stops.as_deref_mut(),
             };
-            tile_on(path, exp, frame, ty * tiles_x + tx, scratch, out)
+            tile(frame, ty * tiles_x + tx, scratch, out)
         })
         .sum()
 }
 
-/// Panics when the CPU lacks `path`'s instructions (every `unsafe` call of a path's loops
-/// relies on this check) or `proj` has no opacities.
-fn check_alpha_frame(path: SimdPath, proj: &ProjectedKernels) {
-    path.assert_available();
+/// Panics when `frame`'s kernels have no opacities.
+fn check_alpha_frame(frame: &BinnedFrame) {
     assert_eq!(
-        proj.opacities.len(),
-        proj.len(),
+        frame.proj.opacities.len(),
+        frame.proj.len(),
         "opacities of an alpha frame"
     );
-}
-
-/// What every tile of an alpha frame shares.
-struct AlphaFrame<'a> {
-    proj: &'a ProjectedKernels,
-    bins: &'a TileBins,
-    forms: &'a [RowForm],
-    background: [f64; 3],
-}
-
-impl<'a> AlphaFrame<'a> {
-    /// The frame of `proj` (with opacities) binned in `bins` over `background`, its row
-    /// forms computed into `forms`, after checking it and `path` ([`check_alpha_frame`]).
-    fn prepare(
-        path: SimdPath,
-        proj: &'a ProjectedKernels,
-        bins: &'a TileBins,
-        forms: &'a mut Vec<RowForm>,
-        background: [f32; 3],
-    ) -> Self {
-        check_alpha_frame(path, proj);
-        row_forms(proj, bins, forms);
-        AlphaFrame {
-            proj,
-            bins,
-            forms,
-            background: background.map(f64::from),
-        }
-    }
 }
 
 /// The image rows of one tile row, and their pixels' stops when they are kept.
@@ -296,18 +225,11 @@ pub(crate) struct Band<'a> {
     stops: Option<&'a mut [PixelStop]>,
 }
 
-/// [`composite_tile`] compiled for `path`.
-fn tile_on(
-    path: SimdPath,
-    exp: ExpMode,
-    frame: &AlphaFrame,
-    t: usize,
-    scratch: &mut CompositeScratch,
-    band: Band,
-) -> u64 {
-    match (path, exp) {
+/// [`composite_tile`] compiled for the frame's path.
+fn tile(frame: &BinnedFrame, t: usize, scratch: &mut CompositeScratch, band: Band) -> u64 {
+    match (frame.path, frame.exp) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller ran `check_alpha_frame`: the CPU has the path's features.
+        // SAFETY: a frame's path is one the CPU has (`BinnedFrame`).
         (SimdPath::Avx512, ExpMode::Poly) => unsafe {
             composite_tile_avx512::<true>(frame, t, scratch, band)
         },
@@ -336,7 +258,7 @@ fn tile_on(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
 fn composite_tile_avx512<const FAST: bool>(
-    frame: &AlphaFrame,
+    frame: &BinnedFrame,
     t: usize,
     scratch: &mut CompositeScratch,
     band: Band,
@@ -348,7 +270,7 @@ fn composite_tile_avx512<const FAST: bool>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn composite_tile_avx2<const FAST: bool>(
-    frame: &AlphaFrame,
+    frame: &BinnedFrame,
     t: usize,
     scratch: &mut CompositeScratch,
     band: Band,
@@ -419,7 +341,7 @@ pub(crate) fn entry_lanes<const FAST: bool, const AVX2: bool>(
         // SAFETY: AVX2 is only asked for on the paths whose CPU has it (checked by the
         // callers' dispatch).
         unsafe {
-            use crate::raster::avx2::{gaussian, lane_numbers, lanes as avx2_lanes};
+            use crate::simd::avx2::{gaussian, lane_numbers, lanes as avx2_lanes};
             use std::arch::x86_64::*;
             let (t8, q, mask) = avx2_lanes(entry, kernel, lane_numbers(lanes), first);
             let g8 = _mm256_and_ps(gaussian::<FAST>(q), mask);
@@ -501,17 +423,12 @@ pub(crate) fn composite_half_row<const FAST: bool, const AVX2: bool>(
 /// Returns the pairs.
 #[inline(always)]
 fn composite_tile<const FAST: bool, const AVX2: bool>(
-    frame: &AlphaFrame,
+    frame: &BinnedFrame,
     t: usize,
     scratch: &mut CompositeScratch,
     mut band: Band,
 ) -> u64 {
-    let AlphaFrame {
-        proj,
-        bins,
-        forms,
-        background,
-    } = *frame;
+    let (bins, background) = (frame.bins, frame.background);
     let rect = bins.tile_rect(t);
     // Halves wholly past the image's edge keep a state with no lane.
     let mut states = [HalfRowState::new(0); 2 * ROW];
@@ -520,7 +437,7 @@ fn composite_tile<const FAST: bool, const AVX2: bool>(
     }
     start_alpha_tile(bins, t, scratch);
     for chunk in chunks(bins.tile_entries(t).len()) {
-        prepare_alpha_range(proj, bins, forms, t, chunk, scratch);
+        prepare_alpha_range(frame, t, chunk, scratch);
         let mut any_alive = false;
         for half in half_rows(rect) {
             let state = &mut states[half.index];
@@ -583,21 +500,20 @@ mod tests {
         let options = RenderOptions::default();
         context.render(&scene, &camera, 0.5, &options).unwrap();
         let mut forms = Vec::new();
-        row_forms(&context.projected, &context.bins, &mut forms);
+        let frame = BinnedFrame::new(
+            &context.projected,
+            &context.bins,
+            &mut forms,
+            [0.0; 3],
+            ExpMode::Poly,
+        );
         let mut scratch = CompositeScratch::default();
         let avx2 = SimdPath::available().contains(&SimdPath::Avx2);
         let (mut stopped, mut pairs) = (0, 0);
         for t in 0..context.bins.tile_count() {
             start_alpha_tile(&context.bins, t, &mut scratch);
             let len = context.bins.tile_entries(t).len();
-            prepare_alpha_range(
-                &context.projected,
-                &context.bins,
-                &forms,
-                t,
-                0..len,
-                &mut scratch,
-            );
+            prepare_alpha_range(&frame, t, 0..len, &mut scratch);
             for half in half_rows(context.bins.tile_rect(t)) {
                 let entries = &scratch.tile.halves[half.index];
                 let (first, lanes) = (half.first as f32, half.lanes as f32);
@@ -670,19 +586,19 @@ mod tests {
         context
             .render(&scene, &camera, 0.5, &RenderOptions::default())
             .unwrap();
-        let mut forms = Vec::new();
-        row_forms(&context.projected, &context.bins, &mut forms);
-        let (mut whole, mut chunked) = (CompositeScratch::default(), CompositeScratch::default());
         let (proj, bins) = (&context.projected, &context.bins);
+        let mut forms = Vec::new();
+        let frame = BinnedFrame::new(proj, bins, &mut forms, [0.0; 3], ExpMode::Poly);
+        let (mut whole, mut chunked) = (CompositeScratch::default(), CompositeScratch::default());
         let mut longest = 0;
         for t in 0..bins.tile_count() {
             let len = bins.tile_entries(t).len();
             longest = longest.max(len);
             start_alpha_tile(bins, t, &mut whole);
-            prepare_alpha_range(proj, bins, &forms, t, 0..len, &mut whole);
+            prepare_alpha_range(&frame, t, 0..len, &mut whole);
             start_alpha_tile(bins, t, &mut chunked);
             for chunk in chunks(len) {
-                prepare_alpha_range(proj, bins, &forms, t, chunk, &mut chunked);
+                prepare_alpha_range(&frame, t, chunk, &mut chunked);
             }
             assert_eq!(whole.tile.entry_of, chunked.tile.entry_of);
             assert_eq!(whole.opacities, chunked.opacities);

@@ -252,11 +252,14 @@ pub(crate) fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Optio
     let v = scene.velocities[i];
     let (amplitude, opacity) = match scene.blend {
         Blend::Additive => (scene.amplitudes[i].map(|a| a * w), 0.0),
-        Blend::Alpha => (scene.amplitudes[i], scene.opacities[i] * w),
+        Blend::Alpha => {
+            let opacity = scene.opacities[i] * w;
+            if opacity == 0.0 {
+                return None; // o(τ) = 0 adds nothing for any ε (SPEC §8)
+            }
+            (scene.amplitudes[i], opacity)
+        }
     };
-    if scene.blend == Blend::Alpha && opacity == 0.0 {
-        return None; // o(τ) = 0 adds nothing for any ε (SPEC §8)
-    }
     Some(SlicedKernel {
         mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
         covariance: covariance_3d(scene.rotations[i], scale),

@@ -6,8 +6,9 @@
 use std::time::Instant;
 
 use splat4d::project::{ProjectedKernels, project};
-use splat4d::raster::{ExpMode, TileScratchPool, rasterize};
+use splat4d::raster::{TileScratchPool, rasterize};
 use splat4d::scenes::synthetic::{bench_camera, bench_scene};
+use splat4d::simd::{BinnedFrame, ExpMode};
 use splat4d::slice::{SlicedKernels, slice};
 use splat4d::tiles::{TileBins, bin};
 use splat4d::{Image, RenderContext, RenderOptions};
@@ -49,14 +50,9 @@ fn main() {
             let t2 = Instant::now();
             bin(&projected, camera.width, camera.height, &mut bins);
             let t3 = Instant::now();
-            rasterize(
-                &projected,
-                &bins,
-                scene.background.map(|b| b as f32),
-                ExpMode::Poly,
-                (&mut forms, &scratch),
-                &mut image,
-            );
+            let background = scene.background.map(|b| b as f32);
+            let binned = BinnedFrame::new(&projected, &bins, &mut forms, background, ExpMode::Poly);
+            rasterize(&binned, &scratch, &mut image);
             let t4 = Instant::now();
             context
                 .render(&scene, &camera, 0.5, &options)

@@ -33,9 +33,7 @@ use crate::composite::{
     CompositeScratch, MAX_ALPHA, PixelStop, chunks, clamped_alpha, entry_lanes,
     prepare_alpha_range, start_alpha_tile,
 };
-use crate::project::ProjectedKernels;
-use crate::raster::{ExpMode, HalfRow, LANES, ROW, RowForm, SimdPath, half_rows};
-use crate::tiles::TileBins;
+use crate::simd::{BinnedFrame, ExpMode, HalfRow, LANES, ROW, SimdPath, half_rows};
 
 /// Per (tile, kernel) entry: `Σ ∂L/∂colour` (3), `Σ w t`, `Σ w t²`, `Σ w Δv`, `Σ w t Δv`,
 /// `Σ w Δv²`, `Σ ∂L/∂α̂ G`.
@@ -59,65 +57,28 @@ thread_local! {
 }
 
 /// Accumulates `∂L/∂C` (`v_image`, RGB row-major) of the alpha frame last composited
-/// (`proj` in depth order, `bins`, `forms` and `stops` of that frame) into `out` (one entry
-/// per projected kernel, reset first) and returns `∂L/∂b`. `partials` is scratch.
-#[allow(clippy::too_many_arguments)]
+/// (`frame`, its kernels in depth order, on the forward's row forms, and the forward's
+/// `stops`) into `out` (one entry per projected kernel, reset first) and returns `∂L/∂b`.
+/// `partials` is scratch.
 pub fn composite_backward(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    forms: &[RowForm],
+    frame: &BinnedFrame,
     stops: &[PixelStop],
-    background: [f32; 3],
     v_image: &[f32],
-    exp: ExpMode,
     partials: &mut Vec<AlphaPartial>,
     out: &mut ScreenGradients,
 ) -> [f64; 3] {
-    composite_backward_on(
-        SimdPath::detect(),
-        proj,
-        bins,
-        forms,
-        stops,
-        background,
-        v_image,
-        exp,
-        partials,
-        out,
-    )
-}
-
-/// [`composite_backward`] on `path` (which the CPU must have).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn composite_backward_on(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    forms: &[RowForm],
-    stops: &[PixelStop],
-    background: [f32; 3],
-    v_image: &[f32],
-    exp: ExpMode,
-    partials: &mut Vec<AlphaPartial>,
-    out: &mut ScreenGradients,
-) -> [f64; 3] {
-    path.assert_available();
+    let (proj, bins) = (frame.proj, frame.bins);
     let width = bins.width as usize;
     assert_eq!(
         v_image.len(),
         3 * width * bins.height as usize,
         "∂L/∂C has the image's size"
     );
-    assert_eq!(forms.len(), proj.len(), "the forward's row forms");
     assert_eq!(stops.len(), v_image.len() / 3, "the forward's pixel stops");
-    let background = background.map(f64::from);
-    let frame = Frame {
-        proj,
-        bins,
-        forms,
+    let backward = Frame {
+        binned: frame,
         stops,
         v_image,
-        background,
     };
     partials.clear();
     partials.resize(bins.proj_from_entry.len(), [0.0; 9]);
@@ -138,29 +99,30 @@ pub(crate) fn composite_backward_on(
                     tile: composite,
                     sums,
                 };
-                match (path, exp) {
+                let frame = &backward;
+                match (frame.binned.path, frame.binned.exp) {
                     #[cfg(target_arch = "x86_64")]
-                    // SAFETY: checked above that the CPU has the path's features.
+                    // SAFETY: a frame's path is one the CPU has (`BinnedFrame`).
                     (SimdPath::Avx512, ExpMode::Poly) => unsafe {
-                        backward_tile_avx512::<true>(&frame, t, run, scratch)
+                        backward_tile_avx512::<true>(frame, t, run, scratch)
                     },
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
                     (SimdPath::Avx512, ExpMode::Std) => unsafe {
-                        backward_tile_avx512::<false>(&frame, t, run, scratch)
+                        backward_tile_avx512::<false>(frame, t, run, scratch)
                     },
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
                     (SimdPath::Avx2, ExpMode::Poly) => unsafe {
-                        backward_tile_avx2::<true>(&frame, t, run, scratch)
+                        backward_tile_avx2::<true>(frame, t, run, scratch)
                     },
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
                     (SimdPath::Avx2, ExpMode::Std) => unsafe {
-                        backward_tile_avx2::<false>(&frame, t, run, scratch)
+                        backward_tile_avx2::<false>(frame, t, run, scratch)
                     },
-                    (_, ExpMode::Poly) => backward_tile::<true, false>(&frame, t, run, scratch),
-                    (_, ExpMode::Std) => backward_tile::<false, false>(&frame, t, run, scratch),
+                    (_, ExpMode::Poly) => backward_tile::<true, false>(frame, t, run, scratch),
+                    (_, ExpMode::Std) => backward_tile::<false, false>(frame, t, run, scratch),
                 }
             })
         })
@@ -175,14 +137,12 @@ pub(crate) fn composite_backward_on(
     v_background
 }
 
-/// What every tile of the frame's backward shares.
+/// What every tile of the frame's backward shares: the frame, the forward's stops and
+/// `∂L/∂C`.
 struct Frame<'a> {
-    proj: &'a ProjectedKernels,
-    bins: &'a TileBins,
-    forms: &'a [RowForm],
+    binned: &'a BinnedFrame<'a>,
     stops: &'a [PixelStop],
     v_image: &'a [f32],
-    background: [f64; 3],
 }
 
 /// [`backward_tile`] compiled for AVX-512 (the f64 lanes in one register; the same
@@ -234,9 +194,10 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
         tile: composite,
         sums,
     } = scratch;
-    let rect = frame.bins.tile_rect(t);
+    let bins = frame.binned.bins;
+    let rect = bins.tile_rect(t);
     let [tx0, _, ty0, _] = rect;
-    let width = frame.bins.width as usize;
+    let width = bins.width as usize;
     // Set up here (so that the set-up is compiled for the path too), a chunk at a time as
     // the forward did, until every half row's list reaches its lanes' last stop.
     let mut needed = [0; 2 * ROW];
@@ -249,9 +210,9 @@ fn backward_tile<const FAST: bool, const AVX2: bool>(
             .max()
             .unwrap_or(0);
     }
-    start_alpha_tile(frame.bins, t, composite);
-    for chunk in chunks(frame.bins.tile_entries(t).len()) {
-        prepare_alpha_range(frame.proj, frame.bins, frame.forms, t, chunk, composite);
+    start_alpha_tile(bins, t, composite);
+    for chunk in chunks(bins.tile_entries(t).len()) {
+        prepare_alpha_range(frame.binned, t, chunk, composite);
         let halves = &composite.tile.halves;
         if halves.iter().zip(&needed).all(|(list, &n)| list.len() >= n) {
             break;
@@ -321,7 +282,7 @@ impl LaneState {
         let mut state = LaneState {
             v: [[0.0; LANES]; 3],
             transmittance: [1.0; LANES],
-            behind: frame.background.map(|b| [b; LANES]),
+            behind: frame.binned.background.map(|b| [b; LANES]),
             end: [0; LANES],
         };
         for i in 0..lanes {
@@ -402,22 +363,18 @@ mod tests {
             .map(|i| ((i * 7919) % 211) as f32 / 105.0 - 1.0)
             .collect();
         let mut forms = Vec::new();
-        crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
-        let stops = context.pixel_stops.clone();
+        let frame = BinnedFrame::new(
+            &context.projected,
+            &context.bins,
+            &mut forms,
+            [0.2, 0.3, 0.4],
+            ExpMode::Poly,
+        );
+        let stops = context.alpha_stops().to_vec();
         let gradients = |path| {
             let mut out = ScreenGradients::default();
-            let v_background = composite_backward_on(
-                path,
-                &context.projected,
-                &context.bins,
-                &forms,
-                &stops,
-                [0.2, 0.3, 0.4],
-                &v_image,
-                ExpMode::Poly,
-                &mut Vec::new(),
-                &mut out,
-            );
+            let v_background =
+                composite_backward(&frame.on(path), &stops, &v_image, &mut Vec::new(), &mut out);
             (out, v_background)
         };
         let (portable, portable_background) = gradients(SimdPath::Baseline);

@@ -144,12 +144,6 @@ impl Gradients {
 /// Reusable buffers of the backward pass.
 #[derive(Debug, Default)]
 pub struct BackwardBuffers {
-    /// Per (tile, kernel) entry: partial sums of one tile.
-    pub(crate) entry_partials: Vec<[f32; 8]>,
-    /// The same for alpha frames.
-    pub(crate) alpha_partials: Vec<composite::AlphaPartial>,
-    /// Per projected kernel: the entries' partial sums reduced in f64.
-    pub(crate) kernel_sums: Vec<[f64; 8]>,
     /// Stage 1 output.
     pub screen: raster::ScreenGradients,
     /// Stage 2 output: `∂L/∂m(τ)` and `∂L/∂a(τ)` per sliced kernel.

@@ -18,7 +18,7 @@
 //! and accumulates, per kernel, `Σ ∂L/∂C G` and `Σ w (t, t², Δv, t Δv, Δv²)` pixel column by
 //! pixel column over the tile's rows (f32, at most 16 terms a column), then over the 16
 //! columns in f64, into one partial per (tile, kernel) entry. The AVX-512 path takes the
-//! forward's whole-row tile set-up (16 lanes a row, `raster::avx512::prepare_tile`) and walks
+//! forward's whole-row tile set-up (16 lanes a row, `raster::prepare_whole_rows`) and walks
 //! each kernel's own rows with its moments in registers: a column adds the same terms in the
 //! same order (one per row, rows ascending), and the lanes of a half the kernel does not
 //! reach add zeros (which can change only the sign of a zero sum; a partial's zero is stored
@@ -30,15 +30,17 @@
 //! ([`rasterize_with_backward`]): each tile is set up once, summed, given its `∂L/∂C` by the
 //! loss ([`PixelGradient`]) and differentiated at once, with the same bits as the two
 //! passes. On the AVX-512 path the forward keeps each (tile kernel, row)'s `G` and pair mask
-//! (`raster::KeptGaussians`, 66 bytes) and the backward reads them instead of evaluating `q`
-//! and the exp again: half the backward's vector work per row.
+//! (`raster::KeptGaussians`: 16 values and a mask) and the backward reads them instead of
+//! evaluating `q` and the exp again.
 
 use rayon::prelude::*;
 
+use crate::model::Image;
 use crate::project::ProjectedKernels;
-use crate::raster::{
-    ExpMode, HalfRow, LANES, ROW, RowEntry, RowForm, SimdPath, TileKernel, TileScratch,
-    forward_tile_on, half_rows, prepare_tile, read_planes, row_forms, size_image,
+use crate::raster::{RasterScratch, forward_tile};
+use crate::simd::{
+    BinnedFrame, ExpMode, HalfRow, LANES, ROW, RowEntry, SimdPath, TileKernel, half_rows,
+    prepare_tile, read_planes, size_image,
 };
 use crate::tiles::TileBins;
 
@@ -55,51 +57,42 @@ pub struct ScreenGradients {
     pub v_opacities: Vec<f64>,
 }
 
-/// Accumulates `∂L/∂C` (`v_image`, RGB row-major, `width` pixels per row) into `out`, one
-/// entry per projected kernel (reset first). `forms` are the row forms of the forward render
-/// of the same frame ([`crate::raster::row_forms`]); `partials` (one per tile entry) and
-/// `sums` (one per projected kernel) are scratch, kept between calls.
-#[allow(clippy::too_many_arguments)]
-pub fn rasterize_backward(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    forms: &[RowForm],
-    v_image: &[f32],
-    exp: ExpMode,
-    partials: &mut Vec<[f32; 8]>,
-    sums: &mut Vec<[f64; 8]>,
-    out: &mut ScreenGradients,
-) {
-    let path = SimdPath::detect();
-    rasterize_backward_on(path, proj, bins, forms, v_image, exp, partials, sums, out);
+/// The additive backward's partial sums, kept between frames: one per (tile, kernel) entry
+/// (`Σ ∂L/∂a` and the five moments, f32 per tile), and their reduction per projected kernel
+/// in f64.
+#[derive(Clone, Debug, Default)]
+pub struct RasterPartials {
+    entries: Vec<[f32; 8]>,
+    kernels: Vec<[f64; 8]>,
 }
 
-/// [`rasterize_backward`] on `path` (which the CPU must have).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rasterize_backward_on(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    forms: &[RowForm],
+impl RasterPartials {
+    /// One zeroed partial per tile entry of `bins`.
+    fn reset(&mut self, bins: &TileBins) {
+        self.entries.clear();
+        self.entries.resize(bins.proj_from_entry.len(), [0.0; 8]);
+    }
+}
+
+/// Accumulates `∂L/∂C` (`v_image`, RGB row-major, `width` pixels per row) of `frame` (whose
+/// row forms are its forward render's) into `out`, one entry per projected kernel (reset
+/// first), with `partials` as scratch.
+pub fn rasterize_backward(
+    frame: &BinnedFrame,
     v_image: &[f32],
-    exp: ExpMode,
-    partials: &mut Vec<[f32; 8]>,
-    sums: &mut Vec<[f64; 8]>,
+    partials: &mut RasterPartials,
     out: &mut ScreenGradients,
 ) {
-    path.assert_available();
-    let width = bins.width as usize;
+    let bins = frame.bins;
     assert_eq!(
         v_image.len(),
-        3 * width * bins.height as usize,
+        3 * bins.width as usize * bins.height as usize,
         "∂L/∂C has the image's size"
     );
-    assert_eq!(forms.len(), proj.len(), "the forward's row forms");
-    partials.clear();
-    partials.resize(bins.proj_from_entry.len(), [0.0; 8]);
+    partials.reset(bins);
     // One disjoint run of partials per tile.
     let mut runs = Vec::with_capacity(bins.tile_count());
-    let mut rest = partials.as_mut_slice();
+    let mut rest = partials.entries.as_mut_slice();
     for t in 0..bins.tile_count() {
         let (run, tail) = rest.split_at_mut(bins.tile_entries(t).len());
         runs.push((t, run));
@@ -108,11 +101,17 @@ pub(crate) fn rasterize_backward_on(
     runs.into_par_iter().for_each(|(t, run)| {
         SCRATCH.with(|cell| {
             let scratch = &mut *cell.borrow_mut();
-            prepare_tile_on(path, bins, forms, t, scratch);
-            backward_prepared_tile_on(path, exp, bins, v_image, 0, t, run, scratch, false);
+            prepare_backward_tile(frame, t, scratch);
+            backward_tile(frame, (v_image, 0), t, run, scratch, false);
         });
     });
-    reduce(proj, bins, partials, sums, out);
+    reduce(
+        frame.proj,
+        bins,
+        &partials.entries,
+        &mut partials.kernels,
+        out,
+    );
 }
 
 /// A loss's gradient with respect to the rendered pixels, run by run: `gradient(k,
@@ -123,69 +122,31 @@ pub(crate) fn rasterize_backward_on(
 /// work of its own (a rayon call could run another tile on the same thread).
 pub type PixelGradient<'a> = dyn Fn(usize, &[f32], &mut [f32]) + Sync + 'a;
 
-/// The forward raster ([`crate::raster::rasterize`]) and [`rasterize_backward`] of one
-/// frame in one pass over its tiles: each tile is set up once, summed into `image`, its
-/// `∂L/∂C` computed by `gradient` into `v_image` (resized to the image's), and
-/// differentiated while its set-up is in cache. The image, `v_image` and `out` are the same
-/// bits as the forward, `gradient` over the whole image and the backward one after the
-/// other: every stage is the same code on the same set-up (the forward's `prepare_tile`).
-/// Returns the pairs.
-#[allow(clippy::too_many_arguments)]
+/// The forward raster ([`crate::raster::rasterize`]) and [`rasterize_backward`] of `frame`
+/// in one pass over its tiles: each tile is set up once, summed into `image`, its `∂L/∂C`
+/// computed by `gradient` into `v_image` (resized to the image's), and differentiated while
+/// its set-up is in cache. The image, `v_image` and `out` are the same bits as the forward,
+/// `gradient` over the whole image and the backward one after the other: every stage is the
+/// same code on the same set-up (the forward's). Returns the pairs.
 pub fn rasterize_with_backward(
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    forms: &mut Vec<RowForm>,
-    image: &mut crate::model::Image,
+    frame: &BinnedFrame,
+    image: &mut Image,
     gradient: &PixelGradient,
     v_image: &mut Vec<f32>,
-    (partials, sums): (&mut Vec<[f32; 8]>, &mut Vec<[f64; 8]>),
+    partials: &mut RasterPartials,
     out: &mut ScreenGradients,
 ) -> u64 {
-    rasterize_with_backward_on(
-        SimdPath::detect(),
-        proj,
-        bins,
-        background,
-        exp,
-        forms,
-        image,
-        gradient,
-        v_image,
-        (partials, sums),
-        out,
-    )
-}
-
-/// [`rasterize_with_backward`] on `path` (which the CPU must have).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rasterize_with_backward_on(
-    path: SimdPath,
-    proj: &ProjectedKernels,
-    bins: &TileBins,
-    background: [f32; 3],
-    exp: ExpMode,
-    forms: &mut Vec<RowForm>,
-    image: &mut crate::model::Image,
-    gradient: &PixelGradient,
-    v_image: &mut Vec<f32>,
-    (partials, sums): (&mut Vec<[f32; 8]>, &mut Vec<[f64; 8]>),
-    out: &mut ScreenGradients,
-) -> u64 {
-    path.assert_available();
-    row_forms(proj, bins, forms);
+    let bins = frame.bins;
     let pixels = size_image(bins, image);
     v_image.clear();
     v_image.resize(image.pixels.len(), 0.0);
-    partials.clear();
-    partials.resize(bins.proj_from_entry.len(), [0.0; 8]);
+    partials.reset(bins);
     let mut pairs = 0;
     if pixels {
         let (width, tiles_x) = (bins.width as usize, bins.tiles_x as usize);
         // One disjoint run of partials per tile row: its tiles' entries are consecutive.
         let mut band_runs = Vec::with_capacity(bins.tiles_y as usize);
-        let mut rest = partials.as_mut_slice();
+        let mut rest = partials.entries.as_mut_slice();
         for ty in 0..bins.tiles_y as usize {
             let tiles = ty * tiles_x..(ty + 1) * tiles_x;
             let entries = (bins.tile_offsets[tiles.end] - bins.tile_offsets[tiles.start]) as usize;
@@ -193,7 +154,6 @@ pub(crate) fn rasterize_with_backward_on(
             band_runs.push(run);
             rest = tail;
         }
-        let forms = forms.as_slice();
         pairs = image
             .pixels
             .par_chunks_mut(3 * width * ROW)
@@ -205,16 +165,7 @@ pub(crate) fn rasterize_with_backward_on(
                     let scratch = &mut *cell.borrow_mut();
                     let mut pairs = 0;
                     for t in ty * tiles_x..(ty + 1) * tiles_x {
-                        pairs += forward_tile_on(
-                            path,
-                            exp,
-                            bins,
-                            forms,
-                            background,
-                            t,
-                            &mut scratch.tile,
-                            band,
-                        );
+                        pairs += forward_tile(frame, t, &mut scratch.forward, band);
                         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
                         for row in 0..(ty1 - ty0) as usize {
                             let at = 3 * (row * width + tx0 as usize);
@@ -225,45 +176,39 @@ pub(crate) fn rasterize_with_backward_on(
                         let (run, tail) =
                             std::mem::take(&mut runs).split_at_mut(bins.tile_entries(t).len());
                         runs = tail;
-                        backward_prepared_tile_on(
-                            path,
-                            exp,
-                            bins,
-                            v_band,
-                            ty0 as usize,
-                            t,
-                            run,
-                            scratch,
-                            true,
-                        );
+                        backward_tile(frame, (v_band, ty0 as usize), t, run, scratch, true);
                     }
                     pairs
                 })
             })
             .sum();
     }
-    reduce(proj, bins, partials, sums, out);
+    reduce(
+        frame.proj,
+        bins,
+        &partials.entries,
+        &mut partials.kernels,
+        out,
+    );
     pairs
 }
 
-/// [`backward_prepared_tile`] compiled for `path`. `kept`: the tile's forward ran just before
-/// with [`crate::raster::forward_tile_on`], which keeps its `G` on the AVX-512 path; that
-/// path then reads it instead of evaluating `q` and `exp(-½ q)` again.
-#[allow(clippy::too_many_arguments)]
-fn backward_prepared_tile_on(
-    path: SimdPath,
-    exp: ExpMode,
-    bins: &TileBins,
-    v: &[f32],
-    v_row: usize,
+/// [`backward_prepared_tile`] compiled for the frame's path; `v` holds `∂L/∂C` of the image
+/// rows from its second number on. `kept`: the tile's forward ran just before with
+/// [`crate::raster::forward_tile`], which keeps its `G` on the AVX-512 path; that path then
+/// reads it instead of evaluating `q` and `exp(-½ q)` again.
+fn backward_tile(
+    frame: &BinnedFrame,
+    (v, v_row): (&[f32], usize),
     t: usize,
     run: &mut [[f32; 8]],
     scratch: &mut BackwardScratch,
     kept: bool,
 ) {
-    match (path, exp, kept) {
+    let bins = frame.bins;
+    match (frame.path, frame.exp, kept) {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller checked that the CPU has the path's features; `kept` says the
+        // SAFETY: a frame's path is one the CPU has (`BinnedFrame`); `kept` says the
         // scratch holds this tile's `G`.
         (SimdPath::Avx512, _, true) => unsafe {
             avx512::backward_prepared_tile::<true, true>(bins, v, v_row, t, run, scratch);
@@ -311,11 +256,11 @@ fn backward_prepared_tile_avx2<const FAST: bool>(
     backward_prepared_tile::<FAST, true>(bins, v, v_row, t, run, scratch);
 }
 
-/// Scratch of one worker: the tile's row entries (as the forward builds them) and, per
-/// kernel of the tile, its eight moments column by column.
+/// Scratch of one worker: the tile's set-up (as the forward builds it) and, per kernel of
+/// the tile, its eight moments column by column.
 #[derive(Default)]
 struct BackwardScratch {
-    tile: TileScratch,
+    forward: RasterScratch,
     moments: Vec<Moments>,
 }
 
@@ -328,42 +273,37 @@ thread_local! {
         std::cell::RefCell::new(BackwardScratch::default());
 }
 
-/// Sets tile `t` up in `scratch.tile` for [`backward_prepared_tile_on`] on `path` (which
-/// the CPU must have) as the forward does: whole rows with AVX-512, half rows otherwise.
-fn prepare_tile_on(
-    path: SimdPath,
-    bins: &TileBins,
-    forms: &[RowForm],
-    t: usize,
-    scratch: &mut BackwardScratch,
-) {
-    match path {
+/// Sets tile `t` of `frame` up in `scratch.forward` for [`backward_tile`] as the forward
+/// does on the frame's path: whole rows with AVX-512, half rows otherwise.
+fn prepare_backward_tile(frame: &BinnedFrame, t: usize, scratch: &mut BackwardScratch) {
+    let (bins, forms) = (frame.bins, frame.forms);
+    match frame.path {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller checked that the CPU has the path's features.
+        // SAFETY: a frame's path is one the CPU has (`BinnedFrame`).
         SimdPath::Avx512 => unsafe {
-            crate::raster::avx512::prepare_tile::<false>(
+            crate::raster::prepare_whole_rows::<false>(
                 bins,
                 forms,
                 t,
-                &mut scratch.tile.whole_rows,
+                &mut scratch.forward.whole_rows,
             );
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        SimdPath::Avx2 => unsafe { prepare_tile_avx2(bins, forms, t, &mut scratch.tile) },
-        _ => prepare_tile(bins, forms, t, &mut scratch.tile),
+        SimdPath::Avx2 => unsafe { prepare_tile_avx2(frame, t, &mut scratch.forward) },
+        _ => prepare_tile(bins, forms, t, &mut scratch.forward.tile),
     }
 }
 
 /// [`prepare_tile`] compiled for AVX2 and FMA (as the forward's AVX2 tiles are).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn prepare_tile_avx2(bins: &TileBins, forms: &[RowForm], t: usize, scratch: &mut TileScratch) {
-    prepare_tile(bins, forms, t, scratch);
+fn prepare_tile_avx2(frame: &BinnedFrame, t: usize, scratch: &mut RasterScratch) {
+    prepare_tile(frame.bins, frame.forms, t, &mut scratch.tile);
 }
 
 /// Accumulates tile `t`'s entries into `run` (one partial per entry), the tile set up in
-/// `scratch.tile` by [`prepare_tile`] (by the forward of the same frame, say): the
+/// `scratch.forward.tile` by [`prepare_tile`] (by the forward of the same frame, say): the
 /// forward's row entries, half row by half row; each kernel's moments are summed column by
 /// column over the tile's rows (f32, at most 16 terms a column), then over the columns in
 /// f64. `v_image` holds `∂L/∂C` of the image rows from `v_row` on.
@@ -376,7 +316,7 @@ fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
     run: &mut [[f32; 8]],
     scratch: &mut BackwardScratch,
 ) {
-    let tile = &scratch.tile;
+    let tile = &scratch.forward.tile;
     scratch.moments.clear();
     scratch.moments.resize(tile.kernels.len(), [[0.0; ROW]; 8]);
     let rect = bins.tile_rect(t);
@@ -419,7 +359,7 @@ fn backward_prepared_tile<const FAST: bool, const AVX2: bool>(
             );
         }
     }
-    store_partials(&scratch.moments, &scratch.tile.entry_of, run);
+    store_partials(&scratch.moments, &tile.entry_of, run);
 }
 
 /// Each tile kernel's moments, summed over the columns in f64, into its entry's partial
@@ -486,8 +426,8 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::Moments;
-    use crate::raster::avx2::{gaussian, lane_numbers, lanes};
-    use crate::raster::{LANES, RowEntry, TileKernel};
+    use crate::simd::avx2::{gaussian, lane_numbers, lanes};
+    use crate::simd::{LANES, RowEntry, TileKernel};
 
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn half_row<const FAST: bool>(
@@ -557,13 +497,14 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     use super::{BackwardScratch, ROW, read_planes};
-    use crate::raster::avx512::{gaussian, row_lanes, row_t};
+    use crate::simd::avx512::{gaussian, row_lanes, row_t};
     use crate::tiles::TileBins;
 
     /// [`super::backward_prepared_tile`] with AVX-512, per kernel and row the operations of
     /// [`super::half_row`] on 16 lanes, on a tile whose blocks, masks and kernels are set
-    /// up in `scratch.tile.whole_rows` (by `prepare_tile::<false>`, or by the forward's
-    /// `prepare_tile::<true>`, which sets up the same ones and the row lists besides).
+    /// up in `scratch.forward.whole_rows` (by `prepare_whole_rows::<false>`, or by the
+    /// forward's `prepare_whole_rows::<true>`, which sets up the same ones and the row lists
+    /// besides).
     /// `v_image` holds `∂L/∂C` of the image rows from `v_row` on.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]
     pub(super) fn backward_prepared_tile<const FAST: bool, const KEPT: bool>(
@@ -574,7 +515,7 @@ mod avx512 {
         run: &mut [[f32; 8]],
         scratch: &mut BackwardScratch,
     ) {
-        let (tile, kept) = (&scratch.tile.whole_rows, &scratch.tile.kept);
+        let (tile, kept) = (&scratch.forward.whole_rows, &scratch.forward.kept);
         let [tx0, tx1, ty0, ty1] = bins.tile_rect(t);
         let lanes = (tx1 - tx0) as usize;
         let width = bins.width as usize;
@@ -779,7 +720,8 @@ mod tests {
 
     #[test]
     fn the_render_with_its_backward_is_the_render_then_the_backward_bit_for_bit() {
-        use crate::raster::{TileScratchPool, rasterize_on};
+        use crate::raster::{TileScratchPool, rasterize};
+        use crate::simd::RowForm;
         // Partial tiles on the right and at the bottom; an empty frame.
         let scene = crate::scenes::synthetic::bench_scene(2000, 5);
         for ((w, h), exp) in [
@@ -812,47 +754,31 @@ mod tests {
             for &path in SimdPath::available() {
                 // One after the other.
                 let (mut forms, pool) = (Vec::new(), TileScratchPool::default());
+                let frame = BinnedFrame::new(proj, bins, &mut forms, background, exp).on(path);
                 let mut image = crate::model::Image::filled(0, 0, [0.0; 3]);
-                let pairs = rasterize_on(
-                    path,
-                    proj,
-                    bins,
-                    background,
-                    exp,
-                    (&mut forms, &pool),
-                    &mut image,
-                );
+                let pairs = rasterize(&frame, &pool, &mut image);
                 let mut v_image = vec![0.0; image.pixels.len()];
                 gradient(0, &image.pixels, &mut v_image);
-                let (mut partials, mut sums) = (Vec::new(), Vec::new());
+                let mut partials = RasterPartials::default();
                 let mut out = ScreenGradients::default();
-                rasterize_backward_on(
-                    path,
-                    proj,
-                    bins,
-                    &forms,
-                    &v_image,
-                    exp,
-                    &mut partials,
-                    &mut sums,
-                    &mut out,
-                );
+                rasterize_backward(&frame, &v_image, &mut partials, &mut out);
                 // In one pass, with buffers holding another frame's values.
+                let mut fused_forms = vec![RowForm::default(); 3];
+                let fused_frame =
+                    BinnedFrame::new(proj, bins, &mut fused_forms, background, exp).on(path);
                 let mut fused_image = crate::model::Image::filled(3, 2, [9.0; 3]);
                 let mut fused_v = vec![5.0; 11];
-                let (mut fused_partials, mut fused_sums) = (vec![[3.0; 8]; 4], vec![[1.0; 8]; 2]);
+                let mut fused_partials = RasterPartials {
+                    entries: vec![[3.0; 8]; 4],
+                    kernels: vec![[1.0; 8]; 2],
+                };
                 let mut fused_out = ScreenGradients::default();
-                let fused_pairs = rasterize_with_backward_on(
-                    path,
-                    proj,
-                    bins,
-                    background,
-                    exp,
-                    &mut Vec::new(),
+                let fused_pairs = rasterize_with_backward(
+                    &fused_frame,
                     &mut fused_image,
                     &gradient,
                     &mut fused_v,
-                    (&mut fused_partials, &mut fused_sums),
+                    &mut fused_partials,
                     &mut fused_out,
                 );
                 let bits = |values: &[f32]| values.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -861,13 +787,13 @@ mod tests {
                 assert_eq!(bits(&fused_image.pixels), bits(&image.pixels), "{path}");
                 assert_eq!(bits(&fused_v), bits(&v_image), "{path}");
                 assert_eq!(
-                    bits(fused_partials.as_flattened()),
-                    bits(partials.as_flattened()),
+                    bits(fused_partials.entries.as_flattened()),
+                    bits(partials.entries.as_flattened()),
                     "{path}"
                 );
                 assert_eq!(format!("{fused_out:?}"), format!("{out:?}"), "{path}");
                 if w > 0 {
-                    assert!(pairs > 0 && partials.iter().flatten().any(|&p| p != 0.0));
+                    assert!(pairs > 0 && partials.entries.iter().flatten().any(|&p| p != 0.0));
                 }
             }
         }
@@ -894,22 +820,14 @@ mod tests {
                 .map(|_| rng.random_range(-1.0..1.0))
                 .collect();
             let mut forms = Vec::new();
-            crate::raster::row_forms(&context.projected, &context.bins, &mut forms);
+            let (proj, bins) = (&context.projected, &context.bins);
+            let frame = BinnedFrame::new(proj, bins, &mut forms, [0.0; 3], exp);
             let mut results = Vec::new();
             for &path in SimdPath::available() {
-                let (mut partials, mut sums) = (Vec::new(), Vec::new());
+                let mut partials = RasterPartials::default();
                 let mut out = ScreenGradients::default();
-                rasterize_backward_on(
-                    path,
-                    &context.projected,
-                    &context.bins,
-                    &forms,
-                    &v_image,
-                    exp,
-                    &mut partials,
-                    &mut sums,
-                    &mut out,
-                );
+                rasterize_backward(&frame.on(path), &v_image, &mut partials, &mut out);
+                let partials = partials.entries;
                 assert!(partials.iter().flatten().any(|&p| p != 0.0));
                 results.push((path, partials));
             }

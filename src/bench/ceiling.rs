@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use crate::composite::clamped_alpha;
 use crate::model::Result;
-use crate::raster::{ROW, SimdPath, fast_exp_neg_half};
+use crate::simd::{ROW, SimdPath, fast_exp_neg_half};
 
 use super::measure::{BenchRow, thread_pool};
 
@@ -181,7 +181,7 @@ fn ceiling_portable(constants: &[[f32; 6]], passes: usize) -> f32 {
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use crate::raster::avx2::exp_neg_half;
+    use crate::simd::avx2::exp_neg_half;
 
     /// [`super::ceiling_probe`]'s loop: 16 lanes as two registers, f32 accumulators.
     #[target_feature(enable = "avx2,fma")]
@@ -220,7 +220,7 @@ mod avx2 {
 mod avx512 {
     use std::arch::x86_64::*;
 
-    use crate::raster::avx512::exp_neg_half;
+    use crate::simd::avx512::exp_neg_half;
 
     /// [`super::ceiling_probe`]'s loop: 16 lanes in one register, f32 accumulators.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,popcnt")]

@@ -9,8 +9,8 @@
 use crate::model::camera::Camera;
 use crate::model::error::Result;
 use crate::model::scene::Scene;
-use crate::raster::ExpMode;
 use crate::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderContext, RenderOptions};
+use crate::simd::ExpMode;
 
 use super::measure::{
     BenchSettings, errors, reference_colours, sample_pixels, thread_pool, time_frames,

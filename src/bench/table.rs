@@ -1,7 +1,7 @@
 //! The bench's tables as a user reads them: one row per measured configuration (with its
 //! share of the ceiling), one line per ceiling probe, and the sweep as markdown.
 
-use crate::raster::SimdPath;
+use crate::simd::SimdPath;
 
 use super::ceiling::Ceiling;
 use super::measure::BenchRow;

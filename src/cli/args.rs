@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
-use splat4d::raster::ExpMode;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
+use splat4d::simd::ExpMode;
 use splat4d::tasks::render::{CameraSource, ViewRequest};
 
 // What to look at: a scene through a camera at a time. (A `//` comment: subcommands are

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use splat4d::Result;
-use splat4d::raster::ExpMode;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
+use splat4d::simd::ExpMode;
 use splat4d::tasks::bench::{BenchRequest, bench};
 
 use super::args::parse_size;

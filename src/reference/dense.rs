@@ -8,7 +8,7 @@
 //!
 //! Slice and projection are the renderer's own (f64, per kernel; they are not what costs).
 //! The per-pair work is f32 throughout, like a GPU tensor program: q in the plain quadratic
-//! form, the inlined polynomial exp ([`crate::raster::fast_exp_neg_half`]) so the loop over
+//! form, the inlined polynomial exp ([`crate::simd::fast_exp_neg_half`]) so the loop over
 //! a row of pixels vectorises, and f32 sums. Rows run in parallel; each row adds the kernels
 //! in scene order, so the image does not depend on the thread count. It is a baseline, not a
 //! reference: its error against the f64 reference is measured beside its time.
@@ -21,7 +21,7 @@ use crate::model::scene::Scene;
 use crate::project::{ProjectedKernels, project};
 use crate::render::RenderOptions;
 use crate::slice::{SlicedKernels, slice};
-use crate::{model::Image, raster::fast_exp_neg_half};
+use crate::{model::Image, simd::fast_exp_neg_half};
 
 /// Renders `scene` at `tau` through `camera` by evaluating every projected kernel at every
 /// pixel. Returns the image and the number of (pixel, kernel) pairs evaluated.

@@ -248,20 +248,22 @@ fn every_thread_count_and_simd_path_composites_the_same_bits() {
     let mut context = RenderContext::new();
     context.render(&scene, &camera, 0.5, &options).unwrap();
     let mut path_stops = Vec::new();
-    for &path in splat4d::raster::SimdPath::available() {
+    let mut forms = Vec::new();
+    let frame = splat4d::simd::BinnedFrame::new(
+        &context.projected,
+        &context.bins,
+        &mut forms,
+        scene.background.map(|b| b as f32),
+        options.exp,
+    );
+    for &path in splat4d::simd::SimdPath::available() {
         // With the stops a backward reads, and without: the same image.
         for keep_stops in [true, false] {
-            let mut forms = Vec::new();
             let mut image = Image::default();
             // Left as it was when no stops are asked for.
             let mut stops = vec![splat4d::composite::PixelStop::default(); 3];
-            splat4d::composite::composite_on(
-                path,
-                &context.projected,
-                &context.bins,
-                scene.background.map(|b| b as f32),
-                options.exp,
-                &mut forms,
+            splat4d::composite::composite(
+                &frame.on(path),
                 &mut image,
                 keep_stops.then_some(&mut stops),
             );

@@ -13,9 +13,9 @@ use crate::common::{
     PARAM_NAMES, PARAMS, finite_difference_gradients, grad_of, hard_random_scene, jittered_target,
     reference_case, reference_case_dir, test_camera,
 };
-use splat4d::raster::ExpMode;
 use splat4d::reference::reference_loss_and_gradients;
 use splat4d::render::DEFAULT_CUTOFF;
+use splat4d::simd::ExpMode;
 use splat4d::{Camera, Gradients, Image, Kernel, RenderOptions, Scene};
 
 /// Finite-difference tolerance: `|analytic - fd| ≤ ATOL_FD·scale + RTOL_FD·|fd|`, `scale` the

@@ -7,9 +7,9 @@ use crate::common::{
     worst_ratio,
 };
 use splat4d::io::image_file::load_image;
-use splat4d::raster::ExpMode;
 use splat4d::reference::render_reference;
 use splat4d::render::DEFAULT_CUTOFF;
+use splat4d::simd::ExpMode;
 use splat4d::{RenderContext, RenderOptions};
 
 #[test]

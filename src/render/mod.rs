@@ -7,33 +7,40 @@
 //! alpha:    slice → project → colour::shade → order_by_depth → tiles → composite::composite
 //! ```
 //!
-//! An additive frame no backward reads (`render`, `render_in_bands`, `render_indexed`)
-//! slices and projects each kernel in one pass ([`crate::project::slice_and_project`]): the
-//! same projections without the slices' arrays.
+//! The steps that differ between the blends (what comes between the projection and the
+//! tiles, stage 4, its backward and a training step's two together) are each blend's, behind
+//! one dispatch on the scene's blend (`Blends::of`, the only place a frame branches on it):
+//! the steps in `stage.rs`, each blend's in `additive.rs` and `alpha.rs`, with the buffers
+//! they keep. A frame whose blend reads no slices and that no backward reads (`render`,
+//! `render_in_bands`, `render_indexed` of an additive scene) slices and projects each kernel
+//! in one pass ([`crate::project::slice_and_project`]): the same projections without the
+//! slices' arrays.
 //!
 //! Buffers are kept between frames and only cleared, so rendering a sequence of frames
 //! allocates nothing once the largest frame has been seen. Tiles run on the current rayon
 //! thread pool (install a pool to choose the thread count); the image is identical bit for
 //! bit whatever the number of threads.
 
-use crate::backward::composite::composite_backward;
+mod additive;
+mod alpha;
+mod stage;
+
 use crate::backward::project::project_backward;
-use crate::backward::raster::{PixelGradient, rasterize_backward, rasterize_with_backward};
+use crate::backward::raster::PixelGradient;
 use crate::backward::slice::slice_backward;
 use crate::backward::{BackwardBuffers, Gradients};
-use crate::colour::{order_by_depth, shade};
-use crate::composite::{composite, composite_in_bands_on};
+use crate::model::Image;
 use crate::model::camera::Camera;
 use crate::model::error::{Error, Result, check_non_negative_setting};
 use crate::model::scene::{Blend, Scene};
 use crate::parallel::{Drain, GroupBuffers};
 use crate::project::{ProjectedKernels, project, slice_and_project, slice_candidates_and_project};
+use crate::simd::{BinnedFrame, ExpMode, RowForm};
 use crate::slice::{SlicedKernels, TemporalIndex, slice, slice_candidates};
 use crate::tiles::{TileBins, bin};
-use crate::{
-    model::Image,
-    raster::{ExpMode, SimdPath, rasterize, rasterize_in_bands_on},
-};
+use additive::Additive;
+use alpha::Alpha;
+use stage::BlendStages;
 
 /// Default dilation `s` of SPEC §4, px².
 pub const DEFAULT_DILATION: f64 = 0.3;
@@ -121,14 +128,11 @@ pub struct RenderContext {
     pub bins: TileBins,
     /// Buffers of the backward pass.
     pub backward: BackwardBuffers,
-    row_forms: Vec<crate::raster::RowForm>,
-    /// The additive raster's per-tile scratch.
-    tile_scratch: crate::raster::TileScratchPool,
-    /// Scratch of the depth order (alpha scenes).
-    depth_keys: Vec<(f64, u32, u32)>,
-    /// Alpha frames: each pixel's final transmittance and stop, for the backward; kept by
-    /// [`Self::render_for_backward`] only (after other frames, an older frame's or none).
-    pub(crate) pixel_stops: Vec<crate::composite::PixelStop>,
+    /// The row forms of the frame last rendered (stage 4 of either blend; its backward reads
+    /// them).
+    row_forms: Vec<RowForm>,
+    /// Each blend's steps and the buffers they keep.
+    blends: Blends,
     /// Whether the last frame was rendered by [`Self::render_for_backward`]: it kept what
     /// [`Self::backward`] reads.
     ready_for_backward: bool,
@@ -203,30 +207,14 @@ impl RenderContext {
     ) -> Result<RenderStats> {
         check_frame(tau, options)?;
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, false);
-        let background = scene.background.map(|b| b as f32);
-        let path = SimdPath::detect();
-        let pairs = match scene.blend {
-            Blend::Additive => rasterize_in_bands_on(
-                path,
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                (&mut self.row_forms, &self.tile_scratch),
-                &mut self.row_groups,
-                drain,
-            ),
-            Blend::Alpha => composite_in_bands_on(
-                path,
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                &mut self.row_forms,
-                &mut self.row_groups,
-                drain,
-            ),
-        }?;
+        let frame = binned_frame(
+            (&self.projected, &self.bins),
+            &mut self.row_forms,
+            scene,
+            options,
+        );
+        let stages = self.blends.of(scene.blend);
+        let pairs = stages.render_in_bands(&frame, &mut self.row_groups, drain)?;
         Ok(self.stats(alive, pairs))
     }
 
@@ -256,12 +244,12 @@ impl RenderContext {
         Ok(self.finish_frame(scene, options, false, alive))
     }
 
-    /// Stages 1–3 of a frame: the slice, the projection (alpha scenes: shaded and in depth
-    /// order) and the tile bins; returns the number of kernels alive at `tau`. A frame that
-    /// keeps what a backward reads, and an alpha frame (whose colours and order read the
-    /// slices), keep the slices in [`Self::sliced`]; an additive frame only looked at
-    /// slices and projects each kernel in one pass ([`slice_and_project`]) and keeps none
-    /// (`sliced` is left empty): the same projections, bit for bit.
+    /// Stages 1–3 of a frame: the slice, the projection (then the blend's per-kernel work:
+    /// the alpha blend's colour and depth order) and the tile bins; returns the number of
+    /// kernels alive at `tau`. A frame that keeps what a backward reads, and a frame whose
+    /// blend reads the slices, keep the slices in [`Self::sliced`]; another frame slices and
+    /// projects each kernel in one pass ([`slice_and_project`]) and keeps none (`sliced` is
+    /// left empty): the same projections, bit for bit.
     fn prepare_frame(
         &mut self,
         scene: &Scene,
@@ -273,7 +261,8 @@ impl RenderContext {
     ) -> usize {
         // Ready again only once a frame for a backward is whole.
         self.ready_for_backward = false;
-        let alive = if keep_slices || scene.blend == Blend::Alpha {
+        let stages = self.blends.of(scene.blend);
+        let alive = if keep_slices || stages.reads_slices() {
             match visit {
                 Visit::All => slice(scene, tau, options.cutoff, &mut self.sliced),
                 Visit::Candidates => {
@@ -282,15 +271,7 @@ impl RenderContext {
                 }
             }
             project(&self.sliced, camera, options.dilation, &mut self.projected);
-            if scene.blend == Blend::Alpha {
-                shade(scene, &self.sliced, camera, &mut self.projected);
-                order_by_depth(
-                    &self.sliced,
-                    camera,
-                    &mut self.projected,
-                    &mut self.depth_keys,
-                );
-            }
+            stages.after_projection(scene, &self.sliced, camera, &mut self.projected);
             self.sliced.len()
         } else {
             self.sliced.reset();
@@ -328,26 +309,14 @@ impl RenderContext {
         alive: usize,
     ) -> RenderStats {
         self.ready_for_backward = for_backward;
-        let background = scene.background.map(|b| b as f32);
-        let pairs = match scene.blend {
-            Blend::Additive => rasterize(
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                (&mut self.row_forms, &self.tile_scratch),
-                &mut self.image,
-            ),
-            Blend::Alpha => composite(
-                &self.projected,
-                &self.bins,
-                background,
-                options.exp,
-                &mut self.row_forms,
-                &mut self.image,
-                for_backward.then_some(&mut self.pixel_stops),
-            ),
-        };
+        let frame = binned_frame(
+            (&self.projected, &self.bins),
+            &mut self.row_forms,
+            scene,
+            options,
+        );
+        let stages = self.blends.of(scene.blend);
+        let pairs = stages.render(&frame, &mut self.image, for_backward);
         self.stats(alive, pairs)
     }
 
@@ -374,42 +343,24 @@ impl RenderContext {
             self.ready_for_backward,
             "RenderContext::backward: the last frame was not rendered by render_for_backward"
         );
-        let buffers = &mut self.backward;
-        let v_background = match scene.blend {
-            Blend::Additive => {
-                rasterize_backward(
-                    &self.projected,
-                    &self.bins,
-                    &self.row_forms,
-                    v_image,
-                    options.exp,
-                    &mut buffers.entry_partials,
-                    &mut buffers.kernel_sums,
-                    &mut buffers.screen,
-                );
-                background_gradient(v_image)
-            }
-            Blend::Alpha => composite_backward(
-                &self.projected,
-                &self.bins,
-                &self.row_forms,
-                &self.pixel_stops,
-                scene.background.map(|b| b as f32),
-                v_image,
-                options.exp,
-                &mut buffers.alpha_partials,
-                &mut buffers.screen,
-            ),
-        };
+        let frame = BinnedFrame::with_forms(
+            &self.projected,
+            &self.bins,
+            &self.row_forms,
+            scene.background.map(|b| b as f32),
+            options.exp,
+        );
+        let stages = self.blends.of(scene.blend);
+        let v_background = stages.backward(&frame, v_image, &mut self.backward.screen);
         self.backward_from_screen(scene, camera, tau, options, v_background, grads);
     }
 
     /// [`Self::render_for_backward`], then [`Self::backward`] of the loss whose `∂L/∂C`
     /// `gradient` gives from the rendered pixels ([`PixelGradient`]), written to `v_image`: a
     /// training step's render and backward. Additive scenes take one pass over the tiles,
-    /// each set up once for both ([`rasterize_with_backward`]); the image, `v_image` and the
-    /// gradients are the same bits as the two calls with `gradient` applied to the whole image
-    /// between them.
+    /// each set up once for both ([`crate::backward::raster::rasterize_with_backward`]); the
+    /// image, `v_image` and the gradients are the same bits as the two calls with `gradient`
+    /// applied to the whole image between them.
     #[allow(clippy::too_many_arguments)]
     pub fn render_and_backward(
         &mut self,
@@ -421,31 +372,22 @@ impl RenderContext {
         v_image: &mut Vec<f32>,
         grads: &mut Gradients,
     ) -> Result<RenderStats> {
-        if scene.blend != Blend::Additive {
-            let stats = self.render_for_backward(scene, camera, tau, options)?;
-            v_image.clear();
-            v_image.resize(self.image.pixels.len(), 0.0);
-            gradient(0, &self.image.pixels, v_image);
-            self.backward(scene, camera, tau, options, v_image, grads);
-            return Ok(stats);
-        }
         check_frame(tau, options)?;
         let alive = self.prepare_frame(scene, Visit::All, camera, tau, options, true);
         self.ready_for_backward = true;
-        let buffers = &mut self.backward;
-        let pairs = rasterize_with_backward(
-            &self.projected,
-            &self.bins,
-            scene.background.map(|b| b as f32),
-            options.exp,
+        let frame = binned_frame(
+            (&self.projected, &self.bins),
             &mut self.row_forms,
-            &mut self.image,
-            gradient,
-            v_image,
-            (&mut buffers.entry_partials, &mut buffers.kernel_sums),
-            &mut buffers.screen,
+            scene,
+            options,
         );
-        let v_background = background_gradient(v_image);
+        let stages = self.blends.of(scene.blend);
+        let (pairs, v_background) = stages.render_and_backward(
+            &frame,
+            &mut self.image,
+            (gradient, v_image),
+            &mut self.backward.screen,
+        );
         self.backward_from_screen(scene, camera, tau, options, v_background, grads);
         Ok(self.stats(alive, pairs))
     }
@@ -476,6 +418,12 @@ impl RenderContext {
         }
     }
 
+    /// Alpha frames: each pixel's stop, as the last frame rendered for a backward kept them.
+    #[cfg(test)]
+    pub(crate) fn alpha_stops(&self) -> &[crate::composite::PixelStop] {
+        &self.blends.alpha.stops
+    }
+
     /// The last rendered image.
     #[must_use]
     pub fn image(&self) -> &Image {
@@ -492,27 +440,33 @@ impl RenderContext {
     }
 }
 
-/// The gradient of the background of an additive frame, which is added to every pixel: the
-/// sum of `∂L/∂C` over the pixels, per channel, in f64 in a fixed order (blocks of pixels in
-/// parallel, eight lanes within a block: [`crate::parallel::sum_in_blocks`]).
-fn background_gradient(v_image: &[f32]) -> [f64; 3] {
-    use crate::parallel::{add_lanes, sum_in_blocks};
-    // Channel c of pixel p goes to lane p mod 8 of its channel (`lane_sum`'s order).
-    sum_in_blocks(v_image.len() / 3, |pixels| {
-        let values = &v_image[3 * pixels.start..3 * pixels.end];
-        let mut s = [0.0_f64; 24];
-        let groups = values.chunks_exact(24);
-        let tail = groups.remainder();
-        for group in groups {
-            for (sum, &v) in s.iter_mut().zip(group) {
-                *sum += f64::from(v);
-            }
+/// The frame stage 4 reads after the bins: `proj` binned in `bins`, its row forms computed
+/// into `forms`, over `scene`'s background, with `options`' exp.
+fn binned_frame<'a>(
+    (proj, bins): (&'a ProjectedKernels, &'a TileBins),
+    forms: &'a mut Vec<RowForm>,
+    scene: &Scene,
+    options: &RenderOptions,
+) -> BinnedFrame<'a> {
+    let background = scene.background.map(|b| b as f32);
+    BinnedFrame::new(proj, bins, forms, background, options.exp)
+}
+
+/// Each blend's steps of a frame and the buffers they keep.
+#[derive(Debug, Default)]
+struct Blends {
+    additive: Additive,
+    alpha: Alpha,
+}
+
+impl Blends {
+    /// The steps of `blend`: the one place a frame branches on its blend.
+    fn of(&mut self, blend: Blend) -> &mut dyn BlendStages {
+        match blend {
+            Blend::Additive => &mut self.additive,
+            Blend::Alpha => &mut self.alpha,
         }
-        for (sum, &v) in s.iter_mut().zip(tail) {
-            *sum += f64::from(v);
-        }
-        std::array::from_fn(|c| add_lanes(std::array::from_fn(|lane| s[3 * lane + c])))
-    })
+    }
 }
 
 /// The checks of SPEC §4–5 on a frame's options and time.
@@ -539,40 +493,6 @@ pub fn render(scene: &Scene, camera: &Camera, tau: f64, options: &RenderOptions)
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_background_gradient_is_the_plain_sum_and_the_same_on_any_threads() {
-        // 300×300 pixels: two blocks, a partial one, and a partial group of lanes.
-        let values: Vec<f32> = (0..3 * 300 * 300)
-            .map(|k| ((k as f32 * 0.618_034).fract() - 0.5) * 1e-3)
-            .collect();
-        let plain: [f64; 3] = std::array::from_fn(|c| {
-            values
-                .iter()
-                .skip(c)
-                .step_by(3)
-                .map(|&v| f64::from(v))
-                .sum()
-        });
-        let on = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| background_gradient(&values))
-        };
-        let one = on(1);
-        for c in 0..3 {
-            assert!(
-                (one[c] - plain[c]).abs() <= 1e-12 * plain[c].abs().max(1e-3),
-                "{c}"
-            );
-        }
-        for threads in [2, 3] {
-            assert_eq!(on(threads).map(f64::to_bits), one.map(f64::to_bits));
-        }
-        assert_eq!(background_gradient(&[]), [0.0; 3]);
-    }
-
     /// An alpha frame and a context that rendered it for a backward, then `between` on it.
     fn backward_after(between: impl FnOnce(&mut RenderContext, &Scene, &Camera)) {
         let camera = crate::scenes::synthetic::bench_camera(40, 24);
@@ -594,7 +514,7 @@ mod tests {
         // A frame only looked at keeps no stops, and the image is the same.
         backward_after(|context, scene, camera| {
             let kept = context.image().clone();
-            let stops = context.pixel_stops.clone();
+            let stops = context.blends.alpha.stops.clone();
             assert_eq!(stops.len(), 40 * 24);
             context
                 .render(scene, camera, 0.5, &RenderOptions::default())
@@ -603,7 +523,7 @@ mod tests {
             context
                 .render_for_backward(scene, camera, 0.5, &RenderOptions::default())
                 .unwrap();
-            assert_eq!(context.pixel_stops, stops);
+            assert_eq!(context.blends.alpha.stops, stops);
         });
     }
 
