@@ -31,21 +31,15 @@ pub struct ViewFlags {
 
 impl ViewFlags {
     /// The view these flags and `render` describe.
-    pub fn request(&self, render: &RenderFlags) -> ViewRequest {
-        let camera = match (&self.camera, &self.camera_from) {
-            (Some(path), _) => CameraSource::File(path.clone()),
-            (None, spec) => CameraSource::Gltf {
-                spec: spec.clone().unwrap_or_default(),
-                size: self.size,
-            },
-        };
-        ViewRequest {
+    pub fn request(&self, render: &RenderFlags) -> splat4d::Result<ViewRequest> {
+        let camera = CameraSource::new(self.camera.clone(), self.camera_from.clone(), self.size)?;
+        Ok(ViewRequest {
             scene: self.scene.clone(),
             camera,
             time: self.time,
             options: render.options(),
             threads: render.threads(),
-        }
+        })
     }
 }
 

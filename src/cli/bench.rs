@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use splat4d::Result;
-use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::simd::ExpMode;
 use splat4d::tasks::bench::{BenchRequest, bench};
 
@@ -18,31 +17,32 @@ pub struct BenchArgs {
     /// Camera file for scene files (default: a look-at camera framing the scene).
     #[arg(long)]
     camera: Option<PathBuf>,
-    /// Frame size `WxH` (ignored with --camera).
-    #[arg(long, value_parser = parse_size, default_value = "512x512")]
-    size: (u32, u32),
+    /// Frame size `WxH` of the built-in scenes and of scene files without --camera
+    /// [default: 512x512].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
     /// Worker threads (default: 1, and one per core).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=splat4d::tasks::MAX_THREADS as i64))]
     threads: Option<u16>,
-    /// Timed frames per configuration (the median is reported).
-    #[arg(long, default_value_t = 10)]
-    frames: usize,
-    /// Pixels sampled for the error against the f64 reference.
-    #[arg(long, default_value_t = 400)]
-    samples: usize,
-    /// Scene time τ.
-    #[arg(long, value_parser = super::args::finite, default_value_t = 0.5, allow_negative_numbers = true)]
-    time: f64,
-    /// Variance added to each screen covariance, px².
-    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_DILATION)]
-    dilation: f64,
-    /// Cut-off ε.
-    #[arg(long, value_parser = super::args::finite, default_value_t = DEFAULT_CUTOFF)]
-    cutoff: f64,
+    /// Timed frames per configuration (the median is reported) [default: 10].
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Pixels sampled for the error against the f64 reference [default: 400].
+    #[arg(long)]
+    samples: Option<usize>,
+    /// Scene time τ [default: 0.5].
+    #[arg(long, value_parser = super::args::finite, allow_negative_numbers = true)]
+    time: Option<f64>,
+    /// Variance added to each screen covariance, px² [default: 0.3].
+    #[arg(long, value_parser = super::args::finite)]
+    dilation: Option<f64>,
+    /// Cut-off ε [default: 0.00392156862745098].
+    #[arg(long, value_parser = super::args::finite)]
+    cutoff: Option<f64>,
     /// How exp(-q/2) is evaluated: `poly` (inlined polynomial, vectorised) or
-    /// `std` (libm).
-    #[arg(long, default_value = "poly")]
-    exp: ExpMode,
+    /// `std` (libm) [default: poly].
+    #[arg(long)]
+    exp: Option<ExpMode>,
     /// Time the seed-style dense baseline (every kernel at every pixel) for every scene. By
     /// default it runs when kernels × pixels ≤ 3·10⁹ (a few seconds a frame).
     #[arg(long, conflicts_with = "no_dense")]
@@ -50,22 +50,22 @@ pub struct BenchArgs {
     /// Never time the dense baseline.
     #[arg(long)]
     no_dense: bool,
-    /// Measure speed against error over the cut-off, dilation and exp evaluation on the
-    /// first scene (with --threads, or one thread per core); writes sweep.md and sweep.png
+    /// Measure speed against error over a grid of cut-offs, dilations and exp evaluations
+    /// on one scene (with --threads, or one thread per core); writes sweep.md and sweep.png
     /// to --out.
     #[arg(long)]
     sweep: bool,
-    /// Only run the ceiling probe (the ideal inner loop every figure is compared with) and
-    /// print its pairs per second.
+    /// Only run the ceiling probes (the ideal inner loop every figure is compared with) and
+    /// print their pairs per second; takes only --threads.
     #[arg(long)]
     ceiling: bool,
-    /// Output folder of --sweep.
-    #[arg(long, default_value = "out/bench")]
-    out: PathBuf,
+    /// Output folder of --sweep [default: out/bench].
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Blend of the built-in scenes: `additive` (SPEC §5) or `alpha` (§8: every kernel at
-    /// opacity 0.5, colour its amplitude). Scene files keep their own.
-    #[arg(long, default_value = "additive")]
-    blend: splat4d::Blend,
+    /// opacity 0.5, colour its amplitude). Scene files keep their own [default: additive].
+    #[arg(long)]
+    blend: Option<splat4d::Blend>,
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
@@ -77,11 +77,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         frames: args.frames,
         samples: args.samples,
         time: args.time,
-        options: RenderOptions {
-            dilation: args.dilation,
-            cutoff: args.cutoff,
-            exp: args.exp,
-        },
+        dilation: args.dilation,
+        cutoff: args.cutoff,
+        exp: args.exp,
         dense: if args.no_dense {
             Some(false)
         } else if args.dense {

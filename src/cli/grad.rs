@@ -23,7 +23,7 @@ pub struct GradArgs {
 
 pub fn run(args: &GradArgs) -> Result<()> {
     let summary = grad(&GradRequest {
-        view: args.view.request(&args.render),
+        view: args.view.request(&args.render)?,
         target: args.target.clone(),
         out: args.out.clone(),
     })?;

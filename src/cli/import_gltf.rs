@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use splat4d::Result;
-use splat4d::io::gltf::Spacing;
 use splat4d::tasks::scene_files::{ImportRequest, import_gltf};
 
 #[derive(Debug, clap::Args)]
@@ -18,9 +17,9 @@ pub struct ImportGltfArgs {
     #[arg(long, default_value = "auto")]
     times: TimesArg,
     /// Largest position error of any surface point, relative to the model's size, with
-    /// `--times auto`.
-    #[arg(long, default_value_t = 1e-3, value_parser = super::args::finite)]
-    tolerance: f64,
+    /// `--times auto` [default: 0.001].
+    #[arg(long, value_parser = super::args::finite)]
+    tolerance: Option<f64>,
     /// Output scene (.json or .ply).
     #[arg(long)]
     out: PathBuf,
@@ -37,12 +36,11 @@ pub fn run(args: &ImportGltfArgs) -> Result<()> {
     super::print(import_gltf(&ImportRequest {
         model: args.model.clone(),
         kernels: args.kernels,
-        spacing: match args.times {
-            TimesArg::Auto => Spacing::Adaptive {
-                tolerance: args.tolerance,
-            },
-            TimesArg::Count(n) => Spacing::Even(n),
+        times: match args.times {
+            TimesArg::Auto => None,
+            TimesArg::Count(n) => Some(n),
         },
+        tolerance: args.tolerance,
         out: args.out.clone(),
         seed: args.seed,
         blend: args.blend,

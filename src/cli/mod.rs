@@ -109,3 +109,71 @@ pub fn run(cli: Cli) -> splat4d::Result<()> {
         Some(Command::ImportGltf(args)) => import_gltf::run(&args),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// A flag left out is `None` to the library, which holds its default; the help states
+    /// that default as `[default: …]`, and it is the library's.
+    #[test]
+    fn defaults_the_help_states_are_the_librarys() {
+        use splat4d::tasks::{bench, scene_files, video};
+        let cases = [
+            (
+                "toy",
+                "seed",
+                splat4d::scenes::toy::DEFAULT_SEED.to_string(),
+            ),
+            (
+                "import-gltf",
+                "tolerance",
+                scene_files::DEFAULT_TOLERANCE.to_string(),
+            ),
+            ("render", "bit-depth", "8".to_owned()),
+            (
+                "video",
+                "size",
+                format!("{}x{}", video::DEFAULT_SIZE.0, video::DEFAULT_SIZE.1),
+            ),
+            ("video", "fov", video::DEFAULT_FOV.to_string()),
+            (
+                "bench",
+                "size",
+                format!("{}x{}", bench::DEFAULT_SIZE.0, bench::DEFAULT_SIZE.1),
+            ),
+            ("bench", "frames", bench::DEFAULT_FRAMES.to_string()),
+            ("bench", "samples", bench::DEFAULT_SAMPLES.to_string()),
+            ("bench", "time", bench::DEFAULT_TIME.to_string()),
+            (
+                "bench",
+                "dilation",
+                splat4d::render::DEFAULT_DILATION.to_string(),
+            ),
+            (
+                "bench",
+                "cutoff",
+                splat4d::render::DEFAULT_CUTOFF.to_string(),
+            ),
+            ("bench", "exp", splat4d::simd::ExpMode::Poly.to_string()),
+            ("bench", "out", bench::DEFAULT_SWEEP_OUT.to_owned()),
+            ("bench", "blend", splat4d::Blend::default().to_string()),
+        ];
+        assert_eq!(
+            splat4d::io::image_file::BitDepth::default(),
+            splat4d::io::image_file::BitDepth::Eight
+        );
+        let command = <super::Cli as clap::CommandFactory>::command();
+        for (name, flag, value) in cases {
+            let mut sub = command.find_subcommand(name).unwrap().clone();
+            sub.build();
+            let arg = sub
+                .get_arguments()
+                .find(|a| a.get_long() == Some(flag))
+                .unwrap();
+            let help = arg.get_help().unwrap().to_string();
+            assert!(
+                help.contains(&format!("[default: {value}]")),
+                "{name} --{flag}: {help}"
+            );
+        }
+    }
+}

@@ -17,32 +17,28 @@ pub struct RenderArgs {
     out: PathBuf,
     #[command(flatten)]
     render: RenderFlags,
-    /// Bits per channel of a PNG output: 8 or 16.
-    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
-    bit_depth: u8,
+    /// Bits per channel of a PNG output: 8 or 16 [default: 8].
+    #[arg(long, value_parser = parse_bit_depth)]
+    bit_depth: Option<BitDepth>,
     /// Draw a debug overlay over the render (PNG only): per-tile load as a red heat map, the
     /// tile grid, and each kernel's ellipse at its cut-off.
     #[arg(long)]
     overlay: bool,
 }
 
-fn parse_bit_depth(text: &str) -> std::result::Result<u8, String> {
+fn parse_bit_depth(text: &str) -> std::result::Result<BitDepth, String> {
     match text {
-        "8" => Ok(8),
-        "16" => Ok(16),
+        "8" => Ok(BitDepth::Eight),
+        "16" => Ok(BitDepth::Sixteen),
         _ => Err(format!("`{text}` is not a bit depth: use 8 or 16")),
     }
 }
 
 pub fn run(args: &RenderArgs) -> Result<()> {
     let summary = render(&RenderRequest {
-        view: args.view.request(&args.render),
+        view: args.view.request(&args.render)?,
         out: args.out.clone(),
-        depth: if args.bit_depth == 16 {
-            BitDepth::Sixteen
-        } else {
-            BitDepth::Eight
-        },
+        depth: args.bit_depth,
         overlay: args.overlay,
     })?;
     super::print(summary);

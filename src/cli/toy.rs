@@ -21,9 +21,9 @@ pub struct ToyArgs {
     /// Which scene.
     #[arg(long, value_enum)]
     kind: ToyKind,
-    /// Seed of the points.
-    #[arg(long, default_value_t = splat4d::scenes::toy::DEFAULT_SEED)]
-    seed: u64,
+    /// Seed of the points (the `points` scene only) [default: 2024].
+    #[arg(long)]
+    seed: Option<u64>,
     /// Output scene JSON.
     #[arg(long)]
     out: PathBuf,

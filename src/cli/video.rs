@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use splat4d::Result;
 use splat4d::io::video::VideoOptions;
-use splat4d::scenes::paths::{Circle, Lens, Up};
+use splat4d::scenes::paths::{Circle, Up};
 use splat4d::tasks::video::{CircleSpec as Spec, VideoRequest, write_videos};
 
 use super::args::{RenderFlags, TimeList, parse_list, parse_size, parse_times};
@@ -42,15 +42,16 @@ pub struct VideoArgs {
     /// --orbit, --spiral and --path: one framing orbit.
     #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
     orbit: Option<CircleSpec>,
-    /// Times of the orbits, comma-separated (default: the start, middle and end of the
-    /// scene's time range, the range of its kernels' time means).
+    /// Times of the orbits, comma-separated (default: the start, middle and end of
+    /// --time-range, else of the scene's time range, the range of its kernels' time means).
     #[arg(long, value_parser = parse_times, allow_hyphen_values = true)]
     times: Option<TimeList>,
     /// One turn while time runs over --time-range and the elevation rises from -e to +e:
     /// `cx,cy,cz,radius,elevation_degrees,frames`, or alone for one framing the scene.
     #[arg(long, num_args = 0..=1, default_missing_value = "auto", value_parser = parse_circle)]
     spiral: Option<CircleSpec>,
-    /// Time range of the spiral, `t0,t1` (default: the scene's time range).
+    /// Time range `t0,t1` of the spiral, of the orbits' default --times and of a path file's
+    /// cameras without a time (default: the scene's time range).
     #[arg(long, value_parser = parse_list::<2>, allow_hyphen_values = true)]
     time_range: Option<[f64; 2]>,
     /// The axis orbits and spirals turn about, and the cameras' up: `x`, `y`, `z`, `-x`,
@@ -66,12 +67,12 @@ pub struct VideoArgs {
     /// Output folder.
     #[arg(long)]
     out: PathBuf,
-    /// Frame size of orbits and spirals, `WxH`.
-    #[arg(long, value_parser = parse_size, default_value = "256x256")]
-    size: (u32, u32),
-    /// Vertical field of view of orbits and spirals, degrees.
-    #[arg(long, value_parser = super::args::finite, default_value_t = 40.0)]
-    fov: f64,
+    /// Frame size of orbits and spirals, `WxH` [default: 256x256].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Vertical field of view of orbits and spirals, degrees [default: 40].
+    #[arg(long, value_parser = super::args::finite)]
+    fov: Option<f64>,
     /// Frames per second of the GIF and MP4 (default 25; a nerfstudio path file's own `fps`
     /// for its video).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100))]
@@ -117,11 +118,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         up: args.up,
         path: args.path.clone(),
         out: args.out.clone(),
-        lens: Lens {
-            width: args.size.0,
-            height: args.size.1,
-            fov_y_degrees: args.fov,
-        },
+        size: args.size,
+        fov: args.fov,
         video: VideoOptions {
             fps: args.fps.unwrap_or(25),
             gif: !args.no_gif,

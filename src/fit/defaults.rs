@@ -106,7 +106,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     render: RenderOptions {
         dilation: crate::render::DEFAULT_DILATION,
         cutoff: crate::render::DEFAULT_CUTOFF,
-        exp: crate::raster::ExpMode::Poly,
+        exp: crate::simd::ExpMode::Poly,
     },
     start_kernels: 2000,
     max_start_points: 3000,

@@ -54,8 +54,6 @@ use crate::model::Image;
 use crate::parallel::{Drain, GroupBuffers};
 use crate::simd::{BinnedFrame, ROW, SimdPath, TileScratch, size_image, stream_tile_rows};
 
-/// The exp modes of the per-pixel loops (defined with the exp in [`crate::simd`]).
-pub use crate::simd::ExpMode;
 pub(crate) use whole_rows::{KeptGaussians, TileBlocks, prepare_whole_rows};
 
 /// Scratch of one worker of the additive raster: the tile set up by half rows, or by whole

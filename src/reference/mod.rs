@@ -9,20 +9,20 @@
 //! | [`crate::tiles`] + [`crate::raster`] (SPEC §5) | [`raster::render_reference`], [`raster::reference_at_pixels`] |
 //! | [`crate::colour`] (SPEC §8) | [`colour::reference_alpha_kernels`] |
 //! | [`crate::composite`] (SPEC §8) | [`composite::render_reference_alpha`], [`composite::composite_traced`] |
-//! | [`crate::backward`] (SPEC §6) | [`gradients::reference_loss_and_gradients`] |
+//! | [`crate::backward`] (SPEC §6), stage by stage | [`backward::reference_loss_and_gradients`]: [`backward::raster`], [`backward::project`], [`backward::slice`](mod@backward::slice) |
 //!
 //! [`dense`] is the seed-style baseline the benches time against the tiles (every kernel at
 //! every pixel, but the fast f32 arithmetic): a speed reference, not an accuracy one.
 
+pub mod backward;
 pub mod colour;
 pub mod composite;
 pub mod dense;
-pub mod gradients;
 pub mod project;
 pub mod raster;
 pub mod slice;
 
-pub use gradients::{mse, reference_loss_and_gradients};
+pub use backward::{mse, reference_loss_and_gradients};
 pub use project::{ReferenceKernel, reference_project};
 pub use raster::{
     BORDERLINE_BAND, ERROR_BOUND, ErrorBound, PairMask, ReferenceImage, is_borderline,

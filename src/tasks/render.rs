@@ -35,6 +35,26 @@ pub enum CameraSource {
 }
 
 impl CameraSource {
+    /// A camera file, else a glTF model's camera `gltf` (`MODEL.gltf[#index]`) at `size`.
+    /// `size` with a camera file is refused: the file gives the camera's own size.
+    pub fn new(
+        file: Option<PathBuf>,
+        gltf: Option<String>,
+        size: Option<(u32, u32)>,
+    ) -> Result<Self> {
+        match file {
+            Some(_) if size.is_some() => Err(Error::setting(
+                &["size"],
+                "`size` sizes a glTF model's camera (`camera_from`), and a camera file gives its own size: leave `size` out",
+            )),
+            Some(path) => Ok(CameraSource::File(path)),
+            None => Ok(CameraSource::Gltf {
+                spec: gltf.unwrap_or_default(),
+                size,
+            }),
+        }
+    }
+
     /// Reads the camera.
     pub fn load(&self) -> Result<Camera> {
         match self {
@@ -96,8 +116,9 @@ pub struct RenderRequest {
     pub view: ViewRequest,
     /// Output image: `.png` or `.exr`.
     pub out: PathBuf,
-    /// Bits per channel of a PNG.
-    pub depth: BitDepth,
+    /// Bits per channel of a PNG (`None`: 8). Refused with an EXR output or the overlay,
+    /// where it cannot act.
+    pub depth: Option<BitDepth>,
     /// Draw the debug overlay ([`crate::overlay`]) instead of the plain image (PNG only).
     pub overlay: bool,
 }
@@ -159,6 +180,24 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
             ),
         ));
     }
+    if request.depth.is_some() {
+        let why = if kind != ImageKind::Png {
+            Some("an EXR holds float32")
+        } else if request.overlay {
+            Some("`overlay` draws an 8-bit PNG")
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            return Err(Error::setting(
+                &["bit_depth"],
+                format!(
+                    "{}: `bit_depth` sets a PNG's bits per channel, and {why}: leave `bit_depth` out",
+                    request.out.display()
+                ),
+            ));
+        }
+    }
     let view = &request.view;
     check_output(
         &request.out,
@@ -183,7 +222,8 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
             }
             // The frame's rows go to the file as they are made: no image in memory.
             let size = (camera.width, camera.height);
-            save_rows(&request.out, size, request.depth, |rows| {
+            let depth = request.depth.unwrap_or_default();
+            save_rows(&request.out, size, depth, |rows| {
                 context.render_in_bands(&scene, &camera, view.time, &view.options, rows)
             })
         };

@@ -38,12 +38,27 @@ impl fmt::Display for SceneSummary {
     }
 }
 
-/// Writes the seed paper's toy scene (`seed` draws the points).
-pub fn write_toy(kind: ToyKind, seed: u64, out: &Path) -> Result<SceneSummary> {
-    let scene = match kind {
-        ToyKind::Points => points_scene(seed),
-        ToyKind::Blob => blob_scene(),
-        ToyKind::ThreeBlobs => three_blobs_scene(),
+/// Writes the seed paper's toy scene (`seed` draws the points; `None`:
+/// [`crate::scenes::toy::DEFAULT_SEED`]). A seed for a scene without randomness (the blob,
+/// the three blobs) is refused.
+pub fn write_toy(kind: ToyKind, seed: Option<u64>, out: &Path) -> Result<SceneSummary> {
+    let scene = match (kind, seed) {
+        (ToyKind::Points, _) => points_scene(seed.unwrap_or(crate::scenes::toy::DEFAULT_SEED)),
+        (ToyKind::Blob | ToyKind::ThreeBlobs, Some(_)) => {
+            return Err(Error::setting(
+                &["seed"],
+                format!(
+                    "`seed` draws the points scene's noise, and the {} scene has none: leave `seed` out",
+                    if kind == ToyKind::Blob {
+                        "blob"
+                    } else {
+                        "three-blobs"
+                    }
+                ),
+            ));
+        }
+        (ToyKind::Blob, None) => blob_scene(),
+        (ToyKind::ThreeBlobs, None) => three_blobs_scene(),
     };
     save_scene(&scene, out)?;
     Ok(SceneSummary {
@@ -60,8 +75,12 @@ pub struct ImportRequest {
     pub model: PathBuf,
     /// Surface points to sample.
     pub kernels: usize,
-    /// How the animation's time is sampled.
-    pub spacing: Spacing,
+    /// Time samples: `None` for `auto` (key times and adaptive ones until every point follows
+    /// its path within `tolerance`), or at most this many evenly ([`Spacing`]).
+    pub times: Option<usize>,
+    /// The largest path error of `auto` times, relative to the model's size (`None`:
+    /// [`DEFAULT_TOLERANCE`]); refused with a count of times, which it cannot refine.
+    pub tolerance: Option<f64>,
     /// Output scene (`.json` or `.ply`).
     pub out: PathBuf,
     /// Seed of the surface samples.
@@ -71,19 +90,36 @@ pub struct ImportRequest {
     pub blend: Blend,
 }
 
+/// The largest path error of `import-gltf`'s `auto` times, relative to the model's size.
+pub const DEFAULT_TOLERANCE: f64 = 1e-3;
+
+impl ImportRequest {
+    /// How the animation's time is sampled, or an error naming `tolerance` given with a count.
+    fn spacing(&self) -> Result<Spacing> {
+        match (self.times, self.tolerance) {
+            (Some(n), Some(_)) => Err(Error::setting(
+                &["tolerance"],
+                format!(
+                    "`tolerance` bounds the path error of `times` auto, and `times` is {n}, evenly spaced: leave `tolerance` out"
+                ),
+            )),
+            (Some(n), None) => Ok(Spacing::Even(n)),
+            (None, tolerance) => Ok(Spacing::Adaptive {
+                tolerance: tolerance.unwrap_or(DEFAULT_TOLERANCE),
+            }),
+        }
+    }
+}
+
 /// Samples a glTF model and its node animation into 4D kernels.
 pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
+    let spacing = request.spacing()?;
     // The model and the buffer files it names are inputs the output may not replace.
     let mut inputs = vec![request.model.clone()];
     inputs.extend(buffer_files(&request.model));
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     check_output(&request.out, &["json", "ply"], &inputs)?;
-    let imported = import_scene(
-        &request.model,
-        request.kernels,
-        request.spacing,
-        request.seed,
-    )?;
+    let imported = import_scene(&request.model, request.kernels, spacing, request.seed)?;
     let imported = match request.blend {
         Blend::Additive => imported,
         Blend::Alpha => imported.into_alpha(&request.model.display().to_string())?,
@@ -103,7 +139,7 @@ pub fn import_gltf(request: &ImportRequest) -> Result<SceneSummary> {
         ));
     }
     let mut warnings = Vec::new();
-    if let Spacing::Adaptive { tolerance } = request.spacing
+    if let Spacing::Adaptive { tolerance } = spacing
         && imported.max_error > tolerance
     {
         warnings.push(format!(
@@ -197,6 +233,7 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     if let ExportTimes::One(tau) = request.times {
         check_output(&request.out, &["ply"], &[&request.scene])?;
         let scene = load_scene(&request.scene)?;
+        check_sh_rest(request, &scene)?;
         let n = write_slice_ply(&scene, tau, request.cutoff, request.sh_rest, &request.out)?;
         return Ok(SceneSummary {
             out: request.out.clone(),
@@ -219,6 +256,7 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     outputs.check()?;
     crate::io::output::check_replaceable(&request.out, "export-ply")?;
     let scene = load_scene(&request.scene)?;
+    check_sh_rest(request, &scene)?;
     let times = match &request.times {
         ExportTimes::List(times) => times.clone(),
         ExportTimes::Frames(n) => {
@@ -248,6 +286,23 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
         ),
         warnings: viewer_warnings(&scene),
     })
+}
+
+/// SH triplets of degree 3, the most a 3DGS PLY holds and what `sh_rest` pads to.
+const DEGREE_3_TRIPLETS: usize = 15;
+
+/// `sh_rest` pads `f_rest_*` to degree 3: refused for a scene whose SH is degree 3 already.
+fn check_sh_rest(request: &ExportRequest, scene: &Scene) -> Result<()> {
+    if request.sh_rest && scene.sh_count >= DEGREE_3_TRIPLETS {
+        return Err(Error::setting(
+            &["sh_rest"],
+            format!(
+                "{}: `sh_rest` pads the `f_rest_*` properties to degree 3, and this scene's SH is degree 3 already: leave `sh_rest` out",
+                request.scene.display()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// What an alpha-compositing splat viewer cannot show of `scene`: negative amplitudes (a

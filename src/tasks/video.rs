@@ -48,8 +48,10 @@ pub struct VideoRequest {
     pub path: Option<PathBuf>,
     /// Output folder.
     pub out: PathBuf,
-    /// Frame size and field of view of orbits and spirals.
-    pub lens: Lens,
+    /// Frame size of orbits and spirals (`None`: [`DEFAULT_SIZE`]).
+    pub size: Option<(u32, u32)>,
+    /// Vertical field of view of orbits and spirals, degrees (`None`: [`DEFAULT_FOV`]).
+    pub fov: Option<f64>,
     /// Frame rate and which files to write.
     pub video: VideoOptions,
     /// Whether `video.fps` was asked for; otherwise a path file's own `fps` is used for its
@@ -59,6 +61,55 @@ pub struct VideoRequest {
     pub options: RenderOptions,
     /// Worker threads (`None`: one per core).
     pub threads: Option<usize>,
+}
+
+/// Frame size of orbits and spirals unless one is given.
+pub const DEFAULT_SIZE: (u32, u32) = (256, 256);
+
+/// Vertical field of view of orbits and spirals unless one is given, degrees.
+pub const DEFAULT_FOV: f64 = 40.0;
+
+impl VideoRequest {
+    /// Frame size and field of view of orbits and spirals.
+    #[must_use]
+    pub fn lens(&self) -> Lens {
+        let (width, height) = self.size.unwrap_or(DEFAULT_SIZE);
+        Lens {
+            width,
+            height,
+            fov_y_degrees: self.fov.unwrap_or(DEFAULT_FOV),
+        }
+    }
+
+    /// An error naming the first setting given that no video of this request uses: the
+    /// orbits' `times` without an orbit; the circles' `up`, `size` and `fov` with neither an
+    /// orbit nor a spiral (a path's cameras have their own). (`time_range` is checked once
+    /// the path file is read: its cameras without a time sweep it.)
+    fn check_used(&self, orbit: bool) -> Result<()> {
+        if !orbit && self.times.is_some() {
+            return Err(Error::setting(
+                &["times"],
+                "`times` are the orbits' times, and no orbit is asked (only `spiral` or `path`): add `orbit`, or leave `times` out",
+            ));
+        }
+        let circle_settings = [
+            ("up", self.up.is_some()),
+            ("size", self.size.is_some()),
+            ("fov", self.fov.is_some()),
+        ];
+        if !orbit
+            && self.spiral.is_none()
+            && let Some(&(field, _)) = circle_settings.iter().find(|(_, given)| *given)
+        {
+            return Err(Error::setting(
+                &[field],
+                format!(
+                    "`{field}` shapes the orbits and spirals, and only a `path` is asked, whose cameras are its own: add `orbit` or `spiral`, or leave `{field}` out"
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// What [`write_videos`] wrote.
@@ -102,7 +153,7 @@ type NamedPath = (String, Vec<PathFrame>, Option<u32>);
 
 /// The named camera paths of `request`.
 fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
-    let lens = &request.lens;
+    let lens = &request.lens();
     let up = request.up.or(scene.up).unwrap_or_default();
     let circle = |spec: &CircleSpec, times: &[f64]| match spec {
         CircleSpec::Given(circle) => Circle { up, ..*circle },
@@ -119,6 +170,11 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
     let nothing_asked =
         request.orbit.is_none() && request.spiral.is_none() && request.path.is_none();
     let orbit_spec = request.orbit.or(nothing_asked.then_some(CircleSpec::Auto));
+    request.check_used(orbit_spec.is_some())?;
+    // The time range spans the spiral, the orbits' default times and a path's cameras
+    // without a time.
+    let mut sweeps_time_range =
+        request.spiral.is_some() || (orbit_spec.is_some() && request.times.is_none());
     // One orbit per time: their frames together are bounded too, before any is placed.
     let orbit_frames = match orbit_spec {
         Some(CircleSpec::Given(circle)) => circle.frames,
@@ -161,6 +217,7 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
         // Cameras without a time (a nerfstudio path of a static scene) sweep the scene's time
         // range in order, as the spiral does.
         let file = load_any_path(path)?;
+        sweeps_time_range |= file.cameras.iter().any(|c| c.time.is_none());
         if request.video.gif {
             one_screen_size(&file.cameras, path)?;
         }
@@ -180,6 +237,12 @@ fn paths(request: &VideoRequest, scene: &Scene) -> Result<Vec<NamedPath>> {
             .filter(|_| !request.fps_given)
             .map(|f| (f.round() as u32).clamp(1, 100));
         videos.push((name, frames, fps));
+    }
+    if request.time_range.is_some() && !sweeps_time_range {
+        return Err(Error::setting(
+            &["time_range"],
+            "`time_range` spans the spiral, the orbits' default `times` and a path's cameras without a time, and this run has none of them: leave `time_range` out",
+        ));
     }
     // Names that can never leave the folder or clash: orbits at times that round to one label,
     // a path file named like the spiral.
@@ -266,7 +329,7 @@ fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<Vec<Stale>> {
 /// Renders and writes every video of `request`.
 pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Result<VideoSummary> {
     request.options.validate()?;
-    let fov = request.lens.fov_y_degrees;
+    let fov = request.lens().fov_y_degrees;
     if !(fov > 0.0 && fov < 180.0) {
         return Err(Error::setting(
             &["fov"],
@@ -281,7 +344,10 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         .flat_map(|(_, frames, _)| frames)
         .map(|f| (f.camera.width, f.camera.height))
         .max_by_key(|&(w, h)| u64::from(w) * u64::from(h))
-        .unwrap_or((request.lens.width, request.lens.height));
+        .unwrap_or_else(|| {
+            let lens = request.lens();
+            (lens.width, lens.height)
+        });
     let per_pixel = crate::io::memory::VIDEO_BYTES_PER_PIXEL
         + if request.video.gif {
             crate::io::memory::GIF_BYTES_PER_PIXEL

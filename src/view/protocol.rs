@@ -337,30 +337,43 @@ mod tests {
     use super::*;
 
     #[test]
-    fn malformed_messages_are_errors_naming_the_field() {
-        for text in ["", "{", "[]", r#"{"type":"frame"}"#, r#"{"type":"x"}"#] {
+    fn malformed_messages_are_errors() {
+        // `\u{7b}`: an opening brace alone, an object never closed (escaped, so that the
+        // file's braces stay balanced for tools that count them line by line).
+        for text in ["", "\u{7b}", "[]", r#"{"type":"frame"}"#, r#"{"type":"x"}"#] {
             assert!(parse_request(text).is_err(), "{text}");
         }
-        let frame = |c2w: &str, w: u32, fov: f64| {
-            format!(
-                r#"{{"type":"frame","id":1,"c2w":{c2w},"fov":{fov},"width":{w},"height":9,"time":0}}"#
-            )
-        };
-        let identity = "[1,0,0,0, 0,1,0,0, 0,0,1,3, 0,0,0,1]";
-        let Request::Frame(ok) = parse_request(&frame(identity, 99_999, 40.0)).unwrap() else {
+    }
+
+    /// A frame request of a camera `c2w` (row-major 4×4), `w` pixels wide, 9 high, at
+    /// vertical field of view `fov`.
+    fn frame(c2w: &str, w: u32, fov: f64) -> FrameRequest {
+        let text = format!(
+            r#"{{"type":"frame","id":1,"c2w":{c2w},"fov":{fov},"width":{w},"height":9,"time":0}}"#
+        );
+        let Request::Frame(frame) = parse_request(&text).unwrap() else {
             panic!("not a frame")
         };
-        let (camera, _) = ok.camera().unwrap();
+        frame
+    }
+
+    /// A camera 3 units along +z, looking down -z.
+    const IDENTITY: &str = "[1,0,0,0, 0,1,0,0, 0,0,1,3, 0,0,0,1]";
+
+    #[test]
+    fn a_frame_wider_than_the_largest_side_is_clamped() {
+        let (camera, _) = frame(IDENTITY, 99_999, 40.0).camera().unwrap();
         assert_eq!(camera.width, MAX_SIDE, "clamped");
+    }
+
+    #[test]
+    fn a_frame_with_a_bad_camera_is_an_error_naming_the_field() {
         for (c2w, w, fov, field) in [
             ("[1,2,3]", 8, 40.0, "c2w"),
-            (identity, 0, 40.0, "width"),
-            (identity, 8, 180.0, "fov"),
+            (IDENTITY, 0, 40.0, "width"),
+            (IDENTITY, 8, 180.0, "fov"),
         ] {
-            let Request::Frame(bad) = parse_request(&frame(c2w, w, fov)).unwrap() else {
-                panic!("not a frame")
-            };
-            let message = bad.camera().unwrap_err().to_string();
+            let message = frame(c2w, w, fov).camera().unwrap_err().to_string();
             assert!(message.contains(field), "{message}");
         }
     }

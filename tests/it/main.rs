@@ -32,6 +32,8 @@ mod fit;
 mod fit_alpha;
 /// Every `fit` flag acts on the chosen blend's fit or is refused naming its blend.
 mod fit_flags;
+/// Every other command's flags act or are refused naming the flag and why.
+mod flags_elsewhere;
 /// Seeded byte-level fuzzing of every loader: errors, never panics.
 mod fuzz_loaders;
 /// 3DGS PLYs both ways: graphdeco files read, exports drawn by a minimal 3DGS compositor.
