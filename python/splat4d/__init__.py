@@ -215,3 +215,19 @@ def fit(
 
 #: The keyword options of :func:`fit` (the command line's flags of ``splat4d fit``).
 FIT_OPTIONS: Tuple[str, ...] = tuple(_native.FIT_OPTIONS)
+
+
+def save_image(image: Any, path: PathLike, *, bits: int = 8) -> None:
+    """Writes an (H, W, 3) image, linear RGB: ``.exr`` as float32, else a PNG of ``bits`` 8 or
+    16 per channel storing ``round(levels · clamp(C, 0, 1))`` (SPEC §5), as the command line
+    writes renders."""
+    _native.save_image(image, os.fspath(path), bits=bits)
+
+
+def load_image(path: PathLike, *, background: Tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Reads an image file (EXR, PNG, JPEG) as (H, W, 3) float32, ``value / (2^bits − 1)``
+    (linear, no sRGB curve); RGBA pixels are composited over ``background``."""
+    return _native.load_image(os.fspath(path), background=background)
+
+
+__all__ += ["save_image", "load_image", "FIT_OPTIONS", "as_scene", "as_camera"]

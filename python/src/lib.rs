@@ -7,6 +7,7 @@
 //! | `scene.rs`, `camera.rs` | `Scene` and `Camera`: arrays validated once, files read and written |
 //! | `frame.rs` | a frame's render and gradient, and their f64 twins |
 //! | `fit.rs` | datasets and fits, with the command line's options and defaults |
+//! | `image.rs` | image files as arrays |
 //! | `arrays.rs`, `errors.rs` | numpy arrays in and out; errors as exceptions |
 //!
 //! The Python side (`python/splat4d/`) adds dicts as scenes, docstrings, stubs and the
@@ -19,6 +20,7 @@ mod camera;
 mod errors;
 mod fit;
 mod frame;
+mod image;
 mod scene;
 
 #[pymodule]
@@ -31,6 +33,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(frame::render_and_backward, m)?)?;
     m.add_function(wrap_pyfunction!(frame::reference_render, m)?)?;
     m.add_function(wrap_pyfunction!(frame::reference_loss_and_gradients_py, m)?)?;
+    m.add_function(wrap_pyfunction!(image::save_image, m)?)?;
+    m.add_function(wrap_pyfunction!(image::load_image, m)?)?;
     m.add_function(wrap_pyfunction!(fit::load_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(fit::fit, m)?)?;
     m.add("FIT_OPTIONS", fit::OPTIONS.to_vec())?;
