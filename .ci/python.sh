@@ -18,8 +18,11 @@ pip install --quiet --disable-pip-version-check maturin numpy pytest torch
 # pure-Python wheel: its CUDA code is compiled only when used, and this never uses it).
 pip install --quiet --disable-pip-version-check gsplat
 step "building and installing the wheel (pip install ./python)"
-# maturin from the environment (installed above), not a second download in an isolated one.
-pip install --quiet --disable-pip-version-check --no-build-isolation ./python
+# maturin from the environment (installed above), not a second download in an isolated one;
+# the release profile without its link-time optimisation across crates (docs/architecture.md,
+# "Quicker rebuilds"): the same bits, built in a fraction of the time.
+CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 \
+  pip install --quiet --disable-pip-version-check --no-build-isolation ./python
 python -c "import splat4d; print('splat4d', splat4d.__version__, 'from', splat4d.__file__)"
 step "the README's Python example"
 python - <<'PY'
