@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The Python package (python/), as a new user installs it: a fresh virtual environment,
 # numpy, pytest and torch from the registry, the wheel built from this clone by the README's
-# command, then the README's Python example, python/examples/ on a short run, and
-# python/tests with pytest. From the repository root; run by .ci/run after the cargo steps.
+# command, then the Python examples of README.md and docs/, python/examples/ on a short
+# run, and python/tests with pytest. From the repository root; run by .ci/run after the cargo steps.
 # SPLAT4D_VENV reuses a folder for the environment (default: a new temporary one).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,14 +24,17 @@ step "building and installing the wheel (pip install ./python)"
 CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 \
   pip install --quiet --disable-pip-version-check --no-build-isolation ./python
 python -c "import splat4d; print('splat4d', splat4d.__version__, 'from', splat4d.__file__)"
-step "the README's Python example"
+step "the Python examples of README.md and docs/ (\`\`\`python blocks, not \`\`\`python no-ci)"
 python - <<'PY'
-import re
-text = open("README.md", encoding="utf-8").read()
-blocks = re.findall(r"^```python[ \t]*\n(.*?)^```", text, re.S | re.M)
-assert blocks, "README.md has no ```python example"
-for block in blocks:
-    exec(compile(block, "README.md", "exec"), {})
+import glob, re
+ran = 0
+for name in ["README.md"] + sorted(glob.glob("docs/*.md")):
+    text = open(name, encoding="utf-8").read()
+    for block in re.findall(r"^```python[ \t]*\n(.*?)^```", text, re.S | re.M):
+        print(f"-- {name}: {block.splitlines()[0]}")
+        exec(compile(block, name, "exec"), {})
+        ran += 1
+assert ran, "README.md and docs/ have no ```python example"
 PY
 step "python/examples (short runs)"
 for example in python/examples/*.py; do
