@@ -7,7 +7,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 command -v python3 >/dev/null || { echo "python3 (3.9 or newer) is required"; exit 1; }
-venv=${SPLAT4D_VENV:-$(mktemp -d)/venv}
+if [ -n "${SPLAT4D_VENV:-}" ]; then
+  venv=$SPLAT4D_VENV
+else
+  scratch=$(mktemp -d)
+  venv=$scratch/venv
+  # torch alone is about 5 GB installed: not left behind.
+  trap 'rm -rf "$scratch"' EXIT
+fi
 step() { echo "== python: $1 ($(( $(date +%s) - start )) s so far)"; }
 start=$(date +%s)
 python3 -m venv "$venv"

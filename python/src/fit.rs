@@ -232,7 +232,6 @@ fn request(
             ));
         };
         let v = &v;
-        let r = &mut s.rates;
         match name {
             "init" => request.init = value::<String>(v, name)?.unwrap_or_else(|| "auto".into()),
             "blend" => {
@@ -260,61 +259,75 @@ fn request(
                     })?;
                 }
             }
-            "steps" => s.steps = value(v, name)?,
-            "batch" => s.batch = value(v, name)?,
-            "start_kernels" => s.start_kernels = value(v, name)?,
-            "max_kernels" => s.max_kernels = value(v, name)?,
-            "eval_every" => s.eval_every = value(v, name)?,
-            "seed" => s.seed = value(v, name)?,
-            "background" => s.background = numbers::<3>(v, name)?,
-            "lr_mean" => r.mean = number(v, name)?,
-            "lr_time" => r.time = number(v, name)?,
-            "lr_velocity" => r.velocity = number(v, name)?,
-            "lr_scale" => r.scale = number(v, name)?,
-            "lr_amplitude" => r.amplitude = number(v, name)?,
-            "lr_background" => r.background = number(v, name)?,
-            "lr_opacity" => r.opacity = number(v, name)?,
-            "lr_rotation" => r.rotation = number(v, name)?,
-            "lr_sh" => r.sh = number(v, name)?,
-            "lr_final" => s.lr_final = number(v, name)?,
-            "densify_every" => s.densify_every = value(v, name)?,
-            "densify_from" => s.densify_from = number(v, name)?,
-            "densify_until" => s.densify_until = number(v, name)?,
-            "densify_threshold" => s.densify_threshold = number(v, name)?,
-            "max_growth" => s.max_growth = number(v, name)?,
-            "prune_below" => s.prune_below = number(v, name)?,
-            "freeze_mean" => s.freeze_mean = flag(v, name)?,
-            "freeze_time" => s.freeze_time = flag(v, name)?,
-            "freeze_amplitude" => s.freeze_amplitude = flag(v, name)?,
-            "freeze_background" => s.freeze_background = flag(v, name)?,
-            "mode" => {
-                s.mode = match value::<String>(v, name)? {
-                    None => None,
-                    Some(text) => Some(text.parse().map_err(|e: String| {
-                        to_py(py, Error::setting(&["mode"], format!("`mode`: {e}")))
-                    })?),
-                }
-            }
-            "fit_velocity" => s.fit_velocity = flag(v, name)?,
-            "fit_scale" => s.fit_scale = flag(v, name)?,
-            "adaptive" => s.adaptive = flag(v, name)?,
-            "min_improvement" => s.min_improvement = number(v, name)?,
-            "merge_tolerance" => s.merge_tolerance = number(v, name)?,
-            "min_scale" => s.min_scale = number(v, name)?,
-            "box" => s.bounds = numbers::<6>(v, name)?,
-            "time_range" => s.time_range = numbers::<2>(v, name)?,
-            "init_scale" => s.init_scale = numbers::<4>(v, name)?,
-            "init_amplitude" => s.init_amplitude = number(v, name)?,
-            "sh" => s.sh = value(v, name)?,
-            "sh_raise_every" => s.sh_raise_every = value(v, name)?,
-            "opacity_reset_every" => s.opacity_reset_every = value(v, name)?,
-            "percent_dense" => s.percent_dense = number(v, name)?,
-            "time_split_fraction" => s.time_split_fraction = number(v, name)?,
-            _ => unreachable!("every name of OPTIONS has its arm"),
+            _ => setting(py, &mut s, name, v)?,
         }
     }
     request.settings = s;
     Ok(request)
+}
+
+/// Sets the [`FitSettings`] option `name` (every option but the request's own).
+fn setting(
+    py: Python<'_>,
+    s: &mut FitSettings,
+    name: &'static str,
+    v: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let r = &mut s.rates;
+    match name {
+        "steps" => s.steps = value(v, name)?,
+        "batch" => s.batch = value(v, name)?,
+        "start_kernels" => s.start_kernels = value(v, name)?,
+        "max_kernels" => s.max_kernels = value(v, name)?,
+        "eval_every" => s.eval_every = value(v, name)?,
+        "seed" => s.seed = value(v, name)?,
+        "background" => s.background = numbers::<3>(v, name)?,
+        "lr_mean" => r.mean = number(v, name)?,
+        "lr_time" => r.time = number(v, name)?,
+        "lr_velocity" => r.velocity = number(v, name)?,
+        "lr_scale" => r.scale = number(v, name)?,
+        "lr_amplitude" => r.amplitude = number(v, name)?,
+        "lr_background" => r.background = number(v, name)?,
+        "lr_opacity" => r.opacity = number(v, name)?,
+        "lr_rotation" => r.rotation = number(v, name)?,
+        "lr_sh" => r.sh = number(v, name)?,
+        "lr_final" => s.lr_final = number(v, name)?,
+        "densify_every" => s.densify_every = value(v, name)?,
+        "densify_from" => s.densify_from = number(v, name)?,
+        "densify_until" => s.densify_until = number(v, name)?,
+        "densify_threshold" => s.densify_threshold = number(v, name)?,
+        "max_growth" => s.max_growth = number(v, name)?,
+        "prune_below" => s.prune_below = number(v, name)?,
+        "freeze_mean" => s.freeze_mean = flag(v, name)?,
+        "freeze_time" => s.freeze_time = flag(v, name)?,
+        "freeze_amplitude" => s.freeze_amplitude = flag(v, name)?,
+        "freeze_background" => s.freeze_background = flag(v, name)?,
+        "mode" => {
+            s.mode = match value::<String>(v, name)? {
+                None => None,
+                Some(text) => Some(text.parse().map_err(|e: String| {
+                    to_py(py, Error::setting(&["mode"], format!("`mode`: {e}")))
+                })?),
+            }
+        }
+        "fit_velocity" => s.fit_velocity = flag(v, name)?,
+        "fit_scale" => s.fit_scale = flag(v, name)?,
+        "adaptive" => s.adaptive = flag(v, name)?,
+        "min_improvement" => s.min_improvement = number(v, name)?,
+        "merge_tolerance" => s.merge_tolerance = number(v, name)?,
+        "min_scale" => s.min_scale = number(v, name)?,
+        "box" => s.bounds = numbers::<6>(v, name)?,
+        "time_range" => s.time_range = numbers::<2>(v, name)?,
+        "init_scale" => s.init_scale = numbers::<4>(v, name)?,
+        "init_amplitude" => s.init_amplitude = number(v, name)?,
+        "sh" => s.sh = value(v, name)?,
+        "sh_raise_every" => s.sh_raise_every = value(v, name)?,
+        "opacity_reset_every" => s.opacity_reset_every = value(v, name)?,
+        "percent_dense" => s.percent_dense = number(v, name)?,
+        "time_split_fraction" => s.time_split_fraction = number(v, name)?,
+        _ => unreachable!("every name of OPTIONS has its arm"),
+    }
+    Ok(())
 }
 
 /// What unwinds out of a fit whose progress callback raised (or saw Ctrl-C).
