@@ -430,6 +430,15 @@ impl RenderContext {
         &self.image
     }
 
+    /// Each pixel's stop, row-major, as [`Self::render_for_backward`] of an alpha scene left
+    /// it: the transmittance `T` after the pixel's last kernel (SPEC §8; `1 - T` is the
+    /// pixel's opacity) and where it stopped. Read it right after such a frame: other frames
+    /// keep no stops (an older frame's, or none, are left here).
+    #[must_use]
+    pub fn pixel_stops(&self) -> &[crate::composite::PixelStop] {
+        &self.pixel_stops
+    }
+
     /// Exchanges the last rendered image with `other`: a sequence of frames handed on (to a
     /// writer, say) without a copy. The context keeps `other`'s buffer, whose pixels the next
     /// render overwrites (every pixel is written each frame); until then [`Self::image`] is
