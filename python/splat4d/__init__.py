@@ -200,7 +200,7 @@ def fit(
     them); an option the chosen blend does not use is refused by name.
 
     ``progress`` is called after every step with ``{"step", "steps", "seconds", "loss",
-    "heldout_psnr", "kernels"}``; an exception it raises (or Ctrl-C) stops the fit and is
+    "heldout_psnr", "kernels", "seconds_left"}``; an exception it raises (or Ctrl-C) stops the fit and is
     raised here. Notes go to ``sys.stderr`` as ``note: …``. With ``out`` the scene is written
     there too. Returns ``(scene, summary)``; ``summary`` has ``kernels``, ``steps``,
     ``seconds``, ``blend``, ``splits`` (per split: ``views``, ``mse``, ``psnr``) and

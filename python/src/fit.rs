@@ -359,7 +359,7 @@ impl FitProgress for Progress {
         });
     }
 
-    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>) {
+    fn step(&mut self, record: &StepRecord, heldout_psnr: Option<f64>, seconds_left: Option<f64>) {
         self.last = Some(*record);
         Python::attach(|py| {
             let outcome = py.check_signals().and_then(|()| {
@@ -373,6 +373,7 @@ impl FitProgress for Progress {
                 event.set_item("loss", record.train_loss)?;
                 event.set_item("heldout_psnr", heldout_psnr)?;
                 event.set_item("kernels", record.kernels)?;
+                event.set_item("seconds_left", seconds_left)?;
                 callback.call1(py, (event,)).map(drop)
             });
             if let Err(e) = outcome {

@@ -370,7 +370,7 @@ mod tests {
             [0.2, 0.3, 0.4],
             ExpMode::Poly,
         );
-        let stops = context.alpha_stops().to_vec();
+        let stops = context.pixel_stops().to_vec();
         let gradients = |path| {
             let mut out = ScreenGradients::default();
             let v_background =

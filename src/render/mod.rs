@@ -418,12 +418,6 @@ impl RenderContext {
         }
     }
 
-    /// Alpha frames: each pixel's stop, as the last frame rendered for a backward kept them.
-    #[cfg(test)]
-    pub(crate) fn alpha_stops(&self) -> &[crate::composite::PixelStop] {
-        &self.blends.alpha.stops
-    }
-
     /// The last rendered image.
     #[must_use]
     pub fn image(&self) -> &Image {
@@ -436,7 +430,7 @@ impl RenderContext {
     /// keep no stops (an older frame's, or none, are left here).
     #[must_use]
     pub fn pixel_stops(&self) -> &[crate::composite::PixelStop] {
-        &self.pixel_stops
+        &self.blends.alpha.stops
     }
 
     /// Exchanges the last rendered image with `other`: a sequence of frames handed on (to a
