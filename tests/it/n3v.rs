@@ -17,7 +17,7 @@ fn blob() -> Scene {
 }
 
 /// The rig's cameras: `n` around the blob, each a different height and field of view.
-fn rig(n: usize) -> Vec<Camera> {
+pub fn rig(n: usize) -> Vec<Camera> {
     (0..n)
         .map(|c| {
             let a = c as f64 * 0.7;
@@ -30,7 +30,7 @@ fn rig(n: usize) -> Vec<Camera> {
 
 /// `poses_bounds.npy` for `cameras` written as LLFF does: per camera the 3×5 row-major
 /// `[down, right, back | centre | hwf]` camera to world, then near and far.
-fn write_poses(dir: &Path, cameras: &[Camera], hwf_scale: f64) {
+pub fn write_poses(dir: &Path, cameras: &[Camera], hwf_scale: f64) {
     let mut values = Vec::new();
     for camera in cameras {
         // OpenGL's columns are [right, up, back]: LLFF's [down, right, back] = [-up, right, back].
@@ -63,7 +63,7 @@ fn npy(rows: usize, values: &[f64]) -> Vec<u8> {
 }
 
 /// Renders the blob through `cameras` at `frames` times into `camNN/images/NNNN.png`.
-fn write_frames(dir: &Path, cameras: &[Camera], frames: usize) {
+pub fn write_frames(dir: &Path, cameras: &[Camera], frames: usize) {
     let scene = blob();
     for (c, camera) in cameras.iter().enumerate() {
         let folder = dir.join(format!("cam{c:02}/images"));
