@@ -20,8 +20,9 @@ const ALPHA: &str = "Alpha blend only (refused with the additive blend)";
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
     /// Dataset folder: D-NeRF layout (transforms_train.json, and val/test for held-out
-    /// views), one nerfstudio/instant-ngp transforms.json, or a COLMAP model (sparse/0 and
-    /// images/).
+    /// views), one nerfstudio/instant-ngp transforms.json, a COLMAP model (sparse/0 and
+    /// images/), or a Neural 3D Video rig (poses_bounds.npy with camNN.mp4 or
+    /// camNN/images/).
     #[arg(long)]
     views: PathBuf,
     /// Refuse a dataset with frames whose image file is missing (by default they are
@@ -57,6 +58,14 @@ pub struct FitArgs {
     /// folder (refused by default, naming the frame).
     #[arg(long)]
     allow_outside_images: bool,
+    /// Frames read of a multi-camera video dataset (poses_bounds.npy): `A:B[:STEP]`, frames
+    /// A to B - 1, every STEP-th (default: all).
+    #[arg(long, value_name = "A:B[:STEP]")]
+    frames: Option<splat4d::io::dataset::FrameRange>,
+    /// Frames per second of a multi-camera video dataset: frame k at time k/FPS seconds
+    /// (default: frame k of F at k/(F-1)).
+    #[arg(long)]
+    fps: Option<f64>,
     #[command(flatten)]
     render: RenderFlags,
 
@@ -282,6 +291,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
         downscale: args.downscale,
         strict: args.strict,
         allow_outside_images: args.allow_outside_images,
+        frames: args.frames,
+        fps: args.fps,
         init: args.init.clone(),
         settings,
         blend,

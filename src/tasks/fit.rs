@@ -9,7 +9,7 @@ use std::time::Duration;
 use crate::fit::plan::Init;
 use crate::fit::settings::FitSettings;
 use crate::fit::train::{SplitScore, StepRecord, evaluate_splits};
-use crate::io::dataset::{DatasetOptions, DatasetSource, PhotoMemory};
+use crate::io::dataset::{DatasetOptions, DatasetSource, FrameRange, PhotoMemory};
 use crate::io::scene_file::{load_scene, save_scene};
 use crate::io::{check_output, same_file, write_bytes_atomically};
 use crate::model::{Blend, Dataset, Result, Scene, Silent};
@@ -28,6 +28,10 @@ pub struct FitRequest {
     pub strict: bool,
     /// Read dataset images that lie outside the dataset's folder.
     pub allow_outside_images: bool,
+    /// The frames of a dataset filmed over time that are read (`None`: all).
+    pub frames: Option<FrameRange>,
+    /// Frames per second of a dataset filmed over time (`None`: times from 0 to 1).
+    pub fps: Option<f64>,
     /// `auto`, `random:N` or a scene file.
     pub init: String,
     /// Everything else about the fit, as chosen: each setting acts on the fit's blend or
@@ -156,13 +160,14 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     // views.
     let source = DatasetSource::open(&request.views);
     check_fit_outputs(request, &source)?;
-    check_fit_memory(request, source.photo_memory(request.downscale))?;
+    let options = dataset_options(request);
+    check_fit_memory(request, source.photo_memory_as(&options))?;
     // A busy port is refused before the dataset is read.
     let server = request
         .view
         .map(|port| Server::bind("127.0.0.1", port))
         .transpose()?;
-    let dataset = read_dataset(request, source, progress)?;
+    let dataset = read_dataset(request, source, &options, progress)?;
     let init = match Init::parse_builtin(&request.init)? {
         Some(init) => init,
         None => Init::Scene(load_scene(Path::new(&request.init))?),
@@ -248,14 +253,9 @@ fn check_fit_outputs(request: &FitRequest, source: &DatasetSource) -> Result<()>
     Ok(())
 }
 
-/// The dataset, read as the request says; its notes, and what the user should know about
-/// its images and cameras, shown.
-fn read_dataset(
-    request: &FitRequest,
-    source: DatasetSource,
-    progress: &mut dyn FitProgress,
-) -> Result<Dataset> {
-    let options = DatasetOptions {
+/// How the request reads its dataset.
+fn dataset_options(request: &FitRequest) -> DatasetOptions {
+    DatasetOptions {
         background: request
             .settings
             .background
@@ -264,8 +264,20 @@ fn read_dataset(
         downscale: request.downscale,
         strict: request.strict,
         allow_outside_images: request.allow_outside_images,
-    };
-    let dataset = source.load(&options)?;
+        frames: request.frames,
+        fps: request.fps,
+    }
+}
+
+/// The dataset, read with `options`; its notes, and what the user should know about its
+/// images and cameras, shown.
+fn read_dataset(
+    request: &FitRequest,
+    source: DatasetSource,
+    options: &DatasetOptions,
+    progress: &mut dyn FitProgress,
+) -> Result<Dataset> {
+    let dataset = source.load(options)?;
     for note in &dataset.notes {
         progress.note(note);
     }
@@ -384,6 +396,8 @@ mod tests {
             downscale: 1,
             strict: false,
             allow_outside_images: false,
+            frames: None,
+            fps: None,
             init: "random:10".into(),
             settings: FitSettings::default(),
             blend: Some(Blend::Additive),

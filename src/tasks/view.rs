@@ -47,8 +47,7 @@ pub fn view_scene(request: &ViewRequest, listening: impl FnOnce(&str)) -> Result
             let options = DatasetOptions {
                 background: scene.background.map(|b| b as f32),
                 downscale: 1,
-                strict: false,
-                allow_outside_images: false,
+                ..DatasetOptions::default()
             };
             // Refused before any photo is decoded when they would not fit in memory.
             let source = DatasetSource::open(dir);

@@ -5,6 +5,7 @@
 //! D-NeRF / Blender          (blender)     DIR/transforms_{train,val,test}.json  DIR/train/r_000.png ...
 //! nerfstudio / instant-ngp  (nerfstudio)  DIR/transforms.json (every frame)     DIR/images/frame_00001.jpg ...
 //! COLMAP                    (colmap)      DIR/sparse/0/{cameras,images,points3D}.{bin,txt}  DIR/images/NAME
+//! Neural 3D Video (N3V)     (n3v)         DIR/poses_bounds.npy  DIR/cam00.mp4 ... or DIR/cam00/images/0000.png ...
 //! ```
 //!
 //! Each format answers for a folder "not mine" or "mine" (`Format::claims`), and then reads
@@ -39,10 +40,13 @@
 mod blender;
 mod colmap;
 mod frames;
+mod n3v;
 mod nerfstudio;
+mod npy;
 mod photo_memory;
 mod photos;
 mod transforms;
+mod video;
 mod write;
 
 use std::path::{Path, PathBuf};
@@ -55,7 +59,12 @@ pub use photos::downscale_weighted;
 pub use write::{DatasetWriter, write_split};
 
 /// The dataset formats, in the order they are asked whether a folder is theirs.
-const FORMATS: [&dyn Format; 3] = [&blender::Blender, &nerfstudio::Nerfstudio, &colmap::Colmap];
+const FORMATS: [&dyn Format; 4] = [
+    &blender::Blender,
+    &nerfstudio::Nerfstudio,
+    &colmap::Colmap,
+    &n3v::N3v,
+];
 
 /// A dataset layout: which folders are its own, and how it reads them.
 trait Format {
@@ -85,6 +94,17 @@ trait Description {
     /// Each frame's photo, mask and lens, as [`Description::load`] would read them.
     fn frame_photos(&self) -> Vec<photo_memory::FramePhoto>;
 
+    /// What its photos will hold in memory once loaded as `options` say.
+    fn photo_memory(&self, options: &DatasetOptions) -> PhotoMemory {
+        photo_memory::estimate(self.frame_photos(), options.downscale)
+    }
+
+    /// Whether its frames are filmed over time ([`DatasetOptions::frames`] and
+    /// [`DatasetOptions::fps`] act on it).
+    fn reads_frames(&self) -> bool {
+        false
+    }
+
     /// Its views, split, with the shared steps applied.
     fn load(self: Box<Self>, options: &DatasetOptions) -> Result<Dataset>;
 }
@@ -109,6 +129,53 @@ pub struct DatasetOptions {
     pub strict: bool,
     /// Read images whose real path (symlinks followed) lies outside the dataset's folder.
     pub allow_outside_images: bool,
+    /// The frames of a dataset filmed over time that are read (`None`: all).
+    pub frames: Option<FrameRange>,
+    /// Frames per second of a dataset filmed over time: frame `k` at `k / fps` seconds
+    /// (`None`: frame `k` of `F` at `k / (F - 1)`).
+    pub fps: Option<f64>,
+}
+
+/// Frames `start`, `start + step`, ... before `end` (`None`: the last), written
+/// `A:B[:STEP]` (`A:` to the end).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRange {
+    pub start: usize,
+    pub end: Option<usize>,
+    pub step: usize,
+}
+
+impl std::str::FromStr for FrameRange {
+    type Err = String;
+
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let bad = || format!("`{text}` is not A:B or A:B:STEP (frames A to B - 1, every STEP-th)");
+        let parts: Vec<&str> = text.split(':').collect();
+        let number = |s: &str| s.trim().parse::<usize>().map_err(|_| bad());
+        let (start, end, step) = match parts.as_slice() {
+            [a, b] => (a, b, "1"),
+            [a, b, s] => (a, b, *s),
+            _ => return Err(bad()),
+        };
+        let start = if start.is_empty() { 0 } else { number(start)? };
+        let end = if end.is_empty() {
+            None
+        } else {
+            Some(number(end)?)
+        };
+        let step = number(step)?;
+        if step == 0 || end.is_some_and(|e| e <= start) {
+            return Err(bad());
+        }
+        Ok(FrameRange { start, end, step })
+    }
+}
+
+impl std::fmt::Display for FrameRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let end = self.end.map(|e| e.to_string()).unwrap_or_default();
+        write!(f, "{}:{end}:{}", self.start, self.step)
+    }
 }
 
 impl Default for DatasetOptions {
@@ -118,6 +185,8 @@ impl Default for DatasetOptions {
             downscale: 1,
             strict: false,
             allow_outside_images: false,
+            frames: None,
+            fps: None,
         }
     }
 }
@@ -230,16 +299,42 @@ impl DatasetSource {
     /// What its photos will hold in memory ([`photo_memory`]).
     #[must_use]
     pub fn photo_memory(&self, downscale: u32) -> PhotoMemory {
-        let photos = match &self.found {
-            Ok(Some(description)) => description.frame_photos(),
-            _ => Vec::new(),
-        };
-        photo_memory::estimate(photos, downscale)
+        self.photo_memory_as(&DatasetOptions {
+            downscale,
+            ..DatasetOptions::default()
+        })
+    }
+
+    /// What its photos will hold in memory once loaded as `options` say (the frames
+    /// chosen, the downscale).
+    #[must_use]
+    pub fn photo_memory_as(&self, options: &DatasetOptions) -> PhotoMemory {
+        match &self.found {
+            Ok(Some(description)) => description.photo_memory(options),
+            _ => PhotoMemory::default(),
+        }
     }
 
     /// Reads every split ([`load_dataset`]).
     pub fn load(self, options: &DatasetOptions) -> Result<Dataset> {
         match self.found? {
+            Some(description) if !description.reads_frames() => {
+                let field = match (options.frames, options.fps) {
+                    (Some(_), _) => Some("frames"),
+                    (_, Some(_)) => Some("fps"),
+                    _ => None,
+                };
+                if let Some(field) = field {
+                    return Err(Error::setting(
+                        &[field],
+                        format!(
+                            "`{field}` acts on a dataset filmed over time (poses_bounds.npy with camNN videos or frames); {} is not one",
+                            self.dir.display()
+                        ),
+                    ));
+                }
+                description.load(options)
+            }
             Some(description) => description.load(options),
             None => Err(Error::malformed(
                 &self.dir.display().to_string(),

@@ -1,0 +1,340 @@
+//! Neural 3D Video rigs as the field ships them: `poses_bounds.npy` (LLFF's camera order)
+//! with `camNN/images/` frames or `camNN.mp4` videos, built here from a known scene rendered
+//! by splat4d; the cameras read back are the ones rendered through.
+
+use std::path::Path;
+use std::process::Command;
+
+use crate::common::run_limited_with_env;
+use splat4d::io::dataset::{DatasetOptions, FrameRange, load_dataset, photo_memory};
+use splat4d::io::image_file::{BitDepth, save_image};
+use splat4d::{Camera, Image, RenderOptions, Scene};
+
+const SIZE: (u32, u32) = (32, 24);
+
+fn blob() -> Scene {
+    splat4d::io::scene_file::scene_from_json(include_str!("../../data/blob.json"), "blob").unwrap()
+}
+
+/// The rig's cameras: `n` around the blob, each a different height and field of view.
+pub fn rig(n: usize) -> Vec<Camera> {
+    (0..n)
+        .map(|c| {
+            let a = c as f64 * 0.7;
+            let eye = [3.0 * a.sin(), 0.3 * c as f64 - 0.4, -3.0 * a.cos()];
+            let fov = 40.0 + 3.0 * c as f64;
+            Camera::look_at(eye, [0.0; 3], [0.0, 1.0, 0.0], fov, SIZE.0, SIZE.1).unwrap()
+        })
+        .collect()
+}
+
+/// `poses_bounds.npy` for `cameras` written as LLFF does: per camera the 3×5 row-major
+/// `[down, right, back | centre | hwf]` camera to world, then near and far.
+pub fn write_poses(dir: &Path, cameras: &[Camera], hwf_scale: f64) {
+    let mut values = Vec::new();
+    for camera in cameras {
+        // OpenGL's columns are [right, up, back]: LLFF's [down, right, back] = [-up, right, back].
+        let gl = camera.opengl_camera_to_world();
+        let hwf = [
+            f64::from(camera.height) * hwf_scale,
+            f64::from(camera.width) * hwf_scale,
+            camera.fx * hwf_scale,
+        ];
+        for (i, row) in gl.iter().take(3).enumerate() {
+            values.extend([-row[1], row[0], row[2], row[3], hwf[i]]);
+        }
+        values.extend([0.5, 9.0]);
+    }
+    std::fs::write(dir.join("poses_bounds.npy"), npy(cameras.len(), &values)).unwrap();
+}
+
+/// A version 1 `.npy` of a `rows × 17` `<f8` array, as `numpy.save` writes it.
+fn npy(rows: usize, values: &[f64]) -> Vec<u8> {
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, 17), }}");
+    while (11 + header.len()) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    values.iter().for_each(|v| bytes.extend(v.to_le_bytes()));
+    bytes
+}
+
+/// Renders the blob through `cameras` at `frames` times into `camNN/images/NNNN.png`.
+pub fn write_frames(dir: &Path, cameras: &[Camera], frames: usize) {
+    let scene = blob();
+    for (c, camera) in cameras.iter().enumerate() {
+        let folder = dir.join(format!("cam{c:02}/images"));
+        std::fs::create_dir_all(&folder).unwrap();
+        for k in 0..frames {
+            let time = k as f64 / (frames - 1) as f64;
+            let image = splat4d::render(&scene, camera, time, &RenderOptions::default()).unwrap();
+            save_image(&image, &folder.join(format!("{k:04}.png")), BitDepth::Eight).unwrap();
+        }
+    }
+}
+
+fn close(a: &Camera, b: &Camera) -> bool {
+    let m = a
+        .world_to_camera
+        .iter()
+        .flatten()
+        .zip(b.world_to_camera.iter().flatten());
+    let k = [a.fx - b.fx, a.fy - b.fy, a.cx - b.cx, a.cy - b.cy];
+    (a.width, a.height) == (b.width, b.height)
+        && m.clone().all(|(x, y)| (x - y).abs() < 1e-12)
+        && k.iter().all(|d| d.abs() < 1e-9)
+}
+
+/// 8-bit quantisation, as a PNG holds a render.
+fn quantised(image: &Image) -> Vec<f32> {
+    let q = |v: f32| (f64::from((v.clamp(0.0, 1.0) * 255.0).round() as u16 * 257) / 65535.0) as f32;
+    image.pixels.iter().map(|&v| q(v)).collect()
+}
+
+#[test]
+fn extracted_frames_load_as_the_cameras_rendered_through() {
+    let dir = tempfile::tempdir().unwrap();
+    let cameras = rig(3);
+    write_frames(dir.path(), &cameras, 4);
+    // hwf at twice the images' size (N3V's frames are often extracted at half size).
+    write_poses(dir.path(), &cameras, 2.0);
+    let read = load_dataset(dir.path(), &DatasetOptions::default()).unwrap();
+    assert_eq!((read.train.len(), read.test.len()), (8, 4));
+    assert!(read.test.iter().all(|v| v.name.starts_with("cam00/")));
+    let scene = blob();
+    for view in read.test.iter().chain(&read.train) {
+        let c: usize = view.name[3..5].parse().unwrap();
+        let k: usize = view.name[view.name.len() - 4..].parse().unwrap();
+        assert!(
+            close(&view.camera, &cameras[c]),
+            "{}: {:?}",
+            view.name,
+            view.camera
+        );
+        assert_eq!(view.time, k as f64 / 3.0);
+        let render = splat4d::render(&scene, &view.camera, view.time, &RenderOptions::default());
+        assert_eq!(
+            quantised(&render.unwrap()),
+            view.image.pixels,
+            "{}",
+            view.name
+        );
+    }
+    // Downscaled: the intrinsics divided, the frames chosen, times at k / fps.
+    let options = DatasetOptions {
+        downscale: 2,
+        frames: Some("1:4:2".parse::<FrameRange>().unwrap()),
+        fps: Some(30.0),
+        ..DatasetOptions::default()
+    };
+    let half = load_dataset(dir.path(), &options).unwrap();
+    assert_eq!(half.train.len(), 4);
+    let times: Vec<f64> = half.test.iter().map(|v| v.time).collect();
+    assert_eq!(times, [1.0 / 30.0, 3.0 / 30.0]);
+    assert_eq!(half.test[0].camera.fx, cameras[0].fx / 2.0);
+    assert_eq!(photo_memory(dir.path(), 1).frames, 12);
+}
+
+/// `bytes` with the first `from` replaced by `to`.
+fn replace(bytes: &[u8], from: &[u8], to: &[u8]) -> Vec<u8> {
+    let at = bytes.windows(from.len()).position(|w| w == from).unwrap();
+    [&bytes[..at], to, &bytes[at + from.len()..]].concat()
+}
+
+/// The error of loading `dir`, as text.
+fn refusal(dir: &Path) -> String {
+    load_dataset(dir, &DatasetOptions::default())
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn broken_rigs_are_refused_naming_file_item_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let cameras = rig(2);
+    write_frames(dir.path(), &cameras, 2);
+    write_poses(dir.path(), &cameras, 1.0);
+    let poses = dir.path().join("poses_bounds.npy");
+    let good = std::fs::read(&poses).unwrap();
+    // A lying header: more rows than the data holds.
+    std::fs::write(&poses, replace(&good, b"(2, 17)", b"(9, 17)")).unwrap();
+    let message = refusal(dir.path());
+    assert!(
+        message.contains("poses_bounds.npy") && message.contains("shape"),
+        "{message}"
+    );
+    // A shape that is not LLFF's.
+    let mut values: Vec<f64> = good[128..]
+        .chunks(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let wrong = replace(&npy(2, &values), b"(2, 17)", b"(2, 16)");
+    std::fs::write(&poses, &wrong[..128 + 2 * 16 * 8]).unwrap();
+    let message = refusal(dir.path());
+    assert!(message.contains("17 columns"), "{message}");
+    // One camera too many in the file.
+    values.extend_from_within(..17);
+    std::fs::write(&poses, npy(3, &values)).unwrap();
+    let message = refusal(dir.path());
+    assert!(
+        message.contains("3 cameras, but the folder has 2"),
+        "{message}"
+    );
+    // A bad hwf.
+    values.truncate(34);
+    values[14] = -1.0;
+    std::fs::write(&poses, npy(2, &values)).unwrap();
+    let message = refusal(dir.path());
+    assert!(
+        message.contains("camera 0 (cam00)") && message.contains("hwf"),
+        "{message}"
+    );
+    values[14] = cameras[0].fx;
+    std::fs::write(&poses, npy(2, &values)).unwrap();
+    // A missing frame.
+    std::fs::remove_file(dir.path().join("cam01/images/0001.png")).unwrap();
+    let message = refusal(dir.path());
+    assert!(
+        message.contains("cam01/images") && message.contains("frame 0001"),
+        "{message}"
+    );
+    // Frames chosen past the end.
+    std::fs::copy(
+        dir.path().join("cam01/images/0000.png"),
+        dir.path().join("cam01/images/0001.png"),
+    )
+    .unwrap();
+    let options = DatasetOptions {
+        frames: Some("0:5".parse().unwrap()),
+        ..DatasetOptions::default()
+    };
+    let message = load_dataset(dir.path(), &options).unwrap_err().to_string();
+    assert!(message.contains("`frames` 0:5:1"), "{message}");
+}
+
+/// Whether ffmpeg can be run; a note when it cannot.
+fn have_ffmpeg() -> bool {
+    let ok = Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        eprintln!("note: ffmpeg is not on PATH: the video tests are skipped");
+    }
+    ok
+}
+
+/// Encodes `camNN/images/*.png` losslessly (RGB H.264) into `camNN.mp4`, `frames` of them.
+fn encode(dir: &Path, camera: usize, frames: usize) {
+    let status = Command::new("ffmpeg")
+        .current_dir(dir)
+        .args(["-v", "error", "-y", "-framerate", "30", "-i"])
+        .arg(format!("cam{camera:02}/images/%04d.png"))
+        .args([
+            "-frames:v",
+            &frames.to_string(),
+            "-c:v",
+            "libx264rgb",
+            "-qp",
+            "0",
+        ])
+        .arg(format!("cam{camera:02}.mp4"))
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+#[test]
+fn videos_decode_to_the_frames_they_were_made_from() {
+    if !have_ffmpeg() {
+        return;
+    }
+    let frames_dir = tempfile::tempdir().unwrap();
+    let cameras = rig(3);
+    write_frames(frames_dir.path(), &cameras, 5);
+    write_poses(frames_dir.path(), &cameras, 1.0);
+    let videos = tempfile::tempdir().unwrap();
+    for c in 0..3 {
+        encode(frames_dir.path(), c, 5);
+        let name = format!("cam{c:02}.mp4");
+        std::fs::rename(frames_dir.path().join(&name), videos.path().join(&name)).unwrap();
+    }
+    std::fs::copy(
+        frames_dir.path().join("poses_bounds.npy"),
+        videos.path().join("poses_bounds.npy"),
+    )
+    .unwrap();
+    let options = DatasetOptions {
+        frames: Some("1:".parse().unwrap()),
+        ..DatasetOptions::default()
+    };
+    let from_frames = load_dataset(frames_dir.path(), &options).unwrap();
+    let from_video = load_dataset(videos.path(), &options).unwrap();
+    assert_eq!(from_video.train.len(), 8);
+    for (a, b) in from_frames
+        .train
+        .iter()
+        .chain(&from_frames.test)
+        .zip(from_video.train.iter().chain(&from_video.test))
+    {
+        assert_eq!(
+            (a.camera, a.time),
+            (b.camera, b.time),
+            "{} {}",
+            a.name,
+            b.name
+        );
+        assert_eq!(a.image.pixels, b.image.pixels, "{} {}", a.name, b.name);
+    }
+    let memory = photo_memory(videos.path(), 2);
+    assert_eq!((memory.frames, memory.largest_view), (15, 16 * 12));
+    // Downscaled on the way: the box filter's sizes and intrinsics.
+    let half = DatasetOptions {
+        downscale: 2,
+        ..DatasetOptions::default()
+    };
+    let video_half = load_dataset(videos.path(), &half).unwrap();
+    let frames_half = load_dataset(frames_dir.path(), &half).unwrap();
+    for (a, b) in frames_half.test.iter().zip(&video_half.test) {
+        assert_eq!(a.camera, b.camera);
+        let worst = a
+            .image
+            .pixels
+            .iter()
+            .zip(&b.image.pixels)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 0.02, "{}: {worst}", a.name);
+    }
+    // A shorter video is refused naming it; without ffmpeg, the error names it and the
+    // frames layout.
+    encode(frames_dir.path(), 1, 4);
+    std::fs::rename(
+        frames_dir.path().join("cam01.mp4"),
+        videos.path().join("cam01.mp4"),
+    )
+    .unwrap();
+    let message = refusal(videos.path());
+    assert!(
+        message.contains("cam01.mp4") && message.contains("4 frames"),
+        "{message}"
+    );
+    let out = videos.path().join("f.json");
+    let args = [
+        "fit",
+        "--views",
+        videos.path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let output = run_limited_with_env(&args, videos.path(), &[("PATH", "/nonexistent")]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("ffmpeg") && stderr.contains("camNN/images"),
+        "{stderr}"
+    );
+}
