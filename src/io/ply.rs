@@ -636,6 +636,8 @@ impl SceneLayout {
                 amplitude: [v(8), v(9), v(10)],
                 rotation: [v(11), v(12), v(13), v(14)],
                 velocity: [v(15), v(16), v(17)],
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             },
             PlyKind::Gaussian3d => Kernel {
                 mean: [v(0), v(1), v(2), 0.0],
@@ -643,6 +645,8 @@ impl SceneLayout {
                 amplitude: [3, 4, 5].map(|k| SH_C0 * v(k) + 0.5),
                 rotation: [v(10), v(11), v(12), v(13)],
                 velocity: [0.0; 3],
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             },
         }
     }

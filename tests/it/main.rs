@@ -6,6 +6,8 @@ mod common;
 
 /// The alpha blend of SPEC §8 against its f64 twin; alpha files.
 mod alpha;
+/// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
+mod motion;
 /// Malformed and invalid inputs are refused with messages naming file, item and field.
 mod bad_input;
 /// Every count bounded and every decode shared; special files refused at once; one GIF
