@@ -369,7 +369,10 @@ impl Scene {
                     origin,
                     "scene",
                     field,
-                    format!("{len} values for {} kernels: one per kernel or none", self.len()),
+                    format!(
+                        "{len} values for {} kernels: one per kernel or none",
+                        self.len()
+                    ),
                 ));
             }
         }

@@ -6,8 +6,6 @@ mod common;
 
 /// The alpha blend of SPEC §8 against its f64 twin; alpha files.
 mod alpha;
-/// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
-mod motion;
 /// Malformed and invalid inputs are refused with messages naming file, item and field.
 mod bad_input;
 /// Every count bounded and every decode shared; special files refused at once; one GIF
@@ -55,6 +53,8 @@ mod memory;
 /// Messages of the fourth attack round: values cut, the file's own property named, extreme
 /// times kept finite or refused.
 mod messages;
+/// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
+mod motion;
 /// The output rule: only a command's own earlier output is replaced, never an input.
 mod outputs;
 /// PLY: 3DGS slices read by an independent parser, 4D scenes round-tripped.

@@ -121,7 +121,10 @@ fn hard_motion_scene(camera: &Camera, tau: f64) -> Scene {
     long.angular_velocity = [0.5, 2.0, -1.0, 0.3];
     kernels.push(long);
     let scene = Scene::from_kernels(&kernels, [0.05, 0.0, 0.1], "<hard motion>").unwrap();
-    assert_eq!(scene.rotations[0], q, "a turning kernel keeps its quaternion as written");
+    assert_eq!(
+        scene.rotations[0], q,
+        "a turning kernel keeps its quaternion as written"
+    );
     scene
 }
 
@@ -235,11 +238,20 @@ fn check_twin_against_finite_differences(
             checked += 1;
         }
     }
-    assert!(checked * 10 >= 9 * FIELDS * scene.len(), "{what}: {checked} checked");
+    assert!(
+        checked * 10 >= 9 * FIELDS * scene.len(),
+        "{what}: {checked} checked"
+    );
     for p in 7..18 {
-        assert!(scale[p] > 0.0, "{what}: {} has a gradient somewhere", NAMES[p]);
+        assert!(
+            scale[p] > 0.0,
+            "{what}: {} has a gradient somewhere",
+            NAMES[p]
+        );
     }
-    println!("{what}: {checked} values, twin vs finite differences worst at {worst:.3} of the bound");
+    println!(
+        "{what}: {checked} values, twin vs finite differences worst at {worst:.3} of the bound"
+    );
 }
 
 fn fast_gradients(
@@ -440,4 +452,23 @@ fn motion_fields_round_trip_through_json_and_are_absent_without_them() {
         .unwrap_err()
         .to_string();
     assert!(message.contains("bad.json"), "{message}");
+}
+
+#[test]
+fn motion_fields_round_trip_through_the_4d_ply() {
+    let camera = test_camera(32, 24);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.ply");
+    for scene in [
+        with_motion(hard_random_scene(&camera, 700, 12), 4),
+        hard_motion_scene(&camera, 0.45),
+    ] {
+        splat4d::io::ply::write_scene_ply(&scene, &path).unwrap();
+        let back = splat4d::io::ply::read_scene_ply(&path).unwrap();
+        assert_eq!(back, scene);
+    }
+    let plain = hard_random_scene(&camera, 700, 12);
+    splat4d::io::ply::write_scene_ply(&plain, &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    assert!(!bytes.windows(5).any(|w| w == b"omega"));
 }
