@@ -5,7 +5,12 @@
 //! unnormalised peak amplitude `[r, g, b]` (any finite real), a Hamilton quaternion
 //! `[w, x, y, z]` turning the spatial axes (normalised on load; active rotation, the columns
 //! of R are the kernel's axes in world space) and a velocity `[vx, vy, vz]` in world units per
-//! time unit (not rotated). Parameters are stored in f64: the per-kernel stage of the
+//! time unit (not rotated). Two optional fields (SPEC §9) let a kernel follow a parabola and
+//! a turn: an acceleration `[ax, ay, az]` and the quaternion's rate `[ωw, ωx, ωy, ωz]`, with
+//! `m(τ) = xyz + v d_t + ½ a d_t²` and axes from `(q + ω d_t)/|q + ω d_t|`, `d_t = τ - t`;
+//! a turning kernel keeps its quaternion as written. They live beside the kernels
+//! ([`Scene::accelerations`], [`Scene::angular_velocities`]), each empty when no kernel has
+//! one. Parameters are stored in f64: the per-kernel stage of the
 //! renderer works in f64 (SPEC §5, precision).
 //!
 //! A scene also declares its [`Blend`] (SPEC §8): `additive` (§5, the default) sums the
