@@ -218,10 +218,13 @@ pub fn extend_scene(
         .zip(scene.amplitudes.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))
         .zip(scene.rotations.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK))
         .zip(scene.velocities.spare_capacity_mut()[..count].par_chunks_mut(MIN_CHUNK));
-    let outcomes: Vec<Result<()>> = slots
+    // Each chunk also lists its kernels with a SPEC §9 field (few or none), applied after.
+    type Motion = (usize, [f64; 3], [f64; 4]);
+    let outcomes: Vec<Result<Vec<Motion>>> = slots
         .enumerate()
         .map(
             |(c, ((((means, scales), amplitudes), rotations), velocities))| {
+                let mut motion = Vec::new();
                 for j in 0..means.len() {
                     let i = c * MIN_CHUNK + j;
                     let k = kernel(i).checked(first + i, origin)?;
@@ -230,12 +233,15 @@ pub fn extend_scene(
                     amplitudes[j].write(k.amplitude);
                     rotations[j].write(k.rotation);
                     velocities[j].write(k.velocity);
+                    if k.acceleration != [0.0; 3] || k.turns() {
+                        motion.push((len + i, k.acceleration, k.angular_velocity));
+                    }
                 }
-                Ok(())
+                Ok(motion)
             },
         )
         .collect();
-    outcomes.into_iter().collect::<Result<()>>()?;
+    let motion = outcomes.into_iter().collect::<Result<Vec<_>>>()?;
     // SAFETY: every chunk succeeded, so each of the `count` slots past `len` in the five
     // arrays was written (the chunks cover `0..count`), and `reserve` made room for them.
     unsafe {
@@ -244,6 +250,22 @@ pub fn extend_scene(
         scene.amplitudes.set_len(len + count);
         scene.rotations.set_len(len + count);
         scene.velocities.set_len(len + count);
+    }
+    for (i, acceleration, angular_velocity) in motion.into_iter().flatten() {
+        if acceleration != [0.0; 3] {
+            scene.accelerations.resize(len + count, [0.0; 3]);
+            scene.accelerations[i] = acceleration;
+        }
+        if angular_velocity != [0.0; 4] {
+            scene.angular_velocities.resize(len + count, [0.0; 4]);
+            scene.angular_velocities[i] = angular_velocity;
+        }
+    }
+    if !scene.accelerations.is_empty() {
+        scene.accelerations.resize(len + count, [0.0; 3]);
+    }
+    if !scene.angular_velocities.is_empty() {
+        scene.angular_velocities.resize(len + count, [0.0; 4]);
     }
     Ok(())
 }

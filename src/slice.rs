@@ -13,6 +13,18 @@
 //! qmax = 2 (ln max_c |A_c| - ½ d² - ln ε)  cut-off radius², in log space (no underflow)
 //! ```
 //!
+//! Motion beyond constant velocity (SPEC §9, optional per kernel: acceleration `a` and the
+//! quaternion's rate `ω`), with `d_t = τ - t`:
+//!
+//! ```text
+//! m    = (x, y, z) + v d_t + ½ a d_t²
+//! R    = R((q + ω d_t) / |q + ω d_t|)      q as stored (not unit when ω ≠ 0)
+//! ```
+//!
+//! A kernel whose `q + ω d_t` is zero or not finite is dropped at τ. Scenes without the
+//! fields (empty [`Scene::accelerations`], [`Scene::angular_velocities`]) take the lines
+//! above unchanged, to the bit.
+//!
 //! A kernel with `qmax ≤ 0` (its largest |amplitude| at τ is ≤ ε) is dropped here, before
 //! any projection work.
 //!
@@ -30,7 +42,7 @@ use crate::parallel::{gather_kept, keep_chunks, keep_in_parallel};
 /// sliced kernel; `kernel_from_slice[s]` is its index in the scene (ascending).
 ///
 /// SPEC §2: the conditional 3D Gaussian at τ, its centre `mean.xyz + velocity (τ − t)` and
-/// amplitude scaled by the temporal weight.
+/// amplitude scaled by the temporal weight (§9: the centre and axes on their curves).
 #[derive(Clone, Debug, Default)]
 pub struct SlicedKernels {
     /// Scene index of each sliced kernel, ascending.
@@ -115,6 +127,23 @@ pub fn rotation_matrix([w, x, y, z]: [f64; 4]) -> [[f64; 3]; 3] {
             1.0 - 2.0 * (x * x + y * y),
         ],
     ]
+}
+
+/// The unit quaternion of `q + ω dt` (SPEC §9), or `None` when it is zero or not finite (the
+/// kernel is culled at that time).
+#[inline]
+#[must_use]
+pub fn turned_quaternion(q: [f64; 4], omega: [f64; 4], dt: f64) -> Option<[f64; 4]> {
+    let turned: [f64; 4] = std::array::from_fn(|k| q[k] + omega[k] * dt);
+    let norm = turned.iter().map(|v| v * v).sum::<f64>().sqrt();
+    (norm > 0.0 && norm.is_finite()).then(|| turned.map(|v| v / norm))
+}
+
+/// `q / |q|`: the unit quaternion of a nonzero, finite `q`.
+#[must_use]
+pub fn unit_quaternion(q: [f64; 4]) -> [f64; 4] {
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    q.map(|v| v / norm)
 }
 
 /// `Σ3 = R diag(s²) Rᵀ` as `[xx, xy, xz, yy, yz, zz]`.
@@ -249,7 +278,19 @@ pub(crate) fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Optio
     let d = dt / scale[3];
     let qmax = cutoff_radius_squared(peak(scene, i), d, cutoff)?;
     let w = weight_of(d);
+    // SPEC §9: a turning kernel's axes at τ, culled where `q + ω d_t` cannot be normalised.
+    let rotation = match scene.angular_velocities.get(i) {
+        Some(&omega) if omega != [0.0; 4] => turned_quaternion(scene.rotations[i], omega, dt)?,
+        _ => scene.rotations[i],
+    };
     let v = scene.velocities[i];
+    let mut mean = [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt];
+    if let Some(a) = scene.accelerations.get(i) {
+        let half_dt2 = 0.5 * dt * dt;
+        for (m, a) in mean.iter_mut().zip(a) {
+            *m += a * half_dt2;
+        }
+    }
     let (amplitude, opacity) = match scene.blend {
         Blend::Additive => (scene.amplitudes[i].map(|a| a * w), 0.0),
         Blend::Alpha => {
@@ -261,8 +302,8 @@ pub(crate) fn slice_one(scene: &Scene, i: usize, tau: f64, cutoff: f64) -> Optio
         }
     };
     Some(SlicedKernel {
-        mean: [x + v[0] * dt, y + v[1] * dt, z + v[2] * dt],
-        covariance: covariance_3d(scene.rotations[i], scale),
+        mean,
+        covariance: covariance_3d(rotation, scale),
         amplitude,
         opacity,
         qmax,

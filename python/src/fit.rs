@@ -62,6 +62,8 @@ pub fn load_dataset<'py>(
         downscale,
         strict,
         allow_outside_images,
+        frames: None,
+        fps: None,
     };
     let dataset = lib(py, py.detach(|| read_dataset(&views, &options)))?;
     let dict = PyDict::new(py);
@@ -219,6 +221,8 @@ fn request(
         log: None,
         threads: None,
         view: None,
+        frames: None,
+        fps: None,
     };
     for (key, v) in options.into_iter().flat_map(|d| d.iter()) {
         let key: String = key.extract()?;

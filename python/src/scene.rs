@@ -137,6 +137,7 @@ impl Scene {
                 amplitude: amplitudes[i],
                 rotation: rotations[i],
                 velocity: velocities[i],
+                ..Kernel::new([0.0; 4], [1.0; 4], [0.0; 3])
             })
             .collect();
         let norms = rotations

@@ -7,7 +7,7 @@
 //! 2. [`project`]: → `∂L/∂m(τ)`, the world-space slice centre, through `Q = Σ2⁻¹`, the EWA
 //!    Jacobian (including its clamp) and the 2D mean;
 //! 3. [`slice`](mod@slice): → `∂L/∂(x, y, z, t)`, `∂L/∂A`, `∂L/∂v`, scales and rotation of
-//!    each scene kernel; alpha scenes also the opacity and, through the colour's view
+//!    each scene kernel (and SPEC §9's acceleration and angular velocity); alpha scenes also the opacity and, through the colour's view
 //!    direction, SH and `m(τ)`.
 //!
 //! Names follow the `v_x = ∂L/∂x` convention. Gradients are f64 and accumulate (`+=`), so a
@@ -35,6 +35,12 @@ pub struct Gradients {
     /// `(I - q̂ q̂ᵀ) ∂L/∂q̂`; a file's stored quaternion of another length `|q|` has this
     /// divided by `|q|` ([`Self::rotations_as_stored`]).
     pub v_rotations: Vec<[f64; 4]>,
+    /// `∂L/∂(ax, ay, az)` (SPEC §9), sized like [`crate::model::Scene::accelerations`]: empty
+    /// for scenes without accelerations.
+    pub v_accelerations: Vec<[f64; 3]>,
+    /// `∂L/∂(ωw, ωx, ωy, ωz)` (SPEC §9), sized like
+    /// [`crate::model::Scene::angular_velocities`]: empty for scenes whose kernels do not turn.
+    pub v_angular_velocities: Vec<[f64; 4]>,
     /// Alpha scenes: `∂L/∂o`, the peak opacity (empty for additive scenes).
     pub v_opacities: Vec<f64>,
     /// Alpha scenes: `∂L/∂sh`, laid out as [`crate::model::Scene::sh`].
@@ -66,15 +72,21 @@ impl Gradients {
         self.reset(scene.len());
         self.v_opacities.resize(scene.opacities.len(), 0.0);
         self.v_sh.resize(scene.sh.len(), [0.0; 3]);
+        self.v_accelerations
+            .resize(scene.accelerations.len(), [0.0; 3]);
+        self.v_angular_velocities
+            .resize(scene.angular_velocities.len(), [0.0; 4]);
     }
 
-    /// Sets every gradient to zero, for `n` kernels (alpha fields emptied: see
+    /// Sets every gradient to zero, for `n` kernels (alpha and SPEC §9 fields emptied: see
     /// [`Self::for_scene`]).
     pub fn reset(&mut self, n: usize) {
         self.v_rotations.clear();
         self.v_rotations.resize(n, [0.0; 4]);
         self.v_opacities.clear();
         self.v_sh.clear();
+        self.v_accelerations.clear();
+        self.v_angular_velocities.clear();
         self.v_means.clear();
         self.v_means.resize(n, [0.0; 4]);
         self.v_amplitudes.clear();
@@ -105,6 +117,8 @@ impl Gradients {
         add_all(&mut self.v_scales, &other.v_scales);
         add_all(&mut self.v_rotations, &other.v_rotations);
         add_all(&mut self.v_sh, &other.v_sh);
+        add_all(&mut self.v_accelerations, &other.v_accelerations);
+        add_all(&mut self.v_angular_velocities, &other.v_angular_velocities);
         assert_eq!(self.v_opacities.len(), other.v_opacities.len());
         for (total, part) in self.v_opacities.iter_mut().zip(&other.v_opacities) {
             *total += part;
@@ -115,7 +129,8 @@ impl Gradients {
     }
 
     /// Makes the rotation gradients those of the quaternions as a file stores them, given
-    /// their norms `|q|` (one per kernel; the scene holds `q/|q|`): SPEC §8 differentiates
+    /// their norms `|q|` (one per kernel; the scene holds `q/|q|`, except a turning kernel's
+    /// `q` as stored, SPEC §9, whose norm is given as 1): SPEC §8 differentiates
     /// the stored quaternion through its normalisation, and `∂(q/|q|)/∂q = (I - q̂ q̂ᵀ)/|q|`
     /// carries a factor `1/|q|` beside the unit quaternion's.
     ///

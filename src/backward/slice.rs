@@ -11,6 +11,17 @@
 //! ∂L/∂R         = 2 ∂L/∂Σ3 R diag(s²)          then through R(q̂) and q̂ = q/|q|
 //! ```
 //!
+//! SPEC §9 (optional acceleration `a` and quaternion rate `ω`, `d_t = τ - t`):
+//! `m = (x, y, z) + v d_t + ½ a d_t²` and `R = R(p̂)` with `p = q + ω d_t`, `p̂ = p/|p|`, so
+//!
+//! ```text
+//! ∂L/∂a  = ½ d_t² ∂L/∂m
+//! ∂L/∂t -= d_t aᵀ ∂L/∂m + ωᵀ ∂L/∂p             (∂m/∂t = -(v + a d_t), ∂p/∂t = -ω)
+//! ∂L/∂q  = ∂L/∂p = (I - p̂ p̂ᵀ) ∂L/∂p̂ / |p|,   ∂L/∂ω = d_t ∂L/∂p
+//! ```
+//!
+//! (a kernel with ω = 0 is the line above, `q` unit).
+//!
 //! Alpha scenes (SPEC §8) carry the weight on the opacity, `o(τ) = o w`, and a colour
 //! `max(0, A + Σ_j Y_j(ω) sh_j)` with `ω = (m - c)/|m - c|`:
 //!
@@ -29,7 +40,7 @@ use crate::backward::project::SliceGradients;
 use crate::colour::{camera_centre, raw_colour, sh_basis, sh_basis_gradient, view_direction};
 use crate::model::camera::Camera;
 use crate::model::scene::{Blend, Scene};
-use crate::slice::{SlicedKernels, rotation_matrix};
+use crate::slice::{SlicedKernels, rotation_matrix, turned_quaternion};
 
 /// Adds the kernel gradients of one view to `grads` (sized for the scene:
 /// [`Gradients::for_scene`]). The kernels run in blocks, in parallel: each kernel takes the
@@ -88,6 +99,10 @@ struct KernelGradients<'a> {
     velocity: &'a mut [f64; 3],
     scale: &'a mut [f64; 4],
     rotation: &'a mut [f64; 4],
+    /// SPEC §9: when the scene has accelerations.
+    acceleration: Option<&'a mut [f64; 3]>,
+    /// SPEC §9: when the scene has angular velocities.
+    angular_velocity: Option<&'a mut [f64; 4]>,
     /// Alpha scenes only.
     opacity: Option<&'a mut f64>,
     /// Alpha scenes: the kernel's `sh_count` coefficients (empty otherwise).
@@ -104,6 +119,8 @@ struct KernelBlock<'a> {
     velocities: &'a mut [[f64; 3]],
     scales: &'a mut [[f64; 4]],
     rotations: &'a mut [[f64; 4]],
+    accelerations: &'a mut [[f64; 3]],
+    angular_velocities: &'a mut [[f64; 4]],
     opacities: &'a mut [f64],
     sh: &'a mut [[f64; 3]],
 }
@@ -119,6 +136,8 @@ impl KernelBlock<'_> {
             velocity: &mut self.velocities[k],
             scale: &mut self.scales[k],
             rotation: &mut self.rotations[k],
+            acceleration: self.accelerations.get_mut(k),
+            angular_velocity: self.angular_velocities.get_mut(k),
             opacity: self.opacities.get_mut(k),
             sh: self
                 .sh
@@ -166,6 +185,10 @@ fn kernel_blocks<'a>(
     } else {
         &mut []
     };
+    let accelerating = !grads.v_accelerations.is_empty();
+    let turning = !grads.v_angular_velocities.is_empty();
+    let mut accelerations = grads.v_accelerations.as_mut_slice();
+    let mut angular_velocities = grads.v_angular_velocities.as_mut_slice();
     let mut slice = 0;
     for first in (0..n).step_by(KERNELS) {
         let len = KERNELS.min(n - first);
@@ -180,6 +203,8 @@ fn kernel_blocks<'a>(
             velocities: take(&mut velocities, len),
             scales: take(&mut scales, len),
             rotations: take(&mut rotations, len),
+            accelerations: take(&mut accelerations, if accelerating { len } else { 0 }),
+            angular_velocities: take(&mut angular_velocities, if turning { len } else { 0 }),
             opacities: take(&mut opacities, if alpha { len } else { 0 }),
             sh: take(&mut sh, count * len),
         });
@@ -232,15 +257,33 @@ impl SliceView<'_> {
                     .sum::<f64>(),
             )
         };
-        let v_t = v_t_weight - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
+        let mut v_t = v_t_weight - (0..3).map(|c| velocity[c] * v_m[c]).sum::<f64>();
+        if let Some(acceleration) = scene.accelerations.get(i) {
+            // m = … + ½ a d_t²: ∂m/∂a = ½ d_t², ∂m/∂t gains -a d_t.
+            v_t -= dt * (0..3).map(|c| acceleration[c] * v_m[c]).sum::<f64>();
+            if let Some(v_acceleration) = grads.acceleration.as_deref_mut() {
+                let half_dt2 = 0.5 * dt * dt;
+                for c in 0..3 {
+                    v_acceleration[c] += half_dt2 * v_m[c];
+                }
+            }
+        }
         let mean = &mut *grads.mean;
         for c in 0..3 {
             mean[c] += v_m[c];
             grads.velocity[c] += dt * v_m[c];
         }
-        mean[3] += v_t;
+        // SPEC §9: the axes at τ are those of p = q + ω d_t (normalised); ω = 0 gives q.
+        let omega = scene.angular_velocity(i);
+        let (turned, r) = if omega == [0.0; 4] {
+            (scene.rotations[i], rotation_matrix(scene.rotations[i]))
+        } else {
+            let q = scene.rotations[i];
+            let turned = std::array::from_fn(|k| q[k] + omega[k] * dt);
+            let unit = turned_quaternion(q, omega, dt).expect("a sliced kernel's q(τ) is finite");
+            (turned, rotation_matrix(unit))
+        };
         // Scales: the spatial ones through Σ3, σt through the temporal weight.
-        let r = rotation_matrix(scene.rotations[i]);
         let v_sigma = from_slice.v_covariances[s];
         let scale = scene.scales[i];
         let v_scale = &mut *grads.scale;
@@ -256,10 +299,20 @@ impl SliceView<'_> {
             v_scale[k] += 2.0 * scale[k] * diagonal;
         }
         v_scale[3] += v_st_weight;
-        let v_rotation = rotation_gradient(scene.rotations[i], scale, &r, &v_sigma);
+        let v_rotation = rotation_gradient(turned, scale, &r, &v_sigma);
         for (total, v) in grads.rotation.iter_mut().zip(v_rotation) {
             *total += v;
         }
+        if omega != [0.0; 4] {
+            // ∂p/∂ω = d_t, ∂p/∂t = -ω.
+            v_t -= (0..4).map(|k| omega[k] * v_rotation[k]).sum::<f64>();
+        }
+        if let Some(v_omega) = grads.angular_velocity.as_deref_mut() {
+            for k in 0..4 {
+                v_omega[k] += dt * v_rotation[k];
+            }
+        }
+        grads.mean[3] += v_t;
     }
 }
 

@@ -1,7 +1,9 @@
 //! The `splat4d grad` file: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3],
 //! "velocity": [3]}]}`, kernels in scene order; numbers read back exactly. Alpha scenes
 //! (SPEC §8) add every other field per kernel: `"scale": [4]`, `"rotation": [4]` (of the
-//! stored quaternion), `"opacity": o` and, with SH, `"sh": [[r, g, b], …]`.
+//! stored quaternion), `"opacity": o` and, with SH, `"sh": [[r, g, b], …]`. Scenes with
+//! SPEC §9 fields add `"acceleration": [3]` and `"angular_velocity": [4]` per kernel (each
+//! when the scene has it).
 
 use serde::{Deserialize, Serialize};
 
@@ -15,6 +17,10 @@ struct KernelGradientEntry {
     mean: [f64; 4],
     amplitude: [f64; 3],
     velocity: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    acceleration: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    angular_velocity: Option<[f64; 4]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     scale: Option<[f64; 4]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -49,6 +55,8 @@ pub fn gradients_to_json(grads: &Gradients, loss: f64) -> String {
                 mean: grads.v_means[i],
                 amplitude: grads.v_amplitudes[i],
                 velocity: grads.v_velocities[i],
+                acceleration: grads.v_accelerations.get(i).copied(),
+                angular_velocity: grads.v_angular_velocities.get(i).copied(),
                 scale: alpha.then(|| grads.v_scales[i]),
                 rotation: alpha.then(|| grads.v_rotations[i]),
                 opacity: alpha.then(|| grads.v_opacities[i]),
@@ -74,6 +82,16 @@ pub fn gradients_from_json(text: &str, origin: &str) -> Result<(f64, Gradients)>
             grads.v_opacities[i] = opacity;
         }
         grads.v_sh.extend(k.sh.iter().flatten());
+        if let Some(acceleration) = k.acceleration {
+            grads.v_accelerations.resize(file.kernels.len(), [0.0; 3]);
+            grads.v_accelerations[i] = acceleration;
+        }
+        if let Some(angular_velocity) = k.angular_velocity {
+            grads
+                .v_angular_velocities
+                .resize(file.kernels.len(), [0.0; 4]);
+            grads.v_angular_velocities[i] = angular_velocity;
+        }
     }
     Ok((file.loss, grads))
 }

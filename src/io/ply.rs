@@ -3,8 +3,8 @@
 //! **3DGS slice** ([`write_slice_ply`]), the layout common splat viewers read: binary little
 //! endian, `element vertex N` with float properties
 //! `x y z nx ny nz f_dc_0 f_dc_1 f_dc_2 opacity scale_0 scale_1 scale_2 rot_0 rot_1 rot_2 rot_3`:
-//! the slice at τ (SPEC §2) of every kernel alive under the cut-off, positions `m(τ)`,
-//! `scale_i = ln σ_i`, `rot` the unit quaternion (w first), normals zero. 3DGS composites
+//! the slice at τ (SPEC §2, §9) of every kernel alive under the cut-off, positions `m(τ)`,
+//! `scale_i = ln σ_i`, `rot` the unit quaternion `q(τ)` (w first), normals zero. 3DGS composites
 //! colour with opacity while splat4d adds amplitudes, so the mapping is approximate: with
 //! `p = max_c |a_c(τ)|`, opacity `α = clamp(p, 0.01, 0.99)` stored as `logit(α)`, colour
 //! `c = a(τ)/α` stored as the SH DC term `f_dc = (c - ½)/C0`, `C0 = 0.28209479177387814`. For
@@ -19,7 +19,9 @@
 //!
 //! **4D scene** ([`write_scene_ply`], [`read_scene_ply`]): binary little endian, `element
 //! vertex N` with double properties `x y z t sigma_x sigma_y sigma_z sigma_t amp_0 amp_1 amp_2
-//! rot_0 rot_1 rot_2 rot_3 vx vy vz` (σ linear, rotation w first), the background as
+//! rot_0 rot_1 rot_2 rot_3 vx vy vz` (σ linear, rotation w first), then for scenes with SPEC
+//! §9 fields `ax ay az` and `omega_0 omega_1 omega_2 omega_3` (each only when the scene has
+//! it; a turning kernel's quaternion as stored), the background as
 //! `comment background r g b`, the up axis when known as `comment up z`. Exact: every f64 round-trips. 144 bytes a kernel, against about
 //! 600 in JSON. Float properties are accepted too; other properties are ignored.
 //!
@@ -35,7 +37,7 @@ use crate::model::Up;
 use crate::model::error::{Error, Result};
 use crate::model::scene::{Blend, Kernel, Scene};
 use crate::parallel::extend_scene;
-use crate::slice::{SlicedKernels, slice};
+use crate::slice::{SlicedKernels, slice, turned_quaternion};
 
 /// The zeroth-order spherical-harmonic constant of 3DGS.
 pub const SH_C0: f64 = 0.282_094_791_773_878_14;
@@ -51,6 +53,12 @@ pub const SCENE_PROPERTIES: [&str; 18] = [
     "x", "y", "z", "t", "sigma_x", "sigma_y", "sigma_z", "sigma_t", "amp_0", "amp_1", "amp_2",
     "rot_0", "rot_1", "rot_2", "rot_3", "vx", "vy", "vz",
 ];
+
+/// Optional properties of a 4D scene whose kernels accelerate (SPEC §9).
+pub const ACCELERATION_PROPERTIES: [&str; 3] = ["ax", "ay", "az"];
+
+/// Optional properties of a 4D scene whose kernels turn (SPEC §9), `ω` w first.
+pub const ANGULAR_VELOCITY_PROPERTIES: [&str; 4] = ["omega_0", "omega_1", "omega_2", "omega_3"];
 
 fn header(count: usize, kind: &str, properties: &[&str], comments: &[String]) -> String {
     let mut h = String::from("ply\nformat binary_little_endian 1.0\ncomment written by splat4d\n");
@@ -118,7 +126,14 @@ pub fn write_slice_ply(
             sh.get(j).map_or(0.0, |t| t[c])
         });
         let [sx, sy, sz, _] = scene.scales[i];
-        let q = scene.rotations[i];
+        // SPEC §9: the axes at τ, `q(τ)` (a sliced kernel's is finite and nonzero).
+        let omega = scene.angular_velocity(i);
+        let q = if omega == [0.0; 4] {
+            scene.rotations[i]
+        } else {
+            turned_quaternion(scene.rotations[i], omega, tau - scene.means[i][3])
+                .expect("a sliced kernel's q(τ) is finite")
+        };
         [m0, m1, m2, 0.0, 0.0, 0.0, dc[0], dc[1], dc[2]]
             .into_iter()
             .chain(f_rest)
@@ -225,6 +240,16 @@ pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
         names.push("opacity");
         names.extend(sh_names.iter().map(String::as_str));
     }
+    let (accelerating, turning) = (
+        !scene.accelerations.is_empty(),
+        !scene.angular_velocities.is_empty(),
+    );
+    if accelerating {
+        names.extend(ACCELERATION_PROPERTIES);
+    }
+    if turning {
+        names.extend(ANGULAR_VELOCITY_PROPERTIES);
+    }
     write_atomically(path, |w| {
         w.write_all(header(scene.len(), "double", &names, &scene_comments(scene)).as_bytes())?;
         for i in 0..scene.len() {
@@ -245,6 +270,16 @@ pub fn write_scene_ply(scene: &Scene, path: &Path) -> Result<()> {
             if alpha {
                 w.write_all(&scene.opacity(i).to_le_bytes())?;
                 for value in scene.sh_of(i).iter().flatten() {
+                    w.write_all(&value.to_le_bytes())?;
+                }
+            }
+            if accelerating {
+                for value in scene.accelerations[i] {
+                    w.write_all(&value.to_le_bytes())?;
+                }
+            }
+            if turning {
+                for value in scene.angular_velocities[i] {
                     w.write_all(&value.to_le_bytes())?;
                 }
             }
@@ -384,6 +419,10 @@ struct SceneLayout {
     fields: Vec<(usize, usize)>,
     /// 4D alpha scenes: `opacity`.
     opacity: Option<(usize, usize)>,
+    /// 4D scenes with SPEC §9 fields: `ax ay az` ([`ACCELERATION_PROPERTIES`]).
+    acceleration: Option<Vec<(usize, usize)>>,
+    /// 4D scenes with SPEC §9 fields: `omega_0 … omega_3` ([`ANGULAR_VELOCITY_PROPERTIES`]).
+    angular_velocity: Option<Vec<(usize, usize)>>,
     /// The SH coefficients, in the file's naming order (`sh_k` or `f_rest_k`).
     sh: Vec<(usize, usize)>,
     blend: Blend,
@@ -545,6 +584,21 @@ fn header_layout(header: Header, comments: SceneComments, origin: &str) -> Resul
         PlyKind::Scene4d => find("opacity").transpose()?,
         PlyKind::Gaussian3d => None,
     };
+    // SPEC §9: all of a field's properties or none.
+    let optional = |names: &[&str]| -> Result<Option<Vec<(usize, usize)>>> {
+        if kind == PlyKind::Gaussian3d || !names.iter().any(|n| has(n)) {
+            return Ok(None);
+        }
+        names
+            .iter()
+            .map(|name| {
+                find(name).unwrap_or_else(|| Err(bad(format!("missing property `{name}`"))))
+            })
+            .collect::<Result<Vec<_>>>()
+            .map(Some)
+    };
+    let acceleration = optional(&ACCELERATION_PROPERTIES)?;
+    let angular_velocity = optional(&ANGULAR_VELOCITY_PROPERTIES)?;
     if kind == PlyKind::Gaussian3d {
         blend = Blend::Alpha;
     }
@@ -567,6 +621,8 @@ fn header_layout(header: Header, comments: SceneComments, origin: &str) -> Resul
         kind,
         fields,
         opacity,
+        acceleration,
+        angular_velocity,
         sh,
         blend,
         background,
@@ -636,6 +692,12 @@ impl SceneLayout {
                 amplitude: [v(8), v(9), v(10)],
                 rotation: [v(11), v(12), v(13), v(14)],
                 velocity: [v(15), v(16), v(17)],
+                acceleration: self.acceleration.as_ref().map_or([0.0; 3], |fields| {
+                    std::array::from_fn(|k| value_at(row, fields[k]))
+                }),
+                angular_velocity: self.angular_velocity.as_ref().map_or([0.0; 4], |fields| {
+                    std::array::from_fn(|k| value_at(row, fields[k]))
+                }),
             },
             PlyKind::Gaussian3d => Kernel {
                 mean: [v(0), v(1), v(2), 0.0],
@@ -643,6 +705,8 @@ impl SceneLayout {
                 amplitude: [3, 4, 5].map(|k| SH_C0 * v(k) + 0.5),
                 rotation: [v(10), v(11), v(12), v(13)],
                 velocity: [0.0; 3],
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             },
         }
     }

@@ -67,10 +67,19 @@ struct KernelRecord {
     rotation: [f64; 4],
     #[serde(default)]
     velocity: [f64; 3],
+    #[serde(default, skip_serializing_if = "is_zero")]
+    acceleration: [f64; 3],
+    #[serde(default, skip_serializing_if = "is_zero")]
+    angular_velocity: [f64; 4],
     #[serde(default, skip_serializing_if = "Option::is_none")]
     opacity: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     sh: Option<Vec<[f64; 3]>>,
+}
+
+/// True for an all-zero SPEC §9 field, which is not written.
+fn is_zero<const N: usize>(values: &[f64; N]) -> bool {
+    values.iter().all(|&v| v == 0.0)
 }
 
 fn identity_rotation() -> [f64; 4] {
@@ -105,6 +114,8 @@ fn scene_from_file(file: SceneFile, origin: &str) -> Result<Scene> {
             amplitude: k.amplitude,
             rotation: k.rotation,
             velocity: k.velocity,
+            acceleration: k.acceleration,
+            angular_velocity: k.angular_velocity,
         })
         .collect();
     let mut scene = Scene::from_kernels(&kernels, file.background, origin)?;
@@ -178,6 +189,8 @@ pub fn scene_to_json(scene: &Scene) -> String {
                 amplitude: k.amplitude,
                 rotation: k.rotation,
                 velocity: k.velocity,
+                acceleration: k.acceleration,
+                angular_velocity: k.angular_velocity,
                 opacity: alpha.then(|| scene.opacity(i)),
                 sh: (alpha && scene.sh_count > 0).then(|| scene.sh_of(i).to_vec()),
             }

@@ -5,7 +5,12 @@
 //! unnormalised peak amplitude `[r, g, b]` (any finite real), a Hamilton quaternion
 //! `[w, x, y, z]` turning the spatial axes (normalised on load; active rotation, the columns
 //! of R are the kernel's axes in world space) and a velocity `[vx, vy, vz]` in world units per
-//! time unit (not rotated). Parameters are stored in f64: the per-kernel stage of the
+//! time unit (not rotated). Two optional fields (SPEC §9) let a kernel follow a parabola and
+//! a turn: an acceleration `[ax, ay, az]` and the quaternion's rate `[ωw, ωx, ωy, ωz]`, with
+//! `m(τ) = xyz + v d_t + ½ a d_t²` and axes from `(q + ω d_t)/|q + ω d_t|`, `d_t = τ - t`;
+//! a turning kernel keeps its quaternion as written. They live beside the kernels
+//! ([`Scene::accelerations`], [`Scene::angular_velocities`]), each empty when no kernel has
+//! one. Parameters are stored in f64: the per-kernel stage of the
 //! renderer works in f64 (SPEC §5, precision).
 //!
 //! A scene also declares its [`Blend`] (SPEC §8): `additive` (§5, the default) sums the
@@ -47,6 +52,13 @@ pub struct Kernel {
     /// World units per time unit.
     #[serde(default)]
     pub velocity: [f64; 3],
+    /// World units per time unit² (SPEC §9; zero: §1's motion).
+    #[serde(default)]
+    pub acceleration: [f64; 3],
+    /// The rate of the stored quaternion per time unit, `[ωw, ωx, ωy, ωz]` (SPEC §9; zero:
+    /// §1's fixed rotation).
+    #[serde(default)]
+    pub angular_velocity: [f64; 4],
 }
 
 fn identity_rotation() -> [f64; 4] {
@@ -63,12 +75,52 @@ impl Kernel {
             amplitude,
             rotation: identity_rotation(),
             velocity: [0.0; 3],
+            acceleration: [0.0; 3],
+            angular_velocity: [0.0; 4],
         }
+    }
+
+    /// Moves the kernel's time mean by `dt` along its own path (SPEC §9): the centre to
+    /// `m(t + dt)`, the velocity to `v + a dt`, a turning kernel's quaternion to `q + ω dt`
+    /// (as written); the acceleration and angular velocity stay. Its slice at any τ is then
+    /// the same centre and axes as before (the temporal weight is the caller's). Without §9
+    /// fields only the centre moves, by `v dt`.
+    pub fn advance_on_path(&mut self, dt: f64) {
+        self.mean[3] += dt;
+        for c in 0..3 {
+            self.mean[c] += self.velocity[c] * dt;
+        }
+        if self.acceleration != [0.0; 3] {
+            for c in 0..3 {
+                self.mean[c] += 0.5 * self.acceleration[c] * dt * dt;
+                self.velocity[c] += self.acceleration[c] * dt;
+            }
+        }
+        if self.turns() {
+            for (q, w) in self.rotation.iter_mut().zip(self.angular_velocity) {
+                *q += w * dt;
+            }
+        }
+    }
+
+    /// True when the kernel accelerates or turns (SPEC §9).
+    #[must_use]
+    pub fn has_motion(&self) -> bool {
+        self.acceleration != [0.0; 3] || self.turns()
+    }
+
+    /// True when the kernel turns (SPEC §9): its angular velocity is not zero, so its
+    /// quaternion is kept as written.
+    #[must_use]
+    pub fn turns(&self) -> bool {
+        self.angular_velocity != [0.0; 4]
     }
 
     /// The kernel as a scene holds it, or an error naming kernel `index` of `origin` and the
     /// field: every value finite, scales > 0, the rotation normalised (a quaternion within a
-    /// few ulps of unit norm is kept as it is, so that files round-trip exactly).
+    /// few ulps of unit norm is kept as it is, so that files round-trip exactly). A kernel that
+    /// turns (SPEC §9, [`Kernel::turns`]) keeps its quaternion as written: `q + ω d_t` is
+    /// normalised at each τ instead. A zero quaternion is an error either way (§1).
     pub fn checked(&self, index: usize, origin: &str) -> Result<Kernel> {
         let all_finite = [
             &self.mean[..],
@@ -76,6 +128,8 @@ impl Kernel {
             &self.amplitude,
             &self.rotation,
             &self.velocity,
+            &self.acceleration,
+            &self.angular_velocity,
         ]
         .iter()
         .all(|values| values.iter().all(|v| v.is_finite()));
@@ -88,6 +142,8 @@ impl Kernel {
             check_finite(origin, &item, "amplitude", &self.amplitude)?;
             check_finite(origin, &item, "rotation", &self.rotation)?;
             check_finite(origin, &item, "velocity", &self.velocity)?;
+            check_finite(origin, &item, "acceleration", &self.acceleration)?;
+            check_finite(origin, &item, "angular_velocity", &self.angular_velocity)?;
         }
         if let Some(c) = self.scale.iter().position(|&s| s <= 0.0) {
             return Err(Error::invalid(
@@ -107,7 +163,7 @@ impl Kernel {
             ));
         }
         // Dividing a unit quaternion again would only perturb its last bits.
-        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON;
+        let unit = (norm - 1.0).abs() <= 4.0 * f64::EPSILON || self.turns();
         Ok(Kernel {
             rotation: if unit {
                 self.rotation
@@ -117,6 +173,18 @@ impl Kernel {
             ..*self
         })
     }
+}
+
+/// Pushes `value` as item `n - 1` of `column`, which holds either nothing (every earlier
+/// value zero) or `n - 1` values: it stays empty while the values are zero.
+fn push_optional<T: Copy + Default + PartialEq>(column: &mut Vec<T>, n: usize, value: T) {
+    if column.is_empty() && value == T::default() {
+        return;
+    }
+    if column.len() < n - 1 {
+        column.resize(n - 1, T::default());
+    }
+    column.push(value);
 }
 
 /// How a scene's kernels make a pixel (SPEC §5 and §8).
@@ -172,10 +240,15 @@ pub struct Scene {
     pub scales: Vec<[f64; 4]>,
     /// `[r, g, b]` per kernel.
     pub amplitudes: Vec<[f64; 3]>,
-    /// Unit quaternions `[w, x, y, z]` per kernel.
+    /// Quaternions `[w, x, y, z]` per kernel: unit, except for kernels that turn (SPEC §9).
     pub rotations: Vec<[f64; 4]>,
     /// `[vx, vy, vz]` per kernel.
     pub velocities: Vec<[f64; 3]>,
+    /// `[ax, ay, az]` per kernel (SPEC §9), or empty when no kernel accelerates.
+    pub accelerations: Vec<[f64; 3]>,
+    /// `[ωw, ωx, ωy, ωz]` per kernel (SPEC §9), or empty when no kernel turns. A kernel that
+    /// turns keeps its quaternion in [`Scene::rotations`] as written (not unit).
+    pub angular_velocities: Vec<[f64; 4]>,
     /// `[r, g, b]`, linear.
     pub background: [f64; 3],
     /// The world's up axis when known (a scene fitted from a dataset carries its cameras'
@@ -215,8 +288,36 @@ impl Scene {
             scene.amplitudes.push(kernel.amplitude);
             scene.rotations.push(kernel.rotation);
             scene.velocities.push(kernel.velocity);
+            scene.push_motion(kernel.acceleration, kernel.angular_velocity);
         }
         Ok(scene)
+    }
+
+    /// Appends the SPEC §9 fields of the kernel just pushed (the last one of
+    /// [`Scene::means`]), keeping each array empty while every value is zero and full length
+    /// once one is not.
+    pub fn push_motion(&mut self, acceleration: [f64; 3], angular_velocity: [f64; 4]) {
+        let n = self.means.len();
+        push_optional(&mut self.accelerations, n, acceleration);
+        push_optional(&mut self.angular_velocities, n, angular_velocity);
+    }
+
+    /// Kernel `i`'s acceleration (zero when the scene has none).
+    #[must_use]
+    pub fn acceleration(&self, i: usize) -> [f64; 3] {
+        self.accelerations.get(i).copied().unwrap_or_default()
+    }
+
+    /// Kernel `i`'s angular velocity (zero when the scene has none).
+    #[must_use]
+    pub fn angular_velocity(&self, i: usize) -> [f64; 4] {
+        self.angular_velocities.get(i).copied().unwrap_or_default()
+    }
+
+    /// True when some kernel has a SPEC §9 field.
+    #[must_use]
+    pub fn has_motion(&self) -> bool {
+        !self.accelerations.is_empty() || !self.angular_velocities.is_empty()
     }
 
     /// Room for `additional` more kernels in every array.
@@ -249,6 +350,8 @@ impl Scene {
             amplitude: self.amplitudes[i],
             rotation: self.rotations[i],
             velocity: self.velocities[i],
+            acceleration: self.acceleration(i),
+            angular_velocity: self.angular_velocity(i),
         }
     }
 
@@ -262,6 +365,22 @@ impl Scene {
     /// opacities and SH too): for scenes changed in code.
     pub fn validate(&self, origin: &str) -> Result<()> {
         Scene::from_kernels(&self.kernels(), self.background, origin)?;
+        for (field, len) in [
+            ("acceleration", self.accelerations.len()),
+            ("angular_velocity", self.angular_velocities.len()),
+        ] {
+            if len != 0 && len != self.len() {
+                return Err(Error::invalid(
+                    origin,
+                    "scene",
+                    field,
+                    format!(
+                        "{len} values for {} kernels: one per kernel or none",
+                        self.len()
+                    ),
+                ));
+            }
+        }
         self.check_time_range(origin)?;
         self.check_appearance(origin)
     }

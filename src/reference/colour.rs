@@ -91,8 +91,7 @@ pub fn reference_alpha_kernels(
         .into_iter()
         .map(|kernel| {
             let i = kernel.index;
-            let [x, y, z, t] = scene.means[i];
-            let mean = DVec3::new(x, y, z) + DVec3::from(scene.velocities[i]) * (tau - t);
+            let mean = super::slice::reference_mean(scene, i, tau);
             let offset = mean - centre;
             let direction = if offset.length() > 0.0 {
                 offset / offset.length()

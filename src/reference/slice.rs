@@ -3,6 +3,8 @@
 //!
 //! ```text
 //! d = (τ - t)/st,   w = exp(-½ d²),   m = (x, y, z) + v (τ - t),   Σ3 = R diag(s²) Rᵀ
+//! §9:  m = (x, y, z) + v d_t + ½ a d_t²,   R from (q + ω d_t)/|q + ω d_t|   (d_t = τ - t;
+//!      culled when q + ω d_t is zero or not finite)
 //! qmax = 2 (ln max_c |A_c| - ½ d² - ln ε),  culled iff qmax ≤ 0 (ε = 0: qmax = +∞)
 //! ```
 //!
@@ -34,6 +36,16 @@ pub struct ReferenceSlice {
     pub d: f64,
 }
 
+/// `m(τ) = (x, y, z) + v (τ - t) + ½ a (τ - t)²` of kernel `index` (SPEC §2, §9).
+#[must_use]
+pub fn reference_mean(scene: &Scene, index: usize, tau: f64) -> DVec3 {
+    let [x, y, z, t] = scene.means[index];
+    let dt = tau - t;
+    DVec3::new(x, y, z)
+        + DVec3::from(scene.velocities[index]) * dt
+        + DVec3::from(scene.acceleration(index)) * (0.5 * dt * dt)
+}
+
 /// Kernel `index` of `scene` sliced at `tau` with cut-off `cutoff`, or `None` when culled.
 #[must_use]
 pub fn reference_slice(
@@ -42,7 +54,7 @@ pub fn reference_slice(
     tau: f64,
     cutoff: f64,
 ) -> Option<ReferenceSlice> {
-    let [x, y, z, t] = scene.means[index];
+    let t = scene.means[index][3];
     let [sx, sy, sz, st] = scene.scales[index];
     let amp = scene.amplitudes[index];
     // §5 culling in log space.
@@ -68,9 +80,22 @@ pub fn reference_slice(
     if alpha && peak * w == 0.0 {
         return None;
     }
-    let mean = DVec3::new(x, y, z) + DVec3::from(scene.velocities[index]) * (tau - t);
+    let mean = reference_mean(scene, index, tau);
     let [qw, qx, qy, qz] = scene.rotations[index];
-    let r = DMat3::from_quat(DQuat::from_xyzw(qx, qy, qz, qw).normalize());
+    let [ww, wx, wy, wz] = scene.angular_velocity(index);
+    // SPEC §9: q(τ) = q + ω (τ - t), normalised; culled when that is impossible.
+    let stored = DQuat::from_xyzw(qx, qy, qz, qw);
+    let unit = if [ww, wx, wy, wz] == [0.0; 4] {
+        stored.normalize()
+    } else {
+        let turned = stored + DQuat::from_xyzw(wx, wy, wz, ww) * (tau - t);
+        let length = turned.length();
+        if !(length > 0.0 && length.is_finite()) {
+            return None;
+        }
+        turned / length
+    };
+    let r = DMat3::from_quat(unit);
     let covariance =
         r * DMat3::from_diagonal(DVec3::new(sx * sx, sy * sy, sz * sz)) * r.transpose();
     Some(ReferenceSlice {

@@ -33,6 +33,8 @@ pub fn three_blobs_scene() -> Scene {
                 amplitude: [amplitude, 0.8 * amplitude, 0.6 * amplitude],
                 rotation: [1.0, 0.0, 0.0, 0.0],
                 velocity: [-0.5 * tau * angle.sin(), 0.0, 0.5 * tau * angle.cos()],
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             }
         })
         .collect();
@@ -43,6 +45,8 @@ pub fn three_blobs_scene() -> Scene {
         amplitude: [0.4, 0.9, 0.5],
         rotation: [half.cos(), 0.0, 0.0, half.sin()],
         velocity: [0.0; 3],
+        acceleration: [0.0; 3],
+        angular_velocity: [0.0; 4],
     });
     kernels.push(Kernel {
         mean: [0.5, -0.5, 0.3, 1.0],
@@ -50,6 +54,8 @@ pub fn three_blobs_scene() -> Scene {
         amplitude: [0.5, 0.6, 1.0],
         rotation: [1.0, 0.0, 0.0, 0.0],
         velocity: [1.0, 0.0, 0.0],
+        acceleration: [0.0; 3],
+        angular_velocity: [0.0; 4],
     });
     Scene::from_kernels(&kernels, [0.0; 3], "<three blobs>").expect("valid kernels")
 }

@@ -275,6 +275,8 @@ fn surfel_kernels(
                 amplitude: colour.map(|c| c * gain * sample.weight),
                 rotation: [q.w, q.x, q.y, q.z],
                 velocity: rate.transform_point3(local).into(),
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             });
             sample_weights.push(sample.weight);
         }

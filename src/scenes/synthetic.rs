@@ -48,6 +48,8 @@ pub fn bench_scene(n: usize, seed: u64) -> Scene {
                     rng.random_range(-0.2..0.2),
                     rng.random_range(-0.2..0.2),
                 ],
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             }
         })
         .collect();

@@ -313,6 +313,16 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
             &mut grads,
         )
     })??;
+    // A turning kernel's quaternion is held as stored (SPEC §9): its gradient already is.
+    let rotation_norms: Vec<f64> = (rotation_norms.iter().enumerate())
+        .map(|(i, &norm)| {
+            if scene.angular_velocity(i) == [0.0; 4] {
+                norm
+            } else {
+                1.0
+            }
+        })
+        .collect();
     grads.rotations_as_stored(&rotation_norms);
     // Nothing non-finite leaves (JSON would hold `null`).
     let count = scene.sh_count;
@@ -323,6 +333,8 @@ pub fn grad(request: &GradRequest) -> Result<GradSummary> {
             .chain(&grads.v_velocities[i])
             .chain(&grads.v_scales[i])
             .chain(&grads.v_rotations[i])
+            .chain(grads.v_accelerations.get(i).into_iter().flatten())
+            .chain(grads.v_angular_velocities.get(i).into_iter().flatten())
             .chain(grads.v_opacities.get(i))
             .chain(
                 grads

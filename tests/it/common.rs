@@ -78,6 +78,8 @@ pub fn hard_random_scene(camera: &Camera, seed: u64, general: usize) -> Scene {
                 ],
                 rotation: random_rotation(rng),
                 velocity,
+                acceleration: [0.0; 3],
+                angular_velocity: [0.0; 4],
             }
         };
     for _ in 0..general {

@@ -55,6 +55,8 @@ mod memory;
 /// Messages of the fourth attack round: values cut, the file's own property named, extreme
 /// times kept finite or refused.
 mod messages;
+/// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
+mod motion;
 /// Neural 3D Video rigs: poses_bounds.npy with extracted frames or videos.
 mod n3v;
 /// The output rule: only a command's own earlier output is replaced, never an input.

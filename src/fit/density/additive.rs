@@ -294,7 +294,8 @@ fn clone_down_gradient(parent: &Kernel, direction: [f64; 4]) -> Kernel {
 }
 
 /// Splits `parent` in time: it and the returned kernel sit `d = st/√2` before and after its
-/// time on its own path (`mean.xyz` moved by `velocity · Δt`), each with `st/√2`, so that each
+/// time on its own path (`mean.xyz` moved by `velocity · Δt`, and by SPEC §9's acceleration
+/// and turn: [`Kernel::advance_on_path`]), each with `st/√2`, so that each
 /// can follow its half of a curved motion with a velocity of its own. The pair keeps the
 /// parent's temporal mean and variance (`σ² + d² = st²`) and its integral over time (each
 /// half takes `A/√2`); [`rejoin`] is its inverse.
@@ -305,12 +306,8 @@ fn split_in_time(parent: &mut Kernel) -> Kernel {
         *a *= std::f64::consts::FRAC_1_SQRT_2;
     }
     let mut later = *parent;
-    for (kernel, dt) in [(&mut *parent, -half), (&mut later, half)] {
-        kernel.mean[3] += dt;
-        for c in 0..3 {
-            kernel.mean[c] += kernel.velocity[c] * dt;
-        }
-    }
+    parent.advance_on_path(-half);
+    later.advance_on_path(half);
     later
 }
 
@@ -325,11 +322,19 @@ fn halves_of_one_path(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool
     let (si, sj) = (scene.scales[i], scene.scales[j]);
     let (ai, aj) = (scene.amplitudes[i], scene.amplitudes[j]);
     let (ti, tj) = (scene.means[i][3], scene.means[j][3]);
-    same_rotation(scene, i, j)
+    !moves_beyond_velocity(scene, i)
+        && !moves_beyond_velocity(scene, j)
+        && same_rotation(scene, i, j)
         && (0..3).all(|k| (si[k] / sj[k]).ln().abs() <= tolerance)
         && (0..3).all(|c| ai[c] * aj[c] >= 0.0)
         && (ti - tj).abs() <= (si[3] + sj[3]) * (1.0 + tolerance)
         && on_one_line(scene, i, j, tolerance)
+}
+
+/// Whether kernel `i` accelerates or turns (SPEC §9): such kernels are never merged nor
+/// rejoined (the rules compare straight paths).
+fn moves_beyond_velocity(scene: &Scene, i: usize) -> bool {
+    scene.acceleration(i) != [0.0; 3] || scene.angular_velocity(i) != [0.0; 4]
 }
 
 /// Whether kernels `i` and `j` have the same rotation (up to the quaternion's sign).
@@ -393,7 +398,9 @@ pub const MERGE_LIMIT: usize = 4096;
 fn same_kernel(scene: &Scene, i: usize, j: usize, tolerance: f64) -> bool {
     let (si, sj) = (scene.scales[i], scene.scales[j]);
     let (ti, tj) = (scene.means[i][3], scene.means[j][3]);
-    same_rotation(scene, i, j)
+    !moves_beyond_velocity(scene, i)
+        && !moves_beyond_velocity(scene, j)
+        && same_rotation(scene, i, j)
         && (0..4).all(|k| (si[k] / sj[k]).ln().abs() <= tolerance)
         && (ti - tj).abs() <= tolerance * (si[3] * sj[3]).sqrt()
         && on_one_line(scene, i, j, tolerance)

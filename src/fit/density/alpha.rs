@@ -115,6 +115,7 @@ pub fn densify_and_prune(
         next.amplitudes.push(kernel.amplitude);
         next.rotations.push(kernel.rotation);
         next.velocities.push(kernel.velocity);
+        next.push_motion(kernel.acceleration, kernel.angular_velocity);
         opacities.push(scene.opacities[i]);
         sh.extend_from_slice(scene.sh_of(i));
         sources.push(source);
@@ -192,7 +193,12 @@ fn spans_motion(kernel: &Kernel, largest: usize, rules: &AlphaRules) -> bool {
 
 /// The two children of a split along axis `largest`: one σ apart, σ / 1.6 each.
 fn split(kernel: Kernel, largest: usize) -> [Kernel; 2] {
-    let r = crate::slice::rotation_matrix(kernel.rotation);
+    // A turning kernel's stored quaternion is not unit (SPEC §9): its axes at t are q/|q|.
+    let r = crate::slice::rotation_matrix(if kernel.turns() {
+        crate::slice::unit_quaternion(kernel.rotation)
+    } else {
+        kernel.rotation
+    });
     let sigma = kernel.scale[largest];
     let mut child = kernel;
     for a in 0..3 {
@@ -208,17 +214,14 @@ fn split(kernel: Kernel, largest: usize) -> [Kernel; 2] {
 }
 
 /// The two children of a split in time: σt / 2 either side of the parent's time mean,
-/// σt / 1.6 each, their means moved along the velocity so that both follow its path.
+/// σt / 1.6 each, their means moved along the parent's path (its velocity, and SPEC §9's
+/// acceleration and turn) so that both follow it.
 fn split_in_time(kernel: Kernel) -> [Kernel; 2] {
     let time_sigma = kernel.scale[3];
     [-0.5, 0.5].map(|sign| {
         let mut child = kernel;
         child.scale[3] /= 1.6;
-        let dt = sign * time_sigma;
-        child.mean[3] += dt;
-        for a in 0..3 {
-            child.mean[a] += kernel.velocity[a] * dt;
-        }
+        child.advance_on_path(sign * time_sigma);
         child
     })
 }

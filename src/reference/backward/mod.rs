@@ -59,6 +59,12 @@ pub fn reference_loss_and_gradients(
     let loss = mse(&image.pixels, target);
     let n = scene.len();
     let mut grads = Gradients::zeros(n);
+    grads
+        .v_accelerations
+        .resize(scene.accelerations.len(), [0.0; 3]);
+    grads
+        .v_angular_velocities
+        .resize(scene.angular_velocities.len(), [0.0; 4]);
     let scale = 2.0 / image.pixels.len() as f64;
     let v_image: Vec<f64> = image
         .pixels

@@ -10,7 +10,9 @@
 //! ```
 //!
 //! and the rotation through `Σ3` (SPEC §8: the quaternion as the scene holds it, of any
-//! length, through its normalisation).
+//! length, through its normalisation). SPEC §9: with `d_t = τ - t`, `∂L/∂a = ½ d_t² ∂L/∂m`,
+//! and with `p = q + ω d_t` (whose normalisation gives the axes) `∂L/∂q = ∂L/∂p`,
+//! `∂L/∂ω = d_t ∂L/∂p`; `∂L/∂t` gains `-d_t aᵀ ∂L/∂m - ωᵀ ∂L/∂p`.
 
 use glam::{DMat3, DQuat, DVec3, DVec4};
 
@@ -34,15 +36,22 @@ pub fn reference_slice_backward(
     let velocity = DVec3::from(scene.velocities[i]);
     let st = scene.scales[i][3];
     let dt = tau - scene.means[i][3];
-    let v_t = (0..3)
+    // SPEC §9: ∂m/∂t = -(v + a d_t), ∂m/∂a = ½ d_t².
+    let acceleration = DVec3::from(scene.acceleration(i));
+    let mut v_t = (0..3)
         .map(|c| amplitude[c] * kernel.weight * (kernel.d / st) * v_a[c])
         .sum::<f64>()
-        - velocity.dot(v_m);
-    grads.v_means[i] = [v_m.x, v_m.y, v_m.z, v_t];
+        - (velocity + acceleration * dt).dot(v_m);
+    if let Some(v_acceleration) = grads.v_accelerations.get_mut(i) {
+        *v_acceleration = (0.5 * dt * dt * v_m).into();
+    }
     grads.v_amplitudes[i] = v_a.map(|v| kernel.weight * v);
     grads.v_velocities[i] = (dt * v_m).into();
     // Scales: Σ3 = R S² Rᵀ; σt through the temporal weight.
-    let [qw, qx, qy, qz] = scene.rotations[i];
+    // SPEC §9: the axes of p = q + ω d_t (q itself when ω = 0), through p/|p|.
+    let omega = DVec4::from(scene.angular_velocity(i));
+    let turned = DVec4::from(scene.rotations[i]) + omega * dt;
+    let [qw, qx, qy, qz] = turned.to_array();
     let rotation = DMat3::from_quat(DQuat::from_xyzw(qx, qy, qz, qw).normalize());
     let v_axes = rotation.transpose() * v_sigma3 * rotation;
     let s = scene.scales[i];
@@ -54,7 +63,14 @@ pub fn reference_slice_backward(
             .map(|c| amplitude[c] * kernel.weight * (kernel.d * kernel.d / st) * v_a[c])
             .sum(),
     ];
-    grads.v_rotations[i] = quaternion_gradient(scene.rotations[i], &rotation, s, v_sigma3);
+    let v_turned = quaternion_gradient(turned.to_array(), &rotation, s, v_sigma3);
+    grads.v_rotations[i] = v_turned;
+    // ∂p/∂q = I, ∂p/∂ω = d_t I, ∂p/∂t = -ω.
+    v_t -= omega.dot(DVec4::from(v_turned));
+    if let Some(v_omega) = grads.v_angular_velocities.get_mut(i) {
+        *v_omega = (dt * DVec4::from(v_turned)).into();
+    }
+    grads.v_means[i] = [v_m.x, v_m.y, v_m.z, v_t];
 }
 
 /// `∂L/∂q` of the quaternion `q` as stored (any length; SPEC §8: through its
