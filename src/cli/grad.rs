@@ -14,7 +14,9 @@ pub struct GradArgs {
     /// Target image (`.exr` or `.png`), the camera's size.
     #[arg(long)]
     target: PathBuf,
-    /// Output JSON: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3], "velocity": [3]}]}`.
+    /// Output JSON: `{"loss": L, "kernels": [{"mean": [4], "amplitude": [3], "velocity": [3]}]}`;
+    /// alpha scenes add `scale`, `rotation`, `opacity` and `sh`, scenes with SPEC §9 motion
+    /// `acceleration` and `angular_velocity` (docs/formats.md).
     #[arg(long)]
     out: PathBuf,
     #[command(flatten)]
