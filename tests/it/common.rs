@@ -206,6 +206,84 @@ pub fn grad_of(grads: &splat4d::Gradients, i: usize) -> [f64; PARAMS] {
     )
 }
 
+/// Central differences of the reference MSE against `target`, every kernel's pair set
+/// frozen at the unperturbed scene (SPEC §6: the indicator is a constant): the image of
+/// `scene` and what each kernel adds to it (`None` where it is culled).
+pub struct FrozenDifferences<'a> {
+    scene: &'a Scene,
+    camera: &'a Camera,
+    tau: f64,
+    options: &'a splat4d::RenderOptions,
+    target: &'a [f32],
+    base: Vec<f64>,
+    parts: Vec<Option<(Vec<f64>, splat4d::reference::PairMask)>>,
+}
+
+impl<'a> FrozenDifferences<'a> {
+    /// The reference image of `scene` at `tau` and each kernel's part of it.
+    pub fn new(
+        scene: &'a Scene,
+        (camera, tau, options): (&'a Camera, f64, &'a splat4d::RenderOptions),
+        target: &'a [f32],
+    ) -> Self {
+        use splat4d::reference::{kernel_contribution, reference_kernel};
+        let n_px = 3 * camera.pixel_count();
+        let mut base: Vec<f64> = (0..n_px).map(|k| scene.background[k % 3]).collect();
+        let parts = (0..scene.len())
+            .map(|i| {
+                let part = reference_kernel(scene, i, camera, tau, options)
+                    .map(|k| kernel_contribution(&k, camera, None));
+                if let Some((image, _)) = &part {
+                    base.iter_mut().zip(image).for_each(|(b, c)| *b += c);
+                }
+                part
+            })
+            .collect();
+        FrozenDifferences {
+            scene,
+            camera,
+            tau,
+            options,
+            target,
+            base,
+            parts,
+        }
+    }
+
+    /// `(L(θ + h) - L(θ - h)) / 2h` when `set(scene, θ ± h)` moves one parameter of kernel
+    /// `i`; `None` where a step changes whether the kernel is culled.
+    pub fn central(
+        &self,
+        i: usize,
+        theta: f64,
+        h: f64,
+        set: impl Fn(&mut Scene, f64),
+    ) -> Option<f64> {
+        use splat4d::reference::{kernel_contribution, mse, reference_kernel};
+        let mut losses = [0.0; 2];
+        for (side, sign) in [1.0, -1.0].into_iter().enumerate() {
+            let mut moved = self.scene.clone();
+            set(&mut moved, theta + sign * h);
+            let kernel = reference_kernel(&moved, i, self.camera, self.tau, self.options);
+            let image: Vec<f64> = match (&self.parts[i], kernel) {
+                (Some((old, mask)), Some(k)) => {
+                    let (new, _) = kernel_contribution(&k, self.camera, Some(mask));
+                    self.base
+                        .iter()
+                        .zip(old)
+                        .zip(&new)
+                        .map(|((b, o), n)| b - o + n)
+                        .collect()
+                }
+                (None, None) => self.base.clone(),
+                _ => return None,
+            };
+            losses[side] = mse(&image, self.target);
+        }
+        Some((losses[0] - losses[1]) / (2.0 * h))
+    }
+}
+
 /// Central finite differences (f64) of the reference MSE against `target`, per kernel and
 /// parameter, with every kernel's pair set frozen at the unperturbed scene (SPEC §6: the
 /// indicator is a constant). `None` where a step changes whether the kernel is culled.
@@ -216,20 +294,9 @@ pub fn finite_difference_gradients(
     options: &splat4d::RenderOptions,
     target: &[f32],
 ) -> Vec<[Option<f64>; PARAMS]> {
-    use splat4d::reference::{kernel_contribution, mse, reference_kernel};
-    let n_px = 3 * camera.pixel_count();
-    let mut base: Vec<f64> = (0..n_px).map(|k| scene.background[k % 3]).collect();
-    let mut parts = Vec::new();
-    for i in 0..scene.len() {
-        let part = reference_kernel(scene, i, camera, tau, options)
-            .map(|k| kernel_contribution(&k, camera, None));
-        if let Some((image, _)) = &part {
-            base.iter_mut().zip(image).for_each(|(b, c)| *b += c);
-        }
-        parts.push(part);
-    }
+    let differences = FrozenDifferences::new(scene, (camera, tau, options), target);
     let mut out = Vec::new();
-    for (i, part) in parts.iter().enumerate() {
+    for i in 0..scene.len() {
         let mut row = [None; PARAMS];
         let theta = params(scene, i);
         for p in 0..PARAMS {
@@ -246,32 +313,8 @@ pub fn finite_difference_gradients(
                 // below a needle's small scale gradient (truncation is (h/s)² ~ 4e-8).
                 _ => 2e-4 * theta[p],
             };
-            let mut losses = [0.0; 2];
-            let mut ok = true;
-            for (side, sign) in [1.0, -1.0].into_iter().enumerate() {
-                let mut moved = scene.clone();
-                set_param(&mut moved, i, p, theta[p] + sign * h);
-                let kernel = reference_kernel(&moved, i, camera, tau, options);
-                let image: Vec<f64> = match (part, kernel) {
-                    (Some((old, mask)), Some(k)) => {
-                        let (new, _) = kernel_contribution(&k, camera, Some(mask));
-                        base.iter()
-                            .zip(old)
-                            .zip(&new)
-                            .map(|((b, o), n)| b - o + n)
-                            .collect()
-                    }
-                    (None, None) => base.clone(),
-                    _ => {
-                        ok = false;
-                        break;
-                    }
-                };
-                losses[side] = mse(&image, target);
-            }
-            if ok {
-                row[p] = Some((losses[0] - losses[1]) / (2.0 * h));
-            }
+            row[p] =
+                differences.central(i, theta[p], h, |moved, value| set_param(moved, i, p, value));
         }
         out.push(row);
     }

@@ -7,10 +7,10 @@
 //! `|Δ| ≤ 1e-7·scale + 1e-5·|fd|`, fast vs twin `|Δ| ≤ 1e-5·scale + 1e-5·|ref|`, `scale` the
 //! field's largest |gradient| over the scene's kernels.
 
-use crate::common::{assert_within_bound, hard_random_scene, jittered_target, test_camera};
-use splat4d::reference::{
-    kernel_contribution, mse, reference_kernel, reference_loss_and_gradients, render_reference,
+use crate::common::{
+    FrozenDifferences, assert_within_bound, hard_random_scene, jittered_target, test_camera,
 };
+use splat4d::reference::{mse, reference_loss_and_gradients, render_reference};
 use splat4d::render::DEFAULT_CUTOFF;
 use splat4d::{Camera, Gradients, Image, Kernel, RenderContext, RenderOptions, Scene};
 
@@ -137,20 +137,9 @@ fn finite_differences(
     options: &RenderOptions,
     target: &[f32],
 ) -> Vec<[Option<f64>; FIELDS]> {
-    let n_px = 3 * camera.pixel_count();
-    let mut base: Vec<f64> = (0..n_px).map(|k| scene.background[k % 3]).collect();
-    let parts: Vec<_> = (0..scene.len())
-        .map(|i| {
-            let part = reference_kernel(scene, i, camera, tau, options)
-                .map(|k| kernel_contribution(&k, camera, None));
-            if let Some((image, _)) = &part {
-                base.iter_mut().zip(image).for_each(|(b, c)| *b += c);
-            }
-            part
-        })
-        .collect();
+    let differences = FrozenDifferences::new(scene, (camera, tau, options), target);
     let mut out = Vec::new();
-    for (i, part) in parts.iter().enumerate() {
+    for i in 0..scene.len() {
         let mut row = [None; FIELDS];
         let [sx, sy, sz, st] = scene.scales[i];
         let spatial = 1e-4 * sx.min(sy).min(sz).min(0.01);
@@ -173,32 +162,7 @@ fn finite_differences(
                 18..21 => 1e-6 * theta.abs().max(1.0),
                 _ => 2e-4 * theta,
             };
-            let mut losses = [0.0; 2];
-            let mut ok = true;
-            for (side, sign) in [1.0, -1.0].into_iter().enumerate() {
-                let mut moved = scene.clone();
-                *field_mut(&mut moved, i, p) = theta + sign * h;
-                let image: Vec<f64> =
-                    match (part, reference_kernel(&moved, i, camera, tau, options)) {
-                        (Some((old, mask)), Some(k)) => {
-                            let (new, _) = kernel_contribution(&k, camera, Some(mask));
-                            base.iter()
-                                .zip(old)
-                                .zip(&new)
-                                .map(|((b, o), n)| b - o + n)
-                                .collect()
-                        }
-                        (None, None) => base.clone(),
-                        _ => {
-                            ok = false;
-                            break;
-                        }
-                    };
-                losses[side] = mse(&image, target);
-            }
-            if ok {
-                *value = Some((losses[0] - losses[1]) / (2.0 * h));
-            }
+            *value = differences.central(i, theta, h, |moved, v| *field_mut(moved, i, p) = v);
         }
         out.push(row);
     }
