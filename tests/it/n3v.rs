@@ -213,6 +213,26 @@ fn broken_rigs_are_refused_naming_file_item_and_field() {
     };
     let message = load_dataset(dir.path(), &options).unwrap_err().to_string();
     assert!(message.contains("`frames` 0:5:1"), "{message}");
+    // A camera's video that leads out of the folder is never read, nor a FIFO.
+    let rig_dir = tempfile::tempdir().unwrap();
+    write_poses(rig_dir.path(), &cameras, 1.0);
+    let outside = dir.path().join("outside.mp4");
+    std::fs::write(&outside, b"not a video").unwrap();
+    std::os::unix::fs::symlink(&outside, rig_dir.path().join("cam00.mp4")).unwrap();
+    let fifo = rig_dir.path().join("cam01.mp4");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    let message = refusal(rig_dir.path());
+    assert!(
+        message.contains("cam00") && message.contains("outside the dataset folder"),
+        "{message}"
+    );
+    std::fs::remove_file(rig_dir.path().join("cam00.mp4")).unwrap();
+    let message = refusal(rig_dir.path());
+    assert!(
+        message.contains("cam01") && message.contains("FIFO"),
+        "{message}"
+    );
 }
 
 /// Whether ffmpeg can be run; a note when it cannot.

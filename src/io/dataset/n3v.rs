@@ -121,10 +121,15 @@ fn find_cameras(dir: &Path) -> Result<Vec<RigCamera>> {
         };
         let path = entry.path();
         let key = (number, stem);
-        if video && path.is_file() {
+        if video && !path.is_dir() {
+            // Read only inside the folder, and only a regular file (a FIFO would hold
+            // ffprobe forever): refused, naming the camera, when it loads.
+            let origin = dir.join(FILE).display().to_string();
+            let info =
+                inside_dataset(dir, &name, &origin, &key.1, "video").and_then(|real| probe(&real));
             found
                 .entry(key)
-                .or_insert_with(|| CameraFrames::Video(path.clone(), probe(&path)));
+                .or_insert_with(|| CameraFrames::Video(path.clone(), info));
         } else if !video && path.join("images").is_dir() {
             found.insert(
                 key,
