@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use splat4d::fit::coarse::CoarseToFine;
+use splat4d::fit::defaults::DEFAULT_COARSE;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::simd::ExpMode;
 use splat4d::tasks::render::{CameraSource, ViewRequest};
@@ -83,6 +85,24 @@ pub fn finite(text: &str) -> Result<f64, String> {
         Ok(v) if v.is_finite() => Ok(v),
         Ok(v) => Err(format!("{v} is not finite")),
         Err(e) => Err(format!("`{text}`: {e}")),
+    }
+}
+
+/// `off`, or the shorter side (pixels, ≥ 1) a coarse stage keeps: the default stages'
+/// ends ([`splat4d::fit::defaults::DEFAULT_COARSE`]) with that side.
+pub fn coarse_to_fine(text: &str) -> Result<CoarseToFine, String> {
+    let text = text.trim();
+    if text == "off" {
+        return Ok(CoarseToFine::Off);
+    }
+    let CoarseToFine::Auto { ends, .. } = DEFAULT_COARSE else {
+        return Ok(CoarseToFine::Off);
+    };
+    match text.parse::<u32>() {
+        Ok(min_side) if min_side >= 1 => Ok(CoarseToFine::Auto { min_side, ends }),
+        _ => Err(format!(
+            "`{text}`: give `off` or the shorter side in pixels (an integer ≥ 1) a coarse stage keeps"
+        )),
     }
 }
 

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use splat4d::Blend;
 use splat4d::Result;
 use splat4d::fit::additive::FitMode;
+use splat4d::fit::coarse::CoarseToFine;
 use splat4d::fit::settings::{FitSettings, RateSettings};
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
@@ -231,6 +232,11 @@ pub struct FitArgs {
     /// further than its largest σ within one σt, is split in time [default: 0.05].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     time_split_fraction: Option<f64>,
+    /// Fit downscaled views first: at 1/4 size until 30 % of the steps and 1/2 until 60 %,
+    /// each only where every training view keeps at least SIDE pixels on its shorter side;
+    /// `off`: every step at full size [default: 100].
+    #[arg(long, value_name = "SIDE|off", value_parser = super::args::coarse_to_fine, help_heading = ALPHA)]
+    coarse_to_fine: Option<CoarseToFine>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -282,6 +288,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         init_amplitude: args.init_amplitude,
         sh: args.sh,
         sh_raise_every: args.sh_raise_every,
+        coarse_to_fine: args.coarse_to_fine,
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

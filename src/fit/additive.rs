@@ -142,6 +142,7 @@ impl AdditiveFitOptions {
             groups: self.groups(),
             final_rate_factor: self.final_rate_factor,
             density: self.adaptive.map(DensityRules::Additive),
+            coarse: Vec::new(),
         }
     }
 }

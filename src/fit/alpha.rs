@@ -18,6 +18,7 @@
 //! draws of the same seed are independent.
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
+use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::{AlphaRules, DensityRules};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::train::Training;
@@ -103,6 +104,8 @@ pub struct AlphaFitOptions {
     /// further than its largest spatial σ within one σt, is split in time rather than in
     /// space (the 4DGS papers' split in the time dimension).
     pub time_split_fraction: f64,
+    /// The coarse stages' choice ([`crate::fit::coarse`]).
+    pub coarse: CoarseToFine,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -176,7 +179,7 @@ impl AlphaFitOptions {
     }
 
     /// The training loop's input for a fit in `bounds` (the unit of the spatial rates and
-    /// of the density rules).
+    /// of the density rules); its coarse stages are left to the plan, which sees the views.
     #[must_use]
     pub fn training(&self, bounds: &SpaceTimeBox) -> Training {
         let (diagonal, time_range) = extents(bounds);
@@ -193,6 +196,7 @@ impl AlphaFitOptions {
             groups: self.groups(diagonal, time_range),
             final_rate_factor: self.final_rate_factor,
             density: Some(DensityRules::Alpha(self.rules(diagonal, time_range))),
+            coarse: Vec::new(),
         }
     }
 }

@@ -8,6 +8,7 @@ use crate::fit::adam::AdamConfig;
 use crate::fit::additive::LearningRates;
 use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::AdditiveRules;
 use crate::render::RenderOptions;
 
@@ -76,6 +77,12 @@ pub const MAX_START_KERNELS: usize = 1_000_000;
 /// by the adaptive rounds ([`crate::fit::density::additive`]).
 pub const TIME_SPLIT_SPACINGS: f64 = 2.0;
 
+/// The alpha fit's coarse stages ([`crate::fit::coarse`]).
+pub const DEFAULT_COARSE: CoarseToFine = CoarseToFine::Auto {
+    min_side: 100,
+    ends: [0.3, 0.6],
+};
+
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 ///
@@ -125,6 +132,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     opacity_reset_every: 2000,
     reset_opacity: 0.01,
     time_split_fraction: 0.05,
+    coarse: DEFAULT_COARSE,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

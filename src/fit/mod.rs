@@ -9,6 +9,7 @@ pub mod adam;
 pub mod additive;
 pub mod alpha;
 pub mod alpha_start;
+pub mod coarse;
 pub mod defaults;
 pub mod density;
 pub mod hull;

@@ -602,7 +602,24 @@ pub fn prepare_alpha(
             scene
         }
     };
-    Ok(ReadyFit::new(scene, options.training(&bounds), notes))
+    let mut training = options.training(&bounds);
+    training.coarse = options.coarse.stages(train);
+    if !training.coarse.is_empty() {
+        notes.push(format!(
+            "coarse to fine: {}, then full size",
+            training
+                .coarse
+                .iter()
+                .map(|s| format!(
+                    "1/{} size until {:.0} % of the steps",
+                    s.downscale,
+                    100.0 * s.until
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(ReadyFit::new(scene, training, notes))
 }
 
 /// The automatic alpha start (see [`prepare_alpha`]) and a note saying which it is.

@@ -19,7 +19,7 @@
 //!   always densifies and prunes), the background's rate and freezing (the alpha fit keeps
 //!   its background fixed at its start);
 //! - **alpha only**: SH, the opacity, rotation and SH rates, the opacity reset, the split
-//!   size (`percent_dense`) and the split in time.
+//!   size (`percent_dense`), the split in time and the coarse stages.
 //!
 //! The rates' units follow each model's parameters: the alpha fit's spatial rates are
 //! fractions of the cameras' box per step ([`crate::fit::alpha::AlphaRates`]), the
@@ -32,6 +32,7 @@
 use crate::fit::additive::FitMode;
 use crate::fit::additive::LearningRates;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
     DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
@@ -85,7 +86,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 8] = [
+pub const ALPHA_ONLY: [&str; 9] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -94,6 +95,7 @@ pub const ALPHA_ONLY: [&str; 8] = [
     "opacity_reset_every",
     "percent_dense",
     "time_split_fraction",
+    "coarse_to_fine",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -195,6 +197,8 @@ pub struct FitSettings {
     pub percent_dense: Option<f64>,
     /// Alpha: the σt fraction of the time range above which a kernel splits in time.
     pub time_split_fraction: Option<f64>,
+    /// Alpha: the coarse stages' choice ([`crate::fit::coarse`]).
+    pub coarse_to_fine: Option<CoarseToFine>,
 }
 
 impl FitSettings {
@@ -227,6 +231,7 @@ impl FitSettings {
             self.opacity_reset_every.is_some(),
             self.percent_dense.is_some(),
             self.time_split_fraction.is_some(),
+            self.coarse_to_fine.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -495,6 +500,7 @@ impl FitSettings {
             prune_opacity: self.prune_below.unwrap_or(d.prune_opacity),
             opacity_reset_every: self.opacity_reset_every.unwrap_or(d.opacity_reset_every),
             time_split_fraction: self.time_split_fraction.unwrap_or(d.time_split_fraction),
+            coarse: self.coarse_to_fine.unwrap_or(d.coarse),
             ..d
         }
     }

@@ -27,6 +27,7 @@ use rayon::prelude::*;
 
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
+use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::{DensityRules, DensityStats};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::model::error::{Error, Result};
@@ -58,6 +59,9 @@ pub struct Training {
     pub final_rate_factor: f64,
     /// Density control between steps; `None` keeps the kernel count.
     pub density: Option<DensityRules>,
+    /// Coarse to fine: the stages that fit downscaled views before the full-size steps
+    /// ([`crate::fit::coarse`]); empty: every step at full size.
+    pub coarse: Vec<SizeStage>,
 }
 
 impl Training {
@@ -83,6 +87,9 @@ pub struct StepRecord {
     pub heldout_psnr: Option<f64>,
     /// Kernels after the step (and after a densify/prune round that followed it).
     pub kernels: usize,
+    /// The downscale factor of the step's training views (1: full size;
+    /// [`crate::fit::coarse`]).
+    pub downscale: u32,
 }
 
 /// What every training loop checks first: some training views, every image the size of
@@ -371,23 +378,23 @@ pub(crate) fn batch_gradients(
 /// density rules, the held-out evaluation when due.
 pub fn fit(
     scene: &mut Scene,
-    train: &[View],
+    all_train: &[View],
     heldout: &[View],
     training: &Training,
     mut on_step: impl FnMut(&StepRecord, &Scene),
 ) -> Result<Vec<StepRecord>> {
-    check_fit_inputs(train, heldout, &training.render)?;
+    check_fit_inputs(all_train, heldout, &training.render)?;
     scene.validate("<fit start>")?;
     let start = Instant::now();
     let steps = training.steps;
     let render = &training.render;
-    let batch = training.batch_size.clamp(1, train.len());
+    let batch = training.batch_size.clamp(1, all_train.len());
     // The batch's views run side by side, one per worker thread (`batch_gradients`).
     let mut slots = view_slots(scene, batch);
     let mut grads = Gradients::for_scene(scene);
     let mut adam = Adam::new(scene, &training.groups, training.adam);
     let mut stats = DensityStats::new(scene.len());
-    let mut draws = ViewDraws::new(train.len(), training.draw_seed);
+    let mut draws = ViewDraws::new(all_train.len(), training.draw_seed);
     let mut drawn = Vec::with_capacity(batch);
     // Grows with the steps actually run: a flag never decides an allocation up front.
     let mut records = Vec::with_capacity(steps.min(1 << 12));
@@ -395,8 +402,10 @@ pub fn fit(
     // zero gradient; views that never see one leave nothing to fit).
     let mut seen_any = false;
     // Steps until every training view has been drawn once (the draws go epoch by epoch).
-    let first_epoch = train.len().div_ceil(batch);
+    let first_epoch = all_train.len().div_ceil(batch);
+    let mut staged = StagedViews::new(&training.coarse);
     for step in 1..=steps {
+        let (train, _) = staged.at(all_train, step, steps)?;
         grads.reset_for_scene(scene);
         draws.next_batch(batch, &mut drawn);
         let weight = 1.0 / batch as f64;
@@ -452,6 +461,7 @@ pub fn fit(
             train_loss,
             heldout_psnr,
             kernels: scene.len(),
+            downscale: staged.downscale(),
         };
         on_step(&record, scene);
         records.push(record);

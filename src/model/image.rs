@@ -84,6 +84,50 @@ impl Image {
     }
 }
 
+/// The weighted box filter: per `n × n` block, the mean weight and the weighted mean colour
+/// (the plain mean where every weight is 0).
+#[must_use]
+pub fn downscale_weighted(image: &Image, weights: &[f32], n: u32) -> (Image, Vec<f32>) {
+    let (w, h) = (image.width / n, image.height / n);
+    let mut pixels = Vec::with_capacity(3 * w as usize * h as usize);
+    let mut out_weights = Vec::with_capacity(w as usize * h as usize);
+    let inv = 1.0 / f64::from(n * n);
+    let width = image.width as usize;
+    for j in 0..h {
+        for i in 0..w {
+            let mut sum = [0.0_f64; 3];
+            let mut plain = [0.0_f64; 3];
+            let mut total = 0.0_f64;
+            for dj in 0..n {
+                for di in 0..n {
+                    let (x, y) = (n * i + di, n * j + dj);
+                    let weight = f64::from(weights[y as usize * width + x as usize]);
+                    let p = image.pixel(x, y);
+                    total += weight;
+                    for c in 0..3 {
+                        sum[c] += weight * f64::from(p[c]);
+                        plain[c] += f64::from(p[c]);
+                    }
+                }
+            }
+            pixels.extend(if total > 0.0 {
+                sum.map(|s| (s / total) as f32)
+            } else {
+                plain.map(|s| (s * inv) as f32)
+            });
+            out_weights.push((total * inv) as f32);
+        }
+    }
+    (
+        Image {
+            width: w,
+            height: h,
+            pixels,
+        },
+        out_weights,
+    )
+}
+
 /// The stored value of a linear channel in a file of `max + 1` levels (SPEC §5):
 /// `round(max · clamp(c, 0, 1))`, rounding half away from zero; NaN stores 0.
 #[must_use]

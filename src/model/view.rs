@@ -2,7 +2,7 @@
 //! train / val / test splits of a dataset.
 
 use crate::model::camera::Camera;
-use crate::model::image::Image;
+use crate::model::image::{Image, downscale_weighted};
 
 /// One image with its camera and time.
 ///
@@ -22,6 +22,49 @@ pub struct View {
     /// counts it fully. The loss is then the weighted mean (SPEC §6 with weights;
     /// [`crate::fit::loss`]). `None`: every pixel counts fully (the plain mean).
     pub weights: Option<Vec<f32>>,
+}
+
+impl View {
+    /// The view as a camera of `n`-times fewer pixels on each axis would take it: the image
+    /// (and its weights) box-filtered over `n × n` blocks, `⌊w/n⌋ × ⌊h/n⌋`, the intrinsics
+    /// divided by `n`. Pixel `(i, j)`'s centre `(i + ½, j + ½)` (SPEC §3) then sits at the
+    /// centre of the block it averages, `(n i + n/2, n j + n/2)` of the original, so a render
+    /// through the new camera samples the scene where the block's mean does. `n = 1` shares
+    /// the image. `None` when the image is smaller than `n` on a side.
+    #[must_use]
+    pub fn downscaled(&self, n: u32) -> Option<View> {
+        let n = n.max(1);
+        if n == 1 {
+            return Some(self.clone());
+        }
+        if self.image.width < n || self.image.height < n {
+            return None;
+        }
+        let (image, weights) = match &self.weights {
+            Some(w) => {
+                let (image, weights) = downscale_weighted(&self.image, w, n);
+                (image, Some(weights))
+            }
+            None => (self.image.downscaled(n), None),
+        };
+        let scale = f64::from(n);
+        let camera = Camera {
+            width: image.width,
+            height: image.height,
+            fx: self.camera.fx / scale,
+            fy: self.camera.fy / scale,
+            cx: self.camera.cx / scale,
+            cy: self.camera.cy / scale,
+            ..self.camera
+        };
+        Some(View {
+            camera,
+            time: self.time,
+            image: std::sync::Arc::new(image),
+            name: self.name.clone(),
+            weights,
+        })
+    }
 }
 
 /// A point of the cloud a dataset ships (COLMAP `points3D`, nerfstudio `ply_file_path`), in
@@ -57,4 +100,89 @@ pub struct Dataset {
     /// The point cloud the dataset gives (COLMAP `points3D`, nerfstudio `ply_file_path`), to
     /// start kernels from; `None` when it gives none.
     pub points: Option<Vec<DatasetPoint>>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn view(width: u32, height: u32) -> View {
+        let camera = Camera::look_at(
+            [0.3, -0.2, 4.0],
+            [0.0; 3],
+            [0.0, 1.0, 0.0],
+            40.0,
+            width,
+            height,
+        )
+        .unwrap();
+        let pixels = (0..3 * width * height)
+            .map(|i| (i % 97) as f32 / 97.0)
+            .collect();
+        View {
+            camera,
+            time: 0.25,
+            image: std::sync::Arc::new(Image {
+                width,
+                height,
+                pixels,
+            }),
+            name: "v".into(),
+            weights: Some((0..width * height).map(|i| (i % 3) as f32 / 2.0).collect()),
+        }
+    }
+
+    /// A point lands `n` times closer to the image's corner: pixel `(i, j)` of the small
+    /// image, centred at `(i + ½, j + ½)`, sees what the centre of its block sees.
+    #[test]
+    fn a_downscaled_camera_sees_each_point_at_its_blocks_place() {
+        let full = view(43, 30);
+        for n in [2, 3, 4] {
+            let small = full.downscaled(n).unwrap();
+            assert_eq!((small.camera.width, small.camera.height), (43 / n, 30 / n));
+            assert_eq!((small.image.width, small.image.height), (43 / n, 30 / n));
+            for p in [[0.1, 0.2, -0.3], [-0.5, 0.4, 0.2], [0.0, 0.0, 0.0]] {
+                let [u, v, z] = full.camera.project_point(p);
+                let [us, vs, zs] = small.camera.project_point(p);
+                let scale = f64::from(n);
+                assert!((us * scale - u).abs() < 1e-12 * u.abs().max(1.0));
+                assert!((vs * scale - v).abs() < 1e-12 * v.abs().max(1.0));
+                assert_eq!(zs, z);
+            }
+        }
+    }
+
+    /// Each small pixel is its block's weighted mean colour, and its weight the block's mean
+    /// weight; an image smaller than the factor gives none.
+    #[test]
+    fn a_downscaled_image_is_the_weighted_mean_of_its_blocks() {
+        let full = view(7, 5);
+        let small = full.downscaled(2).unwrap();
+        let weights = full.weights.as_ref().unwrap();
+        for (j, i) in [(0, 0), (1, 2), (1, 0)] {
+            let block = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(di, dj)| (2 * i + di, 2 * j + dj));
+            let w: Vec<f64> = block
+                .iter()
+                .map(|&(x, y)| f64::from(weights[(y * 7 + x) as usize]))
+                .collect();
+            let total: f64 = w.iter().sum();
+            let got = small.image.pixel(i, j);
+            for c in 0..3 {
+                let want: f64 = block
+                    .iter()
+                    .zip(&w)
+                    .map(|(&(x, y), w)| w * f64::from(full.image.pixel(x, y)[c]))
+                    .sum::<f64>()
+                    / total;
+                assert!((f64::from(got[c]) - want).abs() < 1e-6, "{i},{j},{c}");
+            }
+            let small_weight = small.weights.as_ref().unwrap()[(j * 3 + i) as usize];
+            assert!((f64::from(small_weight) - total / 4.0).abs() < 1e-6);
+        }
+        assert!(full.downscaled(6).is_none());
+        assert!(std::sync::Arc::ptr_eq(
+            &full.downscaled(1).unwrap().image,
+            &full.image
+        ));
+    }
 }

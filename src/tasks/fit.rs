@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use crate::fit::coarse::CoarseToFine;
 use crate::fit::plan::Init;
 use crate::fit::settings::FitSettings;
 use crate::fit::train::{SplitScore, StepRecord, evaluate_splits};
@@ -115,7 +116,7 @@ fn check_fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<()> {
 /// What a fit will hold, in bytes, and what for ([`crate::io::memory`]): the photos as the
 /// loader keeps them (`photos`, [`crate::io::dataset::photo_memory`]: one decode per file, one
 /// undistorted or downscaled copy per file, mask and lens, weights per frame) and what
-/// preparing the largest holds; the kernels (the start, or an alpha fit's budget); each view
+/// preparing the largest holds; a coarse stage's copy of them; the kernels (the start, or an alpha fit's budget); each view
 /// rendered at once (one per worker thread, up to the batch) with its frame and its kernels'
 /// copies and gradients.
 fn fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<(u64, String)> {
@@ -131,9 +132,15 @@ fn fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<(u64, String)
         _ => 0,
     };
     let mut batch = additive.as_ref().map_or(1, |p| p.batch_size);
+    // A coarse stage's copy of the training views: at most the ½-size one, a quarter of
+    // the pixels kept ([`crate::fit::coarse`]).
+    let mut coarse_copy = 0;
     if let Some(alpha) = alpha.filter(|_| request.blend != Some(Blend::Additive)) {
         kernels = kernels.max(alpha.max_kernels);
         batch = batch.max(alpha.batch_size);
+        if alpha.coarse != CoarseToFine::Off {
+            coarse_copy = photos.kept / 4;
+        }
     }
     // The fit runs on `--threads` workers (or the global pool's), one view on each.
     let threads = request.threads.unwrap_or_else(rayon::current_num_threads);
@@ -145,6 +152,7 @@ fn fit_memory(request: &FitRequest, photos: PhotoMemory) -> Result<(u64, String)
         photos
             .kept
             .saturating_add(photos.working)
+            .saturating_add(coarse_copy)
             .saturating_add(frames_held)
             .saturating_add((kernels as u64).saturating_mul(per_kernel)),
         format!("fitting up to {kernels} kernels to {frames} frames"),

@@ -3,6 +3,7 @@
 
 use splat4d::fit::alpha::alpha_bounds;
 use splat4d::fit::alpha_start::random_alpha_scene;
+use splat4d::fit::coarse::SizeStage;
 use splat4d::fit::loss::psnr;
 use splat4d::fit::plan::DEFAULT_ALPHA;
 use splat4d::fit::train::{evaluate, fit};
@@ -289,7 +290,8 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
 
 /// A step's views run side by side, one per worker thread; their gradients are added in
 /// view order, so the fitted scene is the same bits for any thread count (with a batch of
-/// 4: 1, 2 and 3 views at once, the last group of 3 short), densification included.
+/// 4: 1, 2 and 3 views at once, the last group of 3 short), densification and the coarse
+/// stages included.
 #[test]
 fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     let scene = occluding_scene();
@@ -312,10 +314,26 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
                 &mut fitted,
                 &dataset.train,
                 &dataset.test,
-                &fit_options.training(&bounds),
+                &splat4d::fit::train::Training {
+                    coarse: vec![
+                        SizeStage {
+                            downscale: 4,
+                            until: 0.3,
+                        },
+                        SizeStage {
+                            downscale: 2,
+                            until: 0.6,
+                        },
+                    ],
+                    ..fit_options.training(&bounds)
+                },
                 |_, _| {},
             )
             .unwrap();
+            assert_eq!(
+                records.iter().map(|r| r.downscale).collect::<Vec<_>>(),
+                [&[4; 18][..], &[2; 18], &[1; 24]].concat()
+            );
             let losses: Vec<u64> = records.iter().map(|r| r.train_loss.to_bits()).collect();
             (splat4d::io::scene_file::scene_to_json(&fitted), losses)
         })

@@ -54,8 +54,8 @@ use std::path::{Path, PathBuf};
 use crate::model::error::{Error, Result};
 use crate::model::{Dataset, View};
 
+pub use crate::model::image::downscale_weighted;
 pub use photo_memory::PhotoMemory;
-pub use photos::downscale_weighted;
 pub use write::{DatasetWriter, write_split};
 
 /// The dataset formats, in the order they are asked whether a folder is theirs.
