@@ -218,6 +218,10 @@ pub struct FitArgs {
     /// Learning rate of the rotations' quaternions [default: 1e-3].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_rotation: Option<f64>,
+    /// Learning rate of SPEC §9 accelerations, in the cameras' box diagonals per time range
+    /// squared (0: none fitted, and no kernel gets one) [default: 0].
+    #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
+    lr_acceleration: Option<f64>,
     /// Learning rate of the SH coefficients beyond the base colour [default: 5e-4].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_sh: Option<f64>,
@@ -262,6 +266,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             background: args.lr_background,
             opacity: args.lr_opacity,
             rotation: args.lr_rotation,
+            acceleration: args.lr_acceleration,
             sh: args.lr_sh,
         },
         lr_final: args.lr_final,

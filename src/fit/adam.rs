@@ -69,6 +69,9 @@ pub enum Field {
     Scale,
     /// Rotation quaternions.
     Rotation,
+    /// Accelerations `(ax, ay, az)` (SPEC §9): the fit gives every kernel one (zero at
+    /// first) while this group is in its table.
+    Acceleration,
     /// Opacities (alpha scenes).
     Opacity,
     /// Amplitudes: the additive colour, the alpha colour's base.
@@ -139,6 +142,12 @@ impl Field {
                 grads.v_rotations.as_flattened(),
                 4,
                 0..4,
+            ),
+            Field::Acceleration => (
+                scene.accelerations.as_flattened_mut(),
+                grads.v_accelerations.as_flattened(),
+                3,
+                0..3,
             ),
             Field::Opacity => (&mut scene.opacities, &grads.v_opacities, 1, 0..1),
             Field::Amplitude => (
@@ -352,7 +361,11 @@ impl Adam {
 fn group_width(field: Field, sh_count: usize) -> usize {
     match field {
         Field::Time | Field::Opacity => 1,
-        Field::Mean | Field::Velocity | Field::Amplitude | Field::Background => 3,
+        Field::Mean
+        | Field::Velocity
+        | Field::Acceleration
+        | Field::Amplitude
+        | Field::Background => 3,
         Field::Scale | Field::Rotation => 4,
         Field::Sh { from, to } => 3 * (to.min(sh_count).saturating_sub(from.min(sh_count))),
     }
@@ -454,6 +467,8 @@ pub fn non_finite_parameter(scene: &Scene, groups: &[ParameterGroup]) -> Option<
             Some(("velocity", Field::Velocity))
         } else if bad(&scene.rotations[i]) {
             Some(("rotation", Field::Rotation))
+        } else if scene.accelerations.get(i).is_some_and(|a| bad(a)) {
+            Some(("acceleration", Field::Acceleration))
         } else if scene.opacities.get(i).is_some_and(|o| !o.is_finite()) {
             Some(("opacity", Field::Opacity))
         } else if scene

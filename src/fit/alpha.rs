@@ -35,6 +35,9 @@ pub struct AlphaRates {
     pub time: f64,
     /// Velocity, box diagonals per time range per step.
     pub velocity: f64,
+    /// SPEC §9 acceleration, box diagonals per time range squared per step (0: not
+    /// fitted, and no kernel gets one).
+    pub acceleration: f64,
     /// `ln s`.
     pub scale: f64,
     /// Quaternion components.
@@ -163,6 +166,14 @@ impl AlphaFitOptions {
             constant(Field::Opacity, "lr_opacity", r.opacity),
             constant(Field::Amplitude, "lr_amplitude", r.colour),
         ];
+        if r.acceleration > 0.0 {
+            groups.push(spatial(
+                Field::Acceleration,
+                "lr_acceleration",
+                r.acceleration,
+                diagonal / (time_range * time_range),
+            ));
+        }
         // Degree d holds SH triplets d² - 1 .. (d + 1)² - 1.
         groups.extend((1..=3).map(|d: usize| ParameterGroup {
             from_step: d * self.sh_raise_every,

@@ -101,6 +101,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
         mean: 1.6e-4,
         time: 1.6e-4,
         velocity: 1.6e-4,
+        acceleration: 0.0,
         scale: 5e-3,
         rotation: 1e-3,
         opacity: 5e-2,

@@ -86,7 +86,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 9] = [
+pub const ALPHA_ONLY: [&str; 10] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -96,6 +96,7 @@ pub const ALPHA_ONLY: [&str; 9] = [
     "percent_dense",
     "time_split_fraction",
     "coarse_to_fine",
+    "lr_acceleration",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -115,6 +116,8 @@ pub struct RateSettings {
     pub background: Option<f64>,
     /// Opacity logits (alpha).
     pub opacity: Option<f64>,
+    /// SPEC §9 accelerations (alpha).
+    pub acceleration: Option<f64>,
     /// Quaternions (alpha).
     pub rotation: Option<f64>,
     /// SH coefficients beyond the base colour (alpha).
@@ -232,6 +235,7 @@ impl FitSettings {
             self.percent_dense.is_some(),
             self.time_split_fraction.is_some(),
             self.coarse_to_fine.is_some(),
+            r.acceleration.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -477,6 +481,7 @@ impl FitSettings {
                 mean: frozen(self.freeze_mean, r.mean.unwrap_or(d.rates.mean)),
                 time: frozen(self.freeze_time, r.time.unwrap_or(d.rates.time)),
                 velocity: r.velocity.unwrap_or(d.rates.velocity),
+                acceleration: r.acceleration.unwrap_or(d.rates.acceleration),
                 scale: r.scale.unwrap_or(d.rates.scale),
                 rotation: r.rotation.unwrap_or(d.rates.rotation),
                 opacity: r.opacity.unwrap_or(d.rates.opacity),
@@ -516,6 +521,7 @@ fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
             ("lr_mean", r.mean),
             ("lr_time", r.time),
             ("lr_velocity", r.velocity),
+            ("lr_acceleration", r.acceleration),
             ("lr_scale", r.scale),
             ("lr_rotation", r.rotation),
             ("lr_opacity", r.opacity),

@@ -391,6 +391,7 @@ pub fn fit(
     let batch = training.batch_size.clamp(1, all_train.len());
     // The batch's views run side by side, one per worker thread (`batch_gradients`).
     let mut slots = view_slots(scene, batch);
+    give_fitted_motion(scene, &training.groups);
     let mut grads = Gradients::for_scene(scene);
     let mut adam = Adam::new(scene, &training.groups, training.adam);
     let mut stats = DensityStats::new(scene.len());
@@ -445,6 +446,7 @@ pub fn fit(
             }
             if let Some(sources) = change.sources {
                 adam.remap(&sources);
+                give_fitted_motion(scene, &training.groups);
             }
         }
         let heldout_psnr = heldout_psnr_at(
@@ -467,6 +469,15 @@ pub fn fit(
         records.push(record);
     }
     Ok(records)
+}
+
+/// Gives every kernel of `scene` the SPEC §9 fields that `groups` fit (zero where a kernel
+/// has none): their rows must exist for their gradients and moments, and a kernel without
+/// them would not move along them.
+fn give_fitted_motion(scene: &mut Scene, groups: &[ParameterGroup]) {
+    if groups.iter().any(|g| g.field == Field::Acceleration) {
+        scene.accelerations.resize(scene.len(), [0.0; 3]);
+    }
 }
 
 /// The error of a fit whose training views saw no kernel in its first `steps` steps (every

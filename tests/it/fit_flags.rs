@@ -127,6 +127,7 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--opacity-reset-every", "2"],
         &["--percent-dense", "0.5"],
         &["--coarse-to-fine", "4"],
+        &["--lr-acceleration", "0.01"],
         &["--cutoff", "0.01"],
         &["--dilation", "0.5"],
     ];
@@ -199,6 +200,7 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--percent-dense", "0.5"],
         &["--time-split-fraction", "0.01"],
         &["--coarse-to-fine", "off"],
+        &["--lr-acceleration", "0.01"],
     ] {
         let mut args = vec!["--blend", "additive"];
         args.extend_from_slice(extra);
