@@ -167,14 +167,14 @@ mod tests {
                 .collect();
             let total: f64 = w.iter().sum();
             let got = small.image.pixel(i, j);
-            for c in 0..3 {
+            for (c, got) in got.iter().enumerate() {
                 let want: f64 = block
                     .iter()
                     .zip(&w)
                     .map(|(&(x, y), w)| w * f64::from(full.image.pixel(x, y)[c]))
                     .sum::<f64>()
                     / total;
-                assert!((f64::from(got[c]) - want).abs() < 1e-6, "{i},{j},{c}");
+                assert!((f64::from(*got) - want).abs() < 1e-6, "{i},{j},{c}");
             }
             let small_weight = small.weights.as_ref().unwrap()[(j * 3 + i) as usize];
             assert!((f64::from(small_weight) - total / 4.0).abs() < 1e-6);
