@@ -222,6 +222,10 @@ pub struct FitArgs {
     /// squared (0: none fitted, and no kernel gets one) [default: 0].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_acceleration: Option<f64>,
+    /// Learning rate of SPEC §9 angular velocities (the quaternion's rate), per time range
+    /// (0: none fitted, and no kernel gets one) [default: 0].
+    #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
+    lr_angular_velocity: Option<f64>,
     /// Learning rate of the SH coefficients beyond the base colour [default: 5e-4].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_sh: Option<f64>,
@@ -267,6 +271,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             opacity: args.lr_opacity,
             rotation: args.lr_rotation,
             acceleration: args.lr_acceleration,
+            angular_velocity: args.lr_angular_velocity,
             sh: args.lr_sh,
         },
         lr_final: args.lr_final,

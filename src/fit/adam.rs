@@ -72,6 +72,9 @@ pub enum Field {
     /// Accelerations `(ax, ay, az)` (SPEC §9): the fit gives every kernel one (zero at
     /// first) while this group is in its table.
     Acceleration,
+    /// Angular velocities `(ωw, ωx, ωy, ωz)` (SPEC §9), the quaternion's rate: the fit gives
+    /// every kernel one (zero at first) while this group is in its table.
+    AngularVelocity,
     /// Opacities (alpha scenes).
     Opacity,
     /// Amplitudes: the additive colour, the alpha colour's base.
@@ -148,6 +151,12 @@ impl Field {
                 grads.v_accelerations.as_flattened(),
                 3,
                 0..3,
+            ),
+            Field::AngularVelocity => (
+                scene.angular_velocities.as_flattened_mut(),
+                grads.v_angular_velocities.as_flattened(),
+                4,
+                0..4,
             ),
             Field::Opacity => (&mut scene.opacities, &grads.v_opacities, 1, 0..1),
             Field::Amplitude => (
@@ -337,7 +346,7 @@ impl Adam {
                 transform,
             };
             let width = moments.width;
-            (
+            let divisors: Vec<f64> = (
                 values.par_chunks_mut(stride),
                 gradients.par_chunks(stride),
                 moments.first.par_chunks_mut(width),
@@ -345,14 +354,32 @@ impl Adam {
             )
                 .into_par_iter()
                 .with_min_len(1024)
-                .for_each(|(row, gradient, first, second)| {
+                .map(|(row, gradient, first, second)| {
                     update.row(
                         &mut row[columns.clone()],
                         &gradient[columns.clone()],
                         first,
                         second,
-                    );
-                });
+                    )
+                })
+                .collect();
+            if transform == Transform::UnitQuaternion {
+                scale_turns_with_rotations(scene, &divisors);
+            }
+        }
+    }
+}
+
+/// Divides each turning kernel's angular velocity by the norm its quaternion was divided by
+/// (`divisors`, one per kernel): the turned quaternion `q + ω (t - μt)` (SPEC §9) is then
+/// divided by the same number at every `t`, so the kernel's axes `q(t)/|q(t)|` stay
+/// where they were.
+fn scale_turns_with_rotations(scene: &mut Scene, divisors: &[f64]) {
+    for (omega, &divisor) in scene.angular_velocities.iter_mut().zip(divisors) {
+        if divisor != 1.0 {
+            for w in omega {
+                *w /= divisor;
+            }
         }
     }
 }
@@ -366,7 +393,7 @@ fn group_width(field: Field, sh_count: usize) -> usize {
         | Field::Acceleration
         | Field::Amplitude
         | Field::Background => 3,
-        Field::Scale | Field::Rotation => 4,
+        Field::Scale | Field::Rotation | Field::AngularVelocity => 4,
         Field::Sh { from, to } => 3 * (to.min(sh_count).saturating_sub(from.min(sh_count))),
     }
 }
@@ -397,8 +424,15 @@ impl Update {
         self.rate * (m / correction1) / ((v / correction2).sqrt() + epsilon)
     }
 
-    /// Updates one row's `values` (the group's columns) from their `gradients`.
-    fn row(&self, values: &mut [f64], gradients: &[f64], first: &mut [f64], second: &mut [f64]) {
+    /// Updates one row's `values` (the group's columns) from their `gradients`; returns the
+    /// number a quaternion was divided by to renormalise it (1 otherwise).
+    fn row(
+        &self,
+        values: &mut [f64],
+        gradients: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+    ) -> f64 {
         let moments = first.iter_mut().zip(second.iter_mut());
         match self.transform {
             Transform::Identity => {
@@ -433,9 +467,11 @@ impl Update {
                     for (value, q) in values.iter_mut().zip(q) {
                         *value = q / norm;
                     }
+                    return norm;
                 }
             }
         }
+        1.0
     }
 }
 
@@ -469,6 +505,8 @@ pub fn non_finite_parameter(scene: &Scene, groups: &[ParameterGroup]) -> Option<
             Some(("rotation", Field::Rotation))
         } else if scene.accelerations.get(i).is_some_and(|a| bad(a)) {
             Some(("acceleration", Field::Acceleration))
+        } else if scene.angular_velocities.get(i).is_some_and(|w| bad(w)) {
+            Some(("angular velocity", Field::AngularVelocity))
         } else if scene.opacities.get(i).is_some_and(|o| !o.is_finite()) {
             Some(("opacity", Field::Opacity))
         } else if scene
@@ -502,6 +540,42 @@ mod tests {
 
     fn group(field: Field, rate: f64) -> ParameterGroup {
         ParameterGroup::new(field, "lr_test", rate)
+    }
+
+    /// A turning kernel's stored quaternion need not be unit (SPEC §9); renormalising it
+    /// divides its angular velocity by the same norm, so its axes at every time stay put.
+    #[test]
+    fn renormalising_a_turning_kernels_quaternion_keeps_its_axes_at_every_time() {
+        let mut kernel = Kernel::new([0.0, 0.0, 0.0, 0.5], [1.0; 4], [1.0; 3]);
+        kernel.rotation = [1.2, 0.8, -0.6, 1.0];
+        kernel.angular_velocity = [0.3, -1.1, 0.7, 0.2];
+        let mut scene = Scene::from_kernels(&[kernel], [0.0; 3], "<test>").unwrap();
+        let axes = |scene: &Scene, t: f64| {
+            let q: [f64; 4] = std::array::from_fn(|c| {
+                scene.rotations[0][c] + scene.angular_velocity(0)[c] * (t - 0.5)
+            });
+            let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+            q.map(|v| v / norm)
+        };
+        let before: Vec<[f64; 4]> = [0.0, 0.3, 0.9].iter().map(|&t| axes(&scene, t)).collect();
+        let grads = Gradients::for_scene(&scene);
+        Adam::new(
+            &scene,
+            &[group(Field::Rotation, 0.1)],
+            AdamConfig::default(),
+        )
+        .step(&mut scene, &grads, 1, 1.0);
+        let norm: f64 = scene.rotations[0].iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-15);
+        for (t, before) in [0.0, 0.3, 0.9].into_iter().zip(before) {
+            let after = axes(&scene, t);
+            for c in 0..4 {
+                assert!(
+                    (after[c] - before[c]).abs() < 1e-14,
+                    "t {t}: {after:?} {before:?}"
+                );
+            }
+        }
     }
 
     #[test]

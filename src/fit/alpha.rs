@@ -38,6 +38,9 @@ pub struct AlphaRates {
     /// SPEC §9 acceleration, box diagonals per time range squared per step (0: not
     /// fitted, and no kernel gets one).
     pub acceleration: f64,
+    /// SPEC §9 angular velocity, quaternion units per time range per step (0: not fitted,
+    /// and no kernel gets one).
+    pub angular_velocity: f64,
     /// `ln s`.
     pub scale: f64,
     /// Quaternion components.
@@ -172,6 +175,14 @@ impl AlphaFitOptions {
                 "lr_acceleration",
                 r.acceleration,
                 diagonal / (time_range * time_range),
+            ));
+        }
+        if r.angular_velocity > 0.0 {
+            groups.push(spatial(
+                Field::AngularVelocity,
+                "lr_angular_velocity",
+                r.angular_velocity,
+                1.0 / time_range,
             ));
         }
         // Degree d holds SH triplets d² - 1 .. (d + 1)² - 1.

@@ -102,6 +102,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
         time: 1.6e-4,
         velocity: 1.6e-4,
         acceleration: 0.0,
+        angular_velocity: 0.0,
         scale: 5e-3,
         rotation: 1e-3,
         opacity: 5e-2,

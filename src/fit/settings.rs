@@ -86,7 +86,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 10] = [
+pub const ALPHA_ONLY: [&str; 11] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -97,6 +97,7 @@ pub const ALPHA_ONLY: [&str; 10] = [
     "time_split_fraction",
     "coarse_to_fine",
     "lr_acceleration",
+    "lr_angular_velocity",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -118,6 +119,8 @@ pub struct RateSettings {
     pub opacity: Option<f64>,
     /// SPEC §9 accelerations (alpha).
     pub acceleration: Option<f64>,
+    /// SPEC §9 angular velocities (alpha).
+    pub angular_velocity: Option<f64>,
     /// Quaternions (alpha).
     pub rotation: Option<f64>,
     /// SH coefficients beyond the base colour (alpha).
@@ -236,6 +239,7 @@ impl FitSettings {
             self.time_split_fraction.is_some(),
             self.coarse_to_fine.is_some(),
             r.acceleration.is_some(),
+            r.angular_velocity.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -482,6 +486,7 @@ impl FitSettings {
                 time: frozen(self.freeze_time, r.time.unwrap_or(d.rates.time)),
                 velocity: r.velocity.unwrap_or(d.rates.velocity),
                 acceleration: r.acceleration.unwrap_or(d.rates.acceleration),
+                angular_velocity: r.angular_velocity.unwrap_or(d.rates.angular_velocity),
                 scale: r.scale.unwrap_or(d.rates.scale),
                 rotation: r.rotation.unwrap_or(d.rates.rotation),
                 opacity: r.opacity.unwrap_or(d.rates.opacity),
@@ -522,6 +527,7 @@ fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
             ("lr_time", r.time),
             ("lr_velocity", r.velocity),
             ("lr_acceleration", r.acceleration),
+            ("lr_angular_velocity", r.angular_velocity),
             ("lr_scale", r.scale),
             ("lr_rotation", r.rotation),
             ("lr_opacity", r.opacity),

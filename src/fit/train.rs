@@ -478,6 +478,9 @@ fn give_fitted_motion(scene: &mut Scene, groups: &[ParameterGroup]) {
     if groups.iter().any(|g| g.field == Field::Acceleration) {
         scene.accelerations.resize(scene.len(), [0.0; 3]);
     }
+    if groups.iter().any(|g| g.field == Field::AngularVelocity) {
+        scene.angular_velocities.resize(scene.len(), [0.0; 4]);
+    }
 }
 
 /// The error of a fit whose training views saw no kernel in its first `steps` steps (every

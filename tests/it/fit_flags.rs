@@ -128,6 +128,7 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--percent-dense", "0.5"],
         &["--coarse-to-fine", "4"],
         &["--lr-acceleration", "0.01"],
+        &["--lr-angular-velocity", "0.01"],
         &["--cutoff", "0.01"],
         &["--dilation", "0.5"],
     ];
@@ -201,6 +202,7 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--time-split-fraction", "0.01"],
         &["--coarse-to-fine", "off"],
         &["--lr-acceleration", "0.01"],
+        &["--lr-angular-velocity", "0.01"],
     ] {
         let mut args = vec!["--blend", "additive"];
         args.extend_from_slice(extra);
