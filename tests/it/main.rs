@@ -67,6 +67,8 @@ mod ply;
 mod properties;
 /// The CLI writes the same bytes as before the layered move (issue 15).
 mod recorded;
+/// `--shard I/N` and `--assemble`: a batch scheduler's array job gives one run's bytes.
+mod shards;
 /// Each fast stage against its f64 twin, one stage at a time on the same input.
 mod stages;
 /// The temporal index renders exactly what a plain render does.
