@@ -57,6 +57,9 @@ mod memory;
 mod messages;
 /// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
 mod motion;
+/// `mpirun -n N splat4d fit` gives the one-process scene (cargo feature `mpi`).
+#[cfg(feature = "mpi")]
+mod mpi;
 /// Neural 3D Video rigs: poses_bounds.npy with extracted frames or videos.
 mod n3v;
 /// The output rule: only a command's own earlier output is replaced, never an input.
