@@ -21,6 +21,8 @@ struct World {
     comm: Mutex<SimpleCommunicator>,
     size: usize,
     rank: usize,
+    /// All-gathers, bytes received from the other ranks, seconds in the all-gathers.
+    traffic: Mutex<(u64, u64, f64)>,
 }
 
 // SAFETY: the communicator is a handle that MPI lets any thread use when the calls are
@@ -42,6 +44,7 @@ impl splat4d::fit::spread::Ranks for &'static World {
 
     fn all_gather(&self, mine: &[f64]) -> Vec<Vec<f64>> {
         let comm = self.comm.lock().unwrap_or_else(|e| e.into_inner());
+        let start = std::time::Instant::now();
         let count = i32::try_from(mine.len()).expect("a rank sends fewer than 2³¹ numbers");
         let mut counts = vec![0_i32; self.size];
         mpi::request::scope(|scope| {
@@ -58,11 +61,15 @@ impl splat4d::fit::spread::Ranks for &'static World {
         let total: usize = counts.iter().map(|&c| c as usize).sum();
         let mut all = vec![0.0_f64; total];
         {
+            // Blocking: every rank is here already (the counts' gather waited for the last),
+            // so its polling is the transfer itself, which moves a fragment per poll.
             let mut partition = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);
-            mpi::request::scope(|scope| {
-                wait(comm.immediate_all_gather_varcount_into(scope, mine, &mut partition));
-            });
+            comm.all_gather_varcount_into(mine, &mut partition);
         }
+        let mut traffic = self.traffic.lock().unwrap_or_else(|e| e.into_inner());
+        traffic.0 += 1;
+        traffic.1 += 8 * (total - mine.len()) as u64;
+        traffic.2 += start.elapsed().as_secs_f64();
         counts
             .iter()
             .zip(&displs)
@@ -73,7 +80,9 @@ impl splat4d::fit::spread::Ranks for &'static World {
 
 /// Waits for `request`, sleeping between tests once the first few find it unfinished: a
 /// rank waiting for a slower one leaves the core to it (on a machine whose cores are all
-/// busy, a blocking collective's polling took a third of the fit's time).
+/// busy, a blocking collective's polling took a third of the fit's time). Only for the
+/// small gather that waits for the ranks: a large one's fragments move one per test, and
+/// sleeps between them made the transfer 10× slower.
 fn wait<'a, R: ?Sized, S: mpi::request::Scope<'a>>(mut request: mpi::request::Request<'a, R, S>) {
     let mut tries = 0_u32;
     loop {
@@ -90,9 +99,25 @@ fn wait<'a, R: ?Sized, S: mpi::request::Scope<'a>>(mut request: mpi::request::Re
     }
 }
 
-/// MPI, while it runs: finalized when dropped.
+/// MPI, while it runs: finalized when dropped (with `SPLAT4D_MPI_TRAFFIC` set, each rank
+/// first prints its all-gathers, the bytes it received and the seconds they took).
 pub struct Session {
     _universe: Universe,
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        if let Some(world) = WORLD.get()
+            && std::env::var_os("SPLAT4D_MPI_TRAFFIC").is_some()
+        {
+            let (gathers, bytes, seconds) =
+                *world.traffic.lock().unwrap_or_else(|e| e.into_inner());
+            eprintln!(
+                "mpi: rank {} of {}: {gathers} all-gathers, {bytes} bytes received, {seconds:.3} s in them",
+                world.rank, world.size
+            );
+        }
+    }
 }
 
 /// Whether an MPI launcher started this process.
@@ -114,6 +139,7 @@ pub fn start() -> Option<Session> {
         comm: Mutex::new(comm),
         size,
         rank,
+        traffic: Mutex::new((0, 0, 0.0)),
     }));
     let _ = WORLD.set(world);
     splat4d::fit::spread::set_ranks(Box::new(world));

@@ -7,7 +7,7 @@
 //! single rank, nothing here runs.
 //!
 //! **Why the same bits.** One process sums a step's gradient view by view in the batch's
-//! order (`crate::fit::train`): `g = ((g₀ + g₁) + g₂) + …`, one term per kernel and field.
+//! order (the training loop's `batch_gradients`): `g = ((g₀ + g₁) + g₂) + …`, one term per kernel and field.
 //! Spread over `N` ranks, rank `r` renders and differentiates the views at the batch
 //! positions `p` with `p mod N = r` (balanced: every rank renders ⌈B/N⌉ or ⌊B/N⌋ views
 //! whatever views the seeded draw picked), and packs each view's MSE, its gradient and its
@@ -21,10 +21,10 @@
 //! elsewhere, so `-0.0 + 0.0` comes out as one process has it.
 //!
 //! **What a step sends.** Each rank receives the records of the views it did not render:
-//! `(B - B/N) · (8 (3 + s) + 8 (1 + F) · k_seen)` bytes a step, `F` the gradient's fields per
-//! kernel (additive 14; alpha 15 + 3 · SH triplets, 24 at degree 1), `k_seen` the kernels a
-//! view reaches and `s` three numbers per projected kernel for the density statistics
-//! (`docs/performance.md` measures it).
+//! `(B - B/N) · 8 · (7 + (1 + F) · k_seen + 3 · k_projected)` bytes a step: `F` numbers per
+//! kernel (18 additive; alpha 19 + 3 per SH triplet), `k_seen` the kernels whose gradient in
+//! the view is not zero, `k_projected` those it projected (their screen gradients, for the
+//! density statistics). `docs/performance.md` measures it.
 //!
 //! **Why every rank reads every training view.** The draw is the one-process fit's seeded
 //! shuffle, so a batch's views are anywhere in the training set; a rank that held only its
@@ -149,12 +149,16 @@ fn row_width(grads: &Gradients) -> usize {
         + 3 * sh_per_kernel(grads)
 }
 
-/// Sets kernel `k`'s gradient in `grads` from `row` ([`kernel_row`]'s order).
-fn set_kernel_row(grads: &mut Gradients, k: usize, row: &[f64]) {
+/// Adds `row` ([`kernel_row`]'s order) to kernel `k`'s gradient in `grads`, field by
+/// field: what [`Gradients::add`] does for that kernel.
+fn add_kernel_row(grads: &mut Gradients, k: usize, row: &[f64]) {
     let mut at = 0;
     let mut take = |into: &mut [f64]| {
-        into.copy_from_slice(&row[at..at + into.len()]);
-        at += into.len();
+        let n = into.len();
+        for (total, part) in into.iter_mut().zip(&row[at..at + n]) {
+            *total += part;
+        }
+        at += n;
     };
     take(&mut grads.v_means[k]);
     take(&mut grads.v_amplitudes[k]);
@@ -176,26 +180,32 @@ fn set_kernel_row(grads: &mut Gradients, k: usize, row: &[f64]) {
     }
 }
 
-/// One view's record, read back ([`pack_view`]).
+/// One view's record, read back ([`pack_view`]): its gradient kept sparse, as sent.
 pub(crate) struct ViewRecord {
     pub(crate) mse: f64,
     pub(crate) sees: bool,
-    pub(crate) grads: Gradients,
+    /// `(kernel, start in `values`)` of each kernel sent, in kernel order.
+    rows: Vec<(usize, usize)>,
+    values: Vec<f64>,
+    background: [f64; 3],
     pub(crate) screen: Vec<(usize, [f64; 2])>,
 }
 
 impl ViewRecord {
-    pub(crate) fn new(scene: &Scene) -> Self {
+    pub(crate) fn new() -> Self {
         ViewRecord {
             mse: 0.0,
             sees: false,
-            grads: Gradients::for_scene(scene),
+            rows: Vec::new(),
+            values: Vec::new(),
+            background: [0.0; 3],
             screen: Vec::new(),
         }
     }
 
-    /// Reads the record at `data[*at..]` for `scene`'s kernels, and moves `at` past it.
-    fn unpack(&mut self, scene: &Scene, data: &[f64], at: &mut usize) -> Result<()> {
+    /// Reads the record at `data[*at..]` for the kernels of `grads` (sized for the scene),
+    /// and moves `at` past it.
+    fn unpack(&mut self, grads: &Gradients, data: &[f64], at: &mut usize) -> Result<()> {
         let broken = || Error::Numeric("a rank's view record is cut short".into());
         let mut next = |n: usize| -> Result<&[f64]> {
             let part = data.get(*at..*at + n).ok_or_else(broken)?;
@@ -204,17 +214,21 @@ impl ViewRecord {
         };
         let head = next(3)?;
         let (mse, sees, rows) = (head[0], head[1] != 0.0, head[2] as usize);
-        self.grads.reset_for_scene(scene);
-        let width = row_width(&self.grads);
+        let width = row_width(grads);
+        self.rows.clear();
+        self.values.clear();
+        let mut last = None;
         for _ in 0..rows {
             let part = next(1 + width)?;
             let k = part[0] as usize;
-            if k >= scene.len() {
+            if k >= grads.v_means.len() || last.is_some_and(|l| l >= k) {
                 return Err(broken());
             }
-            set_kernel_row(&mut self.grads, k, &part[1..]);
+            last = Some(k);
+            self.rows.push((k, self.values.len()));
+            self.values.extend_from_slice(&part[1..]);
         }
-        self.grads.v_background.copy_from_slice(next(3)?);
+        self.background.copy_from_slice(next(3)?);
         let seen = next(1)?[0] as usize;
         let part = next(3 * seen)?;
         self.screen.clear();
@@ -223,6 +237,26 @@ impl ViewRecord {
         self.mse = mse;
         self.sees = sees;
         Ok(())
+    }
+
+    /// Adds the view's gradient to `grads` as [`Gradients::add`] adds the dense one: the
+    /// kernels sent their rows, every other kernel `+0.0` in every field (which turns a
+    /// `-0.0` sum into `+0.0`, as the dense sum does).
+    fn add_to(&self, grads: &mut Gradients) {
+        let width = row_width(grads);
+        let zeros = vec![0.0; width];
+        let mut rows = self.rows.iter().peekable();
+        for k in 0..grads.v_means.len() {
+            match rows.next_if(|&&(kernel, _)| kernel == k) {
+                Some(&(_, start)) => {
+                    add_kernel_row(grads, k, &self.values[start..start + width]);
+                }
+                None => add_kernel_row(grads, k, &zeros),
+            }
+        }
+        for (total, part) in grads.v_background.iter_mut().zip(self.background) {
+            *total += part;
+        }
     }
 }
 
@@ -248,9 +282,14 @@ impl Gathered {
     }
 
     /// Reads position `p`'s record into `record`.
-    pub(crate) fn read(&mut self, p: usize, scene: &Scene, record: &mut ViewRecord) -> Result<()> {
+    pub(crate) fn read(
+        &mut self,
+        p: usize,
+        grads: &Gradients,
+        record: &mut ViewRecord,
+    ) -> Result<()> {
         let rank = p % self.data.len();
-        record.unpack(scene, &self.data[rank], &mut self.at[rank])
+        record.unpack(grads, &self.data[rank], &mut self.at[rank])
     }
 
     /// Reads position `p`'s single number.
@@ -298,7 +337,6 @@ pub(crate) fn run_share<S: Send>(
 pub(crate) fn batch<S: Send>(
     ranks: &dyn Ranks,
     slots: &mut [S],
-    scene: &Scene,
     count: usize,
     weight: f64,
     grads: &mut Gradients,
@@ -308,12 +346,12 @@ pub(crate) fn batch<S: Send>(
 ) -> Result<f64> {
     let mine = run_share(ranks, count, slots, run, pack)?;
     let mut gathered = Gathered::new(ranks, &mine);
-    let mut record = ViewRecord::new(scene);
+    let mut record = ViewRecord::new();
     let mut loss = 0.0;
     for p in 0..count {
-        gathered.read(p, scene, &mut record)?;
+        gathered.read(p, grads, &mut record)?;
         loss += weight * record.mse;
-        grads.add(&record.grads);
+        record.add_to(grads);
         each_view(record.sees, &mut record.screen.iter().copied());
     }
     Ok(loss)
@@ -397,11 +435,20 @@ mod tests {
             [(1, [2.0, -1.0])].into_iter(),
         );
         // Kernel 0 is all +0.0: left out.
-        assert_eq!(out.len(), 3 + (1 + 14) + 3 + 1 + 3);
-        let mut record = ViewRecord::new(&scene);
+        assert_eq!(out.len(), 3 + (1 + 18) + 3 + 1 + 3);
+        let mut record = ViewRecord::new();
         let mut at = 0;
-        record.unpack(&scene, &out, &mut at).unwrap();
+        record.unpack(&grads, &out, &mut at).unwrap();
         assert_eq!(at, out.len());
+        // Added to a sum holding -0.0 everywhere, as the dense gradient adds.
+        let mut dense = Gradients::for_scene(&scene);
+        let mut sparse = Gradients::for_scene(&scene);
+        for g in [&mut dense, &mut sparse] {
+            g.v_means.iter_mut().for_each(|m| *m = [-0.0; 4]);
+            g.v_background = [-0.0; 3];
+        }
+        dense.add(&grads);
+        record.add_to(&mut sparse);
         let bits = |g: &Gradients| {
             let mut row = Vec::new();
             for k in 0..2 {
@@ -410,7 +457,7 @@ mod tests {
             row.extend(g.v_background);
             row.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
         };
-        assert_eq!(bits(&record.grads), bits(&grads));
+        assert_eq!(bits(&sparse), bits(&dense));
         assert_eq!(record.screen, [(1, [2.0, -1.0])]);
         assert!(record.sees && record.mse == 0.125);
     }
@@ -433,13 +480,16 @@ mod tests {
             crate::scenes::dataset::render_dataset(&scene, &spec, &options, || {}).unwrap();
         let mut moved = scene.clone();
         moved.means[0][0] += 0.05;
-        let one = crate::fit::train::evaluate(
-            &moved,
-            &dataset.train,
-            &options,
-            &mut RenderContext::new(),
-        )
-        .unwrap();
+        // One process: the MSEs summed one view after the other.
+        let mut context = RenderContext::new();
+        let mut total = 0.0;
+        for view in &dataset.train {
+            context
+                .render(&moved, &view.camera, view.time, &options)
+                .unwrap();
+            total += view_mse(context.image(), view);
+        }
+        let one = total / dataset.train.len() as f64;
         for size in [2, 3] {
             let shared = Arc::new((Barrier::new(size), Mutex::new(vec![Vec::new(); size])));
             let results: Vec<f64> = std::thread::scope(|s| {

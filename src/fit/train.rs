@@ -360,7 +360,6 @@ pub(crate) fn batch_gradients(
         return spread::batch(
             ranks,
             slots,
-            scene,
             drawn.len(),
             weight,
             grads,

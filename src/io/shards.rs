@@ -5,7 +5,7 @@
 //! - Shard `I/N` writes the frames `k` with `k mod N = I` into the folder one run writes
 //!   (a video's frame folder, a sequence's or a dataset's folder), each frame staged and then
 //!   moved into place, and records them in its own marker `.splat4d-shard-I-of-N`: the
-//!   command and the shard, a fingerprint of what the frames depend on (the scene file's
+//!   command and the shard (`video shard 0/4`), a fingerprint of what the frames depend on (the scene file's
 //!   bytes, the cameras and times, the options), and each frame's [`Stamp`]. It never removes
 //!   another shard's frames, so shards run side by side into one folder.
 //! - A shard writes into a folder only when every file in it is recorded by a marker of the
@@ -176,7 +176,7 @@ fn shard_markers(dir: &Path, command: &str) -> BTreeMap<String, ShardMarker> {
             let ours = marker
                 .header
                 .strip_prefix(command)
-                .is_some_and(|rest| rest.starts_with(" --shard "));
+                .is_some_and(|rest| rest.starts_with(" shard "));
             ours.then_some((name, marker))
         })
         .collect()
@@ -270,7 +270,7 @@ pub fn commit_shard(
     let marker_path = dir.join(shard.marker_name());
     let earlier = ShardMarker::read(&marker_path);
     let mut marker = ShardMarker {
-        header: format!("{command} --shard {}/{}", shard.index, shard.count),
+        header: format!("{command} shard {}/{}", shard.index, shard.count),
         fingerprint: fingerprint.to_string(),
         files: names.iter().map(|n| (n.clone(), None)).collect(),
     };
@@ -333,7 +333,7 @@ pub fn check_assembled(
 ) -> Result<()> {
     if !dir.is_dir() {
         return Err(Error::usage(format!(
-            "{}: missing: `--assemble` puts together the frames written by `splat4d {command} --shard I/N` runs of the same settings; run them first",
+            "{}: missing: `assemble` puts together the frames written by the `shard` runs of `splat4d {command}` with the same settings; run them first",
             dir.display()
         )));
     }
@@ -356,10 +356,10 @@ pub fn check_assembled(
             let why = if stamp.is_none() {
                 "missing"
             } else {
-                "not written by a `--shard` run of these settings (or changed since)"
+                "not written by a `shard` run of these settings (or changed since)"
             };
             return Err(Error::usage(format!(
-                "{}: {why}: `--assemble` needs every frame written by `splat4d {command} --shard I/N` runs of the same settings (run the missing shard)",
+                "{}: {why}: `assemble` needs every frame written by the `shard` runs of `splat4d {command}` with the same settings (run the missing shard)",
                 path.display()
             )));
         }

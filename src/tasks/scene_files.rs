@@ -212,43 +212,7 @@ pub const MAX_EXPORT_FRAMES: usize = 10_000;
 /// Writes the 3D Gaussian Splatting PLY of a scene's slice at one time, or a sequence of them
 /// with an index ([`crate::io::ply::write_slice_sequence`]).
 pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
-    check_non_negative_setting("cutoff", request.cutoff)?;
-    match &request.times {
-        ExportTimes::One(tau) if !tau.is_finite() => {
-            return Err(Error::setting(&["time"], "`time` must be finite"));
-        }
-        ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
-            return Err(Error::setting(
-                &["times"],
-                format!("`times` needs 1 to {MAX_EXPORT_FRAMES} times"),
-            ));
-        }
-        ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
-            return Err(Error::setting(&["times"], "`times` must be finite"));
-        }
-        ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
-            return Err(Error::setting(
-                &["frames"],
-                format!("`frames` {n} must be from 1 to {MAX_EXPORT_FRAMES}"),
-            ));
-        }
-        _ => {}
-    }
-    if let ExportTimes::One(_) = request.times
-        && request.sharding != Sharding::Whole
-    {
-        let field = if request.sharding == Sharding::Assemble {
-            "assemble"
-        } else {
-            "shard"
-        };
-        return Err(Error::setting(
-            &[field],
-            format!(
-                "`{field}` shares a sequence's slices (`times` or `frames`) among runs, and one slice at `time` is one file: leave `{field}` out"
-            ),
-        ));
-    }
+    check_export_settings(request)?;
     if let ExportTimes::One(tau) = request.times {
         check_output(&request.out, &["ply"], &[&request.scene])?;
         let scene = load_scene(&request.scene)?;
@@ -316,6 +280,49 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     })
 }
 
+/// Refuses, before any work, settings `export-ply` cannot act on: a negative cut-off, a
+/// time that is not finite, a sequence of no or too many times, and sharding of one slice.
+fn check_export_settings(request: &ExportRequest) -> Result<()> {
+    check_non_negative_setting("cutoff", request.cutoff)?;
+    match &request.times {
+        ExportTimes::One(tau) if !tau.is_finite() => {
+            return Err(Error::setting(&["time"], "`time` must be finite"));
+        }
+        ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
+            return Err(Error::setting(
+                &["times"],
+                format!("`times` needs 1 to {MAX_EXPORT_FRAMES} times"),
+            ));
+        }
+        ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
+            return Err(Error::setting(&["times"], "`times` must be finite"));
+        }
+        ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
+            return Err(Error::setting(
+                &["frames"],
+                format!("`frames` {n} must be from 1 to {MAX_EXPORT_FRAMES}"),
+            ));
+        }
+        _ => {}
+    }
+    if let ExportTimes::One(_) = request.times
+        && request.sharding != Sharding::Whole
+    {
+        let field = if request.sharding == Sharding::Assemble {
+            "assemble"
+        } else {
+            "shard"
+        };
+        return Err(Error::setting(
+            &[field],
+            format!(
+                "`{field}` shares a sequence's slices (`times` or `frames`) among runs, and one slice at `time` is one file: leave `{field}` out"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// What a sequence's slices depend on: the scene file's bytes, the times, the cut-off and
 /// `sh_rest` ([`crate::io::shards::fingerprint`]).
 fn sequence_fingerprint(request: &ExportRequest, times: &[f64]) -> Result<String> {
@@ -360,7 +367,7 @@ fn export_shard(
     Ok(SceneSummary {
         out: request.out.clone(),
         line: format!(
-            "{} of {} slices (shard {}/{}); `--assemble` writes the index once every shard is done",
+            "{} of {} slices (shard {}/{}); `assemble` writes the index once every shard is done",
             names.len(),
             times.len(),
             shard.index,
