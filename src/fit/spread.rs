@@ -11,7 +11,7 @@
 //! Spread over `N` ranks, rank `r` renders and differentiates the views at the batch
 //! positions `p` with `p mod N = r` (balanced: every rank renders ⌈B/N⌉ or ⌊B/N⌋ views
 //! whatever views the seeded draw picked), and packs each view's MSE, its gradient and its
-//! screen-space gradients ([`pack_view`]). One all-gather hands every rank every view's
+//! screen-space gradients (`pack_view`). One all-gather hands every rank every view's
 //! record; every rank then adds them in batch order exactly as one process does, feeds the
 //! density statistics in that order, and takes the same Adam step: the scenes of all ranks
 //! stay identical, and equal to the one-process scene, without any further message. The
