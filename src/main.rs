@@ -30,6 +30,9 @@ fn exit_code(kind: ErrorKind) -> u8 {
 fn main() -> ExitCode {
     cli::allocator::tune_heap();
     let args = <cli::Cli as clap::Parser>::parse();
+    // Under `mpirun` (cargo feature `mpi`): MPI runs until this is dropped, after the command.
+    #[cfg(feature = "mpi")]
+    let _mpi = cli::mpi::start();
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
@@ -37,8 +40,15 @@ fn main() -> ExitCode {
             let given = cli::flags::given_flags(args.iter().cloned());
             let known = cli::flags::command_flags(&args);
             let error = cli::flags::name_flags(error, &given, &known);
+            let code = exit_code(error.kind());
+            #[cfg(feature = "mpi")]
+            if let Some((rank, size)) = cli::mpi::spread() {
+                // One rank failing stops them all, none left waiting for it.
+                eprintln!("error: rank {rank} of {size}: {error}");
+                cli::mpi::stop_all(code);
+            }
             eprintln!("error: {error}");
-            ExitCode::from(exit_code(error.kind()))
+            ExitCode::from(code)
         }
     }
 }

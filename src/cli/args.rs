@@ -147,3 +147,29 @@ pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
         _ => Err(format!("`{text}` is not WxH with W, H ≥ 1")),
     }
 }
+
+// Frames shared among the runs of an array job (`--shard I/N`), then put together
+// (`--assemble`). (`//`: as for `ViewFlags`.)
+#[derive(Debug, clap::Args)]
+pub struct ShardFlags {
+    /// Write only frames I, I+N, I+2N, … (`I/N`, 0 ≤ I < N) into the output's layout, for a
+    /// batch scheduler's array job; `--assemble` puts the shards' frames together.
+    #[arg(long, value_name = "I/N", conflicts_with = "assemble")]
+    shard: Option<splat4d::io::shards::Shard>,
+    /// Write what one run writes beyond the frames from the frames the `--shard` runs of the
+    /// same command wrote (refused naming a missing frame).
+    #[arg(long)]
+    assemble: bool,
+}
+
+impl ShardFlags {
+    /// The sharding these flags ask for.
+    pub fn sharding(&self) -> splat4d::io::shards::Sharding {
+        use splat4d::io::shards::Sharding;
+        match (self.shard, self.assemble) {
+            (Some(shard), _) => Sharding::Shard(shard),
+            (None, true) => Sharding::Assemble,
+            (None, false) => Sharding::Whole,
+        }
+    }
+}

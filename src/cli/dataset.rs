@@ -43,6 +43,8 @@ pub struct DatasetArgs {
     monocular: bool,
     #[command(flatten)]
     render: RenderFlags,
+    #[command(flatten)]
+    shards: super::args::ShardFlags,
 }
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
@@ -62,6 +64,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         exr: args.exr,
         options: args.render.options(),
         threads: args.render.threads(),
+        sharding: args.shards.sharding(),
     };
     super::with_progress(|bars| write_dataset(&request, bars))
 }

@@ -36,6 +36,8 @@ pub struct ExportPlyArgs {
     /// require them, such as the reference 3DGS training code.
     #[arg(long)]
     sh_rest: bool,
+    #[command(flatten)]
+    shards: super::args::ShardFlags,
 }
 
 pub fn run(args: &ExportPlyArgs) -> Result<()> {
@@ -50,6 +52,7 @@ pub fn run(args: &ExportPlyArgs) -> Result<()> {
         out: args.out.clone(),
         cutoff: args.cutoff,
         sh_rest: args.sh_rest,
+        sharding: args.shards.sharding(),
     })?;
     for warning in &summary.warnings {
         eprintln!("warning: {warning}");

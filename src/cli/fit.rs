@@ -318,5 +318,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
         threads: args.render.threads(),
         view: args.view,
     };
+    if !splat4d::fit::spread::is_leader() {
+        // Spread over MPI ranks: rank 0 alone shows progress and the summary.
+        return fit_dataset(&request, &mut splat4d::model::Silent).map(|_| ());
+    }
     super::with_progress(|bars| fit_dataset(&request, bars))
 }

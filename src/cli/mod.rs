@@ -13,6 +13,8 @@ mod fit;
 pub mod flags;
 mod grad;
 mod import_gltf;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 mod progress;
 mod render;
 mod report;
@@ -92,6 +94,11 @@ enum Command {
 pub fn run(cli: Cli) -> splat4d::Result<()> {
     if let Some(bytes) = cli.max_memory {
         splat4d::io::memory::set_limit(bytes);
+    }
+    if splat4d::fit::spread::ranks().is_some() && !matches!(cli.command, Some(Command::Fit(_))) {
+        return Err(splat4d::Error::usage(
+            "only `splat4d fit` is spread over MPI ranks: run other commands as one process (renders share their frames with `--shard I/N` and `--assemble`)",
+        ));
     }
     match cli.command {
         None => report::run(&report::ReportArgs::default()),

@@ -8,7 +8,7 @@ use splat4d::io::video::VideoOptions;
 use splat4d::scenes::paths::{Circle, Up};
 use splat4d::tasks::video::{CircleSpec as Spec, VideoRequest, write_videos};
 
-use super::args::{RenderFlags, TimeList, parse_list, parse_size, parse_times};
+use super::args::{RenderFlags, ShardFlags, TimeList, parse_list, parse_size, parse_times};
 
 /// An orbit or spiral: explicit `cx,cy,cz,radius,elevation,frames`, or `auto` (from the
 /// scene's bounds: 20° elevation, 60 frames).
@@ -85,6 +85,8 @@ pub struct VideoArgs {
     no_mp4: bool,
     #[command(flatten)]
     render: RenderFlags,
+    #[command(flatten)]
+    shards: ShardFlags,
 }
 
 impl CircleSpec {
@@ -128,6 +130,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         fps_given: args.fps.is_some(),
         options: args.render.options(),
         threads: args.render.threads(),
+        sharding: args.shards.sharding(),
     };
     super::with_progress(|bars| write_videos(&request, bars)).map_err(offer_no_gif)
 }

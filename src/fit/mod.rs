@@ -2,8 +2,9 @@
 //! groups ([`adam`]), one training loop ([`train`]) with its coarse-to-fine stages
 //! ([`coarse`]) and the density rules ([`density`]) for both blends, each blend's table and options ([`additive`], [`alpha`]), the starts
 //! ([`init`], [`alpha_start`], [`hull`], [`stereo`]), the defaults ([`defaults`]) and the
-//! policy that chooses among them ([`plan`], from the caller's [`settings`]), and the
-//! estimate of a running fit's time left ([`time_left`]).
+//! policy that chooses among them ([`plan`], from the caller's [`settings`]), the
+//! estimate of a running fit's time left ([`time_left`]), and a fit spread over MPI ranks
+//! with the one-process scene ([`spread`]).
 
 pub mod adam;
 pub mod additive;
@@ -17,6 +18,7 @@ pub mod init;
 pub mod loss;
 pub mod plan;
 pub mod settings;
+pub mod spread;
 pub mod stereo;
 pub mod time_left;
 pub mod train;

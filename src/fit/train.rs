@@ -30,6 +30,7 @@ use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_param
 use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::{DensityRules, DensityStats};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
+use crate::fit::spread;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::Scene;
@@ -143,6 +144,9 @@ pub fn evaluate(
     options: &RenderOptions,
     context: &mut RenderContext,
 ) -> Result<f64> {
+    if let Some(ranks) = spread::ranks() {
+        return spread::evaluate(ranks, scene, views, options, &mut [context]);
+    }
     let mut total = 0.0;
     for view in views {
         context.render(scene, &view.camera, view.time, options)?;
@@ -203,6 +207,10 @@ pub(crate) fn evaluate_in(
     options: &RenderOptions,
     slots: &mut [ViewSlot],
 ) -> Result<f64> {
+    if let Some(ranks) = spread::ranks() {
+        let mut contexts: Vec<_> = slots.iter_mut().map(|s| &mut s.context).collect();
+        return spread::evaluate(ranks, scene, views, options, &mut contexts);
+    }
     let mut total = 0.0;
     for group in views.chunks(slots.len()) {
         let errors: Vec<Result<f64>> = slots
@@ -339,7 +347,9 @@ pub(crate) fn view_slots(scene: &Scene, batch: usize) -> Vec<ViewSlot> {
 /// Adds to `grads` the gradient of the batch's loss, the mean MSE of the training views
 /// `drawn` (indices into `train`), and returns that loss. The views run side by side in
 /// `slots`, each rendered and differentiated on its own; then, in view order, each view's
-/// gradient is added to `grads` and `each_view` sees its slot. Every field of a view's
+/// gradient is added to `grads` and `each_view` sees whether it saw a kernel and its screen
+/// gradients. Spread over MPI ranks ([`spread`]), each rank runs its share and every rank
+/// adds the gathered views in the same order. Every field of a view's
 /// gradient takes one term per kernel, so this is the sum the views would give one after
 /// the other, bit for bit, whatever the number of slots (threads).
 pub(crate) fn batch_gradients(
@@ -349,9 +359,30 @@ pub(crate) fn batch_gradients(
     drawn: &[usize],
     options: &RenderOptions,
     grads: &mut Gradients,
-    mut each_view: impl FnMut(&ViewSlot),
+    mut each_view: impl FnMut(bool, &mut dyn Iterator<Item = (usize, [f64; 2])>),
 ) -> Result<f64> {
     let weight = 1.0 / drawn.len() as f64;
+    if let Some(ranks) = spread::ranks() {
+        // The batch spread over the ranks, summed in view order on each ([`spread::batch`]).
+        return spread::batch(
+            ranks,
+            slots,
+            drawn.len(),
+            weight,
+            grads,
+            each_view,
+            |slot, p| slot.run(scene, &train[drawn[p]], weight, options),
+            |out, slot, mse| {
+                spread::pack_view(
+                    out,
+                    mse,
+                    slot.sees_a_kernel(),
+                    &slot.grads,
+                    slot.screen_gradients(),
+                );
+            },
+        );
+    }
     let mut loss = 0.0;
     for views in drawn.chunks(slots.len()) {
         let losses: Vec<Result<f64>> = slots
@@ -362,7 +393,7 @@ pub(crate) fn batch_gradients(
         for (slot, mse) in slots.iter().zip(losses) {
             loss += weight * mse?;
             grads.add(&slot.grads);
-            each_view(slot);
+            each_view(slot.sees_a_kernel(), &mut slot.screen_gradients());
         }
     }
     Ok(loss)
@@ -417,9 +448,9 @@ pub fn fit(
             &drawn,
             render,
             &mut grads,
-            |slot| {
-                seen_any |= slot.sees_a_kernel();
-                stats.add_view(slot.screen_gradients(), weight);
+            |sees, screen| {
+                seen_any |= sees;
+                stats.add_view(screen, weight);
             },
         )?;
         if !seen_any && (step == first_epoch || step == steps) {

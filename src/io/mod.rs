@@ -16,6 +16,7 @@
 //! | [`point_cloud`] | PLY point clouds shipped with datasets |
 //! | [`gltf`] | glTF 2.0 models and their cameras: read, checked, handed to the scene math as plain data |
 //! | [`video`] | frame folders, GIF and MP4 from frames rendered above |
+//! | [`shards`] | outputs shared by runs of one command (`--shard I/N`) and put together (`--assemble`) |
 //! | [`json`] | JSON with errors that name the item and field |
 //! | [`input`] | every input file opened: regular files only (FIFOs, sockets, devices refused at once) |
 //!
@@ -38,6 +39,7 @@ pub mod ply;
 pub mod ply_header;
 pub mod point_cloud;
 pub mod scene_file;
+pub mod shards;
 pub mod video;
 
 use std::io::{BufWriter, Write};

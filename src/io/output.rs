@@ -72,24 +72,33 @@ impl Stamp {
     }
 
     fn to_line(self, name: &str) -> String {
+        format!("../{name}\t{}", self.to_fields())
+    }
+
+    /// `len modified device inode`, as marker lines record a stamp.
+    pub(crate) fn to_fields(self) -> String {
         format!(
-            "../{name}\t{} {} {} {}",
+            "{} {} {} {}",
             self.len, self.modified, self.device, self.inode
         )
+    }
+
+    /// The stamp of `len modified device inode` ([`Self::to_fields`]).
+    pub(crate) fn from_fields(numbers: &str) -> Option<Stamp> {
+        let mut numbers = numbers.split(' ');
+        let mut next = || numbers.next();
+        Some(Stamp {
+            len: next()?.parse().ok()?,
+            modified: next()?.parse().ok()?,
+            device: next()?.parse().ok()?,
+            inode: next()?.parse().ok()?,
+        })
     }
 
     /// `(NAME, stamp)` of a marker line `../NAME<TAB>len modified device inode`.
     fn from_line(line: &str) -> Option<(&str, Stamp)> {
         let (name, numbers) = line.strip_prefix("../")?.rsplit_once('\t')?;
-        let mut numbers = numbers.split(' ');
-        let mut next = || numbers.next();
-        let stamp = Stamp {
-            len: next()?.parse().ok()?,
-            modified: next()?.parse().ok()?,
-            device: next()?.parse().ok()?,
-            inode: next()?.parse().ok()?,
-        };
-        Some((name, stamp))
+        Some((name, Stamp::from_fields(numbers)?))
     }
 }
 
@@ -216,7 +225,7 @@ pub fn unique_names(names: &[String]) -> Vec<String> {
 
 /// The paths under `dir` (relative, `/`-separated, sorted; symlinks not followed), or
 /// `None` when it cannot be listed.
-fn listing(dir: &Path) -> Option<Vec<String>> {
+pub(crate) fn listing(dir: &Path) -> Option<Vec<String>> {
     let mut found = Vec::new();
     let mut stack = vec![PathBuf::new()];
     while let Some(relative) = stack.pop() {

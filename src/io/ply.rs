@@ -213,7 +213,7 @@ pub fn write_slice_sequence(
     let mut counts = Vec::with_capacity(times.len());
     let mut index = Vec::with_capacity(times.len());
     for (k, &tau) in times.iter().enumerate() {
-        let file = format!("frame_{k:04}.ply");
+        let file = slice_file(k);
         counts.push(write_slice_ply(
             scene,
             tau,
@@ -221,13 +221,29 @@ pub fn write_slice_sequence(
             sh_rest,
             &folder.path().join(&file),
         )?);
-        index.push(serde_json::json!({"file": file, "time": tau}));
+        index.push(file);
     }
-    let text = serde_json::to_string_pretty(&serde_json::json!({ "frames": index }))
-        .expect("an index of finite times serialises");
-    super::write_bytes_atomically(&folder.path().join(SEQUENCE_INDEX), text.as_bytes())?;
+    write_sequence_index(folder.path(), &index, times)?;
     folder.commit()?;
     Ok(counts)
+}
+
+/// The file name of slice `k` of a sequence.
+#[must_use]
+pub fn slice_file(k: usize) -> String {
+    format!("frame_{k:04}.ply")
+}
+
+/// Writes the index [`SEQUENCE_INDEX`] of the slices `files` at `times` into `dir`.
+pub fn write_sequence_index(dir: &Path, files: &[String], times: &[f64]) -> Result<()> {
+    let index: Vec<_> = files
+        .iter()
+        .zip(times)
+        .map(|(file, tau)| serde_json::json!({"file": file, "time": tau}))
+        .collect();
+    let text = serde_json::to_string_pretty(&serde_json::json!({ "frames": index }))
+        .expect("an index of finite times serialises");
+    super::write_bytes_atomically(&dir.join(SEQUENCE_INDEX), text.as_bytes())
 }
 
 /// Writes `scene` as a 4D scene PLY (alpha scenes with `comment blend alpha`, `opacity`

@@ -231,6 +231,86 @@ fn write_frames(
     written
 }
 
+/// The GIF and MP4 of the `frame_count` frames already in `frames_dir` (as [`write_video`]
+/// wrote them, `frame_KKKK.png`), written into `dir` (a staging folder moved to `shown` by
+/// the caller): the same bytes as [`write_video`]'s from the images the frames were made of
+/// (an 8-bit PNG holds the levels the GIF's frame is quantised to). The caller writes the
+/// frame folder's marker once the files are in place.
+pub fn encode_frames(
+    frame_count: usize,
+    frames_dir: &Path,
+    dir: &Path,
+    shown: &Path,
+    name: &str,
+    options: &VideoOptions,
+) -> Result<VideoFiles> {
+    if options.fps == 0 {
+        return Err(Error::setting(&["fps"], "`fps` must be at least 1"));
+    }
+    let read_frame = |k: usize| -> Result<RgbaImage> {
+        let path = frames_dir.join(format!("frame_{k:04}.png"));
+        let image = image::ImageReader::open(&path)
+            .map_err(|e| Error::read(&path, "cannot read the frame", e))?
+            .decode()
+            .map_err(|e| Error::read(&path, "cannot decode the frame", std::io::Error::other(e)))?;
+        Ok(image.to_rgba8())
+    };
+    let gif_path = options.gif.then(|| dir.join(format!("{name}.gif")));
+    if let Some(gif) = &gif_path {
+        let delay = Delay::from_numer_denom_ms(1000, options.fps);
+        let mut failure = None;
+        let written = write_atomically(gif, |w| {
+            let mut encoder = GifEncoder::new_with_speed(w, 10);
+            encoder
+                .set_repeat(Repeat::Infinite)
+                .map_err(std::io::Error::other)?;
+            let mut screen = None;
+            for k in 0..frame_count {
+                let rgba = match read_frame(k) {
+                    Ok(rgba) => rgba,
+                    Err(e) => {
+                        failure = Some(e);
+                        return Err(std::io::Error::other("a frame failed"));
+                    }
+                };
+                let (w0, h0) = *screen.get_or_insert(rgba.dimensions());
+                if rgba.dimensions() != (w0, h0) || w0 > MAX_GIF_SIDE || h0 > MAX_GIF_SIDE {
+                    failure = Some(Error::setting(
+                        &["gif"],
+                        format!(
+                            "frame {k} is {}×{} and frame 0 {w0}×{h0}: a GIF has one screen size of at most {MAX_GIF_SIDE} pixels a side; give every frame one size or no GIF",
+                            rgba.width(),
+                            rgba.height()
+                        ),
+                    ));
+                    return Err(std::io::Error::other("a frame failed"));
+                }
+                encoder
+                    .encode_frame(Frame::from_parts(rgba, 0, 0, delay))
+                    .map_err(std::io::Error::other)?;
+            }
+            Ok(())
+        });
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        written?;
+    }
+    let (mp4, mp4_note) = if options.mp4 {
+        encode_mp4(frames_dir, dir, name, options.fps)
+    } else {
+        (None, None)
+    };
+    let at = |path: &Path| shown.join(path.file_name().unwrap_or_default());
+    Ok(VideoFiles {
+        frames_dir: shown.join(name),
+        frames: frame_count,
+        gif: gif_path.as_deref().map(at),
+        mp4: mp4.as_deref().map(at),
+        mp4_note,
+    })
+}
+
 /// Runs `ffmpeg` on the numbered frames, if it is on `PATH`.
 fn encode_mp4(
     frames_dir: &Path,

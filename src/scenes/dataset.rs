@@ -152,15 +152,30 @@ impl Split {
     }
 }
 
-/// Renders the views of `spec` one at a time, in file order (train, then val and test by
-/// time), handing each to `sink` as soon as it is rendered: memory does not grow with the
-/// dataset ([`render_dataset`] collects them).
-pub fn render_views(
-    scene: &Scene,
-    spec: &DatasetSpec,
-    options: &RenderOptions,
-    mut sink: impl FnMut(Split, View) -> Result<()>,
-) -> Result<()> {
+/// One frame of a dataset: its split, its place in the split, its camera and time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DatasetFrame {
+    /// The split it belongs to.
+    pub split: Split,
+    /// Its index in the split (`r_000`, …).
+    pub index: usize,
+    /// The camera.
+    pub camera: crate::model::camera::Camera,
+    /// Scene time.
+    pub time: f64,
+}
+
+impl DatasetFrame {
+    /// Its name in the dataset, `./SPLIT/r_NNN`.
+    #[must_use]
+    pub fn name(&self) -> String {
+        format!("./{}/r_{:03}", self.split.name(), self.index)
+    }
+}
+
+/// The frames of `spec`'s dataset of `scene`, in file order (train, then val and test by
+/// time): what [`render_views`] renders.
+pub fn dataset_frames(scene: &Scene, spec: &DatasetSpec) -> Result<Vec<DatasetFrame>> {
     spec.validate()?;
     let train_times = crate::scenes::paths::even_times(spec.time_range, spec.times);
     let mid_times: Vec<f64> = if spec.times == 1 {
@@ -191,47 +206,76 @@ pub fn render_views(
         ));
     }
     let (train_cameras, test_cameras) = cameras.split_at(spec.views);
-    let mut context = RenderContext::new();
+    let mut frames = Vec::new();
     let mut counts = [0_usize; 3];
-    let mut render =
-        |camera: &crate::model::camera::Camera, time: f64, split: Split| -> Result<()> {
-            context.render(scene, camera, time, options)?;
-            let name = format!("./{}/r_{:03}", split.name(), counts[split.index()]);
-            counts[split.index()] += 1;
-            sink(
-                split,
-                View {
-                    camera: *camera,
-                    time,
-                    image: context.image().clone().into(),
-                    name,
-                    weights: None,
-                },
-            )
-        };
+    let mut push = |camera: &crate::model::camera::Camera, time: f64, split: Split| {
+        frames.push(DatasetFrame {
+            split,
+            index: counts[split.index()],
+            camera: *camera,
+            time,
+        });
+        counts[split.index()] += 1;
+    };
     if spec.monocular {
         for (camera, &time) in train_cameras.iter().zip(&train_times) {
-            render(camera, time, Split::Train)?;
+            push(camera, time, Split::Train);
         }
         let [t0, t1] = spec.time_range;
         for (j, camera) in test_cameras.iter().enumerate() {
             let time = t0 + (j as f64 + 0.5) / test_count as f64 * (t1 - t0);
-            render(camera, time, Split::Test)?;
+            push(camera, time, Split::Test);
         }
-        return Ok(());
+        return Ok(frames);
     }
     for &time in &train_times {
         for camera in train_cameras {
-            render(camera, time, Split::Train)?;
+            push(camera, time, Split::Train);
         }
     }
     for &time in &mid_times {
         for camera in train_cameras.iter().take(4) {
-            render(camera, time, Split::Val)?;
+            push(camera, time, Split::Val);
         }
         for camera in test_cameras {
-            render(camera, time, Split::Test)?;
+            push(camera, time, Split::Test);
         }
+    }
+    Ok(frames)
+}
+
+/// Renders frame `frame` of a dataset of `scene` in `context`: the view `sink`s receive.
+pub fn render_frame(
+    scene: &Scene,
+    frame: &DatasetFrame,
+    options: &RenderOptions,
+    context: &mut RenderContext,
+) -> Result<View> {
+    context.render(scene, &frame.camera, frame.time, options)?;
+    Ok(View {
+        camera: frame.camera,
+        time: frame.time,
+        image: context.image().clone().into(),
+        name: frame.name(),
+        weights: None,
+    })
+}
+
+/// Renders the views of `spec` one at a time, in file order (train, then val and test by
+/// time), handing each to `sink` as soon as it is rendered: memory does not grow with the
+/// dataset ([`render_dataset`] collects them).
+pub fn render_views(
+    scene: &Scene,
+    spec: &DatasetSpec,
+    options: &RenderOptions,
+    mut sink: impl FnMut(Split, View) -> Result<()>,
+) -> Result<()> {
+    let mut context = RenderContext::new();
+    for frame in dataset_frames(scene, spec)? {
+        sink(
+            frame.split,
+            render_frame(scene, &frame, options, &mut context)?,
+        )?;
     }
     Ok(())
 }

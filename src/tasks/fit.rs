@@ -171,8 +171,11 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     let options = dataset_options(request);
     check_fit_memory(request, source.photo_memory_as(&options))?;
     // A busy port is refused before the dataset is read.
+    // Spread over MPI ranks, rank 0 alone serves the viewer and writes the outputs.
+    let leader = crate::fit::spread::is_leader();
     let server = request
         .view
+        .filter(|_| leader)
         .map(|port| Server::bind("127.0.0.1", port))
         .transpose()?;
     let dataset = read_dataset(request, source, &options, progress)?;
@@ -228,7 +231,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     })??;
     drop(viewer);
     let scene = &ready.scene;
-    write_fit(request, scene, &records)?;
+    if leader {
+        write_fit(request, scene, &records)?;
+    }
     let splits = with_threads_on_pool(request.threads, || {
         evaluate_splits(scene, &dataset, &render)
     })??;

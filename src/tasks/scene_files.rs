@@ -8,6 +8,7 @@ use crate::io::gltf::Spacing;
 use crate::io::gltf::import_scene;
 use crate::io::ply::write_slice_ply;
 use crate::io::scene_file::{load_scene, save_scene};
+use crate::io::shards::{Shard, Sharding};
 use crate::model::{Blend, Error, Result, Scene, check_non_negative_setting};
 use crate::scenes::motion::three_blobs_scene;
 use crate::scenes::toy::{blob_scene, points_scene};
@@ -188,6 +189,9 @@ pub struct ExportRequest {
     pub cutoff: f64,
     /// Add 45 zero `f_rest_*` properties.
     pub sh_rest: bool,
+    /// A sequence's every slice, one shard of them, or its index from the shards' slices
+    /// ([`crate::io::shards`]).
+    pub sharding: Sharding,
 }
 
 /// The times `export-ply` slices at.
@@ -208,28 +212,7 @@ pub const MAX_EXPORT_FRAMES: usize = 10_000;
 /// Writes the 3D Gaussian Splatting PLY of a scene's slice at one time, or a sequence of them
 /// with an index ([`crate::io::ply::write_slice_sequence`]).
 pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
-    check_non_negative_setting("cutoff", request.cutoff)?;
-    match &request.times {
-        ExportTimes::One(tau) if !tau.is_finite() => {
-            return Err(Error::setting(&["time"], "`time` must be finite"));
-        }
-        ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
-            return Err(Error::setting(
-                &["times"],
-                format!("`times` needs 1 to {MAX_EXPORT_FRAMES} times"),
-            ));
-        }
-        ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
-            return Err(Error::setting(&["times"], "`times` must be finite"));
-        }
-        ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
-            return Err(Error::setting(
-                &["frames"],
-                format!("`frames` {n} must be from 1 to {MAX_EXPORT_FRAMES}"),
-            ));
-        }
-        _ => {}
-    }
+    check_export_settings(request)?;
     if let ExportTimes::One(tau) = request.times {
         check_output(&request.out, &["ply"], &[&request.scene])?;
         let scene = load_scene(&request.scene)?;
@@ -254,7 +237,11 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
     let mut outputs = crate::io::output::Outputs::new();
     outputs.input(&request.scene).folder(&request.out);
     outputs.check()?;
-    crate::io::output::check_replaceable(&request.out, "export-ply")?;
+    if request.sharding == Sharding::Whole {
+        crate::io::output::check_replaceable(&request.out, "export-ply")?;
+    } else {
+        crate::io::shards::check_shared_folder(&request.out, "export-ply")?;
+    }
     let scene = load_scene(&request.scene)?;
     check_sh_rest(request, &scene)?;
     let times = match &request.times {
@@ -264,6 +251,11 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
         }
         ExportTimes::One(_) => unreachable!("handled above"),
     };
+    match request.sharding {
+        Sharding::Whole => {}
+        Sharding::Shard(shard) => return export_shard(request, &scene, &times, shard),
+        Sharding::Assemble => return assemble_sequence(request, &scene, &times),
+    }
     let counts = crate::io::ply::write_slice_sequence(
         &scene,
         &times,
@@ -285,6 +277,131 @@ pub fn export_ply(request: &ExportRequest) -> Result<SceneSummary> {
             crate::io::ply::SEQUENCE_INDEX
         ),
         warnings: viewer_warnings(&scene),
+    })
+}
+
+/// Refuses, before any work, settings `export-ply` cannot act on: a negative cut-off, a
+/// time that is not finite, a sequence of no or too many times, and sharding of one slice.
+fn check_export_settings(request: &ExportRequest) -> Result<()> {
+    check_non_negative_setting("cutoff", request.cutoff)?;
+    match &request.times {
+        ExportTimes::One(tau) if !tau.is_finite() => {
+            return Err(Error::setting(&["time"], "`time` must be finite"));
+        }
+        ExportTimes::List(times) if times.is_empty() || times.len() > MAX_EXPORT_FRAMES => {
+            return Err(Error::setting(
+                &["times"],
+                format!("`times` needs 1 to {MAX_EXPORT_FRAMES} times"),
+            ));
+        }
+        ExportTimes::List(times) if !times.iter().all(|t| t.is_finite()) => {
+            return Err(Error::setting(&["times"], "`times` must be finite"));
+        }
+        ExportTimes::Frames(n) if !(1..=MAX_EXPORT_FRAMES).contains(n) => {
+            return Err(Error::setting(
+                &["frames"],
+                format!("`frames` {n} must be from 1 to {MAX_EXPORT_FRAMES}"),
+            ));
+        }
+        _ => {}
+    }
+    if let ExportTimes::One(_) = request.times
+        && request.sharding != Sharding::Whole
+    {
+        let field = if request.sharding == Sharding::Assemble {
+            "assemble"
+        } else {
+            "shard"
+        };
+        return Err(Error::setting(
+            &[field],
+            format!(
+                "`{field}` shares a sequence's slices (`times` or `frames`) among runs, and one slice at `time` is one file: leave `{field}` out"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// What a sequence's slices depend on: the scene file's bytes, the times, the cut-off and
+/// `sh_rest` ([`crate::io::shards::fingerprint`]).
+fn sequence_fingerprint(request: &ExportRequest, times: &[f64]) -> Result<String> {
+    let scene =
+        std::fs::read(&request.scene).map_err(|e| Error::read(&request.scene, "cannot read", e))?;
+    let settings = format!("{times:?} {:?} {}", request.cutoff, request.sh_rest);
+    Ok(crate::io::shards::fingerprint(&[
+        &scene,
+        settings.as_bytes(),
+    ]))
+}
+
+/// Shard `shard`'s slices of the sequence, moved into its folder beside the other shards'.
+fn export_shard(
+    request: &ExportRequest,
+    scene: &Scene,
+    times: &[f64],
+    shard: Shard,
+) -> Result<SceneSummary> {
+    let fingerprint = sequence_fingerprint(request, times)?;
+    let staging = crate::io::output::Staging::new(&request.out)?;
+    let mut names = Vec::new();
+    for (k, &tau) in times.iter().enumerate().filter(|&(k, _)| shard.takes(k)) {
+        let file = crate::io::ply::slice_file(k);
+        write_slice_ply(
+            scene,
+            tau,
+            request.cutoff,
+            request.sh_rest,
+            &staging.path().join(&file),
+        )?;
+        names.push(file);
+    }
+    crate::io::shards::commit_shard(
+        staging.path(),
+        &request.out,
+        "export-ply",
+        shard,
+        &fingerprint,
+        &names,
+    )?;
+    Ok(SceneSummary {
+        out: request.out.clone(),
+        line: format!(
+            "{} of {} slices (shard {}/{}); `assemble` writes the index once every shard is done",
+            names.len(),
+            times.len(),
+            shard.index,
+            shard.count
+        ),
+        warnings: viewer_warnings(scene),
+    })
+}
+
+/// The sequence's index from the slices its shards wrote, and the folder's marker: the
+/// files of one run.
+fn assemble_sequence(
+    request: &ExportRequest,
+    scene: &Scene,
+    times: &[f64],
+) -> Result<SceneSummary> {
+    let fingerprint = sequence_fingerprint(request, times)?;
+    let names: Vec<String> = (0..times.len()).map(crate::io::ply::slice_file).collect();
+    let out = &request.out;
+    crate::io::shards::check_assembled(out, "export-ply", &fingerprint, &names)?;
+    crate::io::shards::keep_only(out, &names)?;
+    crate::io::ply::write_sequence_index(out, &names, times)?;
+    crate::io::shards::drop_shard_markers(out)?;
+    crate::io::output::write_marker(out, "export-ply", &[])?;
+    Ok(SceneSummary {
+        out: out.clone(),
+        line: format!(
+            "{} slices (t = {} … {}) assembled, indexed in {}",
+            times.len(),
+            times[0],
+            times[times.len() - 1],
+            crate::io::ply::SEQUENCE_INDEX
+        ),
+        warnings: viewer_warnings(scene),
     })
 }
 

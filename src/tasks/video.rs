@@ -4,13 +4,15 @@
 use std::fmt;
 use std::path::PathBuf;
 
+use crate::io::image_file::{BitDepth, save_image};
 use crate::io::output::{
     Outputs, Staging, Stamp, check_beside, check_replaceable, remove_if_unchanged, time_label,
-    unique_names,
+    unique_names, write_marker,
 };
 use crate::io::path_file::{PathCamera, load_any_path, save_nerfstudio_path};
 use crate::io::scene_file::load_scene;
-use crate::io::video::{VideoFiles, VideoOptions, write_video};
+use crate::io::shards::{Shard, Sharding, check_assembled, check_shared_folder, commit_shard};
+use crate::io::video::{VideoFiles, VideoOptions, encode_frames, write_video};
 use crate::model::{Error, Progress, Result, Scene};
 use crate::render::{RenderContext, RenderOptions};
 use crate::scenes::paths::{
@@ -61,6 +63,9 @@ pub struct VideoRequest {
     pub options: RenderOptions,
     /// Worker threads (`None`: one per core).
     pub threads: Option<usize>,
+    /// Every frame, one shard of them, or the GIFs, MP4s and camera paths from the shards'
+    /// frames ([`crate::io::shards`]).
+    pub sharding: Sharding,
 }
 
 /// Frame size of orbits and spirals unless one is given.
@@ -290,7 +295,11 @@ fn one_screen_size(cameras: &[PathCamera], path: &std::path::Path) -> Result<()>
 /// unchanged ([`check_beside`]). Returns, per video, the recorded GIF and MP4 that this run
 /// may leave unwritten (`--no-gif`, `--no-mp4`, ffmpeg failing): removed afterwards if still
 /// unchanged, so that they never pass for the new frames — and a file the user made is kept.
-fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<Vec<Stale>> {
+fn check_outputs(
+    request: &VideoRequest,
+    names: &[&str],
+    check_folder: impl Fn(&str, &std::path::Path) -> Result<()>,
+) -> Result<Vec<Stale>> {
     let mut outputs = Outputs::new();
     outputs.input(&request.scene);
     if let Some(path) = &request.path {
@@ -299,7 +308,7 @@ fn check_outputs(request: &VideoRequest, names: &[&str]) -> Result<Vec<Stale>> {
     let mut stale = Vec::new();
     for name in names {
         let frames = request.out.join(name);
-        check_replaceable(&frames, "video")?;
+        check_folder(name, &frames)?;
         outputs.folder(&frames);
         let mut earlier = Vec::new();
         for (ext, written) in [
@@ -358,18 +367,34 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         (u64::from(w) * u64::from(h)).saturating_mul(per_pixel),
         &format!("{w}×{h} frames"),
     )?;
+    match request.sharding {
+        Sharding::Whole => write_whole(request, &scene, &videos, progress),
+        Sharding::Shard(shard) => write_shard(request, &scene, &videos, shard, progress),
+        Sharding::Assemble => assemble(request, &videos),
+    }
+}
+
+/// Every video of `request`, frames and all, in one run.
+fn write_whole(
+    request: &VideoRequest,
+    scene: &Scene,
+    videos: &[NamedPath],
+    progress: &mut dyn Progress,
+) -> Result<VideoSummary> {
     let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
-    let stale = check_outputs(request, &names)?;
+    let stale = check_outputs(request, &names, |_, frames| {
+        check_replaceable(frames, "video")
+    })?;
     // Every video is written into a temporary folder inside `out` and moved into place once
     // all are complete: a run that fails leaves nothing it created.
     let staging = Staging::new(&request.out)?;
     progress.start("frames", videos.iter().map(|(_, f, _)| f.len()).sum());
     let mut context = RenderContext::new();
     // One scene, many frames: each frame visits only the kernels alive at its time.
-    let index = TemporalIndex::new(&scene, request.options.cutoff);
+    let index = TemporalIndex::new(scene, request.options.cutoff);
     let mut written = Vec::new();
     let mut camera_paths = Vec::new();
-    for (name, frames, fps) in &videos {
+    for (name, frames, fps) in videos {
         let video = VideoOptions {
             fps: fps.unwrap_or(request.video.fps),
             ..request.video
@@ -394,7 +419,7 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
                     // one-thread pool busy.) With one, the loop is on that pool already.
                     with_threads_on_pool(request.threads, || {
                         context.render_indexed(
-                            &scene,
+                            scene,
                             &index,
                             &frame.camera,
                             frame.time,
@@ -413,8 +438,16 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
         camera_paths.push(request.out.join(format!("{name}.camera_path.json")));
     }
     staging.commit(&[])?;
-    // An earlier run's GIF or MP4 of a name this run did not write would pass for one of
-    // these frames: it goes, when it is still what that run recorded.
+    remove_stale(&written, stale)?;
+    Ok(VideoSummary {
+        videos: written,
+        camera_paths,
+    })
+}
+
+/// An earlier run's GIF or MP4 of a name this run did not write would pass for one of
+/// these frames: it goes, when it is still what that run recorded.
+fn remove_stale(written: &[VideoFiles], stale: Vec<Stale>) -> Result<()> {
     for (files, earlier) in written.iter().zip(stale) {
         for (file, stamp) in earlier {
             if files.gif.as_ref() != Some(&file) && files.mp4.as_ref() != Some(&file) {
@@ -422,6 +455,131 @@ pub fn write_videos(request: &VideoRequest, progress: &mut dyn Progress) -> Resu
             }
         }
     }
+    Ok(())
+}
+
+/// The file names of a video's `count` frames.
+fn frame_names(count: usize) -> Vec<String> {
+    (0..count).map(|k| format!("frame_{k:04}.png")).collect()
+}
+
+/// What the frames of one video depend on: the scene file's bytes, the cameras and times,
+/// the render options ([`crate::io::shards::fingerprint`]).
+fn fingerprint(scene: &[u8], frames: &[PathFrame], options: &RenderOptions) -> String {
+    let cameras = format!("{frames:?} {options:?}");
+    crate::io::shards::fingerprint(&[scene, cameras.as_bytes()])
+}
+
+/// The scene file's bytes, for the fingerprint of the frames.
+fn scene_bytes(request: &VideoRequest) -> Result<Vec<u8>> {
+    std::fs::read(&request.scene).map_err(|e| Error::read(&request.scene, "cannot read", e))
+}
+
+/// Shard `shard`'s frames of every video of `request`, moved into each video's frame folder
+/// beside the other shards' ([`commit_shard`]); no GIF, MP4 or camera path.
+fn write_shard(
+    request: &VideoRequest,
+    scene: &Scene,
+    videos: &[NamedPath],
+    shard: Shard,
+    progress: &mut dyn Progress,
+) -> Result<VideoSummary> {
+    let mut outputs = Outputs::new();
+    outputs.input(&request.scene);
+    if let Some(path) = &request.path {
+        outputs.input(path);
+    }
+    for (name, ..) in videos {
+        let frames = request.out.join(name);
+        check_shared_folder(&frames, "video")?;
+        outputs.folder(&frames);
+    }
+    outputs.check()?;
+    let bytes = scene_bytes(request)?;
+    let staging = Staging::new(&request.out)?;
+    let mine = |frames: &[PathFrame]| (0..frames.len()).filter(|&k| shard.takes(k)).count();
+    progress.start("frames", videos.iter().map(|(_, f, _)| mine(f)).sum());
+    let mut context = RenderContext::new();
+    let index = TemporalIndex::new(scene, request.options.cutoff);
+    let mut written = Vec::new();
+    for (name, frames, _) in videos {
+        let staged = staging.path().join(name);
+        std::fs::create_dir(&staged)
+            .map_err(|e| Error::write(&request.out, "cannot write in the output folder", e))?;
+        let mut names = Vec::new();
+        for (k, frame) in frames.iter().enumerate().filter(|&(k, _)| shard.takes(k)) {
+            with_threads(request.threads, || {
+                context.render_indexed(scene, &index, &frame.camera, frame.time, &request.options)
+            })??;
+            let file = format!("frame_{k:04}.png");
+            save_image(context.image(), &staged.join(&file), BitDepth::Eight)?;
+            names.push(file);
+            progress.tick();
+        }
+        let fingerprint = fingerprint(&bytes, frames, &request.options);
+        let dir = request.out.join(name);
+        commit_shard(&staged, &dir, "video", shard, &fingerprint, &names)?;
+        written.push(VideoFiles {
+            frames_dir: dir,
+            frames: names.len(),
+            gif: None,
+            mp4: None,
+            mp4_note: None,
+        });
+    }
+    Ok(VideoSummary {
+        videos: written,
+        camera_paths: Vec::new(),
+    })
+}
+
+/// The GIF, MP4 and camera path of every video of `request` from the frames its shards
+/// wrote ([`check_assembled`]), and each frame folder's marker: the files of one run.
+fn assemble(request: &VideoRequest, videos: &[NamedPath]) -> Result<VideoSummary> {
+    let bytes = scene_bytes(request)?;
+    let names: Vec<&str> = videos.iter().map(|(name, ..)| name.as_str()).collect();
+    let stale = check_outputs(request, &names, |name, dir| {
+        let (_, frames, _) = videos
+            .iter()
+            .find(|(n, ..)| n == name)
+            .expect("a video of the request");
+        let fingerprint = fingerprint(&bytes, frames, &request.options);
+        check_assembled(dir, "video", &fingerprint, &frame_names(frames.len()))
+    })?;
+    let staging = Staging::new(&request.out)?;
+    let mut written = Vec::new();
+    let mut camera_paths = Vec::new();
+    for (name, frames, fps) in videos {
+        let video = VideoOptions {
+            fps: fps.unwrap_or(request.video.fps),
+            ..request.video
+        };
+        let dir = request.out.join(name);
+        crate::io::shards::keep_only(&dir, &frame_names(frames.len()))?;
+        save_nerfstudio_path(
+            frames,
+            video.fps,
+            &staging.path().join(format!("{name}.camera_path.json")),
+        )?;
+        let files = encode_frames(
+            frames.len(),
+            &dir,
+            staging.path(),
+            &request.out,
+            name,
+            &video,
+        )?;
+        written.push(files);
+        camera_paths.push(request.out.join(format!("{name}.camera_path.json")));
+    }
+    staging.commit(&[])?;
+    for (files, camera_path) in written.iter().zip(&camera_paths) {
+        let mut recorded: Vec<PathBuf> = files.gif.iter().chain(&files.mp4).cloned().collect();
+        recorded.push(camera_path.clone());
+        crate::io::shards::drop_shard_markers(&files.frames_dir)?;
+        write_marker(&files.frames_dir, "video", &recorded)?;
+    }
+    remove_stale(&written, stale)?;
     Ok(VideoSummary {
         videos: written,
         camera_paths,

@@ -57,6 +57,9 @@ mod memory;
 mod messages;
 /// Acceleration and angular velocity (SPEC §9): renders, gradients of every field, files.
 mod motion;
+/// `mpirun -n N splat4d fit` gives the one-process scene (cargo feature `mpi`).
+#[cfg(feature = "mpi")]
+mod mpi;
 /// Neural 3D Video rigs: poses_bounds.npy with extracted frames or videos.
 mod n3v;
 /// The output rule: only a command's own earlier output is replaced, never an input.
@@ -67,6 +70,8 @@ mod ply;
 mod properties;
 /// The CLI writes the same bytes as before the layered move (issue 15).
 mod recorded;
+/// `--shard I/N` and `--assemble`: a batch scheduler's array job gives one run's bytes.
+mod shards;
 /// Each fast stage against its f64 twin, one stage at a time on the same input.
 mod stages;
 /// The temporal index renders exactly what a plain render does.

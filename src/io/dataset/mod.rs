@@ -56,7 +56,9 @@ use crate::model::{Dataset, View};
 
 pub use crate::model::image::downscale_weighted;
 pub use photo_memory::PhotoMemory;
-pub use write::{DatasetWriter, write_split};
+pub use write::{
+    DatasetWriter, frame_files, write_all_transforms, write_frame_images, write_split,
+};
 
 /// The dataset formats, in the order they are asked whether a folder is theirs.
 const FORMATS: [&dyn Format; 4] = [

@@ -149,6 +149,64 @@ impl DatasetWriter {
     }
 }
 
+/// The files (relative to the dataset's folder) of frame `index` of `split`: its PNG, and
+/// its EXR when `exr`.
+#[must_use]
+pub fn frame_files(split: &str, index: usize, exr: bool) -> Vec<String> {
+    let base = format!("{split}/r_{index:03}");
+    let mut files = vec![format!("{base}.png")];
+    if exr {
+        files.push(format!("{base}.exr"));
+    }
+    files
+}
+
+/// Writes the images of frame `index` of `split` (the view `view`) under `dir`, as
+/// [`DatasetWriter::add`] does; returns their files ([`frame_files`]).
+pub fn write_frame_images(
+    dir: &Path,
+    split: &str,
+    index: usize,
+    view: &View,
+    exr: bool,
+) -> Result<Vec<String>> {
+    save_frame(dir, split, index, view, &view.camera, exr)?;
+    Ok(frame_files(split, index, exr))
+}
+
+/// Writes the `transforms_*.json` of the frames `frames` — `(split, index, camera, time)`
+/// in file order, their images already in `dir` — as [`DatasetWriter::finish`] does.
+pub fn write_all_transforms(
+    dir: &Path,
+    frames: &[(&str, usize, Camera, f64)],
+    blend: Blend,
+) -> Result<()> {
+    for split in SPLITS {
+        let mut first: Option<Camera> = None;
+        let mut written = Vec::new();
+        for &(s, index, camera, time) in frames.iter().filter(|f| f.0 == split) {
+            let c = *first.get_or_insert(camera);
+            let (v, c) = (&camera, &c);
+            if (v.width, v.height, v.fx, v.fy, v.cx, v.cy)
+                != (c.width, c.height, c.fx, c.fy, c.cx, c.cy)
+            {
+                return Err(Error::Usage(format!(
+                    "split {s}: view {index} has other intrinsics than view 0"
+                )));
+            }
+            written.push(WrittenFrame {
+                file_path: format!("./{s}/r_{index:03}"),
+                time,
+                transform_matrix: camera.opengl_camera_to_world(),
+            });
+        }
+        if let Some(c) = first {
+            write_transforms(dir, split, &c, written, blend)?;
+        }
+    }
+    Ok(())
+}
+
 /// Writes one split: its images (16-bit PNG, and float EXR when `exr`) and its
 /// `transforms_{split}.json`, into the existing folder `dir`. Every camera must share one
 /// set of intrinsics.
