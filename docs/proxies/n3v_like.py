@@ -6,7 +6,7 @@
 #   OUT_DIR/video/camNN.mp4                    (H.264 through ffmpeg, crf 12, yuv420p)
 # cam00, held out by splat4d as N3V's authors do, is the rig's middle camera.
 # Usage: python3 n3v_like.py SPLAT4D_BINARY OUT_DIR [CAMERAS FRAMES WIDTH]
-#   (defaults 12 60 200; standard library and ffmpeg only; about a minute at the defaults)
+#   (defaults 12 60 200; standard library and ffmpeg only; under a minute at the defaults)
 # Then: splat4d fit --views OUT_DIR/video --out f.json
 import json, math, os, random, shutil, struct, subprocess, sys
 BIN, OUT = sys.argv[1], sys.argv[2]
@@ -124,11 +124,15 @@ for c, cam in enumerate(cams):
     folder = OUT + '/frames/cam%02d/images' % c
     os.makedirs(folder, exist_ok=True)
     json.dump(cam, open(OUT + '/cam%02d.json' % c, 'w'))
+    # One `video --path` per camera: the frames are the PNGs `render` would write.
+    path = [{"camera": cam, "time": k / (FRAMES - 1)} for k in range(FRAMES)]
+    json.dump(path, open(OUT + '/path%02d.json' % c, 'w'))
+    subprocess.run([BIN, 'video', '--scene', OUT + '/scene.json', '--path', OUT + '/path%02d.json' % c,
+                    '--out', OUT + '/render', '--no-gif', '--no-mp4'], check=True, capture_output=True)
     for k in range(FRAMES):
-        subprocess.run([BIN, 'render', '--scene', OUT + '/scene.json', '--camera', OUT + '/cam%02d.json' % c,
-                        '--time', repr(k / (FRAMES - 1)), '--out', folder + '/%04d.png' % k],
-                       check=True, capture_output=True)
+        os.replace(OUT + '/render/path%02d/frame_%04d.png' % (c, k), folder + '/%04d.png' % k)
     subprocess.run(['ffmpeg', '-v', 'error', '-y', '-framerate', '30', '-i', folder + '/%04d.png',
                     '-c:v', 'libx264', '-crf', '12', '-pix_fmt', 'yuv420p', OUT + '/video/cam%02d.mp4' % c],
                    check=True)
+shutil.rmtree(OUT + '/render', ignore_errors=True)
 print(len(cams), "cameras,", FRAMES, "frames of", W, "x", H, file=sys.stderr)

@@ -584,7 +584,7 @@ pub fn prepare_alpha(
     origin: &str,
 ) -> Result<ReadyFit> {
     let train = &dataset.train;
-    let bounds = alpha_bounds(train, origin).or_else(|e| rig_bounds(dataset).ok_or(e))?;
+    let bounds = rig_bounds(dataset, alpha_bounds(train, origin))?;
     let background = background.unwrap_or_else(|| border_median(train));
     let colour = start_amplitude(train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
     let mut notes =

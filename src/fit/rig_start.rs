@@ -275,18 +275,52 @@ pub fn rig_alpha_scene(
     Ok(Some((scene, note)))
 }
 
-/// The box of a dataset that is a rig stating its depth range ([`rig_box`] of its training
-/// cameras and times); `None` otherwise.
-#[must_use]
-pub fn rig_bounds(dataset: &crate::model::Dataset) -> Option<SpaceTimeBox> {
-    let rig = find_rig(&dataset.train)?;
+/// The box of a fit of `dataset`, given the one its cameras' axes give (`inferred`): for a
+/// rig that states its depth range, [`rig_box`] when `inferred` failed or its centre lies
+/// outside that range along the rig's mean optical axis (axes near parallel meet far away,
+/// or behind the rig); `inferred` otherwise.
+pub fn rig_bounds(
+    dataset: &crate::model::Dataset,
+    inferred: Result<SpaceTimeBox>,
+) -> Result<SpaceTimeBox> {
+    let (Some(rig), Some([near, far])) = (find_rig(&dataset.train), dataset.depth_range) else {
+        return inferred;
+    };
     let cameras: Vec<Camera> = rig
         .cameras
         .iter()
         .map(|frames| dataset.train[frames[0]].camera)
         .collect();
+    if let Ok(bounds) = &inferred {
+        let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+        let (origin, axis) = mean_axis(&cameras);
+        let depth: f64 = (0..3).map(|a| (centre[a] - origin[a]) * axis[a]).sum();
+        if (near..=far).contains(&depth) {
+            return inferred;
+        }
+    }
     let time = [rig.times[0], rig.times[rig.times.len() - 1]];
-    rig_box(&cameras, dataset.depth_range?, time)
+    match rig_box(&cameras, [near, far], time) {
+        Some(bounds) => Ok(bounds),
+        None => inferred,
+    }
+}
+
+/// The cameras' mean centre and their mean optical axis, normalised (zero when the axes
+/// cancel out).
+fn mean_axis(cameras: &[Camera]) -> ([f64; 3], [f64; 3]) {
+    let n = cameras.len().max(1) as f64;
+    let centre: [f64; 3] =
+        std::array::from_fn(|a| cameras.iter().map(|c| c.centre()[a]).sum::<f64>() / n);
+    let axis: [f64; 3] =
+        std::array::from_fn(|a| cameras.iter().map(|c| c.rotation()[2][a]).sum::<f64>() / n);
+    let norm = axis.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let unit = if norm > 1e-9 {
+        axis.map(|v| v / norm)
+    } else {
+        [0.0; 3]
+    };
+    (centre, unit)
 }
 
 /// A box for a rig whose optical axes are too close to parallel for
@@ -297,21 +331,16 @@ pub fn rig_box(cameras: &[Camera], [near, far]: [f64; 2], time: [f64; 2]) -> Opt
     if cameras.is_empty() || !(near > 0.0 && near < far && far.is_finite()) {
         return None;
     }
-    let n = cameras.len() as f64;
-    let centre: [f64; 3] =
-        std::array::from_fn(|a| cameras.iter().map(|c| c.centre()[a]).sum::<f64>() / n);
-    let axis: [f64; 3] =
-        std::array::from_fn(|a| cameras.iter().map(|c| c.rotation()[2][a]).sum::<f64>() / n);
-    let norm = axis.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let (centre, axis) = mean_axis(cameras);
     let depth = (near * far).sqrt();
-    let target: [f64; 3] = std::array::from_fn(|a| centre[a] + depth * axis[a] / norm);
+    let target: [f64; 3] = std::array::from_fn(|a| centre[a] + depth * axis[a]);
     let mut halves: Vec<f64> = cameras
         .iter()
         .map(|c| 0.5 * depth * 0.5 * f64::from(c.height) / c.fy)
         .collect();
     halves.sort_by(f64::total_cmp);
     let half = halves[halves.len() / 2];
-    let finite = norm > 1e-9 && half > 0.0 && target.iter().all(|v| v.is_finite());
+    let finite = axis != [0.0; 3] && half > 0.0 && target.iter().all(|v| v.is_finite());
     finite.then(|| SpaceTimeBox {
         min: target.map(|v| v - half),
         max: target.map(|v| v + half),

@@ -555,3 +555,32 @@ fn a_rig_in_every_layout_loads_alike_and_fits_alike() {
     assert!(hi - lo <= 1.0, "{scores:?}");
     assert!(lo > 20.0, "{scores:?}");
 }
+
+/// Three cameras side by side looking the same way (cam00 held out, two train): their axes
+/// never meet, so the box comes from `poses_bounds.npy`'s depth bounds, and the default fit
+/// runs without `--box`.
+#[test]
+fn a_rig_of_parallel_cameras_fits_without_a_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let cameras: Vec<Camera> = [0.0, -0.3, 0.3]
+        .iter()
+        .map(|&x| {
+            Camera::look_at([x, 0.0, 0.0], [x, 0.0, -4.0], [0.0, 1.0, 0.0], 50.0, 48, 36).unwrap()
+        })
+        .collect();
+    write_scene_frames(dir.path(), &rig_scene(), &cameras, 4);
+    write_poses(dir.path(), &cameras, 1.0);
+    let out = dir.path().join("f.json");
+    let args = [
+        "fit",
+        "--views",
+        dir.path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let output = crate::common::splat4d(&[&args[..], &["--steps", "20"]].concat(), dir.path());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let fitted = splat4d::io::scene_file::load_scene(&out).unwrap();
+    assert!(!fitted.is_empty());
+}
