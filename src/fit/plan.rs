@@ -25,7 +25,7 @@
 //!   background ([`start_amplitude`]), so the sign follows the data.
 //!
 //! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud,
-//! else a rig's sweeps of its still and moving pixels, else a visual hull, else a plane
+//! else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
 //! sweep, else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
 //!
 //! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
@@ -571,10 +571,10 @@ pub const MIN_SWEPT_POINTS: usize = 100;
 /// names the file the frames come from in its errors).
 ///
 /// An automatic start takes, in this order, the first that gives kernels: the dataset's
-/// point cloud; for a rig of synchronised cameras, its plane sweeps over still and moving
-/// pixels ([`crate::fit::rig_start`]), when they keep at least [`MIN_SWEPT_POINTS`] still
-/// points; the visual hull of the training views where their background is flat
-/// ([`crate::fit::hull`]); a plane sweep over neighbouring views ([`crate::fit::stereo`]),
+/// point cloud; the visual hull of the training views where their background is flat
+/// ([`crate::fit::hull`]); for a rig of synchronised cameras, its plane sweeps over still
+/// and moving pixels ([`crate::fit::rig_start`]), when they keep at least
+/// [`MIN_SWEPT_POINTS`] still points; a plane sweep over neighbouring views ([`crate::fit::stereo`]),
 /// when it keeps at least [`MIN_SWEPT_POINTS`] points; kernels at random in the box.
 pub fn prepare_alpha(
     options: &AlphaFitOptions,
@@ -628,19 +628,6 @@ fn alpha_auto_start(
             note,
         ));
     }
-    if let Some(rig) = find_rig(train)
-        && let Some(start) = rig_alpha_scene(
-            train,
-            &rig,
-            dataset.depth_range,
-            bounds,
-            background,
-            options,
-            MIN_SWEPT_POINTS,
-        )?
-    {
-        return Ok(start);
-    }
     if flat_background(train, background) {
         let (cells, side) = visual_hull(train, background, bounds);
         if !cells.is_empty() {
@@ -654,6 +641,19 @@ fn alpha_auto_start(
                 note,
             ));
         }
+    }
+    if let Some(rig) = find_rig(train)
+        && let Some(start) = rig_alpha_scene(
+            train,
+            &rig,
+            dataset.depth_range,
+            bounds,
+            background,
+            options,
+            MIN_SWEPT_POINTS,
+        )?
+    {
+        return Ok(start);
     }
     let points = plane_sweep(train, bounds, options.start_kernels);
     if points.len() >= MIN_SWEPT_POINTS {
