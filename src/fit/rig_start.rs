@@ -16,7 +16,7 @@
 //!   through the distinct times, all of them when fewer) the cameras' frames of that time
 //!   are swept together — they see the same instant, so the sweep holds where the scene
 //!   moves — and the points whose reference pixel moves become kernels at that time, with
-//!   σt half the gap between the times swept.
+//!   σt half the time range over the number of times swept (about half their gap).
 //!
 //! The planes lie between the dataset's depth bounds when it states them (LLFF's near and
 //! far, [`crate::model::Dataset::depth_range`]), else around the cameras' box. The still
