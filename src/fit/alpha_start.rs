@@ -16,7 +16,7 @@ use crate::model::scene::{Kernel, Scene};
 
 /// One kernel of a start: at `mean` (x, y, z, t), spatial σ `0.5 spacing`, temporal σ
 /// `time_scale`, `colour`, a random rotation from `rng`.
-fn start_kernel(
+pub(super) fn start_kernel(
     rng: &mut rand_chacha::ChaCha8Rng,
     mean: [f64; 4],
     spacing: f64,
@@ -33,7 +33,7 @@ fn start_kernel(
 }
 
 /// The alpha scene of a start's `kernels`: each at `options.start_opacity`, SH zero.
-fn alpha_start(
+pub(super) fn alpha_start(
     kernels: &[Kernel],
     background: [f64; 3],
     options: &AlphaFitOptions,

@@ -1,10 +1,10 @@
 //! Fitting kernels to images (SPEC §6, §8): the loss, one Adam over a table of parameter
 //! groups ([`adam`]), one training loop ([`train`]) with its coarse-to-fine stages
-//! ([`coarse`]) and the density rules ([`density`]) for both blends, each blend's table and options ([`additive`], [`alpha`]), the starts
-//! ([`init`], [`alpha_start`], [`hull`], [`stereo`]), the defaults ([`defaults`]) and the
-//! policy that chooses among them ([`plan`], from the caller's [`settings`]), the
-//! estimate of a running fit's time left ([`time_left`]), and a fit spread over MPI ranks
-//! with the one-process scene ([`spread`]).
+//! ([`coarse`]) and the density rules ([`density`]) for both blends, each blend's table and
+//! options ([`additive`], [`alpha`]), the starts ([`init`], [`alpha_start`], [`hull`],
+//! [`stereo`], [`rig_start`]), the defaults ([`defaults`]) and the policy that chooses among
+//! them ([`plan`], from the caller's [`settings`]), the estimate of a running fit's time left
+//! ([`time_left`]), and a fit spread over MPI ranks with the one-process scene ([`spread`]).
 
 pub mod adam;
 pub mod additive;
@@ -17,6 +17,7 @@ pub mod hull;
 pub mod init;
 pub mod loss;
 pub mod plan;
+pub mod rig_start;
 pub mod settings;
 pub mod spread;
 pub mod stereo;

@@ -25,8 +25,8 @@
 //!   background ([`start_amplitude`]), so the sign follows the data.
 //!
 //! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud,
-//! else a visual hull, else a plane sweep, else kernels at random, in the training cameras'
-//! box, over the given background or the border median (kept fixed).
+//! else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
+//! sweep, else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
 //!
 //! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
 //! constant of [`crate::fit::defaults`], re-exported here.
@@ -40,6 +40,7 @@ pub use crate::fit::defaults::*;
 use crate::fit::density::AdditiveRules;
 use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
+use crate::fit::rig_start::{find_rig, rig_alpha_scene, rig_bounds};
 use crate::fit::stereo::plane_sweep;
 use crate::fit::time_left::TimeLeft;
 use crate::fit::train::{StepRecord, Training, fit};
@@ -566,11 +567,14 @@ pub const MIN_SWEPT_POINTS: usize = 100;
 
 /// The alpha fit of SPEC §8 from `init` to `dataset`, ready to run: over `background` (else
 /// the median of the training images' border pixels), in the box of the training cameras
-/// ([`alpha_bounds`]; `origin` names the file the frames come from in its errors).
+/// ([`alpha_bounds`]; for a rig whose axes are near parallel, [`rig_bounds`]; `origin`
+/// names the file the frames come from in its errors).
 ///
 /// An automatic start takes, in this order, the first that gives kernels: the dataset's
 /// point cloud; the visual hull of the training views where their background is flat
-/// ([`crate::fit::hull`]); a plane sweep over neighbouring views ([`crate::fit::stereo`]),
+/// ([`crate::fit::hull`]); for a rig of synchronised cameras, its plane sweeps over still
+/// and moving pixels ([`crate::fit::rig_start`]), when they keep at least
+/// [`MIN_SWEPT_POINTS`] still points; a plane sweep over neighbouring views ([`crate::fit::stereo`]),
 /// when it keeps at least [`MIN_SWEPT_POINTS`] points; kernels at random in the box.
 pub fn prepare_alpha(
     options: &AlphaFitOptions,
@@ -580,7 +584,7 @@ pub fn prepare_alpha(
     origin: &str,
 ) -> Result<ReadyFit> {
     let train = &dataset.train;
-    let bounds = alpha_bounds(train, origin)?;
+    let bounds = rig_bounds(dataset, alpha_bounds(train, origin))?;
     let background = background.unwrap_or_else(|| border_median(train));
     let colour = start_amplitude(train, background).map(|c| (c + background[0]).clamp(0.05, 1.0));
     let mut notes =
@@ -654,6 +658,19 @@ fn alpha_auto_start(
                 note,
             ));
         }
+    }
+    if let Some(rig) = find_rig(train)
+        && let Some(start) = rig_alpha_scene(
+            train,
+            &rig,
+            dataset.depth_range,
+            bounds,
+            background,
+            options,
+            MIN_SWEPT_POINTS,
+        )?
+    {
+        return Ok(start);
     }
     let points = plane_sweep(train, bounds, options.start_kernels);
     if points.len() >= MIN_SWEPT_POINTS {

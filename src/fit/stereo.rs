@@ -62,34 +62,59 @@ pub struct SweptPoint {
     pub time: f64,
     /// The grid's spacing at the point's depth, world units.
     pub spacing: f64,
+    /// The reference view's index in the views swept.
+    pub view: usize,
+    /// The reference pixel `(column, row)` in the view's own image (before the sweep's
+    /// downscaling: the centre pixel of the block it averaged).
+    pub pixel: [u32; 2],
 }
 
 /// The plane-sweep points of `views` (module doc), about `budget` pixels tested; `bounds`
 /// gives the depth range.
 #[must_use]
 pub fn plane_sweep(views: &[View], bounds: &SpaceTimeBox, budget: usize) -> Vec<SweptPoint> {
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    plane_sweep_in(views, Depths::Around(centre), budget)
+}
+
+/// The depths a sweep tries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Depths {
+    /// From `d/3` to `6 d`, `d` the reference camera's depth of this point.
+    Around([f64; 3]),
+    /// From `near` to `far` (camera depths, `0 < near < far`) for every reference.
+    Between([f64; 2]),
+}
+
+/// The plane-sweep points of `views` (module doc) over the planes of `depths`, about
+/// `budget` pixels tested.
+#[must_use]
+pub fn plane_sweep_in(views: &[View], depths: Depths, budget: usize) -> Vec<SweptPoint> {
     let working: Vec<(Camera, Image)> = views.iter().map(working_copy).collect();
     let pixels: usize = working.iter().map(|(c, _)| c.pixel_count()).sum();
     // Stride so that about `budget` of the pixels are tested.
     let stride = ((pixels as f64 / budget.max(1) as f64).sqrt().ceil() as usize).max(1);
-    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
     let neighbours: Vec<Vec<usize>> = (0..views.len())
         .map(|r| neighbours_of(r, &working))
         .collect();
     let depth_maps: Vec<Vec<f32>> = (0..views.len())
         .into_par_iter()
-        .map(|r| depth_map(&working, r, &neighbours[r], centre))
+        .map(|r| depth_map(&working, r, &neighbours[r], depths))
         .collect();
     (0..views.len())
         .into_par_iter()
         .map(|r| {
+            let factor = views[r].camera.width / working[r].0.width.max(1);
             consistent_points(
                 &working,
                 &depth_maps,
-                r,
+                Reference {
+                    view: r,
+                    time: views[r].time,
+                    factor,
+                },
                 &neighbours[r],
                 stride,
-                views[r].time,
             )
         })
         .collect::<Vec<_>>()
@@ -150,16 +175,23 @@ fn depth_map(
     working: &[(Camera, Image)],
     r: usize,
     neighbours: &[usize],
-    centre: [f64; 3],
+    depths: Depths,
 ) -> Vec<f32> {
     let (camera, image) = &working[r];
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut depth = vec![f32::NAN; w * h];
-    let target_depth = camera.to_camera_space(centre)[2];
-    if neighbours.is_empty() || target_depth.is_nan() || target_depth <= 0.0 {
+    let [nearest, farthest] = match depths {
+        Depths::Around(centre) => {
+            let target = camera.to_camera_space(centre)[2];
+            [target / 3.0, 6.0 * target]
+        }
+        Depths::Between(range) => range,
+    };
+    let usable = nearest > 0.0 && nearest < farthest && farthest.is_finite();
+    if neighbours.is_empty() || !usable {
         return depth;
     }
-    let (near, far) = (1.0 / (target_depth / 3.0), 1.0 / (6.0 * target_depth));
+    let (near, far) = (1.0 / nearest, 1.0 / farthest);
     let inverse_depths: Vec<f64> = (0..PLANES)
         .map(|k| near + (far - near) * k as f64 / (PLANES - 1) as f64)
         .collect();
@@ -188,11 +220,15 @@ fn depth_map(
 fn consistent_points(
     working: &[(Camera, Image)],
     depth_maps: &[Vec<f32>],
-    r: usize,
+    reference: Reference,
     neighbours: &[usize],
     stride: usize,
-    time: f64,
 ) -> Vec<SweptPoint> {
+    let Reference {
+        view: r,
+        time,
+        factor,
+    } = reference;
     let (camera, image) = &working[r];
     let (w, h) = (camera.width as usize, camera.height as usize);
     let to_world = camera_to_world(camera);
@@ -229,11 +265,25 @@ fn consistent_points(
                     colour: image.pixel(i as u32, j as u32),
                     time,
                     spacing,
+                    view: r,
+                    pixel: [
+                        i as u32 * factor + factor / 2,
+                        j as u32 * factor + factor / 2,
+                    ],
                 });
             }
         }
     }
     points
+}
+
+/// A reference view of a sweep: its index, time, and the factor its working copy was
+/// downscaled by.
+#[derive(Clone, Copy)]
+struct Reference {
+    view: usize,
+    time: f64,
+    factor: u32,
 }
 
 /// How closely a neighbour's depth must agree with a point's, relative to the depth.

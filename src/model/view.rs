@@ -100,6 +100,10 @@ pub struct Dataset {
     /// The point cloud the dataset gives (COLMAP `points3D`, nerfstudio `ply_file_path`), to
     /// start kernels from; `None` when it gives none.
     pub points: Option<Vec<DatasetPoint>>,
+    /// The camera depths the scene lies between, `[near, far]`, when the dataset states them
+    /// (LLFF's bounds in `poses_bounds.npy`: the least near and the greatest far), for a
+    /// start's depth search; `None` when it does not.
+    pub depth_range: Option<[f64; 2]>,
 }
 
 #[cfg(test)]

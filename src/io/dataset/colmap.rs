@@ -127,6 +127,7 @@ impl Description for Model {
             notes: loaded.notes,
             blend: None,
             points: points(&model),
+            depth_range: None,
         })
     }
 }

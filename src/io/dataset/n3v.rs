@@ -16,8 +16,9 @@
 //! from there to the world→camera matrix of SPEC §3, in the file's own world: no
 //! recentring, rescaling or NDC. The intrinsics are `hwf`'s focal length scaled to the
 //! image as read (`fx = f · w / W`, `fy = f · h / H`), the principal point at its centre;
-//! `downscale` then divides them as it does for photos. The bounds are checked and not
-//! used (they set LLFF's NDC planes).
+//! `downscale` then divides them as it does for photos. The bounds (LLFF's near and far
+//! depths, which set its NDC planes) are checked and kept as the dataset's depth range, the
+//! depths a start searches ([`crate::fit::rig_start`]).
 //!
 //! Every camera has the same frames (the same file names, or the same frame count in each
 //! video); frame `k` of `F` is at time `k / (F - 1)` (0 for one frame), or `k / fps`
@@ -327,6 +328,16 @@ fn check_poses(file: &Path, poses: &Array2, cameras: &[RigCamera]) -> Result<()>
     Ok(())
 }
 
+/// The least near and the greatest far bound of the rows, when they order as bounds do
+/// (`0 < near < far`); `None` otherwise (the bounds are then not used).
+fn depth_range(poses: &Array2) -> Option<[f64; 2]> {
+    let (near, far) = (0..poses.rows).fold((f64::INFINITY, 0.0_f64), |(near, far), r| {
+        let row = poses.row(r);
+        (near.min(row[15]), far.max(row[16]))
+    });
+    (near > 0.0 && near < far && far.is_finite()).then_some([near, far])
+}
+
 /// `[fx, fy, cx, cy]` of a camera whose row is `row` for an image of `(w, h)` pixels: the
 /// focal length of `hwf` scaled to the image, the principal point at its centre.
 fn intrinsics(row: &[f64], (w, h): (u32, u32)) -> [f64; 4] {
@@ -505,6 +516,7 @@ impl Description for Rig {
             notes,
             blend: None,
             points: None,
+            depth_range: depth_range(&poses),
         })
     }
 }

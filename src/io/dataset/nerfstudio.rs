@@ -83,6 +83,7 @@ impl Description for Single {
             notes: read.notes,
             blend: read.blend,
             points: read.points,
+            depth_range: None,
         })
     }
 }
