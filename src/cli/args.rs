@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 
 use splat4d::fit::coarse::CoarseToFine;
-use splat4d::fit::defaults::DEFAULT_COARSE;
+use splat4d::fit::defaults::{DEFAULT_COARSE, DEFAULT_EARLY_STOP};
+use splat4d::fit::train::EarlyStop;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::simd::ExpMode;
 use splat4d::tasks::render::{CameraSource, ViewRequest};
@@ -102,6 +103,30 @@ pub fn coarse_to_fine(text: &str) -> Result<CoarseToFine, String> {
         Ok(min_side) if min_side >= 1 => Ok(CoarseToFine::Auto { min_side, ends }),
         _ => Err(format!(
             "`{text}`: give `off` or the shorter side in pixels (an integer ≥ 1) a coarse stage keeps"
+        )),
+    }
+}
+
+/// What `--early-stop` chose: a rule, or none (`off`).
+#[derive(Clone, Copy, Debug)]
+pub struct EarlyStopChoice(pub Option<EarlyStop>);
+
+/// `off`, or the fraction of the steps (in (0, 1]) without a gain that ends a fit, with
+/// the default gain ([`splat4d::fit::defaults::DEFAULT_EARLY_STOP`]).
+pub fn early_stop(text: &str) -> Result<EarlyStopChoice, String> {
+    let text = text.trim();
+    if text == "off" {
+        return Ok(EarlyStopChoice(None));
+    }
+    match text.parse::<f64>() {
+        Ok(flat_fraction) if flat_fraction > 0.0 && flat_fraction <= 1.0 => {
+            Ok(EarlyStopChoice(Some(EarlyStop {
+                flat_fraction,
+                ..DEFAULT_EARLY_STOP
+            })))
+        }
+        _ => Err(format!(
+            "`{text}`: give `off` or a fraction of the steps in (0, 1]"
         )),
     }
 }

@@ -11,7 +11,7 @@ use splat4d::fit::coarse::CoarseToFine;
 use splat4d::fit::settings::{FitSettings, RateSettings};
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
-use super::args::{RenderFlags, parse_list};
+use super::args::{EarlyStopChoice, RenderFlags, parse_list};
 
 /// `help fit` headings: the flags every fit reads, then those of each blend.
 const BOTH: &str = "Both blends";
@@ -245,6 +245,10 @@ pub struct FitArgs {
     /// `off`: every step at full size [default: 100].
     #[arg(long, value_name = "SIDE|off", value_parser = super::args::coarse_to_fine, help_heading = ALPHA)]
     coarse_to_fine: Option<CoarseToFine>,
+    /// Stop when the held-out PSNR has not risen by 0.05 dB over this fraction of the steps,
+    /// once no more kernels are added; `off`: every step runs [default: 0.15].
+    #[arg(long, value_name = "FRACTION|off", value_parser = super::args::early_stop, help_heading = ALPHA)]
+    early_stop: Option<EarlyStopChoice>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -299,6 +303,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         sh: args.sh,
         sh_raise_every: args.sh_raise_every,
         coarse_to_fine: args.coarse_to_fine,
+        early_stop: args.early_stop.map(|choice| choice.0),
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

@@ -143,6 +143,7 @@ impl AdditiveFitOptions {
             final_rate_factor: self.final_rate_factor,
             density: self.adaptive.map(DensityRules::Additive),
             coarse: Vec::new(),
+            early_stop: None,
         }
     }
 }

@@ -21,7 +21,7 @@ use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::{AlphaRules, DensityRules};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::train::Training;
+use crate::fit::train::{EarlyStop, Training};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
 use crate::model::{Camera, View};
 use crate::render::RenderOptions;
@@ -112,6 +112,8 @@ pub struct AlphaFitOptions {
     pub time_split_fraction: f64,
     /// The coarse stages' choice ([`crate::fit::coarse`]).
     pub coarse: CoarseToFine,
+    /// The stop when the held-out PSNR no longer rises (`None`: every step runs).
+    pub early_stop: Option<EarlyStop>,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -219,6 +221,7 @@ impl AlphaFitOptions {
             final_rate_factor: self.final_rate_factor,
             density: Some(DensityRules::Alpha(self.rules(diagonal, time_range))),
             coarse: Vec::new(),
+            early_stop: self.early_stop,
         }
     }
 }
@@ -269,7 +272,16 @@ pub fn alpha_bounds(train: &[View], origin: &str) -> Result<SpaceTimeBox> {
             "the camera's position comes out not finite (the matrix is too large, too small or not invertible)",
         ));
     }
-    let bounds = box_from_cameras(&cameras, [lo, hi])?;
+    // The alpha fit takes no box from its caller: say what would give one instead.
+    let bounds = box_from_cameras(&cameras, [lo, hi]).map_err(|_| {
+        Error::invalid(
+            origin,
+            "the training frames",
+            "transform_matrix",
+            "every camera looks along one direction, so the box the fit works in cannot be found where their axes meet: \
+             the alpha fit needs views from at least two directions, or a rig's depth bounds (an N3V folder's poses_bounds.npy)",
+        )
+    })?;
     let finite = (0..3).all(|c| {
         let (lo, hi) = (bounds.min[c], bounds.max[c]);
         lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()

@@ -10,6 +10,7 @@ use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::AdditiveRules;
+use crate::fit::train::EarlyStop;
 use crate::render::RenderOptions;
 
 /// Adam steps of a fit (`splat4d fit` without `--steps`).
@@ -83,6 +84,14 @@ pub const DEFAULT_COARSE: CoarseToFine = CoarseToFine::Auto {
     ends: [0.3, 0.6],
 };
 
+/// The alpha fit's early stop ([`crate::fit::train::EarlyStop`]): on the D-NeRF-like proxy
+/// the held-out PSNR peaked at 70 % of the run (35.90 dB at step 4200 of 6000 at 100×100,
+/// 36.35 dB at 400×400 coarse to fine) and fell or held after it.
+pub const DEFAULT_EARLY_STOP: EarlyStop = EarlyStop {
+    flat_fraction: 0.15,
+    min_gain_db: 0.05,
+};
+
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 ///
@@ -135,6 +144,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     reset_opacity: 0.01,
     time_split_fraction: 0.05,
     coarse: DEFAULT_COARSE,
+    early_stop: Some(DEFAULT_EARLY_STOP),
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

@@ -37,6 +37,7 @@ use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
     DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
 };
+use crate::fit::train::EarlyStop;
 use crate::model::error::{MAX_QUOTE, cut};
 use crate::model::{Blend, Dataset, Error, Result};
 use crate::render::RenderOptions;
@@ -86,7 +87,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 11] = [
+pub const ALPHA_ONLY: [&str; 12] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -98,6 +99,7 @@ pub const ALPHA_ONLY: [&str; 11] = [
     "coarse_to_fine",
     "lr_acceleration",
     "lr_angular_velocity",
+    "early_stop",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -205,6 +207,8 @@ pub struct FitSettings {
     pub time_split_fraction: Option<f64>,
     /// Alpha: the coarse stages' choice ([`crate::fit::coarse`]).
     pub coarse_to_fine: Option<CoarseToFine>,
+    /// Alpha: the early stop (`Some(None)`: off).
+    pub early_stop: Option<Option<EarlyStop>>,
 }
 
 impl FitSettings {
@@ -240,6 +244,7 @@ impl FitSettings {
             self.coarse_to_fine.is_some(),
             r.acceleration.is_some(),
             r.angular_velocity.is_some(),
+            self.early_stop.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -511,6 +516,7 @@ impl FitSettings {
             opacity_reset_every: self.opacity_reset_every.unwrap_or(d.opacity_reset_every),
             time_split_fraction: self.time_split_fraction.unwrap_or(d.time_split_fraction),
             coarse: self.coarse_to_fine.unwrap_or(d.coarse),
+            early_stop: self.early_stop.unwrap_or(d.early_stop),
             ..d
         }
     }

@@ -164,6 +164,7 @@ mod tests {
             final_rate_factor: 1.0,
             density: Some(DensityRules::Alpha(rules)),
             coarse: Vec::new(),
+            early_stop: None,
         }
     }
 

@@ -63,6 +63,55 @@ pub struct Training {
     /// Coarse to fine: the stages that fit downscaled views before the full-size steps
     /// ([`crate::fit::coarse`]); empty: every step at full size.
     pub coarse: Vec<SizeStage>,
+    /// When the held-out PSNR stops rising, stop before the last step; `None`: never.
+    pub early_stop: Option<EarlyStop>,
+}
+
+/// The rule that ends a fit whose held-out PSNR no longer rises: once the density rules
+/// can add no more kernels, a fit stops at the first evaluation at which its best held-out
+/// PSNR has not risen by `min_gain_db` over the last `flat_fraction` of the steps (counted
+/// from the later of that best and the end of growth). Without held-out views it never
+/// acts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EarlyStop {
+    /// The fraction of the run's steps without a gain that ends it.
+    pub flat_fraction: f64,
+    /// The smallest rise of the held-out PSNR, in dB, that counts as a gain.
+    pub min_gain_db: f64,
+}
+
+/// The early stop's state over a run: the best held-out PSNR that was a gain, and its step.
+struct Plateau {
+    rule: EarlyStop,
+    /// Steps without a gain that end the run.
+    flat_steps: usize,
+    /// The step after which kernels are no longer added.
+    growth_ends: usize,
+    best: Option<(f64, usize)>,
+}
+
+impl Plateau {
+    fn new(rule: EarlyStop, steps: usize, growth_ends: usize) -> Self {
+        Plateau {
+            rule,
+            flat_steps: ((rule.flat_fraction * steps as f64).ceil() as usize).max(1),
+            growth_ends,
+            best: None,
+        }
+    }
+
+    /// Whether the run ends after `step`, whose held-out PSNR is `psnr` (when evaluated).
+    fn ends_after(&mut self, step: usize, psnr: Option<f64>) -> bool {
+        let Some(psnr) = psnr else {
+            return false;
+        };
+        match self.best {
+            Some((best, _)) if psnr < best + self.rule.min_gain_db => {}
+            _ => self.best = Some((psnr, step)),
+        }
+        let since = self.best.map_or(step, |(_, at)| at).max(self.growth_ends);
+        step > self.growth_ends && step - since >= self.flat_steps
+    }
 }
 
 impl Training {
@@ -400,7 +449,8 @@ pub(crate) fn batch_gradients(
 }
 
 /// Fits `scene` in place to `train`, evaluating on `heldout`, as `training` says; calls
-/// `on_step` after each step with its record and the scene. Returns every step's record.
+/// `on_step` after each step with its record and the scene. Returns every step's record
+/// (fewer than `training.steps` when its [`EarlyStop`] ended the run).
 /// With density rules the scene's kernels change between steps; otherwise only their
 /// parameters do.
 ///
@@ -436,6 +486,13 @@ pub fn fit(
     // Steps until every training view has been drawn once (the draws go epoch by epoch).
     let first_epoch = all_train.len().div_ceil(batch);
     let mut staged = StagedViews::new(&training.coarse);
+    let growth_ends = training
+        .density
+        .as_ref()
+        .map_or(0, |rules| rules.growth_ends(steps));
+    let mut plateau = training
+        .early_stop
+        .map(|rule| Plateau::new(rule, steps, growth_ends));
     for step in 1..=steps {
         let (train, _) = staged.at(all_train, step, steps)?;
         grads.reset_for_scene(scene);
@@ -498,6 +555,11 @@ pub fn fit(
         };
         on_step(&record, scene);
         records.push(record);
+        if let Some(plateau) = &mut plateau
+            && plateau.ends_after(step, heldout_psnr)
+        {
+            break;
+        }
     }
     Ok(records)
 }
@@ -525,4 +587,37 @@ fn nothing_in_sight(scene: &Scene, train: &[View], steps: usize) -> Error {
         train.len(),
         scene.len(),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RULE: EarlyStop = EarlyStop {
+        flat_fraction: 0.1,
+        min_gain_db: 0.05,
+    };
+
+    /// A run of 100 steps, growth until step 60, evaluated every 5 steps: the step after
+    /// which `psnr` (by step) stops it, if any.
+    fn stop_step(psnr: impl Fn(usize) -> f64) -> Option<usize> {
+        let mut plateau = Plateau::new(RULE, 100, 60);
+        (1..=100).find(|&step| plateau.ends_after(step, (step % 5 == 0).then(|| psnr(step))))
+    }
+
+    #[test]
+    fn a_fit_stops_once_its_heldout_psnr_is_flat_for_the_window_after_growth() {
+        // Rising by 0.1 dB per evaluation until step 70, then flat: stopped 10 steps on.
+        assert_eq!(stop_step(|s| 0.02 * s.min(70) as f64), Some(80));
+        // Flat from the start: not before growth ends, then after the window.
+        assert_eq!(stop_step(|_| 30.0), Some(70));
+        // Rising by 0.06 dB every 5 steps throughout: never.
+        assert_eq!(stop_step(|s| 0.012 * s as f64), None);
+        // Rising by 0.04 dB over the window (below the gain) counts as flat: the last gain
+        // of 0.05 dB since the one before is at step 65.
+        assert_eq!(stop_step(|s| 0.004 * s as f64), Some(75));
+        // Without evaluations, never.
+        let mut plateau = Plateau::new(RULE, 100, 60);
+        assert!((1..=100).all(|step| !plateau.ends_after(step, None)));
+    }
 }

@@ -230,6 +230,16 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         })
     })??;
     drop(viewer);
+    if records.len() < steps
+        && let Some(stop) = ready.training.early_stop
+    {
+        progress.note(&format!(
+            "stopped after step {} of {steps}: the held-out PSNR rose by less than {} dB over the last {:.0} % of the steps",
+            records.len(),
+            stop.min_gain_db,
+            100.0 * stop.flat_fraction
+        ));
+    }
     let scene = &ready.scene;
     if leader {
         write_fit(request, scene, &records)?;
@@ -240,7 +250,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     Ok(FitSummary {
         out: request.out.clone(),
         kernels: scene.len(),
-        steps,
+        steps: records.len(),
         seconds: records.last().map_or(0.0, |r| r.seconds),
         background: scene.background,
         splits,

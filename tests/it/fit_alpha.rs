@@ -642,6 +642,18 @@ fn the_alpha_start_refuses_frames_that_give_no_finite_box() {
             frame["transform_matrix"][0][1] = serde_json::json!(v + 5.0);
         }
     });
+    // Every camera turned to frame 0's direction: their axes never meet, and the alpha fit
+    // has no `--box` to be told of.
+    let parallel = edited_blob_dataset(dir.path(), "parallel", |f| {
+        let first = frames(f)[0]["transform_matrix"].clone();
+        for frame in frames(f) {
+            for row in 0..3 {
+                for column in 0..3 {
+                    frame["transform_matrix"][row][column] = first[row][column].clone();
+                }
+            }
+        }
+    });
     for init in ["random:3", "auto"] {
         let fit = |views: &str| -> Vec<String> {
             [
@@ -664,6 +676,11 @@ fn the_alpha_start_refuses_frames_that_give_no_finite_box() {
             refused_quickly(&fit(&far), dir.path(), 2, needle);
         }
         refused_quickly(&fit(&one_far), dir.path(), 2, "error:");
+        for needle in ["field `transform_matrix`", "at least two directions"] {
+            refused_quickly(&fit(&parallel), dir.path(), 2, needle);
+        }
+        let output = crate::common::run_limited(&fit(&parallel), dir.path());
+        assert!(!crate::common::stderr(&output).contains("box`"));
         refused_quickly(&fit(&sheared), dir.path(), 2, "error:");
         assert!(!dir.path().join("o.json").exists());
     }

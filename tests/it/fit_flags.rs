@@ -203,6 +203,7 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--coarse-to-fine", "off"],
         &["--lr-acceleration", "0.01"],
         &["--lr-angular-velocity", "0.01"],
+        &["--early-stop", "off"],
     ] {
         let mut args = vec!["--blend", "additive"];
         args.extend_from_slice(extra);
