@@ -246,7 +246,8 @@ pub struct FitArgs {
     #[arg(long, value_name = "SIDE|off", value_parser = super::args::coarse_to_fine, help_heading = ALPHA)]
     coarse_to_fine: Option<CoarseToFine>,
     /// Stop when the held-out PSNR has not risen by 0.05 dB over this fraction of the steps,
-    /// once no more kernels are added; `off`: every step runs [default: 0.15].
+    /// once no more kernels are added (0.15 was measured); `off`: every step runs [default:
+    /// off].
     #[arg(long, value_name = "FRACTION|off", value_parser = super::args::early_stop, help_heading = ALPHA)]
     early_stop: Option<EarlyStopChoice>,
 }
