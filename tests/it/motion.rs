@@ -17,6 +17,11 @@ use splat4d::{Camera, Gradients, Image, Kernel, RenderContext, RenderOptions, Sc
 use rand::RngExt;
 use splat4d::model::random::seeded_rng;
 
+use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, alpha_bounds};
+use splat4d::fit::plan::DEFAULT_ALPHA;
+use splat4d::fit::train::{Training, fit};
+use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
+
 /// Fields checked per kernel: mean (4), velocity (3), acceleration (3), quaternion (4),
 /// angular velocity (4), amplitude (3), scale (4).
 const FIELDS: usize = 25;
@@ -523,53 +528,27 @@ fn alpha_scenes_with_motion_match_the_twin_in_renders_and_every_gradient() {
     }
 }
 
-/// A ball thrown under gravity (SPEC §9): fitted from a start that knows its launch but not
-/// its fall, the acceleration group alone (every other rate 0, no density rules) finds the
-/// fall: the fitted acceleration is within 3 % of the truth and the training loss falls
-/// below a thousandth of its start.
-#[test]
-fn the_acceleration_group_finds_a_thrown_balls_fall() {
-    use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, alpha_bounds};
-    use splat4d::fit::plan::DEFAULT_ALPHA;
-    use splat4d::fit::train::{Training, fit};
-    use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
-
-    let mut ball = Kernel::new(
-        [0.0, 0.1, 0.0, 0.5],
-        [0.12, 0.12, 0.12, 10.0],
-        [0.9, 0.5, 0.2],
-    );
-    ball.velocity = [0.4, 0.0, 0.1];
-    ball.acceleration = [0.0, -1.6, 0.0];
-    let truth = Scene::from_kernels(&[ball], [0.0; 3], "<ball>")
-        .unwrap()
-        .into_alpha(vec![0.9], 0, Vec::new(), "<ball>")
-        .unwrap();
+/// Fits `start` to `truth`'s renders (6 cameras × `times` times at 48×48) with only the
+/// rates in `rates` (every other 0), no density rules, 800 steps decaying to 5 %; returns the
+/// fitted scene and the first and last training losses.
+fn fit_one_motion_group(
+    truth: &Scene,
+    mut start: Scene,
+    times: usize,
+    rates: AlphaRates,
+) -> (Scene, f64, f64) {
     let spec = DatasetSpec {
         views: 6,
-        times: 5,
+        times,
         width: 48,
         height: 48,
         ..DatasetSpec::default()
     };
-    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
-    let mut start = truth.clone();
-    start.accelerations.clear();
-    let bounds = alpha_bounds(&dataset.train, "<ball>").unwrap();
+    let dataset = render_dataset(truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<motion>").unwrap();
     let options = AlphaFitOptions {
         steps: 800,
-        rates: AlphaRates {
-            mean: 0.0,
-            time: 0.0,
-            velocity: 0.0,
-            acceleration: 2e-2,
-            angular_velocity: 0.0,
-            scale: 0.0,
-            rotation: 0.0,
-            opacity: 0.0,
-            colour: 0.0,
-            sh: 0.0,
-        },
+        rates,
         sh_count: 0,
         eval_every: 0,
         final_rate_factor: 0.05,
@@ -580,7 +559,54 @@ fn the_acceleration_group_finds_a_thrown_balls_fall() {
         ..options.training(&bounds)
     };
     let records = fit(&mut start, &dataset.train, &[], &training, |_, _| {}).unwrap();
-    let found = start.acceleration(0);
+    let (first, last) = (records[0].train_loss, records.last().unwrap().train_loss);
+    (start, first, last)
+}
+
+/// Every rate 0.
+const NO_RATES: AlphaRates = AlphaRates {
+    mean: 0.0,
+    time: 0.0,
+    velocity: 0.0,
+    acceleration: 0.0,
+    angular_velocity: 0.0,
+    scale: 0.0,
+    rotation: 0.0,
+    opacity: 0.0,
+    colour: 0.0,
+    sh: 0.0,
+};
+
+/// One opaque alpha kernel.
+fn one_alpha_kernel(kernel: Kernel) -> Scene {
+    Scene::from_kernels(&[kernel], [0.0; 3], "<motion>")
+        .unwrap()
+        .into_alpha(vec![0.9], 0, Vec::new(), "<motion>")
+        .unwrap()
+}
+
+/// A ball thrown under gravity (SPEC §9): fitted from a start that knows its launch but not
+/// its fall, the acceleration group alone (every other rate 0, no density rules) finds the
+/// fall: the fitted acceleration is within 3 % of the truth and the training loss falls
+/// below a thousandth of its start.
+#[test]
+fn the_acceleration_group_finds_a_thrown_balls_fall() {
+    let mut ball = Kernel::new(
+        [0.0, 0.1, 0.0, 0.5],
+        [0.12, 0.12, 0.12, 10.0],
+        [0.9, 0.5, 0.2],
+    );
+    ball.velocity = [0.4, 0.0, 0.1];
+    ball.acceleration = [0.0, -1.6, 0.0];
+    let truth = one_alpha_kernel(ball);
+    let mut start = truth.clone();
+    start.accelerations.clear();
+    let rates = AlphaRates {
+        acceleration: 2e-2,
+        ..NO_RATES
+    };
+    let (fitted, first, last) = fit_one_motion_group(&truth, start, 5, rates);
+    let found = fitted.acceleration(0);
     let error = (0..3)
         .map(|c| (found[c] - ball.acceleration[c]).powi(2))
         .sum::<f64>()
@@ -590,7 +616,6 @@ fn the_acceleration_group_finds_a_thrown_balls_fall() {
         "found {found:?}, truth {:?}",
         ball.acceleration
     );
-    let (first, last) = (records[0].train_loss, records.last().unwrap().train_loss);
     assert!(last < 1e-3 * first, "loss {first:e} → {last:e}");
 }
 
@@ -599,57 +624,21 @@ fn the_acceleration_group_finds_a_thrown_balls_fall() {
 /// within 5 %.
 #[test]
 fn the_angular_velocity_group_finds_a_spinning_sticks_turn() {
-    use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, alpha_bounds};
-    use splat4d::fit::plan::DEFAULT_ALPHA;
-    use splat4d::fit::train::{Training, fit};
-    use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
-
     let mut stick = Kernel::new(
         [0.0, 0.0, 0.0, 0.5],
         [0.35, 0.06, 0.06, 10.0],
         [0.9, 0.8, 0.2],
     );
     stick.angular_velocity = [0.0, 0.2, 0.3, 0.8];
-    let truth = Scene::from_kernels(&[stick], [0.0; 3], "<stick>")
-        .unwrap()
-        .into_alpha(vec![0.9], 0, Vec::new(), "<stick>")
-        .unwrap();
-    let spec = DatasetSpec {
-        views: 6,
-        times: 7,
-        width: 48,
-        height: 48,
-        ..DatasetSpec::default()
-    };
-    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let truth = one_alpha_kernel(stick);
     let mut start = truth.clone();
     start.angular_velocities.clear();
-    let bounds = alpha_bounds(&dataset.train, "<stick>").unwrap();
-    let options = AlphaFitOptions {
-        steps: 800,
-        rates: AlphaRates {
-            mean: 0.0,
-            time: 0.0,
-            velocity: 0.0,
-            acceleration: 0.0,
-            angular_velocity: 1e-2,
-            scale: 0.0,
-            rotation: 0.0,
-            opacity: 0.0,
-            colour: 0.0,
-            sh: 0.0,
-        },
-        sh_count: 0,
-        eval_every: 0,
-        final_rate_factor: 0.05,
-        ..DEFAULT_ALPHA
+    let rates = AlphaRates {
+        angular_velocity: 1e-2,
+        ..NO_RATES
     };
-    let training = Training {
-        density: None,
-        ..options.training(&bounds)
-    };
-    fit(&mut start, &dataset.train, &[], &training, |_, _| {}).unwrap();
-    let found = start.angular_velocity(0);
+    let (fitted, _, _) = fit_one_motion_group(&truth, start, 7, rates);
+    let found = fitted.angular_velocity(0);
     // ωw (along q = 1) only scales q(t): no image sees it, so it stays where it started.
     let error = (1..4)
         .map(|c| (found[c] - stick.angular_velocity[c]).powi(2))
