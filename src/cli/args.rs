@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use splat4d::fit::coarse::CoarseToFine;
-use splat4d::fit::defaults::{DEFAULT_COARSE, DEFAULT_EARLY_STOP};
+use splat4d::fit::defaults::{DEFAULT_COARSE_ENDS, DEFAULT_EARLY_STOP};
 use splat4d::fit::train::EarlyStop;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::simd::ExpMode;
@@ -90,17 +90,17 @@ pub fn finite(text: &str) -> Result<f64, String> {
 }
 
 /// `off`, or the shorter side (pixels, ≥ 1) a coarse stage keeps: the default stages'
-/// ends ([`splat4d::fit::defaults::DEFAULT_COARSE`]) with that side.
+/// ends ([`splat4d::fit::defaults::DEFAULT_COARSE_ENDS`]) with that side.
 pub fn coarse_to_fine(text: &str) -> Result<CoarseToFine, String> {
     let text = text.trim();
     if text == "off" {
         return Ok(CoarseToFine::Off);
     }
-    let CoarseToFine::Auto { ends, .. } = DEFAULT_COARSE else {
-        return Ok(CoarseToFine::Off);
-    };
     match text.parse::<u32>() {
-        Ok(min_side) if min_side >= 1 => Ok(CoarseToFine::Auto { min_side, ends }),
+        Ok(min_side) if min_side >= 1 => Ok(CoarseToFine::Auto {
+            min_side,
+            ends: DEFAULT_COARSE_ENDS,
+        }),
         _ => Err(format!(
             "`{text}`: give `off` or the shorter side in pixels (an integer ≥ 1) a coarse stage keeps"
         )),

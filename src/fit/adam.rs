@@ -333,6 +333,9 @@ impl Adam {
                 continue;
             }
             let transform = group.field.transform();
+            // Only a renormalised quaternion's divisors are kept: the turns follow them.
+            let turns_follow =
+                transform == Transform::UnitQuaternion && !scene.angular_velocities.is_empty();
             let (values, gradients, stride, columns) = group.field.arrays(scene, grads);
             assert_eq!(
                 moments.first.len() / moments.width,
@@ -346,7 +349,7 @@ impl Adam {
                 transform,
             };
             let width = moments.width;
-            let divisors: Vec<f64> = (
+            let rows = (
                 values.par_chunks_mut(stride),
                 gradients.par_chunks(stride),
                 moments.first.par_chunks_mut(width),
@@ -361,10 +364,12 @@ impl Adam {
                         first,
                         second,
                     )
-                })
-                .collect();
-            if transform == Transform::UnitQuaternion {
+                });
+            if turns_follow {
+                let divisors: Vec<f64> = rows.collect();
                 scale_turns_with_rotations(scene, &divisors);
+            } else {
+                rows.for_each(drop);
             }
         }
     }

@@ -95,18 +95,16 @@ impl StagedViews {
         }
     }
 
-    /// The views of step `step` of `steps` (`train` itself at full size), and whether they
-    /// changed since the last call. A stage whose factor leaves some image smaller than one
-    /// pixel is refused naming the view.
+    /// The views of step `step` of `steps` (`train` itself at full size). A stage whose
+    /// factor leaves some image smaller than one pixel is refused naming the view.
     pub fn at<'a>(
         &'a mut self,
         train: &'a [View],
         step: usize,
         steps: usize,
-    ) -> Result<(&'a [View], bool)> {
+    ) -> Result<&'a [View]> {
         let downscale = downscale_at(&self.stages, step, steps);
-        let changed = downscale != self.downscale || (step == 1 && downscale > 1);
-        if changed {
+        if downscale != self.downscale {
             self.downscale = downscale;
             self.views = if downscale == 1 {
                 Vec::new()
@@ -114,14 +112,11 @@ impl StagedViews {
                 downscaled_views(train, downscale)?
             };
         }
-        Ok((
-            if self.downscale == 1 {
-                train
-            } else {
-                &self.views
-            },
-            changed,
-        ))
+        Ok(if self.downscale == 1 {
+            train
+        } else {
+            &self.views
+        })
     }
 
     /// The downscale factor of the views [`StagedViews::at`] gave last.

@@ -25,6 +25,7 @@
 //! ```
 
 use crate::fit::coarse::{SizeStage, downscale_at};
+use crate::fit::density::DensityRules;
 use crate::fit::train::{StepRecord, Training};
 
 /// Steps of the window the estimate reads, at least.
@@ -56,14 +57,13 @@ impl TimeLeft {
     /// The estimate for a fit that runs `training`.
     #[must_use]
     pub fn new(training: &Training) -> Self {
-        let (growth_ends, max_kernels) =
-            training.density.as_ref().map_or((0, usize::MAX), |rules| {
-                (rules.growth_ends(training.steps), rules.max_kernels())
-            });
         TimeLeft {
             steps: training.steps,
-            growth_ends,
-            max_kernels,
+            growth_ends: training.growth_ends(),
+            max_kernels: training
+                .density
+                .as_ref()
+                .map_or(usize::MAX, DensityRules::max_kernels),
             stages: training.coarse.clone(),
             history: Vec::with_capacity(training.steps.min(1 << 16)),
         }

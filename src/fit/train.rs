@@ -115,6 +115,14 @@ impl Plateau {
 }
 
 impl Training {
+    /// The last step (1-based) after which the density rules may add kernels (0: never).
+    #[must_use]
+    pub fn growth_ends(&self) -> usize {
+        self.density
+            .as_ref()
+            .map_or(0, |rules| rules.growth_ends(self.steps))
+    }
+
     /// The decay factor of the rates at step `step` (1-based): `final_rate_factor^p`, `p`
     /// from 0 at the first step to 1 at the last.
     #[must_use]
@@ -486,15 +494,11 @@ pub fn fit(
     // Steps until every training view has been drawn once (the draws go epoch by epoch).
     let first_epoch = all_train.len().div_ceil(batch);
     let mut staged = StagedViews::new(&training.coarse);
-    let growth_ends = training
-        .density
-        .as_ref()
-        .map_or(0, |rules| rules.growth_ends(steps));
     let mut plateau = training
         .early_stop
-        .map(|rule| Plateau::new(rule, steps, growth_ends));
+        .map(|rule| Plateau::new(rule, steps, training.growth_ends()));
     for step in 1..=steps {
-        let (train, _) = staged.at(all_train, step, steps)?;
+        let train = staged.at(all_train, step, steps)?;
         grads.reset_for_scene(scene);
         draws.next_batch(batch, &mut drawn);
         let weight = 1.0 / batch as f64;
@@ -513,17 +517,7 @@ pub fn fit(
         if !seen_any && (step == first_epoch || step == steps) {
             return Err(nothing_in_sight(scene, train, step));
         }
-        if !train_loss.is_finite() {
-            return Err(Error::Numeric(format!(
-                "fitting diverged at step {step}: the loss is {train_loss}; lower the learning rates"
-            )));
-        }
-        adam.step(scene, &grads, step, training.decay(step));
-        if let Some(why) = non_finite_parameter(scene, adam.groups()) {
-            return Err(Error::Numeric(format!(
-                "fitting diverged at step {step}: {why}; lower that learning rate, or check the dataset's focal lengths (fl_x, fl_y) and background"
-            )));
-        }
+        adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
             let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
@@ -562,6 +556,29 @@ pub fn fit(
         }
     }
     Ok(records)
+}
+
+/// One Adam step of `scene` at `step`, refused when the step's loss `train_loss` or a
+/// parameter after it leaves the finite numbers (naming the parameter and its rate).
+fn adam_step_checked(
+    adam: &mut Adam,
+    scene: &mut Scene,
+    grads: &Gradients,
+    (step, train_loss): (usize, f64),
+    training: &Training,
+) -> Result<()> {
+    if !train_loss.is_finite() {
+        return Err(Error::Numeric(format!(
+            "fitting diverged at step {step}: the loss is {train_loss}; lower the learning rates"
+        )));
+    }
+    adam.step(scene, grads, step, training.decay(step));
+    if let Some(why) = non_finite_parameter(scene, adam.groups()) {
+        return Err(Error::Numeric(format!(
+            "fitting diverged at step {step}: {why}; lower that learning rate, or check the dataset's focal lengths (fl_x, fl_y) and background"
+        )));
+    }
+    Ok(())
 }
 
 /// Gives every kernel of `scene` the SPEC §9 fields that `groups` fit (zero where a kernel
