@@ -415,6 +415,17 @@ impl FitSettings {
             Blend::Alpha => {
                 let options = self.alpha_options(why)?;
                 self.check_start(blend, &init, init_name)?;
+                if matches!(self.early_stop, Some(Some(_)))
+                    && dataset.val.is_empty()
+                    && dataset.test.is_empty()
+                {
+                    return Err(Error::setting(
+                        &["early_stop"],
+                        format!(
+                            "{origin}: `early_stop` reads the held-out PSNR, and the dataset has no `val` or `test` views: give a dataset with held-out views, or leave `early_stop` out"
+                        ),
+                    ));
+                }
                 prepare_alpha(&options, init, dataset, self.background, origin)
                     .map(|ready| ready.record_data(dataset))
             }

@@ -317,3 +317,23 @@ fn flags_the_start_or_mode_leaves_without_effect_are_refused() {
         "{error}"
     );
 }
+
+/// `--early-stop` reads the held-out PSNR: with no `val` or `test` views it could not act,
+/// and is refused naming it, where the default fit runs.
+#[test]
+fn an_early_stop_without_heldout_views_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    for split in ["val", "test"] {
+        std::fs::remove_file(dir.path().join(format!("ds/transforms_{split}.json"))).unwrap();
+    }
+    let error = fit(dir.path(), "refused", &["--early-stop", "0.5"]).expect_err("refused");
+    assert!(
+        error.starts_with("exit Some(2)")
+            && error.contains("--early-stop reads the held-out PSNR")
+            && !error.contains("panicked"),
+        "{error}"
+    );
+    assert!(!dir.path().join("refused.json").exists());
+    fit(dir.path(), "plain", &[]).expect("the fit without --early-stop");
+}
