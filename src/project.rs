@@ -131,20 +131,6 @@ pub struct Projection {
     pub mean: [f64; 2],
 }
 
-/// The clamp limits `[lim_x⁻, lim_x⁺, lim_y⁻, lim_y⁺]` of SPEC §4.
-#[must_use]
-pub fn clamp_limits(camera: &Camera) -> [f64; 4] {
-    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
-    let margin_x = 0.3 * 0.5 * w / camera.fx;
-    let margin_y = 0.3 * 0.5 * h / camera.fy;
-    [
-        camera.cx / camera.fx + margin_x,
-        (w - camera.cx) / camera.fx + margin_x,
-        camera.cy / camera.fy + margin_y,
-        (h - camera.cy) / camera.fy + margin_y,
-    ]
-}
-
 /// Projects one 3D Gaussian (world-space centre and covariance `[xx, xy, xz, yy, yz, zz]`),
 /// or `None` when it is culled (outside `[near, far]`, degenerate or non-finite `Σ2`).
 #[must_use]
@@ -186,7 +172,7 @@ fn projection(camera: &Camera, dilation: f64, mean: [f64; 3], cov: [f64; 6]) -> 
     });
     let sc: [[f64; 3]; 3] =
         std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| rs[i][k] * rc[j][k]).sum()));
-    let [lxm, lxp, lym, lyp] = clamp_limits(camera);
+    let [lxm, lxp, lym, lyp] = camera.clamp_limits();
     let (u, v) = (x / z, y / z);
     let clamped = [u < -lxm || u > lxp, v < -lym || v > lyp];
     let tx = z * u.clamp(-lxm, lxp);

@@ -88,6 +88,7 @@ impl Camera {
             world_to_camera: matrix4(py, world_to_camera, "world_to_camera")?,
             near,
             far,
+            clamp: None,
         };
         checked(py, camera, near, far, "<camera>")
     }
@@ -140,6 +141,7 @@ impl Camera {
             world_to_camera: matrix4(py, viewmat, "viewmat")?,
             near,
             far,
+            clamp: None,
         };
         checked(py, camera, near, far, "<viewmat camera>")
     }

@@ -107,6 +107,24 @@ pub fn coarse_to_fine(text: &str) -> Result<CoarseToFine, String> {
     }
 }
 
+/// What `--window` chose: a side, or none (`off`).
+#[derive(Clone, Copy, Debug)]
+pub struct WindowChoice(pub Option<u32>);
+
+/// `off`, or a window's largest side in pixels (an integer ≥ 16, a tile).
+pub fn window(text: &str) -> Result<WindowChoice, String> {
+    let text = text.trim();
+    if text == "off" {
+        return Ok(WindowChoice(None));
+    }
+    match text.parse::<u32>() {
+        Ok(side) if side >= 16 => Ok(WindowChoice(Some(side))),
+        _ => Err(format!(
+            "`{text}`: give `off` or a window side in pixels (an integer ≥ 16)"
+        )),
+    }
+}
+
 /// What `--early-stop` chose: a rule, or none (`off`).
 #[derive(Clone, Copy, Debug)]
 pub struct EarlyStopChoice(pub Option<EarlyStop>);

@@ -11,7 +11,7 @@ use splat4d::fit::coarse::CoarseToFine;
 use splat4d::fit::settings::{FitSettings, RateSettings};
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
-use super::args::{EarlyStopChoice, RenderFlags, parse_list};
+use super::args::{EarlyStopChoice, RenderFlags, WindowChoice, parse_list};
 
 /// `help fit` headings: the flags every fit reads, then those of each blend.
 const BOTH: &str = "Both blends";
@@ -250,6 +250,12 @@ pub struct FitArgs {
     /// off].
     #[arg(long, value_name = "FRACTION|off", value_parser = super::args::early_stop, help_heading = ALPHA)]
     early_stop: Option<EarlyStopChoice>,
+    /// Fit one window of each drawn view per step: each view cut into a grid of equal
+    /// windows about SIDE pixels on a side (round(width/SIDE) columns, round(height/SIDE)
+    /// rows), one drawn at random (seeded) each time the view is; views under 1.5 SIDE stay
+    /// whole; `off`: whole views [default: 200].
+    #[arg(long, value_name = "SIDE|off", value_parser = super::args::window, help_heading = ALPHA)]
+    window: Option<WindowChoice>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -305,6 +311,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         sh_raise_every: args.sh_raise_every,
         coarse_to_fine: args.coarse_to_fine,
         early_stop: args.early_stop.map(|choice| choice.0),
+        window: args.window.map(|choice| choice.0),
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

@@ -114,6 +114,9 @@ pub struct AlphaFitOptions {
     pub coarse: CoarseToFine,
     /// The stop when the held-out PSNR no longer rises (`None`: every step runs).
     pub early_stop: Option<EarlyStop>,
+    /// Each step fits one window of about this side of each drawn view
+    /// ([`crate::fit::window`]; `None`: whole views).
+    pub window: Option<u32>,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -222,6 +225,7 @@ impl AlphaFitOptions {
             density: Some(DensityRules::Alpha(self.rules(diagonal, time_range))),
             coarse: Vec::new(),
             early_stop: self.early_stop,
+            window: self.window,
         }
     }
 }

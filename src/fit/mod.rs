@@ -1,6 +1,6 @@
 //! Fitting kernels to images (SPEC §6, §8): the loss, one Adam over a table of parameter
 //! groups ([`adam`]), one training loop ([`train`]) with its coarse-to-fine stages
-//! ([`coarse`]) and the density rules ([`density`]) for both blends, each blend's table and
+//! ([`coarse`]), its windows ([`window`]) and the density rules ([`density`]) for both blends, each blend's table and
 //! options ([`additive`], [`alpha`]), the starts ([`init`], [`alpha_start`], [`hull`],
 //! [`stereo`], [`rig_start`]), the defaults ([`defaults`]) and the policy that chooses among
 //! them ([`plan`], from the caller's [`settings`]), the estimate of a running fit's time left
@@ -23,3 +23,4 @@ pub mod spread;
 pub mod stereo;
 pub mod time_left;
 pub mod train;
+pub mod window;

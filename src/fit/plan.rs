@@ -495,10 +495,14 @@ impl ReadyFit {
         start
     }
 
-    /// The estimate of the time this fit has left, to be given each step's record.
+    /// The estimate of the time this fit has left on training views `train`, to be given
+    /// each step's record.
     #[must_use]
-    pub fn time_left(&self) -> TimeLeft {
-        TimeLeft::new(&self.training)
+    pub fn time_left(&self, train: &[View]) -> TimeLeft {
+        let size = train
+            .first()
+            .map_or([1, 1], |v| [v.image.width, v.image.height]);
+        TimeLeft::new(&self.training, size)
     }
 
     /// Runs the fit ([`fit`]) on `train`, evaluating on `heldout`; `scene` is then the

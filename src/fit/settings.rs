@@ -87,7 +87,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 12] = [
+pub const ALPHA_ONLY: [&str; 13] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -100,6 +100,7 @@ pub const ALPHA_ONLY: [&str; 12] = [
     "lr_acceleration",
     "lr_angular_velocity",
     "early_stop",
+    "window",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -209,6 +210,8 @@ pub struct FitSettings {
     pub coarse_to_fine: Option<CoarseToFine>,
     /// Alpha: the early stop (`Some(None)`: off).
     pub early_stop: Option<Option<EarlyStop>>,
+    /// Alpha: the steps' window side ([`crate::fit::window`]; `Some(None)`: whole views).
+    pub window: Option<Option<u32>>,
 }
 
 impl FitSettings {
@@ -245,6 +248,7 @@ impl FitSettings {
             r.acceleration.is_some(),
             r.angular_velocity.is_some(),
             self.early_stop.is_some(),
+            self.window.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -528,6 +532,7 @@ impl FitSettings {
             time_split_fraction: self.time_split_fraction.unwrap_or(d.time_split_fraction),
             coarse: self.coarse_to_fine.unwrap_or(d.coarse),
             early_stop: self.early_stop.unwrap_or(d.early_stop),
+            window: self.window.unwrap_or(d.window),
             ..d
         }
     }

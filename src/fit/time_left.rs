@@ -10,9 +10,11 @@
 //!
 //! `k` kernels; a fixed cost `k0` (the images' pixels, the loss) expressed in kernels, taken
 //! as the recent mean count — half the cost fixed, half per kernel, near what the alpha fits'
-//! logs show (`docs/fitting.md`, "Time left"); and the stage's factor `m(n)`: a step on views
+//! logs show (`docs/fitting.md`, "Time left"); and the stage's factor `m`: a step on views
 //! downscaled by `n` ([`crate::fit::coarse`]) renders `n²` times fewer pixels and costs about
-//! `n^(-1.2)` as much (a kernel's cost grows with its footprint less than linearly: the
+//! `n^(-1.2)` as much; a step on windows ([`crate::fit::window`]) renders the fraction `f`
+//! of its views' pixels that one cell of their grid holds, and costs `f^β` as much, so
+//! `m = (f / n²)^β` with `f` that of the first training view at the stage's size (a kernel's cost grows with its footprint less than linearly: the
 //! D-NeRF-like proxy at 400×400 took 4.6, 19.8 and 69 ms a step at ¼, ½ and full size with
 //! 3 100, 6 500 and 9 000 kernels, exponents 0.5 and 0.66 of the pixel ratio). `c` comes from
 //! the recent window (the last tenth of the steps run, at least 50), each of its steps
@@ -27,6 +29,7 @@
 use crate::fit::coarse::{SizeStage, downscale_at};
 use crate::fit::density::DensityRules;
 use crate::fit::train::{StepRecord, Training};
+use crate::fit::window::pixel_fraction;
 
 /// Steps of the window the estimate reads, at least.
 const MIN_WINDOW: usize = 50;
@@ -34,9 +37,12 @@ const MIN_WINDOW: usize = 50;
 /// The exponent of the pixel count in a step's cost (see the module docs).
 const PIXEL_EXPONENT: f64 = 0.6;
 
-/// The cost of a step on views downscaled by `n`, relative to full size.
-fn stage_cost(n: u32) -> f64 {
-    f64::from(n.max(1)).powf(-2.0 * PIXEL_EXPONENT)
+/// The cost of a step on views downscaled by `n` (and windowed by `window`, of views of
+/// `size` at full size), relative to whole views at full size.
+fn stage_cost(n: u32, window: Option<u32>, [width, height]: [u32; 2]) -> f64 {
+    let n = n.max(1);
+    let fraction = pixel_fraction(window, (width / n).max(1), (height / n).max(1));
+    (fraction / f64::from(n).powi(2)).powf(PIXEL_EXPONENT)
 }
 
 /// The estimate of a running fit's time left (see the module docs).
@@ -49,14 +55,17 @@ pub struct TimeLeft {
     max_kernels: usize,
     /// The coarse stages.
     stages: Vec<SizeStage>,
+    /// The steps' window side, and the size of the views it cuts (at full size).
+    window: (Option<u32>, [u32; 2]),
     /// `(seconds, kernels, downscale)` after each step so far.
     history: Vec<(f64, usize, u32)>,
 }
 
 impl TimeLeft {
-    /// The estimate for a fit that runs `training`.
+    /// The estimate for a fit that runs `training` on views of `view_size` (width, height;
+    /// the first training view's).
     #[must_use]
-    pub fn new(training: &Training) -> Self {
+    pub fn new(training: &Training, view_size: [u32; 2]) -> Self {
         TimeLeft {
             steps: training.steps,
             growth_ends: training.growth_ends(),
@@ -65,6 +74,7 @@ impl TimeLeft {
                 .as_ref()
                 .map_or(usize::MAX, DensityRules::max_kernels),
             stages: training.coarse.clone(),
+            window: (training.window, view_size),
             history: Vec::with_capacity(training.steps.min(1 << 16)),
         }
     }
@@ -89,7 +99,7 @@ impl TimeLeft {
         let fixed = recent.iter().map(|&(_, k, _)| k as f64).sum::<f64>() / window as f64;
         let units: f64 = recent
             .iter()
-            .map(|&(_, k, n)| (k as f64 + fixed) * stage_cost(n))
+            .map(|&(_, k, n)| (k as f64 + fixed) * self.stage_cost(n))
             .sum();
         let per_unit = (t1 - t0) / units.max(1e-12);
         let k = k1 as f64;
@@ -124,10 +134,15 @@ impl TimeLeft {
         for to in breaks {
             let n = downscale_at(&self.stages, to, self.steps);
             let mean = 0.5 * (kernels_at(from) + kernels_at(to));
-            left += per_unit * (to - from) as f64 * (mean + fixed) * stage_cost(n);
+            left += per_unit * (to - from) as f64 * (mean + fixed) * self.stage_cost(n);
             from = to;
         }
         Some(left.max(0.0))
+    }
+
+    /// [`stage_cost`] of this fit's views at downscale `n`.
+    fn stage_cost(&self, n: u32) -> f64 {
+        stage_cost(n, self.window.0, self.window.1)
     }
 }
 
@@ -165,13 +180,14 @@ mod tests {
             density: Some(DensityRules::Alpha(rules)),
             coarse: Vec::new(),
             early_stop: None,
+            window: None,
         }
     }
 
     /// A run whose kernels grow from 1000 by 10 a step until step 600, each step taking
     /// `1 ms · (k + 1000) / 1000`: the estimate at step `at`, and the truth.
     fn estimate_at(at: usize) -> (f64, f64) {
-        let mut estimate = TimeLeft::new(&training());
+        let mut estimate = TimeLeft::new(&training(), [400, 400]);
         let (mut seconds, mut total_at) = (0.0, 0.0);
         for step in 1..=1000 {
             let kernels = 1000 + 10 * step.min(600);
@@ -208,9 +224,10 @@ mod tests {
         assert!(seconds_at_100 * 9.0 < 0.67 * truth);
     }
 
-    /// The same run in coarse stages (¼ size until step 300, ½ until 600), each step's cost
-    /// scaled by its stage as the model says: the estimate from step 100 on is within a
-    /// fifth, where the time so far, spent at ¼ size, promises far too little.
+    /// The same run in coarse stages (¼ size until step 300, ½ until 600), whole views and
+    /// windows of 200 of 400×400 views, each step's cost scaled by its stage as the model
+    /// says: the estimate from step 100 on is within a fifth, where the time so far, spent
+    /// at ¼ size, promises far too little.
     #[test]
     fn a_coarse_to_fine_fit_is_estimated_across_its_stages() {
         let stages = vec![
@@ -223,48 +240,53 @@ mod tests {
                 until: 0.6,
             },
         ];
-        let training = Training {
-            coarse: stages.clone(),
-            ..training()
-        };
-        let cost = |step: usize| {
-            let kernels = 1000 + 10 * step.min(600);
-            (
-                kernels,
-                1e-3 * (kernels + 1000) as f64 / 1000.0
-                    * stage_cost(downscale_at(&stages, step, 1000)),
-            )
-        };
-        let total: f64 = (1..=1000).map(|s| cost(s).1).sum();
-        for at in [100, 250, 300, 450, 700] {
-            let mut estimate = TimeLeft::new(&training);
-            let mut seconds = 0.0;
-            for step in 1..=at {
-                let (kernels, duration) = cost(step);
-                seconds += duration;
-                estimate.record(&StepRecord {
-                    step,
-                    seconds,
-                    train_loss: 0.0,
-                    heldout_psnr: None,
-                    kernels,
-                    downscale: downscale_at(&stages, step, 1000),
-                });
-            }
-            let (guess, truth) = (estimate.seconds_left().unwrap(), total - seconds);
-            assert!(
-                (guess / truth - 1.0).abs() < 0.2,
-                "at {at}: {guess} s estimated, {truth} s left"
-            );
-            if at == 100 {
-                assert!(seconds * 9.0 < 0.5 * truth);
+        for window in [None, Some(200)] {
+            let training = Training {
+                coarse: stages.clone(),
+                window,
+                ..training()
+            };
+            let cost = |step: usize| {
+                let kernels = 1000 + 10 * step.min(600);
+                let stage = stage_cost(downscale_at(&stages, step, 1000), window, [400, 400]);
+                (kernels, 1e-3 * (kernels + 1000) as f64 / 1000.0 * stage)
+            };
+            let total: f64 = (1..=1000).map(|s| cost(s).1).sum();
+            for at in [100, 250, 300, 450, 700] {
+                let mut estimate = TimeLeft::new(&training, [400, 400]);
+                let mut seconds = 0.0;
+                for step in 1..=at {
+                    let (kernels, duration) = cost(step);
+                    seconds += duration;
+                    estimate.record(&StepRecord {
+                        step,
+                        seconds,
+                        train_loss: 0.0,
+                        heldout_psnr: None,
+                        kernels,
+                        downscale: downscale_at(&stages, step, 1000),
+                    });
+                }
+                let (guess, truth) = (estimate.seconds_left().unwrap(), total - seconds);
+                assert!(
+                    (guess / truth - 1.0).abs() < 0.2,
+                    "{window:?} at {at}: {guess} s estimated, {truth} s left"
+                );
+                if at == 100 {
+                    assert!(seconds * 9.0 < 0.5 * truth);
+                }
             }
         }
+        // Windows of 200 make a full-size step of 400×400 views cost what a ½-size one does.
+        assert_eq!(
+            stage_cost(1, Some(200), [400, 400]),
+            stage_cost(2, None, [400, 400])
+        );
     }
 
     #[test]
     fn nothing_is_promised_before_two_steps() {
-        let mut estimate = TimeLeft::new(&training());
+        let mut estimate = TimeLeft::new(&training(), [400, 400]);
         assert_eq!(estimate.seconds_left(), None);
         estimate.record(&StepRecord {
             step: 1,

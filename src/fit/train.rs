@@ -31,6 +31,7 @@ use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::{DensityRules, DensityStats};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::spread;
+use crate::fit::window::Windows;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::Scene;
@@ -65,7 +66,13 @@ pub struct Training {
     pub coarse: Vec<SizeStage>,
     /// When the held-out PSNR stops rising, stop before the last step; `None`: never.
     pub early_stop: Option<EarlyStop>,
+    /// Each step fits one window of about this side of each drawn view
+    /// ([`crate::fit::window`]); `None`: whole views.
+    pub window: Option<u32>,
 }
+
+/// Mixed into the draw seed for the windows' draws, so that they are not the views' shuffle.
+const WINDOW_SEED_BITS: u64 = 0x5749_4e44_4f57_5321;
 
 /// The rule that ends a fit whose held-out PSNR no longer rises: once the density rules
 /// can add no more kernels, a fit stops at the first evaluation at which its best held-out
@@ -497,16 +504,23 @@ pub fn fit(
     let mut plateau = training
         .early_stop
         .map(|rule| Plateau::new(rule, steps, training.growth_ends()));
+    let mut windows = training
+        .window
+        .map(|side| Windows::new(side, training.draw_seed ^ WINDOW_SEED_BITS));
     for step in 1..=steps {
         let train = staged.at(all_train, step, steps)?;
         grads.reset_for_scene(scene);
         draws.next_batch(batch, &mut drawn);
+        let (batch_views, batch_drawn) = match &mut windows {
+            Some(windows) => windows.draw(train, &drawn),
+            None => (train, &drawn[..]),
+        };
         let weight = 1.0 / batch as f64;
         let train_loss = batch_gradients(
             &mut slots,
             scene,
-            train,
-            &drawn,
+            batch_views,
+            batch_drawn,
             render,
             &mut grads,
             |sees, screen| {
@@ -515,7 +529,12 @@ pub fn fit(
             },
         )?;
         if !seen_any && (step == first_epoch || step == steps) {
-            return Err(nothing_in_sight(scene, train, step));
+            // Windows may all have missed what their whole views see.
+            seen_any =
+                windows.is_some() && some_view_sees_a_kernel(scene, train, render, &mut slots)?;
+            if !seen_any {
+                return Err(nothing_in_sight(scene, train, step));
+            }
         }
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
         if let Some(rules) = &training.density {
@@ -591,6 +610,24 @@ fn give_fitted_motion(scene: &mut Scene, groups: &[ParameterGroup]) {
     if groups.iter().any(|g| g.field == Field::AngularVelocity) {
         scene.angular_velocities.resize(scene.len(), [0.0; 4]);
     }
+}
+
+/// Whether some view of `views`, whole, projects a kernel of `scene` onto its screen.
+fn some_view_sees_a_kernel(
+    scene: &Scene,
+    views: &[View],
+    render: &RenderOptions,
+    slots: &mut [ViewSlot],
+) -> Result<bool> {
+    for view in views {
+        let slot = &mut slots[0];
+        slot.context
+            .render(scene, &view.camera, view.time, render)?;
+        if slot.sees_a_kernel() {
+            return Ok(true);
+        }
+    }
+    Ok(false)
 }
 
 /// The error of a fit whose training views saw no kernel in its first `steps` steps (every

@@ -68,6 +68,12 @@ pub struct Camera {
     /// Kernels whose slice centre has camera `z > far` are culled.
     #[serde(default = "default_far")]
     pub far: f64,
+    /// The limits `[lim_x⁻, lim_x⁺, lim_y⁻, lim_y⁺]` of SPEC §4's clamp of `J` when they are
+    /// not this camera's own: a window of a view keeps the view's
+    /// ([`crate::model::View::cropped`]), so that its pixels are the view's. `None` (every
+    /// camera a file describes): the limits of this camera's own size.
+    #[serde(skip)]
+    pub clamp: Option<[f64; 4]>,
 }
 
 fn default_near() -> f64 {
@@ -97,9 +103,29 @@ impl Camera {
             world_to_camera,
             near: DEFAULT_NEAR,
             far: DEFAULT_FAR,
+            clamp: None,
         };
         camera.validate("<camera>")?;
         Ok(camera)
+    }
+
+    /// The limits `[lim_x⁻, lim_x⁺, lim_y⁻, lim_y⁺]` of SPEC §4's clamp of `J`: those kept
+    /// of the view this camera is a window of ([`Camera::clamp`]), else its own:
+    /// `lim_x⁻ = cx/fx + 0.15 W/fx`, `lim_x⁺ = (W - cx)/fx + 0.15 W/fx` (y likewise).
+    #[must_use]
+    pub fn clamp_limits(&self) -> [f64; 4] {
+        if let Some(limits) = self.clamp {
+            return limits;
+        }
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let margin_x = 0.3 * 0.5 * w / self.fx;
+        let margin_y = 0.3 * 0.5 * h / self.fy;
+        [
+            self.cx / self.fx + margin_x,
+            (w - self.cx) / self.fx + margin_x,
+            self.cy / self.fy + margin_y,
+            (h - self.cy) / self.fy + margin_y,
+        ]
     }
 
     /// Intrinsics `[fx, fy, cx, cy]` of square pixels seeing a vertical field of view of

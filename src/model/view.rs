@@ -67,6 +67,60 @@ impl View {
     }
 }
 
+impl View {
+    /// The `width × height` window of this view whose top-left pixel is `(left, top)`: the
+    /// image's (and weights') pixels there, and the camera with its principal point moved by
+    /// `(-left, -top)` (SPEC §3: pixel `(i, j)` of the window is pixel `(left + i, top + j)`
+    /// of the view, the same ray) that keeps the view's clamp limits (SPEC §4), so that the
+    /// window renders the view's pixels. `None` when the window leaves the image or is
+    /// empty.
+    #[must_use]
+    pub fn cropped(&self, left: u32, top: u32, width: u32, height: u32) -> Option<View> {
+        let (w, h) = (self.image.width, self.image.height);
+        if width == 0 || height == 0 || left.checked_add(width)? > w || top.checked_add(height)? > h
+        {
+            return None;
+        }
+        let rows = top as usize..(top + height) as usize;
+        let columns = left as usize..(left + width) as usize;
+        let mut pixels = Vec::with_capacity(3 * width as usize * height as usize);
+        for j in rows.clone() {
+            let row = j * w as usize;
+            pixels.extend_from_slice(
+                &self.image.pixels[3 * (row + columns.start)..3 * (row + columns.end)],
+            );
+        }
+        let weights = self.weights.as_ref().map(|weights| {
+            rows.flat_map(|j| {
+                let row = j * w as usize;
+                weights[row + columns.start..row + columns.end]
+                    .iter()
+                    .copied()
+            })
+            .collect()
+        });
+        let camera = Camera {
+            width,
+            height,
+            cx: self.camera.cx - f64::from(left),
+            cy: self.camera.cy - f64::from(top),
+            clamp: Some(self.camera.clamp_limits()),
+            ..self.camera
+        };
+        Some(View {
+            camera,
+            time: self.time,
+            image: std::sync::Arc::new(Image {
+                width,
+                height,
+                pixels,
+            }),
+            name: self.name.clone(),
+            weights,
+        })
+    }
+}
+
 /// A point of the cloud a dataset ships (COLMAP `points3D`, nerfstudio `ply_file_path`), in
 /// the world of the dataset's cameras.
 ///
@@ -188,5 +242,34 @@ mod tests {
             &full.downscaled(1).unwrap().image,
             &full.image
         ));
+    }
+
+    /// A window's pixel `(i, j)` is the view's `(left + i, top + j)`: the same colour and
+    /// weight, and a point projects there, shifted by the corner exactly.
+    #[test]
+    fn a_window_sees_each_point_at_its_place_in_the_view() {
+        let full = view(43, 30);
+        let window = full.cropped(5, 7, 20, 11).unwrap();
+        assert_eq!((window.camera.width, window.camera.height), (20, 11));
+        for p in [[0.1, 0.2, -0.3], [-0.5, 0.4, 0.2], [0.0, 0.0, 0.0]] {
+            let [u, v, z] = full.camera.project_point(p);
+            let [uw, vw, zw] = window.camera.project_point(p);
+            assert!((uw + 5.0 - u).abs() < 1e-12 * u.abs().max(1.0));
+            assert!((vw + 7.0 - v).abs() < 1e-12 * v.abs().max(1.0));
+            assert_eq!(zw, z);
+        }
+        let (weights, window_weights) = (full.weights.unwrap(), window.weights.unwrap());
+        for (i, j) in [(0, 0), (19, 10), (3, 4)] {
+            assert_eq!(window.image.pixel(i, j), full.image.pixel(5 + i, 7 + j));
+            assert_eq!(
+                window_weights[(j * 20 + i) as usize],
+                weights[((7 + j) * 43 + 5 + i) as usize]
+            );
+        }
+        let full = view(43, 30);
+        assert!(full.cropped(24, 0, 20, 30).is_none());
+        assert!(full.cropped(0, 0, 0, 30).is_none());
+        assert!(full.cropped(u32::MAX, 0, 2, 2).is_none());
+        assert!(full.cropped(23, 0, 20, 30).is_some());
     }
 }

@@ -51,10 +51,13 @@ pub fn reference_project(
     }
     let sigma_c = rc * slice.covariance * rc.transpose();
     let (w_px, h_px) = (f64::from(camera.width), f64::from(camera.height));
-    let lim_x_pos = (w_px - camera.cx) / camera.fx + 0.3 * 0.5 * w_px / camera.fx;
-    let lim_x_neg = camera.cx / camera.fx + 0.3 * 0.5 * w_px / camera.fx;
-    let lim_y_pos = (h_px - camera.cy) / camera.fy + 0.3 * 0.5 * h_px / camera.fy;
-    let lim_y_neg = camera.cy / camera.fy + 0.3 * 0.5 * h_px / camera.fy;
+    // A window of a view clamps at its view's limits.
+    let [lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos] = camera.clamp.unwrap_or([
+        camera.cx / camera.fx + 0.3 * 0.5 * w_px / camera.fx,
+        (w_px - camera.cx) / camera.fx + 0.3 * 0.5 * w_px / camera.fx,
+        camera.cy / camera.fy + 0.3 * 0.5 * h_px / camera.fy,
+        (h_px - camera.cy) / camera.fy + 0.3 * 0.5 * h_px / camera.fy,
+    ]);
     let tx = p.z * (p.x / p.z).clamp(-lim_x_neg, lim_x_pos);
     let ty = p.z * (p.y / p.z).clamp(-lim_y_neg, lim_y_pos);
     let (fx, fy, zz) = (camera.fx, camera.fy, p.z);

@@ -212,7 +212,7 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
     });
     progress.start(steps);
     let mut last_heldout = None;
-    let mut time_left = ready.time_left();
+    let mut time_left = ready.time_left(&dataset.train);
     // Without a thread count the steps run on a thread of the global pool, so each step's
     // parallel loops start there instead of being handed over one by one; not with a live
     // viewer, whose render thread needs the pool meanwhile. The step's callback only hands

@@ -290,8 +290,8 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
 
 /// A step's views run side by side, one per worker thread; their gradients are added in
 /// view order, so the fitted scene is the same bits for any thread count (with a batch of
-/// 4: 1, 2 and 3 views at once, the last group of 3 short), densification and the coarse
-/// stages included.
+/// 4: 1, 2 and 3 views at once, the last group of 3 short), densification, the coarse
+/// stages and the windows included.
 #[test]
 fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     let scene = occluding_scene();
@@ -325,6 +325,7 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
                             until: 0.6,
                         },
                     ],
+                    window: Some(16),
                     ..fit_options.training(&bounds)
                 },
                 |_, _| {},
@@ -342,6 +343,76 @@ fn an_alpha_fit_is_the_same_bits_for_any_thread_count() {
     for threads in [2, 3] {
         assert!(run(threads) == one, "{threads} threads differ from one");
     }
+}
+
+/// A window of a view ([`splat4d::model::View::cropped`]) renders the pixels the whole view
+/// renders there: the same rays.
+#[test]
+fn a_window_renders_the_pixels_of_its_view() {
+    let scene = occluding_scene();
+    let (dataset, options) = occluding_dataset(&scene);
+    let view = &dataset.train[3];
+    let mut context = RenderContext::new();
+    context
+        .render(&scene, &view.camera, view.time, &options)
+        .unwrap();
+    let whole = context.image().clone();
+    for [left, top, width, height] in [[0, 0, 20, 20], [20, 7, 20, 33], [5, 31, 17, 9]] {
+        let window = view.cropped(left, top, width, height).unwrap();
+        context
+            .render(&scene, &window.camera, window.time, &options)
+            .unwrap();
+        let mut worst = 0.0_f32;
+        for j in 0..height {
+            for i in 0..width {
+                let (a, b) = (context.image().pixel(i, j), whole.pixel(left + i, top + j));
+                for c in 0..3 {
+                    worst = worst.max((a[c] - b[c]).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-5, "window {left},{top}: {worst}");
+    }
+}
+
+/// Steps on windows (a 2×2 grid of 20×20 on 40×40 views) fit the occluding scene about as
+/// well as steps on whole views given the same pixels a step (4 times the views): the
+/// windows' loss is the views' loss.
+#[test]
+fn windows_fit_the_occluding_scene_as_whole_views_do() {
+    let scene = occluding_scene();
+    let (dataset, _) = occluding_dataset(&scene);
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
+    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 600,
+        start_kernels: 300,
+        sh_count: 0,
+        eval_every: 0,
+        ..DEFAULT_ALPHA
+    };
+    let heldout_psnr = |window: Option<u32>, batch_size: usize| {
+        let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
+        let training = splat4d::fit::train::Training {
+            window,
+            batch_size,
+            ..fit_options.training(&bounds)
+        };
+        let records = fit(
+            &mut fitted,
+            &dataset.train,
+            &dataset.test,
+            &training,
+            |_, _| {},
+        )
+        .unwrap();
+        records.last().unwrap().heldout_psnr.unwrap()
+    };
+    let (whole, windows) = (heldout_psnr(None, 4), heldout_psnr(Some(20), 16));
+    eprintln!("held out: whole views {whole:.2} dB, windows {windows:.2} dB");
+    assert!(
+        windows > 24.0 && windows > whole - 1.0,
+        "{windows:.2} against {whole:.2} dB"
+    );
 }
 
 /// A camera at `eye` looking at the origin, or with `away` straight away from it.

@@ -186,7 +186,7 @@ fn hard_cases(camera: &Camera) -> Vec<(&'static str, Scene)> {
     };
     let near_edges = {
         // Centres just inside and just beyond the clamp limits, on every side.
-        let limits = splat4d::project::clamp_limits(camera);
+        let limits = camera.clamp_limits();
         let mut ks = Vec::new();
         for (k, factor) in [0.9, 1.05, 1.3].into_iter().enumerate() {
             let z = 3.0 + k as f64;
