@@ -22,7 +22,7 @@ pub enum Job {
         /// The page's request number.
         id: u64,
         /// The camera.
-        camera: Camera,
+        camera: Box<Camera>,
         /// Scene time.
         time: f64,
         /// PNG instead of JPEG.

@@ -596,7 +596,7 @@ impl Page {
         let (reply, frames) = channel();
         let job = Job::Frame {
             id: 0,
-            camera,
+            camera: Box::new(camera),
             time: time_range(&showing.scene)[0],
             lossless: false,
         };
@@ -774,7 +774,7 @@ impl Page {
                 Ok((camera, time)) => {
                     let job = Job::Frame {
                         id: frame.id,
-                        camera,
+                        camera: Box::new(camera),
                         time,
                         lossless: frame.lossless,
                     };
