@@ -11,7 +11,10 @@ fn heldout_curve(path: &str) -> Vec<(f64, f64)> {
     text.lines()
         .filter_map(|line| {
             let record: serde_json::Value = serde_json::from_str(line).ok()?;
-            Some((record["seconds"].as_f64()?, record["heldout_psnr"].as_f64()?))
+            Some((
+                record["seconds"].as_f64()?,
+                record["heldout_psnr"].as_f64()?,
+            ))
         })
         .collect()
 }

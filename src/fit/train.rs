@@ -228,6 +228,11 @@ pub struct SplitScore {
     pub views: usize,
     /// Mean MSE over them.
     pub mse: f64,
+    /// The mean over the views of each view's PSNR (as papers report a test split).
+    pub mean_view_psnr: f64,
+    /// The mean over the views of each view's SSIM ([`crate::fit::loss::ssim`]); held-out
+    /// splits only (`None` for `train`).
+    pub ssim: Option<f64>,
 }
 
 impl SplitScore {
@@ -238,7 +243,9 @@ impl SplitScore {
     }
 }
 
-/// The score of `scene` on every non-empty split of `dataset` ([`evaluate`]).
+/// The score of `scene` on every non-empty split of `dataset`: each view rendered once, its
+/// MSE added in view order (the sum [`evaluate`] takes, bit for bit), its PSNR, and on
+/// held-out splits its SSIM.
 pub fn evaluate_splits(
     scene: &Scene,
     dataset: &Dataset,
@@ -252,13 +259,28 @@ pub fn evaluate_splits(
     ];
     let mut scores = Vec::new();
     for (split, views) in splits {
-        if !views.is_empty() {
-            scores.push(SplitScore {
-                split,
-                views: views.len(),
-                mse: evaluate(scene, views, options, &mut context)?,
-            });
+        if views.is_empty() {
+            continue;
         }
+        let heldout = split != "train";
+        let (mut mse, mut view_psnr, mut ssim) = (0.0, 0.0, 0.0);
+        for view in views {
+            context.render(scene, &view.camera, view.time, options)?;
+            let error = view_mse(context.image(), view);
+            mse += error;
+            view_psnr += psnr(error);
+            if heldout {
+                ssim += crate::fit::loss::ssim(context.image(), &view.image);
+            }
+        }
+        let n = views.len() as f64;
+        scores.push(SplitScore {
+            split,
+            views: views.len(),
+            mse: mse / n,
+            mean_view_psnr: view_psnr / n,
+            ssim: heldout.then_some(ssim / n),
+        });
     }
     Ok(scores)
 }

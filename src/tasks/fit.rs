@@ -82,8 +82,17 @@ impl fmt::Display for FitSummary {
                 score.split,
                 score.views,
                 score.mse,
-                score.psnr()
+                score.psnr(),
             )?;
+            // On a line of its own, so that scripts reading the line above keep working.
+            write!(
+                f,
+                "\n    per view: mean PSNR {:.2} dB",
+                score.mean_view_psnr
+            )?;
+            if let Some(ssim) = score.ssim {
+                write!(f, ", mean SSIM {ssim:.4}")?;
+            }
         }
         Ok(())
     }

@@ -415,6 +415,50 @@ fn windows_fit_the_occluding_scene_as_whole_views_do() {
     );
 }
 
+/// The fit's summary scores: per split the PSNR of the mean MSE, the mean of the views'
+/// PSNR (at least the former: −log is convex) and, held out, the mean of their SSIM, each
+/// as the views give it one by one.
+#[test]
+fn a_split_is_scored_by_its_mean_mse_and_its_views_mean_psnr_and_ssim() {
+    let scene = occluding_scene();
+    let (dataset, options) = occluding_dataset(&scene);
+    let mut dimmed = scene.clone();
+    for opacity in &mut dimmed.opacities {
+        *opacity *= 0.7;
+    }
+    let scores = splat4d::fit::train::evaluate_splits(&dimmed, &dataset, &options).unwrap();
+    let mut context = RenderContext::new();
+    for (score, views) in scores
+        .iter()
+        .zip([&dataset.train, &dataset.val, &dataset.test])
+    {
+        let (mut psnrs, mut ssims) = (Vec::new(), Vec::new());
+        for view in views.iter() {
+            context
+                .render(&dimmed, &view.camera, view.time, &options)
+                .unwrap();
+            psnrs.push(psnr(splat4d::fit::loss::mse(context.image(), &view.image)));
+            ssims.push(splat4d::fit::loss::ssim(context.image(), &view.image));
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        assert_eq!(score.views, views.len());
+        assert_eq!(
+            score.mse,
+            evaluate(&dimmed, views, &options, &mut context).unwrap()
+        );
+        assert!((score.mean_view_psnr - mean(&psnrs)).abs() < 1e-9);
+        assert!(score.mean_view_psnr >= score.psnr());
+        match score.ssim {
+            Some(ssim) => {
+                assert_ne!(score.split, "train");
+                assert!((ssim - mean(&ssims)).abs() < 1e-12 && ssim < 1.0, "{ssim}");
+            }
+            None => assert_eq!(score.split, "train"),
+        }
+    }
+    assert_eq!(scores.len(), 3);
+}
+
 /// A camera at `eye` looking at the origin, or with `away` straight away from it.
 fn camera_at(eye: [f64; 3], away: bool, size: u32) -> splat4d::Camera {
     let target = if away { eye.map(|v| 2.0 * v) } else { [0.0; 3] };
