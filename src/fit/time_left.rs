@@ -184,6 +184,18 @@ mod tests {
         }
     }
 
+    /// The record of step `step`, `seconds` into the run, with `kernels` at `downscale`.
+    fn record(step: usize, seconds: f64, kernels: usize, downscale: u32) -> StepRecord {
+        StepRecord {
+            step,
+            seconds,
+            train_loss: 0.0,
+            heldout_psnr: None,
+            kernels,
+            downscale,
+        }
+    }
+
     /// A run whose kernels grow from 1000 by 10 a step until step 600, each step taking
     /// `1 ms · (k + 1000) / 1000`: the estimate at step `at`, and the truth.
     fn estimate_at(at: usize) -> (f64, f64) {
@@ -193,14 +205,7 @@ mod tests {
             let kernels = 1000 + 10 * step.min(600);
             seconds += 1e-3 * (kernels + 1000) as f64 / 1000.0;
             if step <= at {
-                estimate.record(&StepRecord {
-                    step,
-                    seconds,
-                    train_loss: 0.0,
-                    heldout_psnr: None,
-                    kernels,
-                    downscale: 1,
-                });
+                estimate.record(&record(step, seconds, kernels, 1));
                 total_at = seconds;
             }
         }
@@ -258,14 +263,8 @@ mod tests {
                 for step in 1..=at {
                     let (kernels, duration) = cost(step);
                     seconds += duration;
-                    estimate.record(&StepRecord {
-                        step,
-                        seconds,
-                        train_loss: 0.0,
-                        heldout_psnr: None,
-                        kernels,
-                        downscale: downscale_at(&stages, step, 1000),
-                    });
+                    let downscale = downscale_at(&stages, step, 1000);
+                    estimate.record(&record(step, seconds, kernels, downscale));
                 }
                 let (guess, truth) = (estimate.seconds_left().unwrap(), total - seconds);
                 assert!(
@@ -288,14 +287,7 @@ mod tests {
     fn nothing_is_promised_before_two_steps() {
         let mut estimate = TimeLeft::new(&training(), [400, 400]);
         assert_eq!(estimate.seconds_left(), None);
-        estimate.record(&StepRecord {
-            step: 1,
-            seconds: 0.1,
-            train_loss: 0.0,
-            heldout_psnr: None,
-            kernels: 10,
-            downscale: 1,
-        });
+        estimate.record(&record(1, 0.1, 10, 1));
         assert_eq!(estimate.seconds_left(), None);
     }
 }

@@ -54,18 +54,23 @@ fn occluding_dataset(scene: &Scene) -> (splat4d::model::Dataset, RenderOptions) 
     )
 }
 
-#[test]
-fn an_occluding_scene_is_recovered_from_a_random_start() {
-    let scene = occluding_scene();
-    let (dataset, options) = occluding_dataset(&scene);
-    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
-    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
+/// A 600-step fit from 300 random kernels without SH, evaluated only at the end.
+fn random_start_options() -> splat4d::fit::alpha::AlphaFitOptions {
+    splat4d::fit::alpha::AlphaFitOptions {
         steps: 600,
         start_kernels: 300,
         sh_count: 0,
         eval_every: 0,
         ..DEFAULT_ALPHA
-    };
+    }
+}
+
+#[test]
+fn an_occluding_scene_is_recovered_from_a_random_start() {
+    let scene = occluding_scene();
+    let (dataset, options) = occluding_dataset(&scene);
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
+    let fit_options = random_start_options();
     let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
     let records = fit(
         &mut fitted,
@@ -107,13 +112,7 @@ fn a_visual_hull_start_holds_the_scene_and_the_fit_from_it_recovers_it() {
             .any(|c| (0..3).all(|a| (c.position[a] - centre[a]).abs() <= side[a]));
         assert!(near, "kernel {k} at {centre:?} is outside the hull");
     }
-    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
-        steps: 600,
-        start_kernels: 300,
-        sh_count: 0,
-        eval_every: 0,
-        ..DEFAULT_ALPHA
-    };
+    let fit_options = random_start_options();
     let heldout = |mut start: Scene| {
         let records = fit(
             &mut start,
@@ -383,13 +382,7 @@ fn windows_fit_the_occluding_scene_as_whole_views_do() {
     let scene = occluding_scene();
     let (dataset, _) = occluding_dataset(&scene);
     let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
-    let fit_options = splat4d::fit::alpha::AlphaFitOptions {
-        steps: 600,
-        start_kernels: 300,
-        sh_count: 0,
-        eval_every: 0,
-        ..DEFAULT_ALPHA
-    };
+    let fit_options = random_start_options();
     let heldout_psnr = |window: Option<u32>, batch_size: usize| {
         let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
         let training = splat4d::fit::train::Training {
