@@ -8,7 +8,7 @@
 //! §6). Density rules: [`crate::fit::density::additive`].
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
-use crate::fit::density::{AdditiveRules, DensityRules};
+use crate::fit::density::{AdditiveRules, DensityRules, ShapeBound};
 use crate::fit::train::Training;
 use crate::render::RenderOptions;
 
@@ -144,6 +144,7 @@ impl AdditiveFitOptions {
             density: self.adaptive.map(DensityRules::Additive),
             coarse: Vec::new(),
             early_stop: None,
+            shape_bound: ShapeBound::OFF,
         }
     }
 }

@@ -19,7 +19,7 @@
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::density::{AlphaRules, DensityRules};
+use crate::fit::density::{AlphaRules, DensityRules, ShapeBound};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::train::{EarlyStop, Training};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
@@ -114,6 +114,11 @@ pub struct AlphaFitOptions {
     pub coarse: CoarseToFine,
     /// The stop when the held-out PSNR no longer rises (`None`: every step runs).
     pub early_stop: Option<EarlyStop>,
+    /// The bound on every kernel's shape after each step ([`ShapeBound`]).
+    pub shape_bound: ShapeBound,
+    /// A start from a point cloud is completed by plane-sweep kernels on the pixels the
+    /// cloud leaves unexplained ([`crate::fit::plan`]).
+    pub fill_uncovered: bool,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -222,6 +227,7 @@ impl AlphaFitOptions {
             density: Some(DensityRules::Alpha(self.rules(diagonal, time_range))),
             coarse: Vec::new(),
             early_stop: self.early_stop,
+            shape_bound: self.shape_bound,
         }
     }
 }

@@ -9,7 +9,7 @@ use rand::RngExt;
 use crate::fit::alpha::AlphaFitOptions;
 use crate::fit::init::SpaceTimeBox;
 use crate::fit::stereo::SweptPoint;
-use crate::model::DatasetPoint;
+use crate::model::{Camera, DatasetPoint, View};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
@@ -89,6 +89,16 @@ pub fn point_cloud_alpha_scene(
     background: [f64; 3],
     options: &AlphaFitOptions,
 ) -> Result<Scene> {
+    let kernels = point_cloud_kernels(points, bounds, options);
+    alpha_start(&kernels, background, options, "<point cloud start>")
+}
+
+/// The kernels of [`point_cloud_alpha_scene`].
+fn point_cloud_kernels(
+    points: &[DatasetPoint],
+    bounds: &SpaceTimeBox,
+    options: &AlphaFitOptions,
+) -> Vec<Kernel> {
     let most = options.max_start_points.min(options.max_kernels).max(1);
     let stride = points.len().div_ceil(most).max(1);
     let chosen: Vec<&DatasetPoint> = points.iter().step_by(stride).collect();
@@ -98,7 +108,7 @@ pub fn point_cloud_alpha_scene(
     let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
     let mut rng = seeded_rng(options.seed);
     let time_scale = options.start_time_scale.max(1.0) * time_range;
-    let kernels: Vec<Kernel> = chosen
+    chosen
         .iter()
         .zip(&spacings)
         .map(|(p, &spacing)| {
@@ -112,8 +122,89 @@ pub fn point_cloud_alpha_scene(
                 colour,
             )
         })
+        .collect()
+}
+
+/// A start from a point cloud that covers only part of what the views show, completed from
+/// a plane sweep: the point cloud's kernels ([`point_cloud_alpha_scene`]), then a kernel
+/// (as [`swept_alpha_scene`] makes them) for every swept point whose reference pixel no
+/// cloud kernel covers in that view ([`uncovered`]), up to `options.max_kernels` in all.
+/// Returns the scene and how many swept kernels it holds.
+pub fn completed_alpha_scene(
+    cloud: &[DatasetPoint],
+    swept: &[SweptPoint],
+    views: &[View],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<(Scene, usize)> {
+    let mut kernels = point_cloud_kernels(cloud, bounds, options);
+    let extra = uncovered(swept, &kernels, views);
+    let room = options.max_kernels.saturating_sub(kernels.len());
+    let filled = swept_kernels(&extra, bounds, options, room);
+    let count = filled.len();
+    kernels.extend(filled);
+    Ok((
+        alpha_start(&kernels, background, options, "<point cloud and plane-sweep start>")?,
+        count,
+    ))
+}
+
+/// The swept points whose reference pixel lies outside every disc that `kernels` (static
+/// starts, isotropic) project to in that view: a disc of radius
+/// `max(1, COVER_SIGMAS · σ f / z)` pixels around the kernel's projection, the cloud's
+/// footprint. Each view's coverage is a mask over its pixels; the order is kept.
+#[must_use]
+pub fn uncovered(swept: &[SweptPoint], kernels: &[Kernel], views: &[View]) -> Vec<SweptPoint> {
+    let masks: Vec<Vec<bool>> = views
+        .iter()
+        .map(|view| coverage(&view.camera, kernels))
         .collect();
-    alpha_start(&kernels, background, options, "<point cloud start>")
+    swept
+        .iter()
+        .filter(|p| {
+            let Some(view) = views.get(p.view) else {
+                return false;
+            };
+            let [i, j] = p.pixel;
+            let width = view.camera.width as usize;
+            let at = j as usize * width + i as usize;
+            masks[p.view].get(at).is_some_and(|covered| !covered)
+        })
+        .copied()
+        .collect()
+}
+
+/// Radius of a start kernel's footprint, in its σ.
+const COVER_SIGMAS: f64 = 3.0;
+
+/// The pixels of `camera` inside some kernel's footprint ([`uncovered`]).
+fn coverage(camera: &Camera, kernels: &[Kernel]) -> Vec<bool> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut mask = vec![false; w * h];
+    for kernel in kernels {
+        let [x, y, z, _] = kernel.mean;
+        let [u, v, depth] = camera.project_point([x, y, z]);
+        if !(depth > 0.0 && u.is_finite() && v.is_finite()) {
+            continue;
+        }
+        let sigma = kernel.scale[0].max(kernel.scale[1]).max(kernel.scale[2]);
+        let radius = (COVER_SIGMAS * sigma * camera.fx.max(camera.fy) / depth).max(1.0);
+        let rows = (v - radius).floor().max(0.0)..=(v + radius).ceil().min(h as f64 - 1.0);
+        let columns = (u - radius).floor().max(0.0)..=(u + radius).ceil().min(w as f64 - 1.0);
+        if rows.is_empty() || columns.is_empty() {
+            continue;
+        }
+        for j in *rows.start() as usize..=*rows.end() as usize {
+            for i in *columns.start() as usize..=*columns.end() as usize {
+                let (du, dv) = (i as f64 + 0.5 - u, j as f64 + 0.5 - v);
+                if du * du + dv * dv <= radius * radius {
+                    mask[j * w + i] = true;
+                }
+            }
+        }
+    }
+    mask
 }
 
 /// Per point, the mean distance to its [`SPACING_NEIGHBOURS`] nearest other points (fewer
@@ -229,11 +320,25 @@ pub fn swept_alpha_scene(
     if points.is_empty() {
         return Err(Error::usage("the plane sweep kept no point to start from"));
     }
-    let stride = points.len().div_ceil(options.max_kernels.max(1)).max(1);
+    let kernels = swept_kernels(points, bounds, options, options.max_kernels);
+    alpha_start(&kernels, background, options, "<plane-sweep start>")
+}
+
+/// The kernels of [`swept_alpha_scene`], at most `most` of them (none when `most` is 0).
+fn swept_kernels(
+    points: &[SweptPoint],
+    bounds: &SpaceTimeBox,
+    options: &AlphaFitOptions,
+    most: usize,
+) -> Vec<Kernel> {
+    if most == 0 {
+        return Vec::new();
+    }
+    let stride = points.len().div_ceil(most).max(1);
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let time_scale = options.start_time_scale * time_range;
     let mut rng = seeded_rng(options.seed);
-    let kernels: Vec<Kernel> = points
+    points
         .iter()
         .step_by(stride)
         .map(|p| {
@@ -241,8 +346,7 @@ pub fn swept_alpha_scene(
             let colour = p.colour.map(f64::from);
             start_kernel(&mut rng, [x, y, z, p.time], p.spacing, time_scale, colour)
         })
-        .collect();
-    alpha_start(&kernels, background, options, "<plane-sweep start>")
+        .collect()
 }
 
 /// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them:

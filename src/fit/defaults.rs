@@ -9,7 +9,7 @@ use crate::fit::additive::LearningRates;
 use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::density::AdditiveRules;
+use crate::fit::density::{AdditiveRules, ShapeBound};
 use crate::fit::train::EarlyStop;
 use crate::render::RenderOptions;
 
@@ -151,6 +151,8 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     time_split_fraction: 0.05,
     coarse: DEFAULT_COARSE,
     early_stop: None,
+    shape_bound: ShapeBound::OFF,
+    fill_uncovered: false,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

@@ -34,7 +34,7 @@
 use crate::fit::additive::{AdditiveFitOptions, FitMode, LearningRates};
 use crate::fit::alpha::{AlphaFitOptions, alpha_bounds};
 use crate::fit::alpha_start::{
-    hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene, swept_alpha_scene,
+    completed_alpha_scene, hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene, swept_alpha_scene,
 };
 pub use crate::fit::defaults::*;
 use crate::fit::density::AdditiveRules;
@@ -636,6 +636,18 @@ fn alpha_auto_start(
 ) -> Result<(Scene, String)> {
     let train = &dataset.train;
     if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
+        if options.fill_uncovered {
+            let swept = plane_sweep(train, bounds, options.start_kernels);
+            let (scene, filled) =
+                completed_alpha_scene(points, &swept, train, bounds, background, options)?;
+            if filled >= MIN_SWEPT_POINTS {
+                let note = format!(
+                    "starting from the dataset's point cloud ({} points) and a plane sweep over the pixels it leaves unexplained ({filled} points)",
+                    points.len()
+                );
+                return Ok((scene, note));
+            }
+        }
         let note = format!(
             "starting from the dataset's point cloud ({} points)",
             points.len()

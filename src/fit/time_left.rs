@@ -165,6 +165,7 @@ mod tests {
             density: Some(DensityRules::Alpha(rules)),
             coarse: Vec::new(),
             early_stop: None,
+            shape_bound: crate::fit::density::ShapeBound::OFF,
         }
     }
 

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
 use crate::fit::coarse::{SizeStage, StagedViews};
-use crate::fit::density::{DensityRules, DensityStats};
+use crate::fit::density::{DensityRules, DensityStats, ShapeBound};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::spread;
 use crate::model::error::{Error, Result};
@@ -65,6 +65,8 @@ pub struct Training {
     pub coarse: Vec<SizeStage>,
     /// When the held-out PSNR stops rising, stop before the last step; `None`: never.
     pub early_stop: Option<EarlyStop>,
+    /// The bound on every kernel's shape after each step ([`ShapeBound::OFF`]: none).
+    pub shape_bound: ShapeBound,
 }
 
 /// The rule that ends a fit whose held-out PSNR no longer rises: once the density rules
@@ -484,6 +486,7 @@ pub fn fit(
     let mut grads = Gradients::for_scene(scene);
     let mut adam = Adam::new(scene, &training.groups, training.adam);
     let mut stats = DensityStats::new(scene.len());
+    let centres: Vec<[f64; 3]> = all_train.iter().map(|v| v.camera.centre()).collect();
     let mut draws = ViewDraws::new(all_train.len(), training.draw_seed);
     let mut drawn = Vec::with_capacity(batch);
     // Grows with the steps actually run: a flag never decides an allocation up front.
@@ -518,6 +521,7 @@ pub fn fit(
             return Err(nothing_in_sight(scene, train, step));
         }
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
+        training.shape_bound.project(scene, &centres);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
             let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
