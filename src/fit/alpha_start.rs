@@ -409,6 +409,37 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_swept_point_is_kept_only_outside_the_clouds_footprint_in_its_view() {
+        // A 40×40 view of the origin from 4 away (f ≈ 48.3 px); one cloud kernel there with
+        // σ 0.1: a footprint of 3σ f / z ≈ 3.6 px around the centre pixel (20, 20).
+        let camera =
+            Camera::look_at([0.0, 0.0, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 40).unwrap();
+        let view = View {
+            camera,
+            time: 0.0,
+            image: crate::model::Image::filled(40, 40, [0.5; 3]).into(),
+            name: "v".into(),
+            weights: None,
+        };
+        let cloud = [Kernel::new([0.0; 4], [0.1, 0.1, 0.1, 1.0], [1.0; 3])];
+        let at = |pixel: [u32; 2], view: usize| SweptPoint {
+            position: [0.0; 3],
+            colour: [0.5; 3],
+            time: 0.0,
+            spacing: 0.1,
+            view,
+            pixel,
+        };
+        let swept = [at([20, 20], 0), at([22, 21], 0), at([25, 20], 0), at([0, 39], 0)];
+        let kept = uncovered(&swept, &cloud, &[view.clone()]);
+        assert_eq!(kept, vec![swept[2], swept[3]]);
+        // A kernel behind the camera covers nothing; a point of a view not given is dropped.
+        let behind = [Kernel::new([0.0, 0.0, 9.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0; 3])];
+        assert_eq!(uncovered(&swept, &behind, &[view.clone()]).len(), 4);
+        assert!(uncovered(&[at([0, 0], 1)], &cloud, &[view]).is_empty());
+    }
+
+    #[test]
     fn point_cloud_spacing_is_the_mean_distance_to_the_three_nearest() {
         // A dense 10×10 grid of spacing 0.01 on a plane and one far point.
         let mut points: Vec<[f64; 3]> = (0..100)

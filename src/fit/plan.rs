@@ -24,8 +24,8 @@
 //! - **amplitudes** of a random or automatic start: the data's mean colour above the
 //!   background ([`start_amplitude`]), so the sign follows the data.
 //!
-//! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud,
-//! else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
+//! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud
+//! (completed by a plane sweep over the pixels it leaves unexplained), else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
 //! sweep, else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
 //!
 //! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
@@ -571,7 +571,9 @@ pub const MIN_SWEPT_POINTS: usize = 100;
 /// names the file the frames come from in its errors).
 ///
 /// An automatic start takes, in this order, the first that gives kernels: the dataset's
-/// point cloud; the visual hull of the training views where their background is flat
+/// point cloud, completed (with [`AlphaFitOptions::fill_uncovered`]) by a plane sweep's
+/// points on the pixels the cloud leaves unexplained when it keeps at least
+/// [`MIN_SWEPT_POINTS`] of them ([`completed_alpha_scene`]); the visual hull of the training views where their background is flat
 /// ([`crate::fit::hull`]); for a rig of synchronised cameras, its plane sweeps over still
 /// and moving pixels ([`crate::fit::rig_start`]), when they keep at least
 /// [`MIN_SWEPT_POINTS`] still points; a plane sweep over neighbouring views ([`crate::fit::stereo`]),
