@@ -9,10 +9,10 @@ use rand::RngExt;
 use crate::fit::alpha::AlphaFitOptions;
 use crate::fit::init::SpaceTimeBox;
 use crate::fit::stereo::SweptPoint;
-use crate::model::{Camera, DatasetPoint, View};
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
+use crate::model::{Camera, DatasetPoint, View};
 
 /// One kernel of a start: at `mean` (x, y, z, t), spatial σ `0.5 spacing`, temporal σ
 /// `time_scale`, `colour`, a random rotation from `rng`.
@@ -145,7 +145,12 @@ pub fn completed_alpha_scene(
     let count = filled.len();
     kernels.extend(filled);
     Ok((
-        alpha_start(&kernels, background, options, "<point cloud and plane-sweep start>")?,
+        alpha_start(
+            &kernels,
+            background,
+            options,
+            "<point cloud and plane-sweep start>",
+        )?,
         count,
     ))
 }
@@ -430,12 +435,24 @@ mod tests {
             view,
             pixel,
         };
-        let swept = [at([20, 20], 0), at([22, 21], 0), at([25, 20], 0), at([0, 39], 0)];
-        let kept = uncovered(&swept, &cloud, &[view.clone()]);
+        let swept = [
+            at([20, 20], 0),
+            at([22, 21], 0),
+            at([25, 20], 0),
+            at([0, 39], 0),
+        ];
+        let kept = uncovered(&swept, &cloud, std::slice::from_ref(&view));
         assert_eq!(kept, vec![swept[2], swept[3]]);
         // A kernel behind the camera covers nothing; a point of a view not given is dropped.
-        let behind = [Kernel::new([0.0, 0.0, 9.0, 0.0], [0.1, 0.1, 0.1, 1.0], [1.0; 3])];
-        assert_eq!(uncovered(&swept, &behind, &[view.clone()]).len(), 4);
+        let behind = [Kernel::new(
+            [0.0, 0.0, 9.0, 0.0],
+            [0.1, 0.1, 0.1, 1.0],
+            [1.0; 3],
+        )];
+        assert_eq!(
+            uncovered(&swept, &behind, std::slice::from_ref(&view)).len(),
+            4
+        );
         assert!(uncovered(&[at([0, 0], 1)], &cloud, &[view]).is_empty());
     }
 

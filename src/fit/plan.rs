@@ -34,7 +34,8 @@
 use crate::fit::additive::{AdditiveFitOptions, FitMode, LearningRates};
 use crate::fit::alpha::{AlphaFitOptions, alpha_bounds};
 use crate::fit::alpha_start::{
-    completed_alpha_scene, hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene, swept_alpha_scene,
+    completed_alpha_scene, hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene,
+    swept_alpha_scene,
 };
 pub use crate::fit::defaults::*;
 use crate::fit::density::AdditiveRules;

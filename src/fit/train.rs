@@ -486,7 +486,6 @@ pub fn fit(
     let mut grads = Gradients::for_scene(scene);
     let mut adam = Adam::new(scene, &training.groups, training.adam);
     let mut stats = DensityStats::new(scene.len());
-    let centres: Vec<[f64; 3]> = all_train.iter().map(|v| v.camera.centre()).collect();
     let mut draws = ViewDraws::new(all_train.len(), training.draw_seed);
     let mut drawn = Vec::with_capacity(batch);
     // Grows with the steps actually run: a flag never decides an allocation up front.
@@ -521,7 +520,7 @@ pub fn fit(
             return Err(nothing_in_sight(scene, train, step));
         }
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
-        training.shape_bound.project(scene, &centres);
+        bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
             let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
@@ -583,6 +582,15 @@ fn adam_step_checked(
         )));
     }
     Ok(())
+}
+
+/// The shape bound's projection of `scene` after a step, relative to the cameras of `train`
+/// ([`ShapeBound::project`]); nothing when the bound is off.
+fn bound_shapes(scene: &mut Scene, train: &[View], bound: &ShapeBound) {
+    if !bound.is_off() {
+        let centres: Vec<[f64; 3]> = train.iter().map(|v| v.camera.centre()).collect();
+        bound.project(scene, &centres);
+    }
 }
 
 /// Gives every kernel of `scene` the SPEC §9 fields that `groups` fit (zero where a kernel

@@ -742,7 +742,8 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
     )
     .unwrap();
     assert_eq!(cloud_only.scene.len(), cloud.len());
-    let mut ready = prepare_alpha(&options, Init::Auto, &dataset, Some([0.0; 3]), "<room>").unwrap();
+    let mut ready =
+        prepare_alpha(&options, Init::Auto, &dataset, Some([0.0; 3]), "<room>").unwrap();
     let added = ready.scene.len() - cloud.len();
     let on_wall = (cloud.len()..ready.scene.len())
         .filter(|&i| (ready.scene.means[i][2] + 1.0).abs() < 0.1)
@@ -764,12 +765,24 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
     )
     .unwrap();
     let centres: Vec<[f64; 3]> = dataset.train.iter().map(|v| v.camera.centre()).collect();
-    for (i, (s, m)) in ready.scene.scales.iter().zip(&ready.scene.means).enumerate() {
+    for (i, (s, m)) in ready
+        .scene
+        .scales
+        .iter()
+        .zip(&ready.scene.means)
+        .enumerate()
+    {
         let mut sorted = [s[0], s[1], s[2]];
         sorted.sort_by(|a, b| b.total_cmp(a));
-        assert!(sorted[0] <= bound.max_needle * sorted[1], "kernel {i}: {s:?}");
+        assert!(
+            sorted[0] <= bound.max_needle * sorted[1],
+            "kernel {i}: {s:?}"
+        );
         let distance = nearest_distance([m[0], m[1], m[2]], &centres);
-        assert!(sorted[0] <= bound.max_size * distance, "kernel {i}: {s:?} at {distance}");
+        assert!(
+            sorted[0] <= bound.max_size * distance,
+            "kernel {i}: {s:?} at {distance}"
+        );
     }
     let psnr = records.last().unwrap().heldout_psnr.unwrap();
     eprintln!("held out after 200 steps: {psnr:.2} dB");
