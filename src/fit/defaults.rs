@@ -105,12 +105,13 @@ pub const DEFAULT_EARLY_STOP: EarlyStop = EarlyStop {
 /// views and 26.82 → 40.72 dB on the 3 held-out ones. Data without a point cloud never runs it.
 pub const DEFAULT_FILL_UNCOVERED: bool = true;
 
-/// The bound on the alpha kernels' shape ([`ShapeBound`]), off by default. Measured with
-/// needles at most 8 and σ at most 0.05 of the distance to the nearest camera, on the
-/// DSLR-like proxy: with the completed start, 40.72 dB held out either way (the training
-/// views 45.22 → 44.35 dB: the gap narrows, the held-out views gain nothing); from the
-/// cloud alone it lost 4.6 dB held out (26.82 → 22.22 dB), the few kernels no longer able
-/// to stretch over the uncovered background. BOUND_DN100
+/// The bound on the alpha kernels' shape ([`ShapeBound`]), off by default (one run each,
+/// `docs/fitting.md`). Needles at most 8 and σ at most 0.05 of the distance to the nearest
+/// camera: on the DSLR-like proxy with the completed start 40.72 dB held out either way (the
+/// training views 45.22 → 44.35 dB), from the cloud alone 26.82 → 22.22 dB; D-NeRF-like
+/// proxy at 100² 35.82 → 36.09 dB; occluding data 37.17 → 36.40 dB. Needles at most 8
+/// alone: DSLR-like 40.72 → 38.71 dB (cloud alone 26.82 → 26.28 dB), D-NeRF-like 36.00 dB,
+/// occluding 37.51 dB. It loses on the data it was meant for.
 pub const DEFAULT_SHAPE_BOUND: ShapeBound = ShapeBound::OFF;
 
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
