@@ -8,7 +8,7 @@
 //! §6). Density rules: [`crate::fit::density::additive`].
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
-use crate::fit::density::{AdditiveRules, DensityRules};
+use crate::fit::density::{AdditiveRules, DensityRules, ShapeBound};
 use crate::fit::train::Training;
 use crate::render::RenderOptions;
 
@@ -145,6 +145,7 @@ impl AdditiveFitOptions {
             coarse: Vec::new(),
             early_stop: None,
             window: None,
+            shape_bound: ShapeBound::OFF,
         }
     }
 }

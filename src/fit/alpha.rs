@@ -19,7 +19,7 @@
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::density::{AlphaRules, DensityRules};
+use crate::fit::density::{AlphaRules, DensityRules, ShapeBound};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::train::{EarlyStop, Training};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
@@ -117,6 +117,11 @@ pub struct AlphaFitOptions {
     /// Each step fits one window of about this side of each drawn view
     /// ([`crate::fit::window`]; `None`: whole views).
     pub window: Option<u32>,
+    /// The bound on every kernel's shape after each step ([`ShapeBound`]).
+    pub shape_bound: ShapeBound,
+    /// A start from a point cloud is completed by plane-sweep kernels on the pixels the
+    /// cloud leaves unexplained ([`crate::fit::plan`]).
+    pub fill_uncovered: bool,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -226,6 +231,7 @@ impl AlphaFitOptions {
             coarse: Vec::new(),
             early_stop: self.early_stop,
             window: self.window,
+            shape_bound: self.shape_bound,
         }
     }
 }

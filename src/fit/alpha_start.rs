@@ -9,10 +9,10 @@ use rand::RngExt;
 use crate::fit::alpha::AlphaFitOptions;
 use crate::fit::init::SpaceTimeBox;
 use crate::fit::stereo::SweptPoint;
-use crate::model::DatasetPoint;
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
+use crate::model::{Camera, DatasetPoint, View};
 
 /// One kernel of a start: at `mean` (x, y, z, t), spatial σ `0.5 spacing`, temporal σ
 /// `time_scale`, `colour`, a random rotation from `rng`.
@@ -89,6 +89,16 @@ pub fn point_cloud_alpha_scene(
     background: [f64; 3],
     options: &AlphaFitOptions,
 ) -> Result<Scene> {
+    let kernels = point_cloud_kernels(points, bounds, options);
+    alpha_start(&kernels, background, options, "<point cloud start>")
+}
+
+/// The kernels of [`point_cloud_alpha_scene`].
+fn point_cloud_kernels(
+    points: &[DatasetPoint],
+    bounds: &SpaceTimeBox,
+    options: &AlphaFitOptions,
+) -> Vec<Kernel> {
     let most = options.max_start_points.min(options.max_kernels).max(1);
     let stride = points.len().div_ceil(most).max(1);
     let chosen: Vec<&DatasetPoint> = points.iter().step_by(stride).collect();
@@ -98,7 +108,7 @@ pub fn point_cloud_alpha_scene(
     let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
     let mut rng = seeded_rng(options.seed);
     let time_scale = options.start_time_scale.max(1.0) * time_range;
-    let kernels: Vec<Kernel> = chosen
+    chosen
         .iter()
         .zip(&spacings)
         .map(|(p, &spacing)| {
@@ -112,8 +122,94 @@ pub fn point_cloud_alpha_scene(
                 colour,
             )
         })
+        .collect()
+}
+
+/// A start from a point cloud that covers only part of what the views show, completed from
+/// a plane sweep: the point cloud's kernels ([`point_cloud_alpha_scene`]), then a kernel
+/// (as [`swept_alpha_scene`] makes them) for every swept point whose reference pixel no
+/// cloud kernel covers in that view ([`uncovered`]), up to `options.max_kernels` in all.
+/// Returns the scene and how many swept kernels it holds.
+pub fn completed_alpha_scene(
+    cloud: &[DatasetPoint],
+    swept: &[SweptPoint],
+    views: &[View],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> Result<(Scene, usize)> {
+    let mut kernels = point_cloud_kernels(cloud, bounds, options);
+    let extra = uncovered(swept, &kernels, views);
+    let room = options.max_kernels.saturating_sub(kernels.len());
+    let filled = swept_kernels(&extra, bounds, options, room);
+    let count = filled.len();
+    kernels.extend(filled);
+    Ok((
+        alpha_start(
+            &kernels,
+            background,
+            options,
+            "<point cloud and plane-sweep start>",
+        )?,
+        count,
+    ))
+}
+
+/// The swept points whose reference pixel lies outside every disc that `kernels` (static
+/// starts, isotropic) project to in that view: a disc of radius
+/// `max(1, COVER_SIGMAS · σ f / z)` pixels around the kernel's projection, the cloud's
+/// footprint. Each view's coverage is a mask over its pixels; the order is kept.
+#[must_use]
+pub fn uncovered(swept: &[SweptPoint], kernels: &[Kernel], views: &[View]) -> Vec<SweptPoint> {
+    let masks: Vec<Vec<bool>> = views
+        .iter()
+        .map(|view| coverage(&view.camera, kernels))
         .collect();
-    alpha_start(&kernels, background, options, "<point cloud start>")
+    swept
+        .iter()
+        .filter(|p| {
+            let Some(view) = views.get(p.view) else {
+                return false;
+            };
+            let [i, j] = p.pixel;
+            let width = view.camera.width as usize;
+            let at = j as usize * width + i as usize;
+            masks[p.view].get(at).is_some_and(|covered| !covered)
+        })
+        .copied()
+        .collect()
+}
+
+/// Radius of a start kernel's footprint, in its σ.
+const COVER_SIGMAS: f64 = 3.0;
+
+/// The pixels of `camera` inside some kernel's footprint ([`uncovered`]).
+fn coverage(camera: &Camera, kernels: &[Kernel]) -> Vec<bool> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut mask = vec![false; w * h];
+    for kernel in kernels {
+        let [x, y, z, _] = kernel.mean;
+        let [u, v, depth] = camera.project_point([x, y, z]);
+        if !(depth > 0.0 && u.is_finite() && v.is_finite()) {
+            continue;
+        }
+        let sigma = kernel.scale[0].max(kernel.scale[1]).max(kernel.scale[2]);
+        let radius = (COVER_SIGMAS * sigma * camera.fx.max(camera.fy) / depth).max(1.0);
+        let rows = (v - radius).floor().max(0.0)..=(v + radius).ceil().min(h as f64 - 1.0);
+        let columns = (u - radius).floor().max(0.0)..=(u + radius).ceil().min(w as f64 - 1.0);
+        if rows.is_empty() || columns.is_empty() {
+            continue;
+        }
+        for j in *rows.start() as usize..=*rows.end() as usize {
+            for i in *columns.start() as usize..=*columns.end() as usize {
+                let (du, dv) = (i as f64 + 0.5 - u, j as f64 + 0.5 - v);
+                if du * du + dv * dv <= radius * radius {
+                    mask[j * w + i] = true;
+                }
+            }
+        }
+    }
+    mask
 }
 
 /// Per point, the mean distance to its [`SPACING_NEIGHBOURS`] nearest other points (fewer
@@ -229,11 +325,25 @@ pub fn swept_alpha_scene(
     if points.is_empty() {
         return Err(Error::usage("the plane sweep kept no point to start from"));
     }
-    let stride = points.len().div_ceil(options.max_kernels.max(1)).max(1);
+    let kernels = swept_kernels(points, bounds, options, options.max_kernels);
+    alpha_start(&kernels, background, options, "<plane-sweep start>")
+}
+
+/// The kernels of [`swept_alpha_scene`], at most `most` of them (none when `most` is 0).
+fn swept_kernels(
+    points: &[SweptPoint],
+    bounds: &SpaceTimeBox,
+    options: &AlphaFitOptions,
+    most: usize,
+) -> Vec<Kernel> {
+    if most == 0 {
+        return Vec::new();
+    }
+    let stride = points.len().div_ceil(most).max(1);
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let time_scale = options.start_time_scale * time_range;
     let mut rng = seeded_rng(options.seed);
-    let kernels: Vec<Kernel> = points
+    points
         .iter()
         .step_by(stride)
         .map(|p| {
@@ -241,8 +351,7 @@ pub fn swept_alpha_scene(
             let colour = p.colour.map(f64::from);
             start_kernel(&mut rng, [x, y, z, p.time], p.spacing, time_scale, colour)
         })
-        .collect();
-    alpha_start(&kernels, background, options, "<plane-sweep start>")
+        .collect()
 }
 
 /// A start from the cells a visual hull kept ([`crate::fit::hull`]), coloured by them:
@@ -303,6 +412,49 @@ fn finite_or(value: f64, otherwise: impl FnOnce() -> f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_swept_point_is_kept_only_outside_the_clouds_footprint_in_its_view() {
+        // A 40×40 view of the origin from 4 away (f ≈ 48.3 px); one cloud kernel there with
+        // σ 0.1: a footprint of 3σ f / z ≈ 3.6 px around the centre pixel (20, 20).
+        let camera =
+            Camera::look_at([0.0, 0.0, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 40).unwrap();
+        let view = View {
+            camera,
+            time: 0.0,
+            image: crate::model::Image::filled(40, 40, [0.5; 3]).into(),
+            name: "v".into(),
+            weights: None,
+        };
+        let cloud = [Kernel::new([0.0; 4], [0.1, 0.1, 0.1, 1.0], [1.0; 3])];
+        let at = |pixel: [u32; 2], view: usize| SweptPoint {
+            position: [0.0; 3],
+            colour: [0.5; 3],
+            time: 0.0,
+            spacing: 0.1,
+            view,
+            pixel,
+        };
+        let swept = [
+            at([20, 20], 0),
+            at([22, 21], 0),
+            at([25, 20], 0),
+            at([0, 39], 0),
+        ];
+        let kept = uncovered(&swept, &cloud, std::slice::from_ref(&view));
+        assert_eq!(kept, vec![swept[2], swept[3]]);
+        // A kernel behind the camera covers nothing; a point of a view not given is dropped.
+        let behind = [Kernel::new(
+            [0.0, 0.0, 9.0, 0.0],
+            [0.1, 0.1, 0.1, 1.0],
+            [1.0; 3],
+        )];
+        assert_eq!(
+            uncovered(&swept, &behind, std::slice::from_ref(&view)).len(),
+            4
+        );
+        assert!(uncovered(&[at([0, 0], 1)], &cloud, &[view]).is_empty());
+    }
 
     #[test]
     fn point_cloud_spacing_is_the_mean_distance_to_the_three_nearest() {

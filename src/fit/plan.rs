@@ -24,8 +24,8 @@
 //! - **amplitudes** of a random or automatic start: the data's mean colour above the
 //!   background ([`start_amplitude`]), so the sign follows the data.
 //!
-//! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud,
-//! else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
+//! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud
+//! (completed by a plane sweep over the pixels it leaves unexplained), else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
 //! sweep, else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
 //!
 //! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
@@ -34,7 +34,8 @@
 use crate::fit::additive::{AdditiveFitOptions, FitMode, LearningRates};
 use crate::fit::alpha::{AlphaFitOptions, alpha_bounds};
 use crate::fit::alpha_start::{
-    hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene, swept_alpha_scene,
+    completed_alpha_scene, hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene,
+    swept_alpha_scene,
 };
 pub use crate::fit::defaults::*;
 use crate::fit::density::AdditiveRules;
@@ -575,7 +576,9 @@ pub const MIN_SWEPT_POINTS: usize = 100;
 /// names the file the frames come from in its errors).
 ///
 /// An automatic start takes, in this order, the first that gives kernels: the dataset's
-/// point cloud; the visual hull of the training views where their background is flat
+/// point cloud, completed (with [`AlphaFitOptions::fill_uncovered`]) by a plane sweep's
+/// points on the pixels the cloud leaves unexplained when it keeps at least
+/// [`MIN_SWEPT_POINTS`] of them ([`completed_alpha_scene`]); the visual hull of the training views where their background is flat
 /// ([`crate::fit::hull`]); for a rig of synchronised cameras, its plane sweeps over still
 /// and moving pixels ([`crate::fit::rig_start`]), when they keep at least
 /// [`MIN_SWEPT_POINTS`] still points; a plane sweep over neighbouring views ([`crate::fit::stereo`]),
@@ -640,6 +643,18 @@ fn alpha_auto_start(
 ) -> Result<(Scene, String)> {
     let train = &dataset.train;
     if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
+        if options.fill_uncovered {
+            let swept = plane_sweep(train, bounds, options.start_kernels);
+            let (scene, filled) =
+                completed_alpha_scene(points, &swept, train, bounds, background, options)?;
+            if filled >= MIN_SWEPT_POINTS {
+                let note = format!(
+                    "starting from the dataset's point cloud ({} points) and a plane sweep over the pixels it leaves unexplained ({filled} points)",
+                    points.len()
+                );
+                return Ok((scene, note));
+            }
+        }
         let note = format!(
             "starting from the dataset's point cloud ({} points)",
             points.len()

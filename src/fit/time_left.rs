@@ -181,6 +181,7 @@ mod tests {
             coarse: Vec::new(),
             early_stop: None,
             window: None,
+            shape_bound: crate::fit::density::ShapeBound::OFF,
         }
     }
 

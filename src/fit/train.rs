@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
 use crate::fit::coarse::{SizeStage, StagedViews};
-use crate::fit::density::{DensityRules, DensityStats};
+use crate::fit::density::{DensityRules, DensityStats, ShapeBound};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::spread;
 use crate::fit::window::Windows;
@@ -69,6 +69,8 @@ pub struct Training {
     /// Each step fits one window of about this side of each drawn view
     /// ([`crate::fit::window`]); `None`: whole views.
     pub window: Option<u32>,
+    /// The bound on every kernel's shape after each step ([`ShapeBound::OFF`]: none).
+    pub shape_bound: ShapeBound,
 }
 
 /// Mixed into the draw seed for the windows' draws, so that they are not the views' shuffle.
@@ -559,6 +561,7 @@ pub fn fit(
             }
         }
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
+        bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
             let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
@@ -620,6 +623,15 @@ fn adam_step_checked(
         )));
     }
     Ok(())
+}
+
+/// The shape bound's projection of `scene` after a step, relative to the cameras of `train`
+/// ([`ShapeBound::project`]); nothing when the bound is off.
+fn bound_shapes(scene: &mut Scene, train: &[View], bound: &ShapeBound) {
+    if !bound.is_off() {
+        let centres: Vec<[f64; 3]> = train.iter().map(|v| v.camera.centre()).collect();
+        bound.project(scene, &centres);
+    }
 }
 
 /// Gives every kernel of `scene` the SPEC §9 fields that `groups` fit (zero where a kernel

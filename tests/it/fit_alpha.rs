@@ -793,3 +793,106 @@ fn the_alpha_start_refuses_frames_that_give_no_finite_box() {
         assert!(!dir.path().join("o.json").exists());
     }
 }
+
+/// A point cloud that covers only part of what the photos show (the room's panel, not the
+/// wall behind: COLMAP's cloud on a figurine, not on the table and backdrop) gets its start
+/// completed by plane-sweep kernels on the pixels it leaves unexplained, and those lie on
+/// the wall; after a fit with the shape bound, no kernel is a needle longer than the bound
+/// or wider than its share of the distance to the nearest camera.
+#[test]
+fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_fit() {
+    use splat4d::fit::density::ShapeBound;
+    use splat4d::fit::density::shape::nearest_distance;
+    use splat4d::fit::plan::{Init, prepare_alpha};
+    use splat4d::model::{Dataset, DatasetPoint};
+    let scene = textured_room();
+    let mut photos = room_photos(&scene, 16);
+    let test: Vec<_> = (0..photos.len())
+        .rev()
+        .filter(|k| k % 5 == 2)
+        .map(|k| photos.remove(k))
+        .collect();
+    // The cloud: the panel's kernels (z = 0.2), none of the wall's (z = -1).
+    let cloud: Vec<DatasetPoint> = (0..scene.len())
+        .filter(|&i| scene.means[i][2] > 0.0)
+        .map(|i| DatasetPoint {
+            position: [scene.means[i][0], scene.means[i][1], scene.means[i][2]],
+            colour: scene.amplitudes[i].map(|c| c as f32),
+        })
+        .collect();
+    let dataset = Dataset {
+        train: photos,
+        test,
+        points: Some(cloud.clone()),
+        ..Dataset::default()
+    };
+    let bound = ShapeBound {
+        max_needle: 4.0,
+        max_size: 0.05,
+    };
+    let options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 200,
+        sh_count: 0,
+        eval_every: 0,
+        fill_uncovered: true,
+        shape_bound: bound,
+        ..DEFAULT_ALPHA
+    };
+    let cloud_only = prepare_alpha(
+        &splat4d::fit::alpha::AlphaFitOptions {
+            fill_uncovered: false,
+            ..options
+        },
+        Init::Auto,
+        &dataset,
+        Some([0.0; 3]),
+        "<room>",
+    )
+    .unwrap();
+    assert_eq!(cloud_only.scene.len(), cloud.len());
+    let mut ready =
+        prepare_alpha(&options, Init::Auto, &dataset, Some([0.0; 3]), "<room>").unwrap();
+    let added = ready.scene.len() - cloud.len();
+    let on_wall = (cloud.len()..ready.scene.len())
+        .filter(|&i| (ready.scene.means[i][2] + 1.0).abs() < 0.1)
+        .count();
+    eprintln!(
+        "{}; {added} kernels added, {on_wall} within 0.1 of the wall",
+        ready.notes.join("; ")
+    );
+    assert!(added >= 100, "{added} added");
+    assert!(on_wall as f64 >= 0.7 * added as f64, "{on_wall} of {added}");
+    assert_eq!(ready.training.shape_bound, bound);
+
+    let records = fit(
+        &mut ready.scene,
+        &dataset.train,
+        &dataset.test,
+        &ready.training,
+        |_, _| {},
+    )
+    .unwrap();
+    let centres: Vec<[f64; 3]> = dataset.train.iter().map(|v| v.camera.centre()).collect();
+    for (i, (s, m)) in ready
+        .scene
+        .scales
+        .iter()
+        .zip(&ready.scene.means)
+        .enumerate()
+    {
+        let mut sorted = [s[0], s[1], s[2]];
+        sorted.sort_by(|a, b| b.total_cmp(a));
+        assert!(
+            sorted[0] <= bound.max_needle * sorted[1],
+            "kernel {i}: {s:?}"
+        );
+        let distance = nearest_distance([m[0], m[1], m[2]], &centres);
+        assert!(
+            sorted[0] <= bound.max_size * distance,
+            "kernel {i}: {s:?} at {distance}"
+        );
+    }
+    let psnr = records.last().unwrap().heldout_psnr.unwrap();
+    eprintln!("held out after 200 steps: {psnr:.2} dB");
+    assert!(psnr > 20.0, "{psnr:.2} dB");
+}

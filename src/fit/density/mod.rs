@@ -20,6 +20,7 @@
 
 pub mod additive;
 pub mod alpha;
+pub mod shape;
 
 use crate::backward::Gradients;
 use crate::model::error::Result;
@@ -27,6 +28,7 @@ use crate::model::scene::Scene;
 
 pub use additive::AdditiveRules;
 pub use alpha::AlphaRules;
+pub use shape::ShapeBound;
 
 /// Per-kernel statistics between two rounds, filled by the training loop: every step's
 /// positional gradients ([`DensityStats::add_step`]) and every view's screen gradients
