@@ -20,6 +20,7 @@ pub mod plan;
 pub mod rig_start;
 pub mod settings;
 pub mod spread;
+pub mod ssim;
 pub mod stereo;
 pub mod time_left;
 pub mod train;
