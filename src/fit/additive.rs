@@ -144,6 +144,7 @@ impl AdditiveFitOptions {
             density: self.adaptive.map(DensityRules::Additive),
             coarse: Vec::new(),
             early_stop: None,
+            loss: crate::fit::train::TrainingLoss::Mse,
         }
     }
 }

@@ -21,7 +21,7 @@ use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::{AlphaRules, DensityRules};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::train::{EarlyStop, Training};
+use crate::fit::train::{EarlyStop, Training, TrainingLoss};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
 use crate::model::{Camera, View};
 use crate::render::RenderOptions;
@@ -114,6 +114,8 @@ pub struct AlphaFitOptions {
     pub coarse: CoarseToFine,
     /// The stop when the held-out PSNR no longer rises (`None`: every step runs).
     pub early_stop: Option<EarlyStop>,
+    /// The per-view loss the gradient is taken of ([`TrainingLoss`]).
+    pub loss: TrainingLoss,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -222,6 +224,7 @@ impl AlphaFitOptions {
             density: Some(DensityRules::Alpha(self.rules(diagonal, time_range))),
             coarse: Vec::new(),
             early_stop: self.early_stop,
+            loss: self.loss,
         }
     }
 }

@@ -10,7 +10,7 @@ use crate::fit::additive::{AdditiveFitOptions, FitMode};
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::AdditiveRules;
-use crate::fit::train::EarlyStop;
+use crate::fit::train::{EarlyStop, TrainingLoss};
 use crate::render::RenderOptions;
 
 /// Adam steps of a fit (`splat4d fit` without `--steps`).
@@ -98,6 +98,13 @@ pub const DEFAULT_EARLY_STOP: EarlyStop = EarlyStop {
     min_gain_db: 0.05,
 };
 
+/// The weight `λ` of `1 - SSIM` in the 3DGS loss (`--loss l1-dssim`; [`crate::fit::ssim`]):
+/// 3D Gaussian splatting's 0.2.
+pub const DEFAULT_DSSIM_WEIGHT: f64 = 0.2;
+
+/// The alpha fit's training loss: the MSE (SPEC §6). MEASUREMENT PENDING.
+pub const DEFAULT_LOSS: TrainingLoss = TrainingLoss::Mse;
+
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 ///
@@ -151,6 +158,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     time_split_fraction: 0.05,
     coarse: DEFAULT_COARSE,
     early_stop: None,
+    loss: DEFAULT_LOSS,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

@@ -165,6 +165,7 @@ mod tests {
             density: Some(DensityRules::Alpha(rules)),
             coarse: Vec::new(),
             early_stop: None,
+            loss: crate::fit::train::TrainingLoss::Mse,
         }
     }
 

@@ -31,6 +31,7 @@ use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::{DensityRules, DensityStats};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::spread;
+use crate::fit::ssim::{L1Dssim, SsimScratch};
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
 use crate::model::scene::Scene;
@@ -65,6 +66,52 @@ pub struct Training {
     pub coarse: Vec<SizeStage>,
     /// When the held-out PSNR stops rising, stop before the last step; `None`: never.
     pub early_stop: Option<EarlyStop>,
+    /// The per-view loss the gradient is taken of (the reported loss stays the MSE).
+    pub loss: TrainingLoss,
+}
+
+/// The per-view loss a fit's gradient is taken of. Whichever it is, a step's reported
+/// `train_loss` and the held-out PSNR are those of the MSE (SPEC §6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrainingLoss {
+    /// SPEC §6's MSE, the render and its backward fused per tile.
+    Mse,
+    /// 3D Gaussian splatting's `(1 - λ) L1 + λ (1 - SSIM)` ([`crate::fit::ssim`]): the
+    /// whole image rendered, its gradient taken over it (SSIM's windows reach across tiles),
+    /// then the backward.
+    L1Dssim(L1Dssim),
+}
+
+/// The training losses by the name a caller gives (`mse`, `l1-dssim`); the D-SSIM weight
+/// is a setting of its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LossName {
+    /// [`TrainingLoss::Mse`].
+    Mse,
+    /// [`TrainingLoss::L1Dssim`].
+    L1Dssim,
+}
+
+impl std::str::FromStr for LossName {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "mse" => Ok(LossName::Mse),
+            "l1-dssim" => Ok(LossName::L1Dssim),
+            _ => Err(format!("unknown loss {s:?} (expected mse or l1-dssim)")),
+        }
+    }
+}
+
+impl TrainingLoss {
+    /// The loss's name ([`LossName`]).
+    #[must_use]
+    pub fn name(&self) -> LossName {
+        match self {
+            TrainingLoss::Mse => LossName::Mse,
+            TrainingLoss::L1Dssim(_) => LossName::L1Dssim,
+        }
+    }
 }
 
 /// The rule that ends a fit whose held-out PSNR no longer rises: once the density rules
@@ -341,6 +388,7 @@ pub(crate) struct ViewSlot {
     pub(crate) context: RenderContext,
     pub(crate) grads: Gradients,
     v_image: Vec<f32>,
+    ssim: SsimScratch,
 }
 
 impl ViewSlot {
@@ -349,30 +397,49 @@ impl ViewSlot {
             context: RenderContext::new(),
             grads: Gradients::for_scene(scene),
             v_image: Vec::new(),
+            ssim: SsimScratch::default(),
         }
     }
 
     /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
-    /// MSE); returns the MSE.
+    /// `loss`); returns the MSE.
     fn run(
         &mut self,
         scene: &Scene,
         view: &View,
-        weight: f64,
+        (weight, loss): (f64, &TrainingLoss),
         options: &RenderOptions,
     ) -> Result<f64> {
         self.grads.reset_for_scene(scene);
-        // The render and its backward in one pass over the tiles (the same bits as
-        // `render_for_backward`, `view_mse_with_gradient` and `backward`).
-        self.context.render_and_backward(
-            scene,
-            &view.camera,
-            view.time,
-            options,
-            &view_mse_gradient(view, weight),
-            &mut self.v_image,
-            &mut self.grads,
-        )?;
+        let (camera, tau) = (&view.camera, view.time);
+        match loss {
+            // The render and its backward in one pass over the tiles (the same bits as
+            // `render_for_backward`, `view_mse_with_gradient` and `backward`).
+            TrainingLoss::Mse => {
+                self.context.render_and_backward(
+                    scene,
+                    camera,
+                    tau,
+                    options,
+                    &view_mse_gradient(view, weight),
+                    &mut self.v_image,
+                    &mut self.grads,
+                )?;
+            }
+            TrainingLoss::L1Dssim(loss) => {
+                self.context
+                    .render_for_backward(scene, camera, tau, options)?;
+                loss.loss_and_gradient(
+                    self.context.image(),
+                    view,
+                    weight,
+                    &mut self.v_image,
+                    &mut self.ssim,
+                );
+                self.context
+                    .backward(scene, camera, tau, options, &self.v_image, &mut self.grads);
+            }
+        }
         Ok(view_mse(self.context.image(), view))
     }
 
@@ -414,7 +481,7 @@ pub(crate) fn batch_gradients(
     scene: &Scene,
     train: &[View],
     drawn: &[usize],
-    options: &RenderOptions,
+    (options, objective): (&RenderOptions, &TrainingLoss),
     grads: &mut Gradients,
     mut each_view: impl FnMut(bool, &mut dyn Iterator<Item = (usize, [f64; 2])>),
 ) -> Result<f64> {
@@ -428,7 +495,7 @@ pub(crate) fn batch_gradients(
             weight,
             grads,
             each_view,
-            |slot, p| slot.run(scene, &train[drawn[p]], weight, options),
+            |slot, p| slot.run(scene, &train[drawn[p]], (weight, objective), options),
             |out, slot, mse| {
                 spread::pack_view(
                     out,
@@ -445,7 +512,7 @@ pub(crate) fn batch_gradients(
         let losses: Vec<Result<f64>> = slots
             .par_iter_mut()
             .zip(views)
-            .map(|(slot, &view)| slot.run(scene, &train[view], weight, options))
+            .map(|(slot, &view)| slot.run(scene, &train[view], (weight, objective), options))
             .collect();
         for (slot, mse) in slots.iter().zip(losses) {
             loss += weight * mse?;
@@ -507,7 +574,7 @@ pub fn fit(
             scene,
             train,
             &drawn,
-            render,
+            (render, &training.loss),
             &mut grads,
             |sees, screen| {
                 seen_any |= sees;
