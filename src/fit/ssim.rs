@@ -94,46 +94,103 @@ fn total_weight(weights: Option<&[f32]>, pixels: usize) -> f64 {
     }
 }
 
+/// `out[i] = g[HALF] c[i] + Σ_{k < HALF} g[k] (lo_k[i] + hi_k[i])`, the taps paired by the
+/// window's symmetry (`lo_k`, `hi_k`: the inputs `HALF - k` before and after), in that
+/// order; `taps(k)` gives `(lo_k, hi_k)`, `c` the centre. The same operations on every
+/// path (no fused multiply-add), so the same bits.
+#[inline(always)]
+fn symmetric_taps<'a>(
+    out: &mut [f32],
+    centre: &[f32],
+    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
+    g: &[f32; WINDOW],
+) {
+    for (o, &c) in out.iter_mut().zip(centre) {
+        *o = g[HALF] * c;
+    }
+    for (k, &gk) in g.iter().enumerate().take(HALF) {
+        let (lo, hi) = taps(k);
+        for ((o, &a), &b) in out.iter_mut().zip(lo).zip(hi) {
+            *o += gk * (a + b);
+        }
+    }
+}
+
+/// [`symmetric_taps`] compiled for AVX2 (8 lanes; the same operations, so the same bits).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn symmetric_taps_avx2<'a>(
+    out: &mut [f32],
+    centre: &[f32],
+    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
+    g: &[f32; WINDOW],
+) {
+    symmetric_taps(out, centre, taps, g);
+}
+
+/// [`symmetric_taps`] on the widest path this CPU has.
+fn filter_line<'a>(
+    out: &mut [f32],
+    centre: &[f32],
+    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
+    g: &[f32; WINDOW],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        unsafe { symmetric_taps_avx2(out, centre, taps, g) };
+        return;
+    }
+    symmetric_taps(out, centre, taps, g);
+}
+
 /// Filters the interleaved RGB plane `src` (`width × height` pixels) by the separable window
-/// `g`, zero-padded ("same" size), into `dst`, through `rows` (both resized): each output is
-/// the sum over its taps in order, rows first.
+/// `g`, zero-padded ("same" size), into `dst`, through `rows` (both resized): a row pass,
+/// then a column pass, each output [`symmetric_taps`] of its line.
 fn blur(src: &[f32], dst: &mut Vec<f32>, rows: &mut Vec<f32>, width: usize, g: &[f32; WINDOW]) {
     let stride = 3 * width;
-    rows.clear();
+    // Every value is written below.
     rows.resize(src.len(), 0.0);
-    dst.clear();
     dst.resize(src.len(), 0.0);
     if stride == 0 {
         return;
     }
     let height = src.len() / stride;
-    // Row pass: out[i] = Σ_k g[k] row[i + 3 (k - HALF)], the row padded with zeros.
+    // Row pass, the row padded with HALF zero pixels on each side.
     rows.par_chunks_mut(stride)
         .zip(src.par_chunks(stride))
         .for_each_init(
             || vec![0.0_f32; stride + 6 * HALF],
             |padded, (out, row)| {
                 padded[3 * HALF..3 * HALF + stride].copy_from_slice(row);
-                for (k, &gk) in g.iter().enumerate() {
-                    let taps = &padded[3 * k..3 * k + stride];
-                    for (o, &v) in out.iter_mut().zip(taps) {
-                        *o += gk * v;
-                    }
-                }
+                let padded = &*padded;
+                let at = |k: usize| &padded[3 * k..3 * k + stride];
+                filter_line(out, at(HALF), |k| (at(k), at(WINDOW - 1 - k)), g);
             },
         );
-    // Column pass: out row y = Σ_k g[k] rows[y + k - HALF], rows outside left out.
+    // Column pass, rows outside the image zero.
     let rows = &*rows;
-    dst.par_chunks_mut(stride).enumerate().for_each(|(y, out)| {
-        for (k, &gk) in g.iter().enumerate() {
-            let Some(source) = (y + k).checked_sub(HALF).filter(|&r| r < height) else {
-                continue;
-            };
-            let taps = &rows[source * stride..(source + 1) * stride];
-            for (o, &v) in out.iter_mut().zip(taps) {
-                *o += gk * v;
-            }
+    let zeros = vec![0.0_f32; stride];
+    let zeros = &zeros[..];
+    let row = |r: isize| {
+        if r < 0 || r >= height as isize {
+            zeros
+        } else {
+            &rows[r as usize * stride..(r as usize + 1) * stride]
         }
+    };
+    dst.par_chunks_mut(stride).enumerate().for_each(|(y, out)| {
+        let y = y as isize;
+        let half = HALF as isize;
+        filter_line(
+            out,
+            row(y),
+            |k| (row(y - half + k as isize), row(y + half - k as isize)),
+            g,
+        );
     });
 }
 
@@ -158,57 +215,76 @@ impl L1Dssim {
         let n = image.pixels.len();
         let width = image.width as usize;
         let total = total_weight(weights, n / 3);
-        v_image.clear();
         v_image.resize(n, 0.0);
         if total <= 0.0 || n == 0 {
+            v_image.fill(0.0);
             return 0.0;
         }
         let lambda = self.dssim_weight;
         let g = window().map(|v| v as f32);
+        // Elementwise loops go a row at a time, rows in parallel.
+        let line = 3 * width;
         let w_at = |k: usize| weights.map_or(1.0, |w| w[k / 3]);
-        let (c, t) = (&image.pixels, &target.pixels);
-        // x, y, x², y², xy of the weighted images.
-        let [x, y, xx, yy, xy] = &mut scratch.maps;
-        for buffer in [&mut *x, &mut *y, &mut *xx, &mut *yy, &mut *xy] {
-            buffer.clear();
+        let (c, t) = (&image.pixels[..], &target.pixels[..]);
+        for buffer in scratch.maps.iter_mut().chain(&mut scratch.back) {
             buffer.resize(n, 0.0);
         }
-        for k in 0..n {
-            let w = w_at(k);
-            let (a, b) = (w * c[k], w * t[k]);
-            (x[k], y[k], xx[k], yy[k], xy[k]) = (a, b, a * a, b * b, a * b);
+        // x, y, x², y², xy of the weighted images.
+        {
+            let [x, y, xx, yy, xy] = &mut scratch.maps;
+            x.par_chunks_mut(line)
+                .zip(y.par_chunks_mut(line))
+                .zip(xx.par_chunks_mut(line))
+                .zip(yy.par_chunks_mut(line))
+                .zip(xy.par_chunks_mut(line))
+                .enumerate()
+                .for_each(|(row, ((((x, y), xx), yy), xy))| {
+                    for i in 0..x.len() {
+                        let k = row * line + i;
+                        let w = w_at(k);
+                        let (a, b) = (w * c[k], w * t[k]);
+                        (x[i], y[i], xx[i], yy[i], xy[i]) = (a, b, a * a, b * b, a * b);
+                    }
+                });
         }
         for (source, out) in scratch.maps.iter().zip(scratch.filtered.iter_mut()) {
             blur(source, out, &mut scratch.rows, width, &g);
         }
-        let [mx, my, exx, eyy, exy] = &scratch.filtered;
-        // The map and its partial derivatives, scaled by -λ a_p weight.
+        // The map `S` (into the x² buffer, no longer needed) and `M1, M2, M3`: the partial
+        // derivatives scaled by -λ a_p weight.
         let scale = (weight / (3.0 * total)) as f32;
         let (c1, c2) = (C1 as f32, C2 as f32);
-        let [m1, m2, m3] = &mut scratch.back;
-        for buffer in [&mut *m1, &mut *m2, &mut *m3] {
-            buffer.clear();
-            buffer.resize(n, 0.0);
-        }
-        let ssim_at = |k: usize| -> [f32; 4] {
-            let (ux, uy) = (mx[k], my[k]);
-            let a = 2.0 * ux * uy + c1;
-            let b = 2.0 * (exy[k] - ux * uy) + c2;
-            let cc = ux * ux + uy * uy + c1;
-            let d = (exx[k] - ux * ux) + (eyy[k] - uy * uy) + c2;
-            [a, b, cc, d]
-        };
-        for k in 0..n {
-            let [a, b, cc, d] = ssim_at(k);
-            let cd = cc * d;
-            let s = a * b / cd;
-            let m = -(lambda as f32) * scale * w_at(k);
-            let (ux, uy) = (mx[k], my[k]);
-            m1[k] = m * (2.0 * uy * (b - a) / cd + 2.0 * ux * s * (1.0 / d - 1.0 / cc));
-            m2[k] = m * (-s / d);
-            m3[k] = m * (2.0 * a / cd);
+        let minus_lambda = -(lambda as f32) * scale;
+        {
+            let [mx, my, exx, eyy, exy] = &scratch.filtered;
+            let [m1, m2, m3] = &mut scratch.back;
+            let map = &mut scratch.maps[2];
+            map.par_chunks_mut(line)
+                .zip(m1.par_chunks_mut(line))
+                .zip(m2.par_chunks_mut(line))
+                .zip(m3.par_chunks_mut(line))
+                .enumerate()
+                .for_each(|(row, (((map, m1), m2), m3))| {
+                    for i in 0..map.len() {
+                        let k = row * line + i;
+                        let (ux, uy) = (mx[k], my[k]);
+                        let a = 2.0 * ux * uy + c1;
+                        let b = 2.0 * (exy[k] - ux * uy) + c2;
+                        let cc = ux * ux + uy * uy + c1;
+                        let d = (exx[k] - ux * ux) + (eyy[k] - uy * uy) + c2;
+                        // 1/(C D); 1/D - 1/C = (C - D)/(C D); 1/D = C/(C D).
+                        let inv = 1.0 / (cc * d);
+                        let s = a * b * inv;
+                        let m = minus_lambda * w_at(k);
+                        map[i] = s;
+                        m1[i] = m * (2.0 * uy * (b - a) * inv + 2.0 * ux * s * ((cc - d) * inv));
+                        m2[i] = m * (-s * cc * inv);
+                        m3[i] = m * (2.0 * a * inv);
+                    }
+                });
         }
         // The loss, in f64 in a fixed order.
+        let map = &scratch.maps[2];
         let [sum] = sum_in_blocks(n / 3, |range| {
             [lane_sum(range.len(), |i| {
                 let p = range.start + i;
@@ -218,10 +294,8 @@ impl L1Dssim {
                 }
                 let terms: f64 = (3 * p..3 * p + 3)
                     .map(|k| {
-                        let [a, b, cc, d] = ssim_at(k);
-                        let s = f64::from(a) * f64::from(b) / (f64::from(cc) * f64::from(d));
                         (1.0 - lambda) * (f64::from(c[k]) - f64::from(t[k])).abs()
-                            + lambda * (1.0 - s)
+                            + lambda * (1.0 - f64::from(map[k]))
                     })
                     .sum();
                 w * terms
@@ -233,15 +307,21 @@ impl L1Dssim {
         let [g1, g2, g3] = &scratch.back_filtered;
         let l1 = (1.0 - lambda) as f32 * scale;
         let (x, y) = (&scratch.maps[0], &scratch.maps[1]);
-        for k in 0..n {
-            let w = w_at(k);
-            let sign = match c[k].partial_cmp(&t[k]) {
-                Some(std::cmp::Ordering::Greater) => 1.0,
-                Some(std::cmp::Ordering::Less) => -1.0,
-                _ => 0.0,
-            };
-            v_image[k] = w * (g1[k] + 2.0 * x[k] * g2[k] + y[k] * g3[k]) + l1 * w * sign;
-        }
+        v_image
+            .par_chunks_mut(line)
+            .enumerate()
+            .for_each(|(row, v)| {
+                for (i, v) in v.iter_mut().enumerate() {
+                    let k = row * line + i;
+                    let w = w_at(k);
+                    let sign = match c[k].partial_cmp(&t[k]) {
+                        Some(std::cmp::Ordering::Greater) => 1.0,
+                        Some(std::cmp::Ordering::Less) => -1.0,
+                        _ => 0.0,
+                    };
+                    *v = w * (g1[k] + 2.0 * x[k] * g2[k] + y[k] * g3[k]) + l1 * w * sign;
+                }
+            });
         sum / (3.0 * total)
     }
 }
@@ -452,7 +532,8 @@ mod tests {
         (loss, v)
     }
 
-    /// Asserts the fast path against the f64 twin: the loss within `1e-5` of its value and
+    /// Asserts the fast path against the f64 twin: the loss within `1e-5` of its value (of
+    /// 1e-3 when smaller: an image against itself has loss 0, the f32 map 1 - 1e-9) and
     /// every gradient component within `1e-4` of the largest one (or of one L1 term's, if
     /// larger). The f32 filters measured 3e-6 and 3e-5 at worst, on constant images, where
     /// `E[x²] - μx²` cancels and only `C2` is left.
@@ -466,7 +547,7 @@ mod tests {
         let (loss, grad) = fast(image, &view, lambda);
         let expected = reference_loss(image, target, weights.as_deref(), lambda);
         assert!(
-            (loss - expected).abs() <= 1e-5 * expected.abs(),
+            (loss - expected).abs() <= 1e-5 * expected.abs().max(1e-3),
             "loss {loss} against {expected}"
         );
         let reference = reference_gradient(image, target, weights.as_deref(), lambda);
