@@ -258,7 +258,7 @@ pub struct FitArgs {
     loss: Option<LossName>,
     /// λ, the weight of 1 - SSIM in `--loss l1-dssim` (refused with the mse loss), in
     /// [0, 1] [default: 0.2].
-    #[arg(long, value_name = "λ", value_parser = super::args::finite, help_heading = ALPHA)]
+    #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
     dssim_weight: Option<f64>,
 }
 
