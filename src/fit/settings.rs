@@ -393,13 +393,13 @@ impl FitSettings {
     /// the background): checked before any work, whichever blend the fit turns out to be.
     pub fn validate(&self) -> Result<()> {
         self.additive().validate()?;
-        if let Some(weight) = self.dssim_weight {
-            if !(0.0..=1.0).contains(&weight) {
-                return Err(Error::setting(
-                    &["dssim_weight"],
-                    format!("`dssim_weight` {weight} must lie in [0, 1]"),
-                ));
-            }
+        if let Some(weight) = self.dssim_weight
+            && !(0.0..=1.0).contains(&weight)
+        {
+            return Err(Error::setting(
+                &["dssim_weight"],
+                format!("`dssim_weight` {weight} must lie in [0, 1]"),
+            ));
         }
         validate_alpha(&self.alpha())
     }

@@ -194,6 +194,65 @@ fn blur(src: &[f32], dst: &mut Vec<f32>, rows: &mut Vec<f32>, width: usize, g: &
     });
 }
 
+/// Pixel `k / 3`'s weight (1 without weights).
+fn weight_at(weights: Option<&[f32]>, k: usize) -> f32 {
+    weights.map_or(1.0, |w| w[k / 3])
+}
+
+impl SsimScratch {
+    /// `x, y, x², y², xy` of the weighted images `w ⊙ c`, `w ⊙ t` into `maps` (sized),
+    /// rows of `line` values in parallel.
+    fn products(&mut self, (c, t): (&[f32], &[f32]), weights: Option<&[f32]>, line: usize) {
+        let [x, y, xx, yy, xy] = &mut self.maps;
+        x.par_chunks_mut(line)
+            .zip(y.par_chunks_mut(line))
+            .zip(xx.par_chunks_mut(line))
+            .zip(yy.par_chunks_mut(line))
+            .zip(xy.par_chunks_mut(line))
+            .enumerate()
+            .for_each(|(row, ((((x, y), xx), yy), xy))| {
+                for i in 0..x.len() {
+                    let k = row * line + i;
+                    let w = weight_at(weights, k);
+                    let (a, b) = (w * c[k], w * t[k]);
+                    (x[i], y[i], xx[i], yy[i], xy[i]) = (a, b, a * a, b * b, a * b);
+                }
+            });
+    }
+
+    /// From the filtered moments: the map `S` (into the x² buffer, no longer needed) and
+    /// `M1, M2, M3`, the partial derivatives times `scale w_p` (`scale = -λ weight / 3W`).
+    fn map_and_partials(&mut self, scale: f32, weights: Option<&[f32]>, line: usize) {
+        let (c1, c2) = (C1 as f32, C2 as f32);
+        let [mx, my, exx, eyy, exy] = &self.filtered;
+        let [m1, m2, m3] = &mut self.back;
+        let map = &mut self.maps[2];
+        map.par_chunks_mut(line)
+            .zip(m1.par_chunks_mut(line))
+            .zip(m2.par_chunks_mut(line))
+            .zip(m3.par_chunks_mut(line))
+            .enumerate()
+            .for_each(|(row, (((map, m1), m2), m3))| {
+                for i in 0..map.len() {
+                    let k = row * line + i;
+                    let (ux, uy) = (mx[k], my[k]);
+                    let a = 2.0 * ux * uy + c1;
+                    let b = 2.0 * (exy[k] - ux * uy) + c2;
+                    let cc = ux * ux + uy * uy + c1;
+                    let d = (exx[k] - ux * ux) + (eyy[k] - uy * uy) + c2;
+                    // 1/(C D); 1/D - 1/C = (C - D)/(C D); 1/D = C/(C D).
+                    let inv = 1.0 / (cc * d);
+                    let s = a * b * inv;
+                    let m = scale * weight_at(weights, k);
+                    map[i] = s;
+                    m1[i] = m * (2.0 * uy * (b - a) * inv + 2.0 * ux * s * ((cc - d) * inv));
+                    m2[i] = m * (-s * cc * inv);
+                    m3[i] = m * (2.0 * a * inv);
+                }
+            });
+    }
+}
+
 impl L1Dssim {
     /// The loss of `image` against `view` (its target and weights; the module docs), and
     /// `weight ∂L/∂C` into `v_image` (resized); `scratch` holds the buffers between calls.
@@ -224,65 +283,17 @@ impl L1Dssim {
         let g = window().map(|v| v as f32);
         // Elementwise loops go a row at a time, rows in parallel.
         let line = 3 * width;
-        let w_at = |k: usize| weights.map_or(1.0, |w| w[k / 3]);
+        let w_at = |k: usize| weight_at(weights, k);
         let (c, t) = (&image.pixels[..], &target.pixels[..]);
         for buffer in scratch.maps.iter_mut().chain(&mut scratch.back) {
             buffer.resize(n, 0.0);
         }
-        // x, y, x², y², xy of the weighted images.
-        {
-            let [x, y, xx, yy, xy] = &mut scratch.maps;
-            x.par_chunks_mut(line)
-                .zip(y.par_chunks_mut(line))
-                .zip(xx.par_chunks_mut(line))
-                .zip(yy.par_chunks_mut(line))
-                .zip(xy.par_chunks_mut(line))
-                .enumerate()
-                .for_each(|(row, ((((x, y), xx), yy), xy))| {
-                    for i in 0..x.len() {
-                        let k = row * line + i;
-                        let w = w_at(k);
-                        let (a, b) = (w * c[k], w * t[k]);
-                        (x[i], y[i], xx[i], yy[i], xy[i]) = (a, b, a * a, b * b, a * b);
-                    }
-                });
-        }
+        scratch.products((c, t), weights, line);
         for (source, out) in scratch.maps.iter().zip(scratch.filtered.iter_mut()) {
             blur(source, out, &mut scratch.rows, width, &g);
         }
-        // The map `S` (into the x² buffer, no longer needed) and `M1, M2, M3`: the partial
-        // derivatives scaled by -λ a_p weight.
         let scale = (weight / (3.0 * total)) as f32;
-        let (c1, c2) = (C1 as f32, C2 as f32);
-        let minus_lambda = -(lambda as f32) * scale;
-        {
-            let [mx, my, exx, eyy, exy] = &scratch.filtered;
-            let [m1, m2, m3] = &mut scratch.back;
-            let map = &mut scratch.maps[2];
-            map.par_chunks_mut(line)
-                .zip(m1.par_chunks_mut(line))
-                .zip(m2.par_chunks_mut(line))
-                .zip(m3.par_chunks_mut(line))
-                .enumerate()
-                .for_each(|(row, (((map, m1), m2), m3))| {
-                    for i in 0..map.len() {
-                        let k = row * line + i;
-                        let (ux, uy) = (mx[k], my[k]);
-                        let a = 2.0 * ux * uy + c1;
-                        let b = 2.0 * (exy[k] - ux * uy) + c2;
-                        let cc = ux * ux + uy * uy + c1;
-                        let d = (exx[k] - ux * ux) + (eyy[k] - uy * uy) + c2;
-                        // 1/(C D); 1/D - 1/C = (C - D)/(C D); 1/D = C/(C D).
-                        let inv = 1.0 / (cc * d);
-                        let s = a * b * inv;
-                        let m = minus_lambda * w_at(k);
-                        map[i] = s;
-                        m1[i] = m * (2.0 * uy * (b - a) * inv + 2.0 * ux * s * ((cc - d) * inv));
-                        m2[i] = m * (-s * cc * inv);
-                        m3[i] = m * (2.0 * a * inv);
-                    }
-                });
-        }
+        scratch.map_and_partials(-(lambda as f32) * scale, weights, line);
         // The loss, in f64 in a fixed order.
         let map = &scratch.maps[2];
         let [sum] = sum_in_blocks(n / 3, |range| {
@@ -631,10 +642,10 @@ mod tests {
         }
         let (loss_changed, grad_changed) = fast(&changed, &view, 0.2);
         assert_eq!(loss.to_bits(), loss_changed.to_bits());
-        for p in 0..300 {
+        for (p, &w) in weights.iter().enumerate() {
             for c in 0..3 {
                 let k = 3 * p + c;
-                if weights[p] == 0.0 {
+                if w == 0.0 {
                     assert_eq!(grad[k], 0.0);
                 } else {
                     assert_eq!(grad[k].to_bits(), grad_changed[k].to_bits());
