@@ -1,8 +1,9 @@
-//! The training loop of both blends: Adam on the mean MSE over mini-batches of views
-//! (SPEC §6, §8).
+//! The training loop of both blends: Adam on the mean loss over mini-batches of views
+//! (SPEC §6, §8): the MSE, or for the alpha fit by default 3DGS's L1 + D-SSIM
+//! ([`TrainingLoss`]); the loss a step reports is the MSE either way.
 //!
 //! Each step draws `batch_size` training views (a seeded shuffle, epoch by epoch), renders
-//! each, accumulates `∂(mean over the batch of MSE)/∂θ` through the backward pass, and takes
+//! each, accumulates `∂(mean over the batch of the loss)/∂θ` through the backward pass, and takes
 //! one Adam step over the blend's parameter table ([`crate::fit::adam`]) with the scheduled
 //! learning rates: a decaying group's rate at step k of K is
 //! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant). The blend's
@@ -468,8 +469,8 @@ pub(crate) fn view_slots(scene: &Scene, batch: usize) -> Vec<ViewSlot> {
         .collect()
 }
 
-/// Adds to `grads` the gradient of the batch's loss, the mean MSE of the training views
-/// `drawn` (indices into `train`), and returns that loss. The views run side by side in
+/// Adds to `grads` the gradient of the batch's loss (the mean over the training views
+/// `drawn`, indices into `train`, of `objective`), and returns their mean MSE. The views run side by side in
 /// `slots`, each rendered and differentiated on its own; then, in view order, each view's
 /// gradient is added to `grads` and `each_view` sees whether it saw a kernel and its screen
 /// gradients. Spread over MPI ranks ([`spread`]), each rank runs its share and every rank
