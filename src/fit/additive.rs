@@ -146,6 +146,7 @@ impl AdditiveFitOptions {
             early_stop: None,
             window: None,
             shape_bound: ShapeBound::OFF,
+            loss: crate::fit::train::TrainingLoss::Mse,
         }
     }
 }

@@ -21,7 +21,7 @@ use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::{AlphaRules, DensityRules, ShapeBound};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
-use crate::fit::train::{EarlyStop, Training};
+use crate::fit::train::{EarlyStop, Training, TrainingLoss};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
 use crate::model::{Camera, View};
 use crate::render::RenderOptions;
@@ -122,6 +122,8 @@ pub struct AlphaFitOptions {
     /// A start from a point cloud is completed by plane-sweep kernels on the pixels the
     /// cloud leaves unexplained ([`crate::fit::plan`]).
     pub fill_uncovered: bool,
+    /// The per-view loss the gradient is taken of ([`TrainingLoss`]).
+    pub loss: TrainingLoss,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -232,6 +234,7 @@ impl AlphaFitOptions {
             early_stop: self.early_stop,
             window: self.window,
             shape_bound: self.shape_bound,
+            loss: self.loss,
         }
     }
 }

@@ -1,4 +1,4 @@
-//! Fitting kernels to images (SPEC §6, §8): the loss, one Adam over a table of parameter
+//! Fitting kernels to images (SPEC §6, §8): the loss ([`loss`]; the 3DGS loss, [`ssim`]), one Adam over a table of parameter
 //! groups ([`adam`]), one training loop ([`train`]) with its coarse-to-fine stages
 //! ([`coarse`]), its windows ([`window`]) and the density rules ([`density`]) for both blends, each blend's table and
 //! options ([`additive`], [`alpha`]), the starts ([`init`], [`alpha_start`], [`hull`],
@@ -20,6 +20,7 @@ pub mod plan;
 pub mod rig_start;
 pub mod settings;
 pub mod spread;
+pub mod ssim;
 pub mod stereo;
 pub mod time_left;
 pub mod train;

@@ -19,7 +19,8 @@
 //!   always densifies and prunes), the background's rate and freezing (the alpha fit keeps
 //!   its background fixed at its start);
 //! - **alpha only**: SH, the opacity, rotation and SH rates, the opacity reset, the split
-//!   size (`percent_dense`), the split in time and the coarse stages.
+//!   size (`percent_dense`), the split in time, the coarse stages, the early stop and the
+//!   training loss (`loss`, `dssim_weight`; the latter only with `loss` l1-dssim).
 //!
 //! The rates' units follow each model's parameters: the alpha fit's spatial rates are
 //! fractions of the cameras' box per step ([`crate::fit::alpha::AlphaRates`]), the
@@ -33,11 +34,13 @@ use crate::fit::additive::FitMode;
 use crate::fit::additive::LearningRates;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
 use crate::fit::coarse::CoarseToFine;
+use crate::fit::defaults::DEFAULT_DSSIM_WEIGHT;
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
     DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
 };
-use crate::fit::train::EarlyStop;
+use crate::fit::ssim::L1Dssim;
+use crate::fit::train::{EarlyStop, LossName, TrainingLoss};
 use crate::model::error::{MAX_QUOTE, cut};
 use crate::model::{Blend, Dataset, Error, Result};
 use crate::render::RenderOptions;
@@ -87,7 +90,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 13] = [
+pub const ALPHA_ONLY: [&str; 15] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -101,6 +104,8 @@ pub const ALPHA_ONLY: [&str; 13] = [
     "lr_angular_velocity",
     "early_stop",
     "window",
+    "loss",
+    "dssim_weight",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -212,6 +217,10 @@ pub struct FitSettings {
     pub early_stop: Option<Option<EarlyStop>>,
     /// Alpha: the steps' window side ([`crate::fit::window`]; `Some(None)`: whole views).
     pub window: Option<Option<u32>>,
+    /// Alpha: the training loss ([`TrainingLoss`]).
+    pub loss: Option<LossName>,
+    /// Alpha: `λ` of the `l1-dssim` loss ([`crate::fit::ssim`]).
+    pub dssim_weight: Option<f64>,
 }
 
 impl FitSettings {
@@ -249,6 +258,8 @@ impl FitSettings {
             r.angular_velocity.is_some(),
             self.early_stop.is_some(),
             self.window.is_some(),
+            self.loss.is_some(),
+            self.dssim_weight.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -386,7 +397,30 @@ impl FitSettings {
     /// the background): checked before any work, whichever blend the fit turns out to be.
     pub fn validate(&self) -> Result<()> {
         self.additive().validate()?;
+        if let Some(weight) = self.dssim_weight
+            && !(0.0..=1.0).contains(&weight)
+        {
+            return Err(Error::setting(
+                &["dssim_weight"],
+                format!("`dssim_weight` {weight} must lie in [0, 1]"),
+            ));
+        }
         validate_alpha(&self.alpha())
+    }
+
+    /// The training loss chosen: `loss` (else the default's kind) with `dssim_weight` (else
+    /// the default's, else [`DEFAULT_DSSIM_WEIGHT`]).
+    fn training_loss(&self, default: TrainingLoss) -> TrainingLoss {
+        let default_weight = match default {
+            TrainingLoss::L1Dssim(loss) => loss.dssim_weight,
+            TrainingLoss::Mse => DEFAULT_DSSIM_WEIGHT,
+        };
+        match self.loss.unwrap_or(default.name()) {
+            LossName::Mse => TrainingLoss::Mse,
+            LossName::L1Dssim => TrainingLoss::L1Dssim(L1Dssim {
+                dssim_weight: self.dssim_weight.unwrap_or(default_weight),
+            }),
+        }
     }
 
     /// The additive fit's plan ([`FitSettings::validate`] checks its numbers); an
@@ -397,10 +431,17 @@ impl FitSettings {
     }
 
     /// The alpha fit's options ([`FitSettings::validate`] checks their numbers); an
-    /// additive-only setting is refused.
+    /// additive-only setting is refused, and `dssim_weight` without the `l1-dssim` loss.
     pub fn alpha_options(&self, why: &str) -> Result<AlphaFitOptions> {
         self.check_blend(Blend::Alpha, why)?;
-        Ok(self.alpha())
+        let options = self.alpha();
+        if self.dssim_weight.is_some() && options.loss.name() != LossName::L1Dssim {
+            return Err(Error::setting(
+                &["dssim_weight"],
+                "`dssim_weight` weighs the D-SSIM term of the `l1-dssim` loss, and this fit's `loss` is mse: add `loss` l1-dssim, or leave `dssim_weight` out",
+            ));
+        }
+        Ok(options)
     }
 
     /// The fit of `dataset` from `init` (named `init_name`), ready to run: the blend chosen
@@ -533,6 +574,7 @@ impl FitSettings {
             coarse: self.coarse_to_fine.unwrap_or(d.coarse),
             early_stop: self.early_stop.unwrap_or(d.early_stop),
             window: self.window.unwrap_or(d.window),
+            loss: self.training_loss(d.loss),
             ..d
         }
     }

@@ -181,6 +181,7 @@ mod tests {
             coarse: Vec::new(),
             early_stop: None,
             window: None,
+            loss: crate::fit::train::TrainingLoss::Mse,
             shape_bound: crate::fit::density::ShapeBound::OFF,
         }
     }

@@ -1,8 +1,9 @@
-//! The training loop of both blends: Adam on the mean MSE over mini-batches of views
-//! (SPEC §6, §8).
+//! The training loop of both blends: Adam on the mean loss over mini-batches of views
+//! (SPEC §6, §8): the MSE, or for the alpha fit by default 3DGS's L1 + D-SSIM
+//! ([`TrainingLoss`]); the loss a step reports is the MSE either way.
 //!
 //! Each step draws `batch_size` training views (a seeded shuffle, epoch by epoch), renders
-//! each, accumulates `∂(mean over the batch of MSE)/∂θ` through the backward pass, and takes
+//! each, accumulates `∂(mean over the batch of the loss)/∂θ` through the backward pass, and takes
 //! one Adam step over the blend's parameter table ([`crate::fit::adam`]) with the scheduled
 //! learning rates: a decaying group's rate at step k of K is
 //! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant). The blend's
@@ -31,6 +32,7 @@ use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::{DensityRules, DensityStats, ShapeBound};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::spread;
+use crate::fit::ssim::{L1Dssim, SsimScratch};
 use crate::fit::window::Windows;
 use crate::model::error::{Error, Result};
 use crate::model::random::seeded_rng;
@@ -71,6 +73,52 @@ pub struct Training {
     pub window: Option<u32>,
     /// The bound on every kernel's shape after each step ([`ShapeBound::OFF`]: none).
     pub shape_bound: ShapeBound,
+    /// The per-view loss the gradient is taken of (the reported loss stays the MSE).
+    pub loss: TrainingLoss,
+}
+
+/// The per-view loss a fit's gradient is taken of. Whichever it is, a step's reported
+/// `train_loss` and the held-out PSNR are those of the MSE (SPEC §6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrainingLoss {
+    /// SPEC §6's MSE, the render and its backward fused per tile.
+    Mse,
+    /// 3D Gaussian splatting's `(1 - λ) L1 + λ (1 - SSIM)` ([`crate::fit::ssim`]): the
+    /// whole image rendered, its gradient taken over it (SSIM's windows reach across tiles),
+    /// then the backward.
+    L1Dssim(L1Dssim),
+}
+
+/// The training losses by the name a caller gives (`mse`, `l1-dssim`); the D-SSIM weight
+/// is a setting of its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LossName {
+    /// [`TrainingLoss::Mse`].
+    Mse,
+    /// [`TrainingLoss::L1Dssim`].
+    L1Dssim,
+}
+
+impl std::str::FromStr for LossName {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "mse" => Ok(LossName::Mse),
+            "l1-dssim" => Ok(LossName::L1Dssim),
+            _ => Err(format!("unknown loss {s:?} (expected mse or l1-dssim)")),
+        }
+    }
+}
+
+impl TrainingLoss {
+    /// The loss's name ([`LossName`]).
+    #[must_use]
+    pub fn name(&self) -> LossName {
+        match self {
+            TrainingLoss::Mse => LossName::Mse,
+            TrainingLoss::L1Dssim(_) => LossName::L1Dssim,
+        }
+    }
 }
 
 /// Mixed into the draw seed for the windows' draws, so that they are not the views' shuffle.
@@ -372,6 +420,7 @@ pub(crate) struct ViewSlot {
     pub(crate) context: RenderContext,
     pub(crate) grads: Gradients,
     v_image: Vec<f32>,
+    ssim: SsimScratch,
 }
 
 impl ViewSlot {
@@ -380,30 +429,49 @@ impl ViewSlot {
             context: RenderContext::new(),
             grads: Gradients::for_scene(scene),
             v_image: Vec::new(),
+            ssim: SsimScratch::default(),
         }
     }
 
     /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
-    /// MSE); returns the MSE.
+    /// `loss`); returns the MSE.
     fn run(
         &mut self,
         scene: &Scene,
         view: &View,
-        weight: f64,
+        (weight, loss): (f64, &TrainingLoss),
         options: &RenderOptions,
     ) -> Result<f64> {
         self.grads.reset_for_scene(scene);
-        // The render and its backward in one pass over the tiles (the same bits as
-        // `render_for_backward`, `view_mse_with_gradient` and `backward`).
-        self.context.render_and_backward(
-            scene,
-            &view.camera,
-            view.time,
-            options,
-            &view_mse_gradient(view, weight),
-            &mut self.v_image,
-            &mut self.grads,
-        )?;
+        let (camera, tau) = (&view.camera, view.time);
+        match loss {
+            // The render and its backward in one pass over the tiles (the same bits as
+            // `render_for_backward`, `view_mse_with_gradient` and `backward`).
+            TrainingLoss::Mse => {
+                self.context.render_and_backward(
+                    scene,
+                    camera,
+                    tau,
+                    options,
+                    &view_mse_gradient(view, weight),
+                    &mut self.v_image,
+                    &mut self.grads,
+                )?;
+            }
+            TrainingLoss::L1Dssim(loss) => {
+                self.context
+                    .render_for_backward(scene, camera, tau, options)?;
+                loss.loss_and_gradient(
+                    self.context.image(),
+                    view,
+                    weight,
+                    &mut self.v_image,
+                    &mut self.ssim,
+                );
+                self.context
+                    .backward(scene, camera, tau, options, &self.v_image, &mut self.grads);
+            }
+        }
         Ok(view_mse(self.context.image(), view))
     }
 
@@ -432,8 +500,8 @@ pub(crate) fn view_slots(scene: &Scene, batch: usize) -> Vec<ViewSlot> {
         .collect()
 }
 
-/// Adds to `grads` the gradient of the batch's loss, the mean MSE of the training views
-/// `drawn` (indices into `train`), and returns that loss. The views run side by side in
+/// Adds to `grads` the gradient of the batch's loss (the mean over the training views
+/// `drawn`, indices into `train`, of `objective`), and returns their mean MSE. The views run side by side in
 /// `slots`, each rendered and differentiated on its own; then, in view order, each view's
 /// gradient is added to `grads` and `each_view` sees whether it saw a kernel and its screen
 /// gradients. Spread over MPI ranks ([`spread`]), each rank runs its share and every rank
@@ -445,7 +513,7 @@ pub(crate) fn batch_gradients(
     scene: &Scene,
     train: &[View],
     drawn: &[usize],
-    options: &RenderOptions,
+    (options, objective): (&RenderOptions, &TrainingLoss),
     grads: &mut Gradients,
     mut each_view: impl FnMut(bool, &mut dyn Iterator<Item = (usize, [f64; 2])>),
 ) -> Result<f64> {
@@ -459,7 +527,7 @@ pub(crate) fn batch_gradients(
             weight,
             grads,
             each_view,
-            |slot, p| slot.run(scene, &train[drawn[p]], weight, options),
+            |slot, p| slot.run(scene, &train[drawn[p]], (weight, objective), options),
             |out, slot, mse| {
                 spread::pack_view(
                     out,
@@ -476,7 +544,7 @@ pub(crate) fn batch_gradients(
         let losses: Vec<Result<f64>> = slots
             .par_iter_mut()
             .zip(views)
-            .map(|(slot, &view)| slot.run(scene, &train[view], weight, options))
+            .map(|(slot, &view)| slot.run(scene, &train[view], (weight, objective), options))
             .collect();
         for (slot, mse) in slots.iter().zip(losses) {
             loss += weight * mse?;
@@ -545,7 +613,7 @@ pub fn fit(
             scene,
             batch_views,
             batch_drawn,
-            render,
+            (render, &training.loss),
             &mut grads,
             |sees, screen| {
                 seen_any |= sees;

@@ -337,3 +337,62 @@ fn an_early_stop_without_heldout_views_is_refused_naming_it() {
     assert!(!dir.path().join("refused.json").exists());
     fit(dir.path(), "plain", &[]).expect("the fit without --early-stop");
 }
+
+/// `--loss l1-dssim` changes the fit, `--dssim-weight` its weight; the reported loss stays
+/// the MSE (the first step's, before any update, is the same under both losses); the fit
+/// has the same bits on 1 and 3 threads; `--dssim-weight` is refused naming it where it
+/// cannot act (with the mse loss, outside [0, 1]) and both flags with the additive blend.
+#[test]
+fn the_loss_flags_act_and_are_refused_naming_them_where_they_cannot() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    let (mse_scene, mse_log) = fit(dir.path(), "mse", &["--loss", "mse"]).unwrap();
+    let (ssim_scene, ssim_log) = fit(dir.path(), "ssim", &["--loss", "l1-dssim"]).unwrap();
+    let (half_scene, _) = fit(
+        dir.path(),
+        "half",
+        &["--loss", "l1-dssim", "--dssim-weight", "0.5"],
+    )
+    .unwrap();
+    assert_ne!(mse_scene, ssim_scene, "--loss l1-dssim changed nothing");
+    assert_ne!(ssim_scene, half_scene, "--dssim-weight changed nothing");
+    let first = |log: &[u8]| without_seconds(log)[0]["train_loss"].clone();
+    assert_eq!(first(&mse_log), first(&ssim_log));
+    for threads in ["1", "3"] {
+        let (scene, log) = fit(
+            dir.path(),
+            "threads",
+            &["--loss", "l1-dssim", "--threads", threads],
+        )
+        .unwrap();
+        assert_eq!(scene, ssim_scene, "{threads} threads");
+        assert_eq!(without_seconds(&log), without_seconds(&ssim_log));
+    }
+    for (extra, says) in [
+        (
+            &["--loss", "mse", "--dssim-weight", "0.5"][..],
+            "--dssim-weight weighs the D-SSIM term",
+        ),
+        (
+            &["--loss", "l1-dssim", "--dssim-weight", "1.5"],
+            "--dssim-weight 1.5 must lie in [0, 1]",
+        ),
+        (
+            &["--blend", "additive", "--loss", "l1-dssim"],
+            "--loss acts on the alpha blend",
+        ),
+        (
+            &["--blend", "additive", "--dssim-weight", "0.5"],
+            "--dssim-weight acts on the alpha blend",
+        ),
+    ] {
+        let error = fit(dir.path(), "refused", extra).expect_err("refused");
+        assert!(
+            error.starts_with("exit Some(2)")
+                && error.contains(says)
+                && !error.contains("panicked"),
+            "{extra:?}: {error}"
+        );
+        assert!(!dir.path().join("refused.json").exists());
+    }
+}
