@@ -621,27 +621,22 @@ pub fn fit(
             },
         )?;
         if !seen_any && (step == first_epoch || step == steps) {
-            // Windows may all have missed what their whole views see.
-            seen_any =
-                windows.is_some() && some_view_sees_a_kernel(scene, train, render, &mut slots)?;
-            if !seen_any {
-                return Err(nothing_in_sight(scene, train, step));
-            }
+            let windowed = windows.is_some();
+            seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
-            let change = rules.after_step((step, steps), scene, &mut stats, |scene| {
-                evaluate_in(scene, train, render, &mut slots)
-            })?;
-            if change.opacities_reset {
-                adam.clear(Field::Opacity);
-            }
-            if let Some(sources) = change.sources {
-                adam.remap(&sources);
-                give_fitted_motion(scene, &training.groups);
-            }
+            let evaluation = (train, render, &mut slots[..]);
+            run_density_rules(
+                rules,
+                (step, steps),
+                scene,
+                &mut stats,
+                &mut adam,
+                evaluation,
+            )?;
         }
         let heldout_psnr = heldout_psnr_at(
             step,
@@ -668,6 +663,30 @@ pub fn fit(
         }
     }
     Ok(records)
+}
+
+/// The density rules after step `step` of `steps`: kernels added, split, pruned or their
+/// opacities reset, and Adam's moments and the fitted motion fields made to follow. The
+/// rules may evaluate the scene on the stage's training views (`evaluation`).
+fn run_density_rules(
+    rules: &DensityRules,
+    (step, steps): (usize, usize),
+    scene: &mut Scene,
+    stats: &mut DensityStats,
+    adam: &mut Adam,
+    (train, render, slots): (&[View], &RenderOptions, &mut [ViewSlot]),
+) -> Result<()> {
+    let change = rules.after_step((step, steps), scene, stats, |scene| {
+        evaluate_in(scene, train, render, slots)
+    })?;
+    if change.opacities_reset {
+        adam.clear(Field::Opacity);
+    }
+    if let Some(sources) = change.sources {
+        adam.remap(&sources);
+        give_fitted_motion(scene, adam.groups());
+    }
+    Ok(())
 }
 
 /// One Adam step of `scene` at `step`, refused when the step's loss `train_loss` or a
@@ -712,6 +731,23 @@ fn give_fitted_motion(scene: &mut Scene, groups: &[ParameterGroup]) {
     if groups.iter().any(|g| g.field == Field::AngularVelocity) {
         scene.angular_velocities.resize(scene.len(), [0.0; 4]);
     }
+}
+
+/// After step `step`, at which no training view drawn has seen a kernel: `true` when some
+/// whole view of `train` does (the steps' windows all missed it), else the fit's refusal
+/// ([`nothing_in_sight`]).
+fn whole_views_in_sight(
+    windowed: bool,
+    scene: &Scene,
+    train: &[View],
+    render: &RenderOptions,
+    slots: &mut [ViewSlot],
+    step: usize,
+) -> Result<bool> {
+    if windowed && some_view_sees_a_kernel(scene, train, render, slots)? {
+        return Ok(true);
+    }
+    Err(nothing_in_sight(scene, train, step))
 }
 
 /// Whether some view of `views`, whole, projects a kernel of `scene` onto its screen.
