@@ -204,6 +204,10 @@ pub fn view_loss_and_gradients(
 pub const SSIM_WINDOW: usize = 11;
 /// Standard deviation of the SSIM window's Gaussian, pixels.
 pub const SSIM_SIGMA: f64 = 1.5;
+/// SSIM's `C1 = (0.01 L)²`, `L = 1`.
+pub const SSIM_C1: f64 = 1e-4;
+/// SSIM's `C2 = (0.03 L)²`, `L = 1`.
+pub const SSIM_C2: f64 = 9e-4;
 
 /// Mean structural similarity (Wang, Bovik, Sheikh, Simoncelli 2004) of `image` against
 /// `target`, on linear values with dynamic range `L = 1`: per channel, local means, variances
@@ -223,7 +227,7 @@ pub fn ssim(image: &Image, target: &Image) -> f64 {
     if w == 0 || h == 0 {
         return 1.0;
     }
-    let (c1, c2) = (0.01_f64.powi(2), 0.03_f64.powi(2));
+    let (c1, c2) = (SSIM_C1, SSIM_C2);
     let weights = |n: usize| -> Vec<f64> {
         let centre = (n as f64 - 1.0) / 2.0;
         let raw: Vec<f64> = (0..n)
@@ -284,11 +288,11 @@ pub fn ssim(image: &Image, target: &Image) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A view of `target` (through some camera of its size) with `weights`.
-    fn view_of(target: Image, weights: Option<Vec<f32>>) -> View {
+    pub(crate) fn view_of(target: Image, weights: Option<Vec<f32>>) -> View {
         let camera = crate::model::Camera::look_at(
             [0.0, 0.0, -1.0],
             [0.0; 3],

@@ -33,17 +33,18 @@
 
 use rayon::prelude::*;
 
+use crate::fit::loss::{SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW};
 use crate::model::{Image, View};
 use crate::parallel::{lane_sum, sum_in_blocks};
 
-/// Side of the training SSIM's window.
-pub const WINDOW: usize = 11;
+/// Side of the training SSIM's window: the reported SSIM's ([`crate::fit::loss::ssim`]).
+pub const WINDOW: usize = SSIM_WINDOW;
 /// Standard deviation of its Gaussian, pixels.
-pub const SIGMA: f64 = 1.5;
+pub const SIGMA: f64 = SSIM_SIGMA;
 /// `C1 = (0.01 L)²`, `L = 1`.
-pub const C1: f64 = 1e-4;
+pub const C1: f64 = SSIM_C1;
 /// `C2 = (0.03 L)²`, `L = 1`.
-pub const C2: f64 = 9e-4;
+pub const C2: f64 = SSIM_C2;
 /// Half the window: the taps reach this far on each side.
 const HALF: usize = WINDOW / 2;
 
@@ -505,22 +506,7 @@ mod tests {
 
     /// A view of `target` with `weights` (the camera is never used).
     fn view_of(target: &Image, weights: Option<Vec<f32>>) -> View {
-        let camera = crate::model::Camera::look_at(
-            [0.0, 0.0, -1.0],
-            [0.0; 3],
-            [0.0, 1.0, 0.0],
-            40.0,
-            target.width,
-            target.height,
-        )
-        .unwrap();
-        View {
-            camera,
-            time: 0.0,
-            image: target.clone().into(),
-            name: "v".into(),
-            weights,
-        }
+        crate::fit::loss::tests::view_of(target.clone(), weights)
     }
 
     fn random_image(rng: &mut impl rand::Rng, width: u32, height: u32) -> Image {
