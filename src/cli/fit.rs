@@ -8,7 +8,7 @@ use splat4d::Blend;
 use splat4d::Result;
 use splat4d::fit::additive::FitMode;
 use splat4d::fit::coarse::CoarseToFine;
-use splat4d::fit::settings::{FitSettings, RateSettings};
+use splat4d::fit::settings::{FitSettings, MotionName, RateSettings};
 use splat4d::fit::train::LossName;
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
 
@@ -266,6 +266,16 @@ pub struct FitArgs {
     /// [0, 1] [default: 0.2].
     #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
     dssim_weight: Option<f64>,
+    /// Which kernels carry fitted SPEC §9 motion (an acceleration and an angular velocity,
+    /// at `--lr-acceleration` and `--lr-angular-velocity`): `auto`, those that keep
+    /// splitting in time (after `--motion-after-splits` splits of their line, instead of a
+    /// further split); `all`, every kernel; `off`, none [default: all].
+    #[arg(long, value_name = "auto|all|off", help_heading = ALPHA)]
+    motion: Option<MotionName>,
+    /// With `--motion auto`: the splits in time of a kernel's line after which a kernel
+    /// that still spans motion gets fitted motion instead of a further split [default: 1].
+    #[arg(long, value_name = "N", help_heading = ALPHA)]
+    motion_after_splits: Option<u32>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -324,6 +334,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
         window: args.window.map(|choice| choice.0),
         loss: args.loss,
         dssim_weight: args.dssim_weight,
+        motion: args.motion,
+        motion_after_splits: args.motion_after_splits,
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

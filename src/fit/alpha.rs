@@ -124,6 +124,25 @@ pub struct AlphaFitOptions {
     pub fill_uncovered: bool,
     /// The per-view loss the gradient is taken of ([`TrainingLoss`]).
     pub loss: TrainingLoss,
+    /// Which kernels carry fitted SPEC §9 motion ([`MotionFit`]).
+    pub motion: MotionFit,
+}
+
+/// Which kernels of an alpha fit carry fitted SPEC §9 motion: an acceleration and an
+/// angular velocity, each fitted at its group's rate when that rate is above 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotionFit {
+    /// No kernel: the fit adds no SPEC §9 field.
+    Off,
+    /// The kernels that keep splitting in time: a kernel that spans motion after this many
+    /// splits in time of its line gets motion instead of a further split
+    /// ([`crate::fit::density::alpha`]); the others' SPEC §9 fields stay zero.
+    WhereNeeded {
+        /// Splits in time of a kernel's line before it gets motion.
+        after_time_splits: u32,
+    },
+    /// Every kernel, from the first step.
+    Everywhere,
 }
 
 /// Adam's ε for the alpha fit (3D Gaussian splatting's): opacity logits and SH have
@@ -151,7 +170,21 @@ impl AlphaFitOptions {
             reset_opacity: self.reset_opacity,
             diagonal,
             time_range,
+            motion_after_time_splits: match self.motion {
+                MotionFit::WhereNeeded { after_time_splits } if self.fits_motion() => {
+                    Some(after_time_splits)
+                }
+                _ => None,
+            },
         }
+    }
+
+    /// Whether some kernel's SPEC §9 motion is fitted: [`MotionFit`] not off, and a rate of
+    /// its groups above 0.
+    #[must_use]
+    pub fn fits_motion(&self) -> bool {
+        self.motion != MotionFit::Off
+            && (self.rates.acceleration > 0.0 || self.rates.angular_velocity > 0.0)
     }
 
     /// The parameter table in a box of `diagonal` and a time range `time_range` (see the
@@ -181,7 +214,8 @@ impl AlphaFitOptions {
             constant(Field::Opacity, "lr_opacity", r.opacity),
             constant(Field::Amplitude, "lr_amplitude", r.colour),
         ];
-        if r.acceleration > 0.0 {
+        let motion = self.motion != MotionFit::Off;
+        if motion && r.acceleration > 0.0 {
             groups.push(spatial(
                 Field::Acceleration,
                 "lr_acceleration",
@@ -189,7 +223,7 @@ impl AlphaFitOptions {
                 diagonal / (time_range * time_range),
             ));
         }
-        if r.angular_velocity > 0.0 {
+        if motion && r.angular_velocity > 0.0 {
             groups.push(spatial(
                 Field::AngularVelocity,
                 "lr_angular_velocity",

@@ -7,7 +7,7 @@
 use crate::fit::adam::AdamConfig;
 use crate::fit::additive::LearningRates;
 use crate::fit::additive::{AdditiveFitOptions, FitMode};
-use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit};
 use crate::fit::coarse::CoarseToFine;
 use crate::fit::density::{AdditiveRules, ShapeBound};
 use crate::fit::train::{EarlyStop, TrainingLoss};
@@ -134,6 +134,13 @@ pub const DEFAULT_LOSS: TrainingLoss = TrainingLoss::L1Dssim(crate::fit::ssim::L
     dssim_weight: DEFAULT_DSSIM_WEIGHT,
 });
 
+/// With `--motion auto`, the splits in time of a kernel's line after which a kernel that
+/// still spans motion gets fitted SPEC §9 motion instead ([`crate::fit::density::alpha`]).
+pub const DEFAULT_MOTION_AFTER_SPLITS: u32 = 1;
+
+/// Which kernels of an alpha fit carry fitted SPEC §9 motion.
+pub const DEFAULT_MOTION: MotionFit = MotionFit::Everywhere;
+
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 ///
@@ -191,6 +198,7 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     shape_bound: DEFAULT_SHAPE_BOUND,
     fill_uncovered: DEFAULT_FILL_UNCOVERED,
     loss: DEFAULT_LOSS,
+    motion: DEFAULT_MOTION,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

@@ -630,7 +630,21 @@ pub fn prepare_alpha(
                 .join(", ")
         ));
     }
+    if let Some(grid) = training.window.and_then(|side| windows_note(side, train)) {
+        notes.push(grid);
+    }
     Ok(ReadyFit::new(scene, training, notes))
+}
+
+/// The note on a fit's windows of side `side` over the full-size views `train`: the finest
+/// grid, or `None` when every view stays whole.
+fn windows_note(side: u32, train: &[View]) -> Option<String> {
+    let ([columns, rows], [width, height]) = crate::fit::window::finest_grid(side, train)?;
+    (columns * rows > 1).then(|| {
+        format!(
+            "windows: each full-size step fits one of {columns}×{rows} windows of each drawn {width}×{height} view"
+        )
+    })
 }
 
 /// The automatic alpha start (see [`prepare_alpha`]) and a note saying which it is.

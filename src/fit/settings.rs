@@ -32,9 +32,9 @@
 
 use crate::fit::additive::FitMode;
 use crate::fit::additive::LearningRates;
-use crate::fit::alpha::{AlphaFitOptions, AlphaRates};
+use crate::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::defaults::DEFAULT_DSSIM_WEIGHT;
+use crate::fit::defaults::{DEFAULT_DSSIM_WEIGHT, DEFAULT_MOTION_AFTER_SPLITS};
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
     DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
@@ -90,7 +90,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 15] = [
+pub const ALPHA_ONLY: [&str; 17] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -106,6 +106,8 @@ pub const ALPHA_ONLY: [&str; 15] = [
     "window",
     "loss",
     "dssim_weight",
+    "motion",
+    "motion_after_splits",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -221,6 +223,35 @@ pub struct FitSettings {
     pub loss: Option<LossName>,
     /// Alpha: `λ` of the `l1-dssim` loss ([`crate::fit::ssim`]).
     pub dssim_weight: Option<f64>,
+    /// Alpha: which kernels carry fitted SPEC §9 motion ([`MotionName`]).
+    pub motion: Option<MotionName>,
+    /// Alpha: with `motion` auto, the splits in time of a kernel's line before it gets
+    /// motion.
+    pub motion_after_splits: Option<u32>,
+}
+
+/// The choices of which kernels carry fitted SPEC §9 motion, by the name a caller gives
+/// (`auto`, `all`, `off`; [`MotionFit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotionName {
+    /// [`MotionFit::WhereNeeded`].
+    Auto,
+    /// [`MotionFit::Everywhere`].
+    All,
+    /// [`MotionFit::Off`].
+    Off,
+}
+
+impl std::str::FromStr for MotionName {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(MotionName::Auto),
+            "all" => Ok(MotionName::All),
+            "off" => Ok(MotionName::Off),
+            _ => Err(format!("unknown motion {s:?} (expected auto, all or off)")),
+        }
+    }
 }
 
 impl FitSettings {
@@ -260,6 +291,8 @@ impl FitSettings {
             self.window.is_some(),
             self.loss.is_some(),
             self.dssim_weight.is_some(),
+            self.motion.is_some(),
+            self.motion_after_splits.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -435,6 +468,7 @@ impl FitSettings {
     pub fn alpha_options(&self, why: &str) -> Result<AlphaFitOptions> {
         self.check_blend(Blend::Alpha, why)?;
         let options = self.alpha();
+        self.check_motion(&options)?;
         if self.dssim_weight.is_some() && options.loss.name() != LossName::L1Dssim {
             return Err(Error::setting(
                 &["dssim_weight"],
@@ -468,6 +502,16 @@ impl FitSettings {
                         &["early_stop"],
                         format!(
                             "{origin}: `early_stop` reads the held-out PSNR, and the dataset has no `val` or `test` views: give a dataset with held-out views, or leave `early_stop` out"
+                        ),
+                    ));
+                }
+                if let Some(Some(side)) = self.window
+                    && let Some(([1, 1], _)) = crate::fit::window::finest_grid(side, &dataset.train)
+                {
+                    return Err(Error::setting(
+                        &["window"],
+                        format!(
+                            "{origin}: `window` {side} cuts only views of 1.5×{side} pixels or more on a side, and no training view is that large, so every step would fit whole views: give a smaller side, or `window` off"
                         ),
                     ));
                 }
@@ -575,7 +619,67 @@ impl FitSettings {
             early_stop: self.early_stop.unwrap_or(d.early_stop),
             window: self.window.unwrap_or(d.window),
             loss: self.training_loss(d.loss),
+            motion: self.motion_fit(d.motion),
             ..d
+        }
+    }
+
+    /// The motion chosen: `motion` (else the default's kind) with `motion_after_splits`
+    /// (else the default's, else [`DEFAULT_MOTION_AFTER_SPLITS`]).
+    fn motion_fit(&self, default: MotionFit) -> MotionFit {
+        let (default_name, default_after) = match default {
+            MotionFit::WhereNeeded { after_time_splits } => (MotionName::Auto, after_time_splits),
+            MotionFit::Everywhere => (MotionName::All, DEFAULT_MOTION_AFTER_SPLITS),
+            MotionFit::Off => (MotionName::Off, DEFAULT_MOTION_AFTER_SPLITS),
+        };
+        match self.motion.unwrap_or(default_name) {
+            MotionName::Auto => MotionFit::WhereNeeded {
+                after_time_splits: self.motion_after_splits.unwrap_or(default_after),
+            },
+            MotionName::All => MotionFit::Everywhere,
+            MotionName::Off => MotionFit::Off,
+        }
+    }
+
+    /// An error naming the first chosen motion setting that cannot act with the motion
+    /// options `options` the fit ends with, or `Ok`: `motion_after_splits` without `motion`
+    /// auto; a SPEC §9 rate with `motion` off; `motion` auto or all with both SPEC §9 rates 0.
+    fn check_motion(&self, options: &AlphaFitOptions) -> Result<()> {
+        let r = &options.rates;
+        let chosen_rate = [
+            ("lr_acceleration", self.rates.acceleration),
+            ("lr_angular_velocity", self.rates.angular_velocity),
+        ]
+        .into_iter()
+        .find(|(_, rate)| rate.is_some_and(|rate| rate > 0.0));
+        let refusal = match options.motion {
+            MotionFit::WhereNeeded { .. } => None,
+            _ if self.motion_after_splits.is_some() => Some((
+                "motion_after_splits",
+                "acts when `motion` is auto, and it is not: add `motion` auto, or leave `motion_after_splits` out".to_string(),
+            )),
+            MotionFit::Off => chosen_rate.map(|(field, _)| {
+                (
+                    field,
+                    format!("fits SPEC §9 motion, and `motion` is off: add `motion` auto or all, or leave `{field}` out"),
+                )
+            }),
+            MotionFit::Everywhere => None,
+        };
+        let refusal = refusal.or_else(|| {
+            (self.motion.is_some_and(|m| m != MotionName::Off)
+                && r.acceleration == 0.0
+                && r.angular_velocity == 0.0)
+                .then(|| {
+                    (
+                        "motion",
+                        "gives kernels SPEC §9 motion, and both its rates (`lr_acceleration`, `lr_angular_velocity`) are 0: give one above 0, or leave `motion` out".to_string(),
+                    )
+                })
+        });
+        match refusal {
+            Some((field, why)) => Err(Error::setting(&[field], format!("`{field}` {why}"))),
+            None => Ok(()),
         }
     }
 }

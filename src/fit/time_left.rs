@@ -167,6 +167,7 @@ mod tests {
             reset_opacity: 0.01,
             diagonal: 1.0,
             time_range: 1.0,
+            motion_after_time_splits: None,
         };
         Training {
             steps: 1000,

@@ -620,6 +620,11 @@ pub fn fit(
                 stats.add_view(screen, weight);
             },
         )?;
+        if let Some(rules) = &training.density
+            && rules.fits_motion_where_needed()
+        {
+            stats.keep_motion_to_moving_kernels(&mut grads);
+        }
         if !seen_any && (step == first_epoch || step == steps) {
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;

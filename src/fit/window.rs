@@ -79,6 +79,20 @@ fn grid(side: u32, width: u32, height: u32) -> [u32; 2] {
     [width, height].map(|length| ((length + side / 2) / side).max(1))
 }
 
+/// The grid of windows of side `side` with the most cells over `views`, and the
+/// `[width, height]` of the view it cuts; `None` without views. It has one cell when every
+/// view stays whole.
+#[must_use]
+pub fn finest_grid(side: u32, views: &[View]) -> Option<([u32; 2], [u32; 2])> {
+    views
+        .iter()
+        .map(|v| {
+            let size = [v.camera.width, v.camera.height];
+            (grid(side, size[0], size[1]), size)
+        })
+        .max_by_key(|([columns, rows], _)| u64::from(*columns) * u64::from(*rows))
+}
+
 /// The `i`-th of the `cells + 1` edges cutting `length` pixels into `cells` nearly equal
 /// parts: `⌊i length / cells⌋`.
 fn grid_edge(i: u32, length: u32, cells: u32) -> u32 {

@@ -396,3 +396,64 @@ fn the_loss_flags_act_and_are_refused_naming_them_where_they_cannot() {
         assert!(!dir.path().join("refused.json").exists());
     }
 }
+
+/// `--motion` acts, and `--motion`, `--motion-after-splits` and `--window` are refused naming them
+/// where they cannot act: a SPEC §9 rate with `--motion off`, `--motion-after-splits`
+/// without `--motion auto`, `--motion` with both SPEC §9 rates 0, a window side that cuts
+/// no training view (16×16 here), and the alpha flags with the additive blend.
+#[test]
+fn the_motion_and_window_flags_act_and_are_refused_naming_them_where_they_cannot() {
+    let dir = tempfile::tempdir().unwrap();
+    occluding_dataset(dir.path());
+    let rate = ["--lr-acceleration", "0.01", "--lr-angular-velocity", "0.01"];
+    let with_rates = |extra: &[&'static str]| [&rate[..], extra].concat();
+    let (off, _) = fit(dir.path(), "off", &["--motion", "off"]).unwrap();
+    let (all, _) = fit(dir.path(), "all", &with_rates(&["--motion", "all"])).unwrap();
+    assert_ne!(off, all, "--motion all changed nothing");
+    for (extra, says) in [
+        (
+            with_rates(&["--motion", "off"]),
+            "--lr-acceleration fits SPEC §9 motion, and --motion is off",
+        ),
+        (
+            with_rates(&["--motion", "all", "--motion-after-splits", "2"]),
+            "--motion-after-splits acts when --motion is auto",
+        ),
+        (
+            vec![
+                "--motion",
+                "auto",
+                "--lr-acceleration",
+                "0",
+                "--lr-angular-velocity",
+                "0",
+            ],
+            "--motion gives kernels SPEC §9 motion, and both its rates",
+        ),
+        (
+            vec!["--window", "16"],
+            "--window 16 cuts only views of 1.5×16 pixels or more",
+        ),
+        (
+            vec!["--blend", "additive", "--motion", "all"],
+            "--motion acts on the alpha blend",
+        ),
+        (
+            vec!["--blend", "additive", "--motion-after-splits", "1"],
+            "--motion-after-splits acts on the alpha blend",
+        ),
+        (
+            vec!["--blend", "additive", "--window", "off"],
+            "--window acts on the alpha blend",
+        ),
+    ] {
+        let error = fit(dir.path(), "refused", &extra).expect_err("refused");
+        assert!(
+            error.starts_with("exit Some(2)")
+                && error.contains(says)
+                && !error.contains("panicked"),
+            "{extra:?}: {error}"
+        );
+        assert!(!dir.path().join("refused.json").exists());
+    }
+}

@@ -17,7 +17,7 @@ use splat4d::{Camera, Gradients, Image, Kernel, RenderContext, RenderOptions, Sc
 use rand::RngExt;
 use splat4d::model::random::seeded_rng;
 
-use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, alpha_bounds};
+use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit, alpha_bounds};
 use splat4d::fit::plan::DEFAULT_ALPHA;
 use splat4d::fit::train::{Training, fit};
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
@@ -652,5 +652,92 @@ fn the_angular_velocity_group_finds_a_spinning_sticks_turn() {
         error < 0.05 * size,
         "found {found:?}, truth {:?}",
         stick.angular_velocity
+    );
+}
+
+/// A thrown ball beside a still plate, fitted with a density round in which every kernel
+/// grows (`motion` where needed, after 0 splits in time; only the acceleration rate above
+/// 0): the ball's kernel, which spans motion, gets fitted motion instead of a split in time
+/// and finds a fall, while the still plate and its clones keep no acceleration at all. With
+/// motion everywhere the plate's acceleration moves too.
+#[test]
+fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
+    let mut ball = Kernel::new(
+        [0.0, 0.1, 0.0, 0.5],
+        [0.12, 0.12, 0.12, 10.0],
+        [0.9, 0.5, 0.2],
+    );
+    ball.velocity = [0.4, 0.0, 0.1];
+    ball.acceleration = [0.0, -1.6, 0.0];
+    let plate = Kernel::new(
+        [0.3, -0.3, 0.0, 0.5],
+        [0.15, 0.03, 0.15, 10.0],
+        [0.2, 0.6, 0.3],
+    );
+    let truth = Scene::from_kernels(&[ball, plate], [0.0; 3], "<motion>")
+        .unwrap()
+        .into_alpha(vec![0.9, 0.9], 0, Vec::new(), "<motion>")
+        .unwrap();
+    let spec = DatasetSpec {
+        views: 6,
+        times: 5,
+        width: 48,
+        height: 48,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<motion>").unwrap();
+    let fitted = |motion: MotionFit| {
+        let options = AlphaFitOptions {
+            steps: 400,
+            rates: AlphaRates {
+                acceleration: 2e-2,
+                ..NO_RATES
+            },
+            sh_count: 0,
+            eval_every: 0,
+            final_rate_factor: 0.05,
+            densify_every: 100,
+            // One round, after step 100.
+            densify_from: 0.0,
+            densify_until: 0.3,
+            densify_fraction: 1.0,
+            densify_threshold: 0.0,
+            opacity_reset_every: 0,
+            motion,
+            ..DEFAULT_ALPHA
+        };
+        let mut start = truth.clone();
+        start.accelerations.clear();
+        fit(
+            &mut start,
+            &dataset.train,
+            &[],
+            &options.training(&bounds),
+            |_, _| {},
+        )
+        .unwrap();
+        start
+    };
+    let still = |scene: &Scene, i: usize| scene.velocities[i] == [0.0; 3];
+    let auto = fitted(MotionFit::WhereNeeded {
+        after_time_splits: 0,
+    });
+    let balls: Vec<usize> = (0..auto.len()).filter(|&i| !still(&auto, i)).collect();
+    assert_eq!(balls.len(), 1, "the ball's kernel was not split in time");
+    assert!(
+        auto.acceleration(balls[0])[1] < -0.5,
+        "{:?}",
+        auto.acceleration(balls[0])
+    );
+    assert!(auto.len() > 2, "the plate was not cloned");
+    for i in (0..auto.len()).filter(|&i| still(&auto, i)) {
+        assert_eq!(auto.acceleration(i), [0.0; 3], "still kernel {i}");
+    }
+    let everywhere = fitted(MotionFit::Everywhere);
+    assert!(
+        (0..everywhere.len())
+            .any(|i| still(&everywhere, i) && everywhere.acceleration(i) != [0.0; 3]),
+        "with motion everywhere, the plate's acceleration should move too"
     );
 }

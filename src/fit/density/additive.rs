@@ -426,6 +426,7 @@ fn merge_into(kernel: &mut Kernel, other: &Kernel) {
 mod tests {
     use super::*;
     use crate::backward::Gradients;
+    use crate::fit::density::Line;
 
     fn scene(amplitudes: &[f64]) -> Scene {
         let kernels: Vec<Kernel> = amplitudes
@@ -528,7 +529,7 @@ mod tests {
         let scene = scene(&[0.5, 0.001, 0.4, 0.3]);
         let mut stats = DensityStats::new(4);
         stats.record_loss(1.0);
-        let mut stats = stats.next_window(4);
+        let mut stats = stats.next_window(vec![Line::default(); 4]);
         stats.record_loss(1.0);
         let mut grads = Gradients::zeros(4);
         grads.v_means[0] = [1e-3, 0.0, 0.0, 0.0]; // |g̃| = 1e-4
@@ -598,7 +599,7 @@ mod tests {
         let run = |losses: [f64; 2]| {
             let mut stats = DensityStats::new(1);
             stats.record_loss(losses[0]);
-            let mut stats = stats.next_window(1);
+            let mut stats = stats.next_window(vec![Line::default(); 1]);
             stats.add_step(&scene, &grads);
             stats.record_loss(losses[1]);
             densify_and_prune(&scene, &stats, &options).unwrap().2.added

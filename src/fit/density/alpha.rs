@@ -11,6 +11,14 @@
 //!   each, their means moved along the velocity so that both follow the parent's path.
 //!   (The additive rule, [`super::additive`], splits at `±st/√2` and keeps the temporal
 //!   integral, because additive kernels add; opaque children each cover the parent.)
+//! - **motion where needed** (when `motion_after_time_splits` is `n`): a kernel that spans
+//!   motion, does not yet carry fitted motion and whose line was already split in time `n`
+//!   times keeps splitting because one straight piece cannot follow its path: instead of a
+//!   further split it is given SPEC §9 motion, its acceleration and angular velocity fitted
+//!   from then on (they start at zero, so its path is unchanged). A moving kernel that
+//!   still spans motion splits in time, and its children move. The training loop keeps
+//!   the other kernels' SPEC §9 gradients at zero
+//!   ([`DensityStats::keep_motion_to_moving_kernels`]).
 //! - **split** when its largest σ exceeds `percent_dense` of the box's diagonal: two
 //!   children one σ apart along that axis, spatial σ / 1.6 each.
 //! - **clone** otherwise: a copy in place, with fresh optimiser moments.
@@ -20,7 +28,7 @@
 //! is lowered to at most `reset_opacity`: what the views need regains its opacity, the rest
 //! fades below `prune_opacity` and is pruned.
 
-use crate::fit::density::DensityStats;
+use crate::fit::density::{DensityStats, Line};
 use crate::model::scene::{Kernel, Scene};
 
 /// The alpha rule set (see the module docs).
@@ -54,6 +62,10 @@ pub struct AlphaRules {
     pub diagonal: f64,
     /// The training times' range: the unit of `time_split_fraction`.
     pub time_range: f64,
+    /// A kernel that spans motion after this many splits in time of its line is given
+    /// fitted SPEC §9 motion instead of a further split; `None`: never (no kernel's motion
+    /// is fitted, or every kernel's is).
+    pub motion_after_time_splits: Option<u32>,
 }
 
 impl AlphaRules {
@@ -90,14 +102,15 @@ pub fn reset_opacities(scene: &mut Scene, ceiling: f64) {
     }
 }
 
-/// One round: prune transparent kernels, then clone, split or split in time the ones with
-/// the largest mean screen-space gradient. Returns, per kernel of the new scene, the old
-/// kernel whose optimiser state it keeps (`None`: fresh).
+/// One round: prune transparent kernels, then clone, split, split in time or give motion to
+/// the ones with the largest mean screen-space gradient. Returns, per kernel of the new
+/// scene, the old kernel whose optimiser state it keeps (`None`: fresh), and its line of
+/// descent.
 pub fn densify_and_prune(
     scene: &mut Scene,
     stats: &DensityStats,
     rules: &AlphaRules,
-) -> Vec<Option<usize>> {
+) -> (Vec<Option<usize>>, Vec<Line>) {
     let n = scene.len();
     let keep: Vec<usize> = (0..n)
         .filter(|&i| scene.opacities[i] >= rules.prune_opacity)
@@ -109,36 +122,52 @@ pub fn densify_and_prune(
         ..Scene::default()
     };
     let (mut opacities, mut sh, mut sources) = (Vec::new(), Vec::new(), Vec::new());
-    let mut push = |kernel: Kernel, i: usize, source: Option<usize>, next: &mut Scene| {
-        next.means.push(kernel.mean);
-        next.scales.push(kernel.scale);
-        next.amplitudes.push(kernel.amplitude);
-        next.rotations.push(kernel.rotation);
-        next.velocities.push(kernel.velocity);
-        next.push_motion(kernel.acceleration, kernel.angular_velocity);
-        opacities.push(scene.opacities[i]);
-        sh.extend_from_slice(scene.sh_of(i));
-        sources.push(source);
-    };
+    let mut lines = Vec::new();
+    let mut push =
+        |kernel: Kernel, (i, line): (usize, Line), source: Option<usize>, next: &mut Scene| {
+            next.means.push(kernel.mean);
+            next.scales.push(kernel.scale);
+            next.amplitudes.push(kernel.amplitude);
+            next.rotations.push(kernel.rotation);
+            next.velocities.push(kernel.velocity);
+            next.push_motion(kernel.acceleration, kernel.angular_velocity);
+            opacities.push(scene.opacities[i]);
+            sh.extend_from_slice(scene.sh_of(i));
+            sources.push(source);
+            lines.push(line);
+        };
     for &i in &keep {
-        let kernel = scene.kernel(i);
+        let (kernel, line) = (scene.kernel(i), stats.line(i));
         if !grow[i] {
-            push(kernel, i, Some(i), &mut next);
+            push(kernel, (i, line), Some(i), &mut next);
             continue;
         }
         let largest = largest_axis(&kernel);
         if spans_motion(&kernel, largest, rules) {
+            if needs_motion(line, rules) {
+                // Its moments stay: only the SPEC §9 gradients, zero until now, start.
+                let moving = Line {
+                    moving: true,
+                    ..line
+                };
+                push(kernel, (i, moving), Some(i), &mut next);
+                continue;
+            }
+            let child_line = Line {
+                time_splits: line.time_splits.saturating_add(1),
+                ..line
+            };
             for child in split_in_time(kernel) {
-                push(child, i, None, &mut next);
+                push(child, (i, child_line), None, &mut next);
             }
         } else if kernel.scale[largest] > rules.percent_dense * rules.diagonal {
             for child in split(kernel, largest) {
-                push(child, i, None, &mut next);
+                push(child, (i, line), None, &mut next);
             }
         } else {
             // Clone: the original keeps its moments, the copy starts fresh.
-            push(kernel, i, Some(i), &mut next);
-            push(kernel, i, None, &mut next);
+            push(kernel, (i, line), Some(i), &mut next);
+            push(kernel, (i, line), None, &mut next);
         }
     }
     next.blend = scene.blend;
@@ -146,7 +175,15 @@ pub fn densify_and_prune(
     next.sh_count = scene.sh_count;
     next.sh = sh;
     *scene = next;
-    sources
+    (sources, lines)
+}
+
+/// Whether a kernel of `line` that spans motion is given fitted motion rather than split in
+/// time again (see the module docs).
+fn needs_motion(line: Line, rules: &AlphaRules) -> bool {
+    rules
+        .motion_after_time_splits
+        .is_some_and(|n| !line.moving && line.time_splits >= n)
 }
 
 /// Per kernel, whether it grows this round: of the kept ones, the largest mean screen
@@ -246,6 +283,7 @@ mod tests {
             reset_opacity: 0.01,
             diagonal: 1.0,
             time_range: 1.0,
+            motion_after_time_splits: None,
         }
     }
 
@@ -280,8 +318,13 @@ mod tests {
     #[test]
     fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let sources = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+        let (sources, lines) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
         assert_eq!(sources, vec![None, None]);
+        let child = Line {
+            time_splits: 1,
+            moving: false,
+        };
+        assert_eq!(lines, vec![child; 2]);
         assert_eq!(scene.len(), 2);
         let times = [scene.means[0][3], scene.means[1][3]];
         assert!((times[0] - 0.35).abs() < 1e-12 && (times[1] - 0.65).abs() < 1e-12);
@@ -297,11 +340,85 @@ mod tests {
         }
     }
 
+    /// Statistics in which one kernel of `line` was seen once with a screen gradient of 1.
+    fn seen_once_on(line: Line) -> DensityStats {
+        let mut stats = DensityStats::new(1).next_window(vec![line]);
+        stats.add_view([(0, [1.0, 0.0])].into_iter(), 1.0);
+        stats
+    }
+
+    #[test]
+    fn a_kernel_that_keeps_splitting_in_time_gets_motion_instead_and_then_splits_moving() {
+        let motion_after_one = AlphaRules {
+            motion_after_time_splits: Some(1),
+            ..grow_all()
+        };
+        let once_split = Line {
+            time_splits: 1,
+            moving: false,
+        };
+        // A first split in time, as without the rule.
+        let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
+        let fresh = seen_once_on(Line::default());
+        let (_, lines) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
+        assert_eq!(lines, vec![once_split; 2]);
+        // A kernel split once that still spans motion: kept whole, moments kept, moving.
+        let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
+        let before = scene.clone();
+        let (sources, lines) =
+            densify_and_prune(&mut scene, &seen_once_on(once_split), &motion_after_one);
+        assert_eq!(sources, vec![Some(0)]);
+        let moving = Line {
+            moving: true,
+            ..once_split
+        };
+        assert_eq!(lines, vec![moving]);
+        assert_eq!(scene.kernel(0), before.kernel(0));
+        // A moving kernel that still spans motion splits in time, its children moving.
+        let (sources, lines) =
+            densify_and_prune(&mut scene, &seen_once_on(moving), &motion_after_one);
+        assert_eq!(sources, vec![None, None]);
+        let children = Line {
+            time_splits: 2,
+            moving: true,
+        };
+        assert_eq!(lines, vec![children; 2]);
+        // Without the rule, the kernel split once splits again.
+        let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
+        let (_, lines) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
+        assert_eq!(lines.len(), 2);
+        assert!(lines.iter().all(|l| l.time_splits == 2 && !l.moving));
+    }
+
+    #[test]
+    fn only_moving_kernels_keep_their_motion_gradients() {
+        let still = Line::default();
+        let moving = Line {
+            moving: true,
+            ..still
+        };
+        let stats = DensityStats::new(3).next_window(vec![still, moving, still]);
+        let mut grads = crate::backward::Gradients {
+            v_accelerations: vec![[1.0, 2.0, 3.0]; 3],
+            v_angular_velocities: vec![[4.0, 5.0, 6.0, 7.0]; 3],
+            ..Default::default()
+        };
+        stats.keep_motion_to_moving_kernels(&mut grads);
+        assert_eq!(
+            grads.v_accelerations,
+            vec![[0.0; 3], [1.0, 2.0, 3.0], [0.0; 3]]
+        );
+        assert_eq!(
+            grads.v_angular_velocities,
+            vec![[0.0; 4], [4.0, 5.0, 6.0, 7.0], [0.0; 4]]
+        );
+    }
+
     #[test]
     fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
         for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
             let mut scene = one_kernel(velocity, time_sigma);
-            let sources = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+            let (sources, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }

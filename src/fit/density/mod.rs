@@ -30,9 +30,21 @@ pub use additive::AdditiveRules;
 pub use alpha::AlphaRules;
 pub use shape::ShapeBound;
 
+/// A kernel's line of descent, carried from round to round: how many splits in time made
+/// it, and whether it carries fitted SPEC §9 motion (the alpha rules' motion where needed,
+/// [`alpha`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Line {
+    /// Splits in time among the kernel's ancestors and itself.
+    pub time_splits: u32,
+    /// Whether its acceleration and angular velocity are fitted.
+    pub moving: bool,
+}
+
 /// Per-kernel statistics between two rounds, filled by the training loop: every step's
 /// positional gradients ([`DensityStats::add_step`]) and every view's screen gradients
-/// ([`DensityStats::add_view`]); and the training loss at the last two rounds.
+/// ([`DensityStats::add_view`]); the training loss at the last two rounds; and each
+/// kernel's [`Line`], which the rounds carry on.
 #[derive(Clone, Debug, Default)]
 pub struct DensityStats {
     /// `Σ g̃` over steps (for the direction of an additive clone).
@@ -49,6 +61,8 @@ pub struct DensityStats {
     loss: Option<f64>,
     /// Training loss at the round before.
     previous_loss: Option<f64>,
+    /// Each kernel's line of descent.
+    lines: Vec<Line>,
 }
 
 impl DensityStats {
@@ -63,16 +77,40 @@ impl DensityStats {
             views_seen: vec![0; n],
             loss: None,
             previous_loss: None,
+            lines: vec![Line::default(); n],
         }
     }
 
-    /// Statistics for `n` kernels after a round: per-kernel sums cleared, this round's loss
-    /// becomes the previous one.
+    /// Statistics after a round that left one kernel per entry of `lines` (their lines of
+    /// descent): per-kernel sums cleared, this round's loss becomes the previous one.
     #[must_use]
-    pub fn next_window(&self, n: usize) -> Self {
+    pub fn next_window(&self, lines: Vec<Line>) -> Self {
+        let n = lines.len();
         DensityStats {
             previous_loss: self.loss,
+            lines,
             ..DensityStats::new(n)
+        }
+    }
+
+    /// Kernel `i`'s line of descent.
+    #[must_use]
+    pub fn line(&self, i: usize) -> Line {
+        self.lines[i]
+    }
+
+    /// Zeroes the SPEC §9 gradients (acceleration, angular velocity) of every kernel that
+    /// does not carry fitted motion, so that Adam leaves them (and their moments) at zero.
+    pub fn keep_motion_to_moving_kernels(&self, grads: &mut Gradients) {
+        for (i, line) in self.lines.iter().enumerate() {
+            if !line.moving {
+                if let Some(a) = grads.v_accelerations.get_mut(i) {
+                    *a = [0.0; 3];
+                }
+                if let Some(w) = grads.v_angular_velocities.get_mut(i) {
+                    *w = [0.0; 4];
+                }
+            }
         }
     }
 
@@ -169,6 +207,8 @@ pub struct DensityChange {
     /// The kernels changed: per kernel of the new scene, the old kernel whose optimiser
     /// state it keeps (`None`: a new kernel).
     pub sources: Option<Vec<Option<usize>>>,
+    /// The new scene's lines of descent (moved into the statistics).
+    lines: Vec<Line>,
 }
 
 impl DensityRules {
@@ -180,6 +220,14 @@ impl DensityRules {
             DensityRules::Alpha(rules) => rules.until * (steps.max(2) - 1) as f64 + 1.0,
         };
         (until.max(0.0) as usize).min(steps)
+    }
+
+    /// Whether only the kernels that keep splitting in time carry fitted SPEC §9 motion
+    /// ([`alpha`]): the others' SPEC §9 gradients are then kept at zero
+    /// ([`DensityStats::keep_motion_to_moving_kernels`]).
+    #[must_use]
+    pub fn fits_motion_where_needed(&self) -> bool {
+        matches!(self, DensityRules::Alpha(rules) if rules.motion_after_time_splits.is_some())
     }
 
     /// The most kernels the rules may reach.
@@ -214,6 +262,7 @@ impl DensityRules {
                     };
                     let (next, sources, _) = additive::densify_and_prune(scene, stats, &round)?;
                     *scene = next;
+                    change.lines = vec![Line::default(); sources.len()];
                     change.sources = Some(sources);
                 }
             }
@@ -223,12 +272,14 @@ impl DensityRules {
                     change.opacities_reset = true;
                 }
                 if rules.round_due(step, steps) {
-                    change.sources = Some(alpha::densify_and_prune(scene, stats, rules));
+                    let (sources, lines) = alpha::densify_and_prune(scene, stats, rules);
+                    change.sources = Some(sources);
+                    change.lines = lines;
                 }
             }
         }
         if change.sources.is_some() {
-            *stats = stats.next_window(scene.len());
+            *stats = stats.next_window(std::mem::take(&mut change.lines));
         }
         Ok(change)
     }
