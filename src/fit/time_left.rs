@@ -146,6 +146,61 @@ impl TimeLeft {
     }
 }
 
+/// One point of a replay ([`replay`]): after `steps` of a finished run, the estimate and
+/// the seconds the run then had left.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Replayed {
+    /// Steps run when the estimate was made.
+    pub steps: usize,
+    /// The estimate, seconds.
+    pub estimate: f64,
+    /// The seconds the run had left.
+    pub truth: f64,
+}
+
+impl Replayed {
+    /// The estimate's relative error, `estimate / truth - 1`.
+    #[must_use]
+    pub fn error(&self) -> f64 {
+        self.estimate / self.truth.max(1e-12) - 1.0
+    }
+}
+
+/// The estimate of a fit that ran `training` on views of `view_size`, replayed over its
+/// step records `records` (a `fit --log`): at each fraction of `fractions` of the run's
+/// steps, what [`TimeLeft::seconds_left`] said and what was left.
+#[must_use]
+pub fn replay(
+    training: &Training,
+    view_size: [u32; 2],
+    records: &[StepRecord],
+    fractions: &[f64],
+) -> Vec<Replayed> {
+    let Some(last) = records.last() else {
+        return Vec::new();
+    };
+    let mut estimate = TimeLeft::new(training, view_size);
+    let mut points = Vec::new();
+    let mut next = fractions.iter().peekable();
+    for (i, record) in records.iter().enumerate() {
+        estimate.record(record);
+        while let Some(&&fraction) = next.peek() {
+            if (fraction * records.len() as f64).round() as usize > i + 1 {
+                break;
+            }
+            next.next();
+            if let Some(left) = estimate.seconds_left() {
+                points.push(Replayed {
+                    steps: i + 1,
+                    estimate: left,
+                    truth: last.seconds - record.seconds,
+                });
+            }
+        }
+    }
+    points
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
