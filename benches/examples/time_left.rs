@@ -84,19 +84,43 @@ fn main() {
     training.coarse = stages(&records);
     let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
     let points = replay(&training, view_size, &records, &fractions);
+    // A straight line through the time so far, for comparison.
+    let line_error = |steps: usize, truth: f64| {
+        let so_far = records[steps - 1].seconds;
+        so_far / steps as f64 * (records.len() - steps) as f64 / truth - 1.0
+    };
     for point in &points {
         println!(
-            "{:5.0} % step {:5}: {:8.1} s estimated, {:8.1} s left, {:+5.0} %",
+            "{:3.0} % step {:5}: {:7.1} s estimated, {:7.1} s left, {:+4.0} % (straight line {:+4.0} %)",
             100.0 * point.steps as f64 / records.len() as f64,
             point.steps,
             point.estimate,
             point.truth,
-            100.0 * point.error()
+            100.0 * point.error(),
+            100.0 * line_error(point.steps, point.truth)
         );
     }
-    let worst = points
+    let errors: Vec<f64> = points.iter().map(|p| p.error()).collect();
+    let lines: Vec<f64> = points
         .iter()
-        .map(|p| p.error())
-        .fold(0.0_f64, |w, e| if e.abs() > w.abs() { e } else { w });
-    println!("worst from 10 %: {:+.0} %", 100.0 * worst);
+        .map(|p| line_error(p.steps, p.truth))
+        .collect();
+    let worst = errors
+        .iter()
+        .fold(0.0_f64, |w, &e| if e.abs() > w.abs() { e } else { w });
+    println!(
+        "from 10 %: {} (worst {:+.0} %), straight line {}; {} steps, {:.1} s",
+        range(&errors),
+        100.0 * worst,
+        range(&lines),
+        records.len(),
+        records[records.len() - 1].seconds
+    );
+}
+
+/// `"low % to high %"` of relative errors.
+fn range(errors: &[f64]) -> String {
+    let low = errors.iter().copied().fold(f64::INFINITY, f64::min);
+    let high = errors.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    format!("{:+.0} % to {:+.0} %", 100.0 * low, 100.0 * high)
 }

@@ -4,29 +4,31 @@
 //! linear extrapolation of the time per step promises a time that keeps growing. The
 //! estimate here models a step's duration as a cost per kernel plus a fixed cost of the
 //! pixels it renders (the render's compositing and its backward, and under L1 + D-SSIM the
-//! SSIM pass, [`crate::fit::ssim`]), in kernels:
+//! SSIM pass, [`crate::fit::ssim`]), counted in kernels:
 //!
 //! ```text
-//! d = c (k + κ P r(n)^0.8),    r(n) = f(n) / n²
+//! d = c (k + κ P r(n)^0.7),    r(n) = f(n) / n²
 //! ```
 //!
 //! `k` kernels; `P` the pixels of the first training view at full size; `r` the fraction of
-//! them a step renders per view: `1/n²` on views downscaled by `n` ([`crate::fit::coarse`]),
-//! times the fraction `f` of the view that one window holds ([`crate::fit::window`]; 1 for
-//! whole views), so a full-size step on 2×2 windows costs what a ½-size step on whole views
-//! does. `κ` is the fixed cost in kernels per pixel: 0.5 under L1 + D-SSIM, 0.4 under the
-//! MSE (fused render and backward); the fixed cost grows as the pixels to the power 0.8 and
-//! a kernel's cost hardly with its footprint (the D-NeRF-like proxy at 400×400 took about
-//! 3.8 and 11.6 ms a step at ¼ and ½ size, plus 0.3 µs a kernel at both: `docs/fitting.md`,
-//! "Time left"). `c` is the median, over the blocks of 50 steps in the recent window (the
-//! last fifth of the steps run, at least 50), of each block's seconds over its summed
-//! `k + κ P r^0.8`: a median, so that a spell of load on a shared machine or a slow density
-//! round moves it little. The kernel count is extrapolated along its recent slope (never
-//! down: pruning early in a fit is followed by growth) until the last step at which the
-//! density rules may add kernels (never beyond their budget), and held after it:
+//! them a step renders of each view: `1/n²` on views downscaled by `n`
+//! ([`crate::fit::coarse`]), times the fraction `f` of the view that one window holds
+//! ([`crate::fit::window`]; 1 for whole views), so a full-size step on 2×2 windows costs
+//! what a ½-size step on whole views does. `κ`, the fixed cost in kernels per pixel, is 0.5
+//! under L1 + D-SSIM and 0.4 under the MSE (its render and backward fused). A kernel's cost
+//! hardly grows with the pixels; the fixed cost grows as their power 0.7, between the 0.8 of
+//! a quiet machine and about 0.5 of a loaded one (on a loaded machine small steps wait
+//! longer; `docs/fitting.md`, "Time left", has the measurements behind these constants).
+//!
+//! `c` is the median, over the blocks of 50 steps in the recent window (the last fifth of
+//! the steps run, at least 50), of each block's seconds over its summed `k + κ P r^0.7`: a
+//! median, so that a spell of load or a slow density round moves it little. The kernel
+//! count is extrapolated along its recent slope (never down: the pruning early in a fit is
+//! followed by growth) until the last step at which the density rules may add kernels
+//! (never beyond their budget), and held after it:
 //!
 //! ```text
-//! left = c Σ_{s > now} (k(s) + κ P r(n(s))^0.8)
+//! left = c Σ_{s > now} (k(s) + κ P r(n(s))^0.7)
 //! ```
 
 use crate::fit::coarse::{SizeStage, downscale_at};
@@ -44,7 +46,7 @@ const WINDOW_FRACTION: f64 = 0.2;
 const BLOCK: usize = 50;
 
 /// The exponent of the pixels rendered in a step's fixed cost (see the module docs).
-const PIXEL_EXPONENT: f64 = 0.8;
+const PIXEL_EXPONENT: f64 = 0.7;
 
 /// The fixed cost of a step, in kernels per pixel of the full-size view, under the MSE
 /// (the render and its backward fused per tile).
