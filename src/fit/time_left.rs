@@ -1,49 +1,60 @@
 //! The time a running fit has left, from its steps so far and its schedule.
 //!
 //! A step's cost grows with the kernel count while the density rules add kernels, so a
-//! linear extrapolation of the time per step promises a time that keeps growing (it was
-//! off by up to half on a D-NeRF-like proxy). The estimate here models a step's duration as
+//! linear extrapolation of the time per step promises a time that keeps growing. The
+//! estimate here models a step's duration as a cost per kernel plus a fixed cost of the
+//! pixels it renders (the render's compositing and its backward, and under L1 + D-SSIM the
+//! SSIM pass, [`crate::fit::ssim`]), counted in kernels:
 //!
 //! ```text
-//! d = c (k + k0) m(n),    m(n) = n^(-2β),  β = 0.6
+//! d = c (k + κ P r(n)^0.7),    r(n) = f(n) / n²
 //! ```
 //!
-//! `k` kernels; a fixed cost `k0` (the images' pixels, the loss) expressed in kernels, taken
-//! as the recent mean count — half the cost fixed, half per kernel, near what the alpha fits'
-//! logs show (`docs/fitting.md`, "Time left"); and the stage's factor `m`: a step on views
-//! downscaled by `n` ([`crate::fit::coarse`]) renders `n²` times fewer pixels and costs about
-//! `n^(-1.2)` as much; a step on windows ([`crate::fit::window`]) renders the fraction `f`
-//! of its views' pixels that one cell of their grid holds, and costs `f^β` as much, so
-//! `m = (f / n²)^β` with `f` that of the first training view at the stage's size (a kernel's cost grows with its footprint less than linearly: the
-//! D-NeRF-like proxy at 400×400 took 4.6, 19.8 and 69 ms a step at ¼, ½ and full size with
-//! 3 100, 6 500 and 9 000 kernels, exponents 0.5 and 0.66 of the pixel ratio). `c` comes from
-//! the recent window (the last tenth of the steps run, at least 50), each of its steps
-//! weighted by its own `(k + k0) m(n)`; the kernel count is extrapolated along its recent
-//! slope until the last step at which the density rules may add kernels (never beyond their
-//! budget), and held after it:
+//! `k` kernels; `P` the pixels of the first training view at full size; `r` the fraction of
+//! them a step renders of each view: `1/n²` on views downscaled by `n`
+//! ([`crate::fit::coarse`]), times the fraction `f` of the view that one window holds
+//! ([`crate::fit::window`]; 1 for whole views), so a full-size step on 2×2 windows costs
+//! what a ½-size step on whole views does. `κ`, the fixed cost in kernels per pixel, is 0.5
+//! under L1 + D-SSIM and 0.4 under the MSE (its render and backward fused). A kernel's cost
+//! hardly grows with the pixels; the fixed cost grows as their power 0.7, between the 0.8 of
+//! a quiet machine and about 0.5 of a loaded one (on a loaded machine small steps wait
+//! longer; `docs/fitting.md`, "Time left", has the measurements behind these constants).
+//!
+//! `c` is the median, over the blocks of 50 steps in the recent window (the last fifth of
+//! the steps run, at least 50), of each block's seconds over its summed `k + κ P r^0.7`: a
+//! median, so that a spell of load or a slow density round moves it little. The kernel
+//! count is extrapolated along its recent slope (never down: the pruning early in a fit is
+//! followed by growth) until the last step at which the density rules may add kernels
+//! (never beyond their budget), and held after it:
 //!
 //! ```text
-//! left = c Σ_{s > now} (k(s) + k0) m(n(s))
+//! left = c Σ_{s > now} (k(s) + κ P r(n(s))^0.7)
 //! ```
 
 use crate::fit::coarse::{SizeStage, downscale_at};
 use crate::fit::density::DensityRules;
-use crate::fit::train::{StepRecord, Training};
+use crate::fit::train::{StepRecord, Training, TrainingLoss};
 use crate::fit::window::pixel_fraction;
 
 /// Steps of the window the estimate reads, at least.
 const MIN_WINDOW: usize = 50;
 
-/// The exponent of the pixel count in a step's cost (see the module docs).
-const PIXEL_EXPONENT: f64 = 0.6;
+/// The window the estimate reads, as a fraction of the steps run.
+const WINDOW_FRACTION: f64 = 0.2;
 
-/// The cost of a step on views downscaled by `n` (and windowed by `window`, of views of
-/// `size` at full size), relative to whole views at full size.
-fn stage_cost(n: u32, window: Option<u32>, [width, height]: [u32; 2]) -> f64 {
-    let n = n.max(1);
-    let fraction = pixel_fraction(window, (width / n).max(1), (height / n).max(1));
-    (fraction / f64::from(n).powi(2)).powf(PIXEL_EXPONENT)
-}
+/// Steps of each block of the window whose rates the estimate takes the median of.
+const BLOCK: usize = 50;
+
+/// The exponent of the pixels rendered in a step's fixed cost (see the module docs).
+const PIXEL_EXPONENT: f64 = 0.7;
+
+/// The fixed cost of a step, in kernels per pixel of the full-size view, under the MSE
+/// (the render and its backward fused per tile).
+const FIXED_PER_PIXEL_MSE: f64 = 0.4;
+
+/// The fixed cost of a step, in kernels per pixel of the full-size view, under
+/// L1 + D-SSIM (the SSIM pass, the unfused render and backward).
+const FIXED_PER_PIXEL_DSSIM: f64 = 0.5;
 
 /// The estimate of a running fit's time left (see the module docs).
 #[derive(Clone, Debug)]
@@ -57,6 +68,8 @@ pub struct TimeLeft {
     stages: Vec<SizeStage>,
     /// The steps' window side, and the size of the views it cuts (at full size).
     window: (Option<u32>, [u32; 2]),
+    /// The fixed cost of a step, in kernels per pixel of the full-size view.
+    fixed_per_pixel: f64,
     /// `(seconds, kernels, downscale)` after each step so far.
     history: Vec<(f64, usize, u32)>,
 }
@@ -75,6 +88,10 @@ impl TimeLeft {
                 .map_or(usize::MAX, DensityRules::max_kernels),
             stages: training.coarse.clone(),
             window: (training.window, view_size),
+            fixed_per_pixel: match training.loss {
+                TrainingLoss::Mse => FIXED_PER_PIXEL_MSE,
+                TrainingLoss::L1Dssim(_) => FIXED_PER_PIXEL_DSSIM,
+            },
             history: Vec::with_capacity(training.steps.min(1 << 16)),
         }
     }
@@ -92,21 +109,17 @@ impl TimeLeft {
         if now < 2 {
             return None;
         }
-        let window = MIN_WINDOW.max(now / 10).min(now - 1);
-        let (t1, k1, _) = self.history[now - 1];
-        let (t0, k_start, _) = self.history[now - 1 - window];
-        let recent = &self.history[now - window..];
-        let fixed = recent.iter().map(|&(_, k, _)| k as f64).sum::<f64>() / window as f64;
-        let units: f64 = recent
-            .iter()
-            .map(|&(_, k, n)| (k as f64 + fixed) * self.stage_cost(n))
-            .sum();
-        let per_unit = (t1 - t0) / units.max(1e-12);
+        let window = MIN_WINDOW
+            .max((now as f64 * WINDOW_FRACTION) as usize)
+            .min(now - 1);
+        let per_unit = self.seconds_per_unit(window);
+        let (_, k1, _) = self.history[now - 1];
+        let (_, k_start, _) = self.history[now - 1 - window];
         let k = k1 as f64;
-        let slope = (k - k_start as f64) / window as f64;
+        let slope = ((k - k_start as f64) / window as f64).max(0.0);
         let grow_to = self.growth_ends.min(self.steps);
         let end = if now < grow_to {
-            (k + slope * (grow_to - now) as f64).clamp(0.0, self.max_kernels as f64)
+            (k + slope * (grow_to - now) as f64).min(self.max_kernels as f64)
         } else {
             k
         };
@@ -134,16 +147,107 @@ impl TimeLeft {
         for to in breaks {
             let n = downscale_at(&self.stages, to, self.steps);
             let mean = 0.5 * (kernels_at(from) + kernels_at(to));
-            left += per_unit * (to - from) as f64 * (mean + fixed) * self.stage_cost(n);
+            left += per_unit * (to - from) as f64 * self.step_cost(mean, n);
             from = to;
         }
         Some(left.max(0.0))
     }
 
-    /// [`stage_cost`] of this fit's views at downscale `n`.
-    fn stage_cost(&self, n: u32) -> f64 {
-        stage_cost(n, self.window.0, self.window.1)
+    /// Seconds per unit of [`TimeLeft::step_cost`] over the last `window` steps: the median
+    /// of the rates of its blocks of [`BLOCK`] steps (the mean rate of the whole window
+    /// when it holds no whole block).
+    fn seconds_per_unit(&self, window: usize) -> f64 {
+        let now = self.history.len();
+        let rate = |from: usize, to: usize| {
+            let units: f64 = self.history[from..to]
+                .iter()
+                .map(|&(_, k, n)| self.step_cost(k as f64, n))
+                .sum();
+            (self.history[to - 1].0 - self.history[from - 1].0) / units.max(1e-12)
+        };
+        let mut rates: Vec<f64> = (1..=window / BLOCK)
+            .map(|b| rate(now - b * BLOCK, now - (b - 1) * BLOCK))
+            .collect();
+        if rates.is_empty() {
+            return rate(now - window, now);
+        }
+        rates.sort_unstable_by(f64::total_cmp);
+        rates[rates.len() / 2]
     }
+
+    /// The cost of a step with `kernels` on views downscaled by `n`, in kernels: the
+    /// kernels plus the fixed cost of the pixels it renders (see the module docs).
+    fn step_cost(&self, kernels: f64, n: u32) -> f64 {
+        let [width, height] = self.window.1;
+        let pixels = f64::from(width) * f64::from(height);
+        kernels
+            + self.fixed_per_pixel
+                * pixels
+                * pixel_ratio(n, self.window.0, self.window.1).powf(PIXEL_EXPONENT)
+    }
+}
+
+/// The pixels a step on views downscaled by `n` (and windowed by `window`, of views of
+/// `size` at full size) renders, relative to whole views at full size.
+fn pixel_ratio(n: u32, window: Option<u32>, [width, height]: [u32; 2]) -> f64 {
+    let n = n.max(1);
+    let fraction = pixel_fraction(window, (width / n).max(1), (height / n).max(1));
+    fraction / f64::from(n).powi(2)
+}
+
+/// One point of a replay ([`replay`]): after `steps` of a finished run, the estimate and
+/// the seconds the run then had left.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Replayed {
+    /// Steps run when the estimate was made.
+    pub steps: usize,
+    /// The estimate, seconds.
+    pub estimate: f64,
+    /// The seconds the run had left.
+    pub truth: f64,
+}
+
+impl Replayed {
+    /// The estimate's relative error, `estimate / truth - 1`.
+    #[must_use]
+    pub fn error(&self) -> f64 {
+        self.estimate / self.truth.max(1e-12) - 1.0
+    }
+}
+
+/// The estimate of a fit that ran `training` on views of `view_size`, replayed over its
+/// step records `records` (a `fit --log`): at each fraction of `fractions` of the run's
+/// steps, what [`TimeLeft::seconds_left`] said and what was left.
+#[must_use]
+pub fn replay(
+    training: &Training,
+    view_size: [u32; 2],
+    records: &[StepRecord],
+    fractions: &[f64],
+) -> Vec<Replayed> {
+    let Some(last) = records.last() else {
+        return Vec::new();
+    };
+    let mut estimate = TimeLeft::new(training, view_size);
+    let mut points = Vec::new();
+    let mut next = fractions.iter().peekable();
+    for (i, record) in records.iter().enumerate() {
+        estimate.record(record);
+        while let Some(&&fraction) = next.peek() {
+            if (fraction * records.len() as f64).round() as usize > i + 1 {
+                break;
+            }
+            next.next();
+            if let Some(left) = estimate.seconds_left() {
+                points.push(Replayed {
+                    steps: i + 1,
+                    estimate: left,
+                    truth: last.seconds - record.seconds,
+                });
+            }
+        }
+    }
+    points
 }
 
 #[cfg(test)]
@@ -202,7 +306,8 @@ mod tests {
     /// A run whose kernels grow from 1000 by 10 a step until step 600, each step taking
     /// `1 ms · (k + 1000) / 1000`: the estimate at step `at`, and the truth.
     fn estimate_at(at: usize) -> (f64, f64) {
-        let mut estimate = TimeLeft::new(&training(), [400, 400]);
+        // 50×50 views: a fixed cost of 0.4 × 2500 = 1000 kernels under the MSE.
+        let mut estimate = TimeLeft::new(&training(), [50, 50]);
         let (mut seconds, mut total_at) = (0.0, 0.0);
         for step in 1..=1000 {
             let kernels = 1000 + 10 * step.min(600);
@@ -232,10 +337,10 @@ mod tests {
         assert!(seconds_at_100 * 9.0 < 0.67 * truth);
     }
 
-    /// The same run in coarse stages (¼ size until step 300, ½ until 600), whole views and
-    /// windows of 200 of 400×400 views, each step's cost scaled by its stage as the model
-    /// says: the estimate from step 100 on is within a fifth, where the time so far, spent
-    /// at ¼ size, promises far too little.
+    /// The same growth in coarse stages (¼ size until step 300, ½ until 600), whole views
+    /// and windows of 200 of 400×400 views, each step costing what the model says: the
+    /// estimate from step 100 on is within a fifth, where the time so far, spent at ¼ size,
+    /// promises far too little.
     #[test]
     fn a_coarse_to_fine_fit_is_estimated_across_its_stages() {
         let stages = vec![
@@ -254,10 +359,11 @@ mod tests {
                 window,
                 ..training()
             };
+            let model = TimeLeft::new(&training, [400, 400]);
             let cost = |step: usize| {
                 let kernels = 1000 + 10 * step.min(600);
-                let stage = stage_cost(downscale_at(&stages, step, 1000), window, [400, 400]);
-                (kernels, 1e-3 * (kernels + 1000) as f64 / 1000.0 * stage)
+                let n = downscale_at(&stages, step, 1000);
+                (kernels, 1e-6 * model.step_cost(kernels as f64, n))
             };
             let total: f64 = (1..=1000).map(|s| cost(s).1).sum();
             for at in [100, 250, 300, 450, 700] {
@@ -281,9 +387,89 @@ mod tests {
         }
         // Windows of 200 make a full-size step of 400×400 views cost what a ½-size one does.
         assert_eq!(
-            stage_cost(1, Some(200), [400, 400]),
-            stage_cost(2, None, [400, 400])
+            pixel_ratio(1, Some(200), [400, 400]),
+            pixel_ratio(2, None, [400, 400])
         );
+    }
+
+    /// The step records of a recorded default fit (`tests/data/time_left/README.md`): one
+    /// line `milliseconds kernels downscale` a step.
+    fn recorded(text: &str) -> Vec<StepRecord> {
+        text.lines()
+            .enumerate()
+            .map(|(i, line)| {
+                let fields: Vec<&str> = line.split_whitespace().collect();
+                let milliseconds: f64 = fields[0].parse().unwrap();
+                record(
+                    i + 1,
+                    1e-3 * milliseconds,
+                    fields[1].parse().unwrap(),
+                    fields[2].parse().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    /// The alpha fit's defaults for a run of `records`, with coarse stages `stages` (as the
+    /// plan chooses them for the recorded views) and loss `loss`.
+    fn default_training(
+        records: &[StepRecord],
+        stages: &[(u32, f64)],
+        loss: TrainingLoss,
+    ) -> Training {
+        let bounds = crate::fit::init::SpaceTimeBox {
+            min: [-1.0; 3],
+            max: [1.0; 3],
+            time: [0.0, 1.0],
+        };
+        Training {
+            steps: records.len(),
+            coarse: stages
+                .iter()
+                .map(|&(downscale, until)| SizeStage { downscale, until })
+                .collect(),
+            loss,
+            ..crate::fit::defaults::DEFAULT_ALPHA.training(&bounds)
+        }
+    }
+
+    /// Two default fits recorded on a shared 2-core machine, replayed through the estimate:
+    /// within 30 % of the time left at every 5 % of the run from 10 % to 90 %.
+    #[test]
+    fn recorded_default_fits_are_estimated_within_thirty_percent_from_a_tenth() {
+        let dn400 = recorded(include_str!("../../tests/data/time_left/fin_dn400.txt"));
+        let phone = recorded(include_str!("../../tests/data/time_left/ph4.txt"));
+        let fits = [
+            (
+                default_training(
+                    &dn400,
+                    &[(4, 0.3), (2, 0.6)],
+                    crate::fit::defaults::DEFAULT_LOSS,
+                ),
+                [400, 400],
+                &dn400,
+            ),
+            (
+                default_training(&phone, &[(2, 0.6)], TrainingLoss::Mse),
+                [270, 480],
+                &phone,
+            ),
+        ];
+        let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
+        for (training, size, records) in fits {
+            assert_eq!(training.window, Some(200));
+            let points = replay(&training, size, records, &fractions);
+            assert_eq!(points.len(), fractions.len());
+            for point in points {
+                assert!(
+                    point.error().abs() < 0.3,
+                    "{size:?} after {} steps: {} s estimated, {} s left",
+                    point.steps,
+                    point.estimate,
+                    point.truth
+                );
+            }
+        }
     }
 
     #[test]
