@@ -220,11 +220,11 @@ pub struct FitArgs {
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_rotation: Option<f64>,
     /// Learning rate of SPEC §9 accelerations, in the cameras' box diagonals per time range
-    /// squared (0: none fitted, and no kernel gets one) [default: 0].
+    /// squared (0: none fitted) [default: 5e-3].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_acceleration: Option<f64>,
     /// Learning rate of SPEC §9 angular velocities (the quaternion's rate), per time range
-    /// (0: none fitted, and no kernel gets one) [default: 0].
+    /// (0: none fitted) [default: 1e-3].
     #[arg(long, value_parser = super::args::finite, help_heading = ALPHA)]
     lr_angular_velocity: Option<f64>,
     /// Learning rate of the SH coefficients beyond the base colour [default: 5e-4].

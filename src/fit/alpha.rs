@@ -36,10 +36,10 @@ pub struct AlphaRates {
     /// Velocity, box diagonals per time range per step.
     pub velocity: f64,
     /// SPEC §9 acceleration, box diagonals per time range squared per step (0: not
-    /// fitted, and no kernel gets one).
+    /// fitted; with the angular rate 0 too, no kernel gets SPEC §9 fields).
     pub acceleration: f64,
-    /// SPEC §9 angular velocity, quaternion units per time range per step (0: not fitted,
-    /// and no kernel gets one).
+    /// SPEC §9 angular velocity, quaternion units per time range per step (0: not fitted;
+    /// with the acceleration rate 0 too, no kernel gets SPEC §9 fields).
     pub angular_velocity: f64,
     /// `ln s`.
     pub scale: f64,

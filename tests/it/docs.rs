@@ -146,6 +146,15 @@ fn the_fitting_manuals_defaults_are_the_codes() {
         ),
         ("percent_dense", None, Some(alpha.percent_dense)),
         ("time_split_fraction", None, Some(alpha.time_split_fraction)),
+        ("lr_acceleration", None, Some(a.acceleration)),
+        ("lr_angular_velocity", None, Some(a.angular_velocity)),
+        (
+            "motion_after_splits",
+            None,
+            Some(f64::from(
+                splat4d::fit::defaults::DEFAULT_MOTION_AFTER_SPLITS,
+            )),
+        ),
     ];
     let cell = |text: &str| -> Option<f64> {
         let first = text.split_whitespace().next()?;
