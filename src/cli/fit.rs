@@ -266,6 +266,23 @@ pub struct FitArgs {
     /// [0, 1] [default: 0.2].
     #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
     dssim_weight: Option<f64>,
+    /// Remove this fraction of the kernels, in [0, 1), once growth ends: those of lowest
+    /// spatio-temporal score (each kernel's Σ α·T over the training views' pixels, weighted
+    /// up to 2× for a kernel that lives many frames; 4DGS-1K's criterion) [default: 0].
+    #[arg(long, value_name = "FRACTION", value_parser = super::args::finite, help_heading = ALPHA)]
+    prune_fraction: Option<f64>,
+    /// Spread --prune-fraction over N rounds, --densify-every steps apart, the first when
+    /// growth ends [default: 1].
+    #[arg(long, value_name = "N", help_heading = ALPHA)]
+    prune_rounds: Option<usize>,
+    /// λ of an L1 on the opacities (their mean over the kernels) added to the loss
+    /// (3DGS-MCMC's) [default: 0].
+    #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
+    opacity_regulariser: Option<f64>,
+    /// λ of an L1 on the spatial scales (their mean over the kernels and axes, in box
+    /// diagonals) added to the loss (3DGS-MCMC's) [default: 0].
+    #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
+    scale_regulariser: Option<f64>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -324,6 +341,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
         window: args.window.map(|choice| choice.0),
         loss: args.loss,
         dssim_weight: args.dssim_weight,
+        prune_fraction: args.prune_fraction,
+        prune_rounds: args.prune_rounds,
+        opacity_regulariser: args.opacity_regulariser,
+        scale_regulariser: args.scale_regulariser,
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

@@ -134,6 +134,20 @@ pub const DEFAULT_LOSS: TrainingLoss = TrainingLoss::L1Dssim(crate::fit::ssim::L
     dssim_weight: DEFAULT_DSSIM_WEIGHT,
 });
 
+/// The fraction of the alpha kernels removed by their spatio-temporal score after growth
+/// ends (`--prune-fraction`; [`crate::fit::density::prune`]). Off until measured.
+pub const DEFAULT_PRUNE_FRACTION: f64 = 0.0;
+
+/// The rounds that remove [`DEFAULT_PRUNE_FRACTION`] together (`--prune-rounds`).
+pub const DEFAULT_PRUNE_ROUNDS: usize = 1;
+
+/// `λo` of the L1 on the alpha opacities (`--opacity-regulariser`;
+/// [`crate::fit::regularise`]). Off until measured.
+pub const DEFAULT_OPACITY_REGULARISER: f64 = 0.0;
+
+/// `λs` of the L1 on the alpha spatial scales (`--scale-regulariser`). Off until measured.
+pub const DEFAULT_SCALE_REGULARISER: f64 = 0.0;
+
 /// Every default of the alpha fit (SPEC §8, [`crate::fit::alpha`]): the 3DGS and 4DGS
 /// papers' rates and density rules, scaled to runs of a few thousand steps.
 ///
@@ -191,6 +205,10 @@ pub const DEFAULT_ALPHA: AlphaFitOptions = AlphaFitOptions {
     shape_bound: DEFAULT_SHAPE_BOUND,
     fill_uncovered: DEFAULT_FILL_UNCOVERED,
     loss: DEFAULT_LOSS,
+    prune_fraction: DEFAULT_PRUNE_FRACTION,
+    prune_rounds: DEFAULT_PRUNE_ROUNDS,
+    opacity_regulariser: DEFAULT_OPACITY_REGULARISER,
+    scale_regulariser: DEFAULT_SCALE_REGULARISER,
 };
 
 /// The defaults of this module with the paper's mode and a fixed count.

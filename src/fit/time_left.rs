@@ -183,6 +183,8 @@ mod tests {
             window: None,
             loss: crate::fit::train::TrainingLoss::Mse,
             shape_bound: crate::fit::density::ShapeBound::OFF,
+            prune: None,
+            regularisers: crate::fit::regularise::Regularisers::OFF,
         }
     }
 

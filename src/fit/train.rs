@@ -29,8 +29,10 @@ use rayon::prelude::*;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
 use crate::fit::coarse::{SizeStage, StagedViews};
-use crate::fit::density::{DensityRules, DensityStats, ShapeBound};
+use crate::fit::density::prune::{keep_kernels, kept_after_pruning, temporal_weight, time_spacing};
+use crate::fit::density::{DensityRules, DensityStats, ShapeBound, SpacetimePrune};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
+use crate::fit::regularise::Regularisers;
 use crate::fit::spread;
 use crate::fit::ssim::{L1Dssim, SsimScratch};
 use crate::fit::window::Windows;
@@ -75,6 +77,11 @@ pub struct Training {
     pub shape_bound: ShapeBound,
     /// The per-view loss the gradient is taken of (the reported loss stays the MSE).
     pub loss: TrainingLoss,
+    /// Pruning by the spatio-temporal score after growth ends ([`SpacetimePrune`]); `None`:
+    /// none.
+    pub prune: Option<SpacetimePrune>,
+    /// Regularisers added to each step's gradient ([`Regularisers::OFF`]: none).
+    pub regularisers: Regularisers,
 }
 
 /// The per-view loss a fit's gradient is taken of. Whichever it is, a step's reported
@@ -475,6 +482,20 @@ impl ViewSlot {
         Ok(view_mse(self.context.image(), view))
     }
 
+    /// Renders `view` and runs the backward from `∂L/∂C = 1` on every pixel: each projected
+    /// kernel's colour gradient is then its `Σ_pixels α̂ T` (SPEC §8).
+    fn contributions(&mut self, scene: &Scene, view: &View, options: &RenderOptions) -> Result<()> {
+        self.grads.reset_for_scene(scene);
+        let (camera, tau) = (&view.camera, view.time);
+        self.context
+            .render_for_backward(scene, camera, tau, options)?;
+        self.v_image.clear();
+        self.v_image.resize(3 * camera.pixel_count(), 1.0);
+        self.context
+            .backward(scene, camera, tau, options, &self.v_image, &mut self.grads);
+        Ok(())
+    }
+
     /// Whether the last view rendered here projected some kernel onto its screen.
     fn sees_a_kernel(&self) -> bool {
         !self.context.projected.kernel_from_proj.is_empty()
@@ -624,6 +645,7 @@ pub fn fit(
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
+        training.regularisers.add_gradient(scene, &mut grads);
         adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
@@ -637,6 +659,13 @@ pub fn fit(
                 &mut adam,
                 evaluation,
             )?;
+            if let Some(fraction) = training
+                .prune
+                .and_then(|rule| rule.due(step, rules.growth_ends(steps)))
+            {
+                prune_by_score(fraction, scene, (train, render, &mut slots), &mut adam)?;
+                stats = stats.next_window(scene.len());
+            }
         }
         let heldout_psnr = heldout_psnr_at(
             step,
@@ -687,6 +716,61 @@ fn run_density_rules(
         give_fitted_motion(scene, adam.groups());
     }
     Ok(())
+}
+
+/// Removes the lowest-scored `fraction` of the kernels of `scene` by their spatio-temporal
+/// score over the stage's training views `train` ([`crate::fit::density::prune`]), and
+/// makes Adam's moments and the fitted motion fields follow.
+fn prune_by_score(
+    fraction: f64,
+    scene: &mut Scene,
+    (train, render, slots): (&[View], &RenderOptions, &mut [ViewSlot]),
+    adam: &mut Adam,
+) -> Result<()> {
+    let scores = spacetime_scores_in(scene, train, render, slots)?;
+    let sources = keep_kernels(scene, &kept_after_pruning(&scores, fraction));
+    adam.remap(&sources);
+    give_fitted_motion(scene, adam.groups());
+    Ok(())
+}
+
+/// Per kernel of the alpha scene `scene`, its spatio-temporal score over `views`
+/// ([`crate::fit::density::prune`]): each view's `Σ_pixels α̂ T` of the kernel (the colour
+/// gradient of a backward from `∂L/∂C = 1`), times the kernel's temporal weight at the
+/// view's time, added in view order: the same bits for any thread count.
+pub fn spacetime_scores(scene: &Scene, views: &[View], render: &RenderOptions) -> Result<Vec<f64>> {
+    let mut slots = view_slots(scene, views.len().max(1));
+    spacetime_scores_in(scene, views, render, &mut slots)
+}
+
+/// [`spacetime_scores`], the views rendered side by side in `slots`.
+fn spacetime_scores_in(
+    scene: &Scene,
+    views: &[View],
+    render: &RenderOptions,
+    slots: &mut [ViewSlot],
+) -> Result<Vec<f64>> {
+    let times: Vec<f64> = views.iter().map(|v| v.time).collect();
+    let spacing = time_spacing(&times);
+    let mut scores = vec![0.0; scene.len()];
+    for group in views.chunks(slots.len()) {
+        let done: Vec<Result<()>> = slots
+            .par_iter_mut()
+            .zip(group)
+            .map(|(slot, view)| slot.contributions(scene, view, render))
+            .collect();
+        for ((slot, view), result) in slots.iter().zip(group).zip(done) {
+            result?;
+            let colour = &slot.context.backward.screen.v_amplitudes;
+            for (p, &k) in slot.context.projected.kernel_from_proj.iter().enumerate() {
+                let k = k as usize;
+                let weight =
+                    temporal_weight(scene.means[k][3], scene.scales[k][3], view.time, spacing);
+                scores[k] += colour[p][0] * weight;
+            }
+        }
+    }
+    Ok(scores)
 }
 
 /// One Adam step of `scene` at `step`, refused when the step's loss `train_loss` or a

@@ -20,6 +20,7 @@
 
 pub mod additive;
 pub mod alpha;
+pub mod prune;
 pub mod shape;
 
 use crate::backward::Gradients;
@@ -28,6 +29,7 @@ use crate::model::scene::Scene;
 
 pub use additive::AdditiveRules;
 pub use alpha::AlphaRules;
+pub use prune::SpacetimePrune;
 pub use shape::ShapeBound;
 
 /// Per-kernel statistics between two rounds, filled by the training loop: every step's
