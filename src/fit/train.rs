@@ -6,8 +6,11 @@
 //! each, accumulates `∂(mean over the batch of the loss)/∂θ` through the backward pass, and takes
 //! one Adam step over the blend's parameter table ([`crate::fit::adam`]) with the scheduled
 //! learning rates: a decaying group's rate at step k of K is
-//! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant). The blend's
-//! density rules ([`crate::fit::density`]) then change the kernels when a round is due.
+//! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant), the
+//! regularisers' gradient ([`crate::fit::regularise`]) added first. The blend's density rules
+//! ([`crate::fit::density`]) then change the kernels when a round is due, and once growth
+//! ends the pruning by score ([`crate::fit::density::prune`]) removes kernels when a round
+//! of it is due.
 //! Every `eval_every` steps and at the last, the mean MSE over the held-out views is
 //! measured.
 //!
@@ -645,27 +648,18 @@ pub fn fit(
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
-        training.regularisers.add_gradient(scene, &mut grads);
-        adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
+        adam_step_checked(&mut adam, scene, &mut grads, (step, train_loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
-            let evaluation = (train, render, &mut slots[..]);
             run_density_rules(
-                rules,
+                (rules, training.prune),
                 (step, steps),
                 scene,
                 &mut stats,
                 &mut adam,
-                evaluation,
+                (train, render, &mut slots[..]),
             )?;
-            if let Some(fraction) = training
-                .prune
-                .and_then(|rule| rule.due(step, rules.growth_ends(steps)))
-            {
-                prune_by_score(fraction, scene, (train, render, &mut slots), &mut adam)?;
-                stats = stats.next_window(scene.len());
-            }
         }
         let heldout_psnr = heldout_psnr_at(
             step,
@@ -695,10 +689,11 @@ pub fn fit(
 }
 
 /// The density rules after step `step` of `steps`: kernels added, split, pruned or their
-/// opacities reset, and Adam's moments and the fitted motion fields made to follow. The
-/// rules may evaluate the scene on the stage's training views (`evaluation`).
+/// opacities reset, and Adam's moments and the fitted motion fields made to follow; then
+/// the pruning by score when a round of it is due. The rules may evaluate the scene on the
+/// stage's training views (`evaluation`).
 fn run_density_rules(
-    rules: &DensityRules,
+    (rules, prune): (&DensityRules, Option<SpacetimePrune>),
     (step, steps): (usize, usize),
     scene: &mut Scene,
     stats: &mut DensityStats,
@@ -714,6 +709,10 @@ fn run_density_rules(
     if let Some(sources) = change.sources {
         adam.remap(&sources);
         give_fitted_motion(scene, adam.groups());
+    }
+    if let Some(fraction) = prune.and_then(|rule| rule.due(step, rules.growth_ends(steps))) {
+        prune_by_score(fraction, scene, (train, render, slots), adam)?;
+        *stats = stats.next_window(scene.len());
     }
     Ok(())
 }
@@ -773,12 +772,13 @@ fn spacetime_scores_in(
     Ok(scores)
 }
 
-/// One Adam step of `scene` at `step`, refused when the step's loss `train_loss` or a
-/// parameter after it leaves the finite numbers (naming the parameter and its rate).
+/// One Adam step of `scene` at `step` on `grads` with the training's regularisers added,
+/// refused when the step's loss `train_loss` or a parameter after it leaves the finite
+/// numbers (naming the parameter and its rate).
 fn adam_step_checked(
     adam: &mut Adam,
     scene: &mut Scene,
-    grads: &Gradients,
+    grads: &mut Gradients,
     (step, train_loss): (usize, f64),
     training: &Training,
 ) -> Result<()> {
@@ -787,6 +787,7 @@ fn adam_step_checked(
             "fitting diverged at step {step}: the loss is {train_loss}; lower the learning rates"
         )));
     }
+    training.regularisers.add_gradient(scene, grads);
     adam.step(scene, grads, step, training.decay(step));
     if let Some(why) = non_finite_parameter(scene, adam.groups()) {
         return Err(Error::Numeric(format!(
