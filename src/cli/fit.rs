@@ -276,6 +276,24 @@ pub struct FitArgs {
     /// that still spans motion gets fitted motion instead of a further split [default: 1].
     #[arg(long, value_name = "N", help_heading = ALPHA)]
     motion_after_splits: Option<u32>,
+    /// Remove this fraction of the kernels, in [0, 1), once growth ends: those of lowest
+    /// spatio-temporal score (each kernel's Σ α·T over the training views' pixels, weighted
+    /// up to 2× for a kernel that lives many frames; 4DGS-1K's criterion; 0: none)
+    /// [default: 0.5].
+    #[arg(long, value_name = "FRACTION", value_parser = super::args::finite, help_heading = ALPHA)]
+    prune_fraction: Option<f64>,
+    /// Spread --prune-fraction over N rounds, --densify-every steps apart, the first when
+    /// growth ends [default: 1].
+    #[arg(long, value_name = "N", help_heading = ALPHA)]
+    prune_rounds: Option<usize>,
+    /// λ of an L1 on the opacities (their mean over the kernels) added to the loss
+    /// (3DGS-MCMC's) [default: 0].
+    #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
+    opacity_regulariser: Option<f64>,
+    /// λ of an L1 on the spatial scales (their mean over the kernels and axes, in box
+    /// diagonals) added to the loss (3DGS-MCMC's) [default: 0].
+    #[arg(long, value_name = "WEIGHT", value_parser = super::args::finite, help_heading = ALPHA)]
+    scale_regulariser: Option<f64>,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -336,6 +354,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
         dssim_weight: args.dssim_weight,
         motion: args.motion,
         motion_after_splits: args.motion_after_splits,
+        prune_fraction: args.prune_fraction,
+        prune_rounds: args.prune_rounds,
+        opacity_regulariser: args.opacity_regulariser,
+        scale_regulariser: args.scale_regulariser,
         opacity_reset_every: args.opacity_reset_every,
         percent_dense: args.percent_dense,
         time_split_fraction: args.time_split_fraction,

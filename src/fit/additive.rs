@@ -147,6 +147,8 @@ impl AdditiveFitOptions {
             window: None,
             shape_bound: ShapeBound::OFF,
             loss: crate::fit::train::TrainingLoss::Mse,
+            prune: None,
+            regularisers: crate::fit::regularise::Regularisers::OFF,
         }
     }
 }

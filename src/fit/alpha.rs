@@ -12,15 +12,18 @@
 //! **SH degree** rises during the run: degree `d` of the scene's SH is its own group, fitted
 //! from step `d · sh_raise_every` (its coefficients start at zero and stay there until then).
 //!
-//! **Density rules**: [`crate::fit::density::alpha`], relative to the same box.
+//! **Density rules**: [`crate::fit::density::alpha`], relative to the same box; after growth,
+//! optionally, pruning by a spatio-temporal score ([`crate::fit::density::prune`]) and,
+//! through the run, regularisers of the opacities and scales ([`crate::fit::regularise`]).
 //!
 //! A step's batch is drawn with the seed `seed ^ 0x5eed`, so that a random start and the
 //! draws of the same seed are independent.
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::density::{AlphaRules, DensityRules, ShapeBound};
+use crate::fit::density::{AlphaRules, DensityRules, ShapeBound, SpacetimePrune};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
+use crate::fit::regularise::Regularisers;
 use crate::fit::train::{EarlyStop, Training, TrainingLoss};
 use crate::model::error::{Error, MAX_QUOTE, Result, cut};
 use crate::model::{Camera, View};
@@ -126,6 +129,15 @@ pub struct AlphaFitOptions {
     pub loss: TrainingLoss,
     /// Which kernels carry fitted SPEC §9 motion ([`MotionFit`]).
     pub motion: MotionFit,
+    /// The fraction of the kernels removed by their spatio-temporal score after growth
+    /// ends ([`crate::fit::density::prune`]; 0: none).
+    pub prune_fraction: f64,
+    /// The rounds that remove `prune_fraction` together, `densify_every` steps apart.
+    pub prune_rounds: usize,
+    /// `λo` of the L1 on the opacities ([`crate::fit::regularise`]; 0: off).
+    pub opacity_regulariser: f64,
+    /// `λs` of the L1 on the spatial scales over the box diagonal (0: off).
+    pub scale_regulariser: f64,
 }
 
 /// Which kernels of an alpha fit carry fitted SPEC §9 motion: an acceleration and an
@@ -269,6 +281,16 @@ impl AlphaFitOptions {
             window: self.window,
             shape_bound: self.shape_bound,
             loss: self.loss,
+            prune: (self.prune_fraction > 0.0).then_some(SpacetimePrune {
+                fraction: self.prune_fraction,
+                rounds: self.prune_rounds,
+                every: self.densify_every,
+            }),
+            regularisers: Regularisers {
+                opacity: self.opacity_regulariser,
+                scale: self.scale_regulariser,
+                diagonal,
+            },
         }
     }
 }

@@ -17,6 +17,7 @@ pub mod hull;
 pub mod init;
 pub mod loss;
 pub mod plan;
+pub mod regularise;
 pub mod rig_start;
 pub mod settings;
 pub mod spread;

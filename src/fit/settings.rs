@@ -20,7 +20,9 @@
 //!   its background fixed at its start);
 //! - **alpha only**: SH, the opacity, rotation and SH rates, the opacity reset, the split
 //!   size (`percent_dense`), the split in time, the coarse stages, the early stop and the
-//!   training loss (`loss`, `dssim_weight`; the latter only with `loss` l1-dssim).
+//!   training loss (`loss`, `dssim_weight`; the latter only with `loss` l1-dssim), the
+//!   pruning by score (`prune_fraction`, `prune_rounds`; the latter only with a fraction)
+//!   and the regularisers (`opacity_regulariser`, `scale_regulariser`).
 //!
 //! The rates' units follow each model's parameters: the alpha fit's spatial rates are
 //! fractions of the cameras' box per step ([`crate::fit::alpha::AlphaRates`]), the
@@ -90,7 +92,7 @@ pub const ADDITIVE_ONLY: [&str; 13] = [
 ];
 
 /// Settings only the alpha fit acts on.
-pub const ALPHA_ONLY: [&str; 17] = [
+pub const ALPHA_ONLY: [&str; 21] = [
     "sh",
     "sh_raise_every",
     "lr_opacity",
@@ -108,6 +110,10 @@ pub const ALPHA_ONLY: [&str; 17] = [
     "dssim_weight",
     "motion",
     "motion_after_splits",
+    "prune_fraction",
+    "prune_rounds",
+    "opacity_regulariser",
+    "scale_regulariser",
 ];
 
 /// Learning rates a caller chose, per group (`None`: the blend's default).
@@ -228,6 +234,15 @@ pub struct FitSettings {
     /// Alpha: with `motion` auto, the splits in time of a kernel's line before it gets
     /// motion.
     pub motion_after_splits: Option<u32>,
+    /// Alpha: the fraction of the kernels pruned by their spatio-temporal score after
+    /// growth ([`crate::fit::density::prune`]).
+    pub prune_fraction: Option<f64>,
+    /// Alpha: the rounds that prune `prune_fraction` together.
+    pub prune_rounds: Option<usize>,
+    /// Alpha: `λo` of the L1 on the opacities ([`crate::fit::regularise`]).
+    pub opacity_regulariser: Option<f64>,
+    /// Alpha: `λs` of the L1 on the spatial scales.
+    pub scale_regulariser: Option<f64>,
 }
 
 /// The choices of which kernels carry fitted SPEC §9 motion, by the name a caller gives
@@ -293,6 +308,10 @@ impl FitSettings {
             self.dssim_weight.is_some(),
             self.motion.is_some(),
             self.motion_after_splits.is_some(),
+            self.prune_fraction.is_some(),
+            self.prune_rounds.is_some(),
+            self.opacity_regulariser.is_some(),
+            self.scale_regulariser.is_some(),
         ];
         let given = |names: &[&'static str], on: &[bool]| {
             names
@@ -475,6 +494,12 @@ impl FitSettings {
                 "`dssim_weight` weighs the D-SSIM term of the `l1-dssim` loss, and this fit's `loss` is mse: add `loss` l1-dssim, or leave `dssim_weight` out",
             ));
         }
+        if self.prune_rounds.is_some() && options.prune_fraction == 0.0 {
+            return Err(Error::setting(
+                &["prune_rounds"],
+                "`prune_rounds` spreads the pruning of `prune_fraction` over rounds, and this fit's `prune_fraction` is 0 (no pruning): give `prune_fraction`, or leave `prune_rounds` out",
+            ));
+        }
         Ok(options)
     }
 
@@ -620,6 +645,10 @@ impl FitSettings {
             window: self.window.unwrap_or(d.window),
             loss: self.training_loss(d.loss),
             motion: self.motion_fit(d.motion),
+            prune_fraction: self.prune_fraction.unwrap_or(d.prune_fraction),
+            prune_rounds: self.prune_rounds.unwrap_or(d.prune_rounds),
+            opacity_regulariser: self.opacity_regulariser.unwrap_or(d.opacity_regulariser),
+            scale_regulariser: self.scale_regulariser.unwrap_or(d.scale_regulariser),
             ..d
         }
     }
@@ -684,6 +713,9 @@ impl FitSettings {
     }
 }
 
+/// Most pruning rounds a fit accepts.
+const MAX_PRUNE_ROUNDS: usize = 100;
+
 /// The alpha options' numbers in range ([`check_fit_numbers`]) and SH a count the model
 /// has.
 fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
@@ -706,10 +738,30 @@ fn validate_alpha(options: &AlphaFitOptions) -> Result<()> {
             ("prune_below", options.prune_opacity),
             ("percent_dense", options.percent_dense),
             ("time_split_fraction", options.time_split_fraction),
+            ("opacity_regulariser", options.opacity_regulariser),
+            ("scale_regulariser", options.scale_regulariser),
         ],
         [options.densify_from, options.densify_until],
         options.final_rate_factor,
     )?;
+    if !(0.0..1.0).contains(&options.prune_fraction) {
+        return Err(Error::setting(
+            &["prune_fraction"],
+            format!(
+                "`prune_fraction` {} must lie in [0, 1) (the share of the kernels removed; 1 would remove them all)",
+                options.prune_fraction
+            ),
+        ));
+    }
+    if !(1..=MAX_PRUNE_ROUNDS).contains(&options.prune_rounds) {
+        return Err(Error::setting(
+            &["prune_rounds"],
+            format!(
+                "`prune_rounds` {} must be a whole number from 1 to {MAX_PRUNE_ROUNDS}",
+                options.prune_rounds
+            ),
+        ));
+    }
     if !crate::model::scene::SH_COUNTS.contains(&options.sh_count) {
         return Err(Error::setting(
             &["sh"],

@@ -6,8 +6,11 @@
 //! each, accumulates `∂(mean over the batch of the loss)/∂θ` through the backward pass, and takes
 //! one Adam step over the blend's parameter table ([`crate::fit::adam`]) with the scheduled
 //! learning rates: a decaying group's rate at step k of K is
-//! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant). The blend's
-//! density rules ([`crate::fit::density`]) then change the kernels when a round is due.
+//! `lr · final_factor^((k-1)/(K-1))` (`final_factor = 1` keeps it constant), the
+//! regularisers' gradient ([`crate::fit::regularise`]) added first. The blend's density rules
+//! ([`crate::fit::density`]) then change the kernels when a round is due, and once growth
+//! ends the pruning by score ([`crate::fit::density::prune`]) removes kernels when a round
+//! of it is due.
 //! Every `eval_every` steps and at the last, the mean MSE over the held-out views is
 //! measured.
 //!
@@ -29,8 +32,10 @@ use rayon::prelude::*;
 use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
 use crate::fit::coarse::{SizeStage, StagedViews};
-use crate::fit::density::{DensityRules, DensityStats, ShapeBound};
+use crate::fit::density::prune::{keep_kernels, kept_after_pruning, temporal_weight, time_spacing};
+use crate::fit::density::{DensityRules, DensityStats, Line, ShapeBound, SpacetimePrune};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
+use crate::fit::regularise::Regularisers;
 use crate::fit::spread;
 use crate::fit::ssim::{L1Dssim, SsimScratch};
 use crate::fit::window::Windows;
@@ -75,6 +80,11 @@ pub struct Training {
     pub shape_bound: ShapeBound,
     /// The per-view loss the gradient is taken of (the reported loss stays the MSE).
     pub loss: TrainingLoss,
+    /// Pruning by the spatio-temporal score after growth ends ([`SpacetimePrune`]); `None`:
+    /// none.
+    pub prune: Option<SpacetimePrune>,
+    /// Regularisers added to each step's gradient ([`Regularisers::OFF`]: none).
+    pub regularisers: Regularisers,
 }
 
 /// The per-view loss a fit's gradient is taken of. Whichever it is, a step's reported
@@ -475,6 +485,20 @@ impl ViewSlot {
         Ok(view_mse(self.context.image(), view))
     }
 
+    /// Renders `view` and runs the backward from `∂L/∂C = 1` on every pixel: each projected
+    /// kernel's colour gradient is then its `Σ_pixels α̂ T` (SPEC §8).
+    fn contributions(&mut self, scene: &Scene, view: &View, options: &RenderOptions) -> Result<()> {
+        self.grads.reset_for_scene(scene);
+        let (camera, tau) = (&view.camera, view.time);
+        self.context
+            .render_for_backward(scene, camera, tau, options)?;
+        self.v_image.clear();
+        self.v_image.resize(3 * camera.pixel_count(), 1.0);
+        self.context
+            .backward(scene, camera, tau, options, &self.v_image, &mut self.grads);
+        Ok(())
+    }
+
     /// Whether the last view rendered here projected some kernel onto its screen.
     fn sees_a_kernel(&self) -> bool {
         !self.context.projected.kernel_from_proj.is_empty()
@@ -620,27 +644,22 @@ pub fn fit(
                 stats.add_view(screen, weight);
             },
         )?;
-        if let Some(rules) = &training.density
-            && rules.fits_motion_where_needed()
-        {
-            stats.keep_motion_to_moving_kernels(&mut grads);
-        }
+        keep_motion_where_fitted(training, &stats, &mut grads);
         if !seen_any && (step == first_epoch || step == steps) {
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
-        adam_step_checked(&mut adam, scene, &grads, (step, train_loss), training)?;
+        adam_step_checked(&mut adam, scene, &mut grads, (step, train_loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
-            let evaluation = (train, render, &mut slots[..]);
             run_density_rules(
-                rules,
+                (rules, training.prune),
                 (step, steps),
                 scene,
                 &mut stats,
                 &mut adam,
-                evaluation,
+                (train, render, &mut slots[..]),
             )?;
         }
         let heldout_psnr = heldout_psnr_at(
@@ -671,10 +690,11 @@ pub fn fit(
 }
 
 /// The density rules after step `step` of `steps`: kernels added, split, pruned or their
-/// opacities reset, and Adam's moments and the fitted motion fields made to follow. The
-/// rules may evaluate the scene on the stage's training views (`evaluation`).
+/// opacities reset, and Adam's moments and the fitted motion fields made to follow; then
+/// the pruning by score when a round of it is due. The rules may evaluate the scene on the
+/// stage's training views (`evaluation`).
 fn run_density_rules(
-    rules: &DensityRules,
+    (rules, prune): (&DensityRules, Option<SpacetimePrune>),
     (step, steps): (usize, usize),
     scene: &mut Scene,
     stats: &mut DensityStats,
@@ -691,15 +711,91 @@ fn run_density_rules(
         adam.remap(&sources);
         give_fitted_motion(scene, adam.groups());
     }
+    if let Some(fraction) = prune.and_then(|rule| rule.due(step, rules.growth_ends(steps))) {
+        let sources = prune_by_score(fraction, scene, (train, render, slots), adam)?;
+        // The kept kernels keep their lines of descent.
+        let lines = sources
+            .iter()
+            .map(|source| source.map_or_else(Line::default, |i| stats.line(i)))
+            .collect();
+        *stats = stats.next_window(lines);
+    }
     Ok(())
 }
 
-/// One Adam step of `scene` at `step`, refused when the step's loss `train_loss` or a
-/// parameter after it leaves the finite numbers (naming the parameter and its rate).
+/// Removes the lowest-scored `fraction` of the kernels of `scene` by their spatio-temporal
+/// score over the stage's training views `train` ([`crate::fit::density::prune`]), and
+/// makes Adam's moments and the fitted motion fields follow; returns, per kernel kept, the
+/// old kernel it was.
+fn prune_by_score(
+    fraction: f64,
+    scene: &mut Scene,
+    (train, render, slots): (&[View], &RenderOptions, &mut [ViewSlot]),
+    adam: &mut Adam,
+) -> Result<Vec<Option<usize>>> {
+    let scores = spacetime_scores_in(scene, train, render, slots)?;
+    let sources = keep_kernels(scene, &kept_after_pruning(&scores, fraction));
+    adam.remap(&sources);
+    give_fitted_motion(scene, adam.groups());
+    Ok(sources)
+}
+
+/// Per kernel of the alpha scene `scene`, its spatio-temporal score over `views`
+/// ([`crate::fit::density::prune`]): each view's `Σ_pixels α̂ T` of the kernel (the colour
+/// gradient of a backward from `∂L/∂C = 1`), times the kernel's temporal weight at the
+/// view's time, added in view order: the same bits for any thread count.
+pub fn spacetime_scores(scene: &Scene, views: &[View], render: &RenderOptions) -> Result<Vec<f64>> {
+    let mut slots = view_slots(scene, views.len().max(1));
+    spacetime_scores_in(scene, views, render, &mut slots)
+}
+
+/// [`spacetime_scores`], the views rendered side by side in `slots`.
+fn spacetime_scores_in(
+    scene: &Scene,
+    views: &[View],
+    render: &RenderOptions,
+    slots: &mut [ViewSlot],
+) -> Result<Vec<f64>> {
+    let times: Vec<f64> = views.iter().map(|v| v.time).collect();
+    let spacing = time_spacing(&times);
+    let mut scores = vec![0.0; scene.len()];
+    for group in views.chunks(slots.len()) {
+        let done: Vec<Result<()>> = slots
+            .par_iter_mut()
+            .zip(group)
+            .map(|(slot, view)| slot.contributions(scene, view, render))
+            .collect();
+        for ((slot, view), result) in slots.iter().zip(group).zip(done) {
+            result?;
+            let colour = &slot.context.backward.screen.v_amplitudes;
+            for (p, &k) in slot.context.projected.kernel_from_proj.iter().enumerate() {
+                let k = k as usize;
+                let weight =
+                    temporal_weight(scene.means[k][3], scene.scales[k][3], view.time, spacing);
+                scores[k] += colour[p][0] * weight;
+            }
+        }
+    }
+    Ok(scores)
+}
+
+/// With motion only where needed ([`DensityRules::fits_motion_where_needed`]), zeroes the
+/// SPEC §9 gradients of the kernels that carry none ([`DensityStats`]' lines); else nothing.
+fn keep_motion_where_fitted(training: &Training, stats: &DensityStats, grads: &mut Gradients) {
+    if let Some(rules) = &training.density
+        && rules.fits_motion_where_needed()
+    {
+        stats.keep_motion_to_moving_kernels(grads);
+    }
+}
+
+/// One Adam step of `scene` at `step` on `grads` with the training's regularisers added,
+/// refused when the step's loss `train_loss` or a parameter after it leaves the finite
+/// numbers (naming the parameter and its rate).
 fn adam_step_checked(
     adam: &mut Adam,
     scene: &mut Scene,
-    grads: &Gradients,
+    grads: &mut Gradients,
     (step, train_loss): (usize, f64),
     training: &Training,
 ) -> Result<()> {
@@ -708,6 +804,7 @@ fn adam_step_checked(
             "fitting diverged at step {step}: the loss is {train_loss}; lower the learning rates"
         )));
     }
+    training.regularisers.add_gradient(scene, grads);
     adam.step(scene, grads, step, training.decay(step));
     if let Some(why) = non_finite_parameter(scene, adam.groups()) {
         return Err(Error::Numeric(format!(

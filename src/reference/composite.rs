@@ -132,6 +132,40 @@ pub fn render_reference_alpha(
     out
 }
 
+/// Per kernel of `scene` (by scene index), its weight `Σ_pixels α̂ T` in the f64 composite
+/// at τ: the `α̂ T` it adds at each pixel before that pixel's stop (0 for kernels culled or
+/// off screen).
+#[must_use]
+pub fn reference_pixel_weights(
+    scene: &Scene,
+    camera: &Camera,
+    tau: f64,
+    options: &RenderOptions,
+) -> Vec<f64> {
+    let kernels = reference_alpha_kernels(scene, camera, tau, options);
+    let mut weights = vec![0.0; scene.len()];
+    for j in 0..camera.height {
+        for i in 0..camera.width {
+            let mut transmittance = 1.0;
+            for alpha_kernel in &kernels {
+                let kernel = &alpha_kernel.kernel;
+                let q = quadratic_form(kernel, i, j);
+                if q > kernel.qmax {
+                    continue;
+                }
+                let alpha = (kernel.opacity * (-0.5 * q).exp()).min(MAX_ALPHA);
+                let next = transmittance * (1.0 - alpha);
+                if next < T_STOP {
+                    break;
+                }
+                weights[kernel.index] += alpha * transmittance;
+                transmittance = next;
+            }
+        }
+    }
+    weights
+}
+
 /// The f64 composite at chosen pixels only (for error estimates on frames too large for
 /// [`render_reference_alpha`]).
 #[must_use]

@@ -896,3 +896,75 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
     eprintln!("held out after 200 steps: {psnr:.2} dB");
     assert!(psnr > 20.0, "{psnr:.2} dB");
 }
+
+/// The spatio-temporal score of pruning ([`splat4d::fit::density::prune`]) on the occluding
+/// scene with its blob made short-lived, against the f64 composite's `Σ α̂ T` per view and
+/// the temporal weight written out: `2 / (1 + tanh(Δ² |p''(τ)|))`.
+#[test]
+fn the_spacetime_score_matches_the_f64_composite_weighted_by_life() {
+    use splat4d::fit::train::spacetime_scores;
+    use splat4d::reference::composite::reference_pixel_weights;
+    let mut scene = occluding_scene();
+    scene.scales[2][3] = 0.15;
+    let (dataset, options) = occluding_dataset(&scene);
+    let views = &dataset.train;
+    let scores = spacetime_scores(&scene, views, &options).unwrap();
+    let mut times: Vec<f64> = views.iter().map(|v| v.time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let spacing = (times[times.len() - 1] - times[0]) / (times.len() - 1) as f64;
+    let mut expected = vec![0.0f64; scene.len()];
+    for view in views {
+        let weights = reference_pixel_weights(&scene, &view.camera, view.time, &options);
+        for (k, w) in weights.iter().enumerate() {
+            let (t, st) = (scene.means[k][3], scene.scales[k][3]);
+            let p = (-0.5 * ((view.time - t) / st).powi(2)).exp();
+            let bend = p * ((view.time - t).powi(2) / st.powi(4) - 1.0 / st.powi(2));
+            expected[k] += w * 2.0 / (1.0 + (spacing * spacing * bend.abs()).tanh());
+        }
+    }
+    eprintln!("scores {scores:?}, f64 {expected:?}");
+    for (k, (fast, exact)) in scores.iter().zip(&expected).enumerate() {
+        assert!(
+            (fast - exact).abs() <= 1e-3 * exact.abs() + 1e-6,
+            "kernel {k}: {fast} against {exact}, |Δ| {}",
+            (fast - exact).abs()
+        );
+    }
+    // The short-lived blob scores below either long-lived slab.
+    assert!(expected[2] < expected[0].min(expected[1]));
+}
+
+/// Pruning half the kernels by their score when growth ends keeps the occluding fit's
+/// held-out PSNR within 1 dB of the unpruned fit's, with about half its kernels.
+#[test]
+fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
+    let scene = occluding_scene();
+    let (dataset, _) = occluding_dataset(&scene);
+    let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
+    let run = |prune_fraction: f64| {
+        let fit_options = splat4d::fit::alpha::AlphaFitOptions {
+            prune_fraction,
+            ..random_start_options()
+        };
+        let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
+        let records = fit(
+            &mut fitted,
+            &dataset.train,
+            &dataset.test,
+            &fit_options.training(&bounds),
+            |_, _| {},
+        )
+        .unwrap();
+        (records.last().unwrap().heldout_psnr.unwrap(), fitted.len())
+    };
+    let (whole, pruned) = (run(0.0), run(0.5));
+    eprintln!("held out: unpruned {whole:?}, pruned by half {pruned:?}");
+    assert!(pruned.0 > whole.0 - 1.0, "{pruned:?} against {whole:?}");
+    assert!(
+        pruned.1 * 10 <= whole.1 * 6,
+        "{} kernels against {}",
+        pruned.1,
+        whole.1
+    );
+}

@@ -131,6 +131,10 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--lr-angular-velocity", "0.01"],
         &["--cutoff", "0.01"],
         &["--dilation", "0.5"],
+        &["--prune-fraction", "0"],
+        &["--prune-rounds", "2"],
+        &["--opacity-regulariser", "0.5"],
+        &["--scale-regulariser", "0.5"],
     ];
     let mut reference: Option<(Vec<u8>, Vec<u8>)> = None;
     for extra in acting {
@@ -149,9 +153,11 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
             reference = Some((scene, log));
         }
     }
-    // The split in time needs kernels that move: a start of the base fit's kernels, each
-    // sent across the box within its σt.
-    let mut moving: serde_json::Value = serde_json::from_slice(&base_scene).unwrap();
+    // The split in time needs kernels that move: a start of the base fit's kernels
+    // unpruned (the rounds grow 5 % of the visible kernels: at least one of 21, none of
+    // 10), each sent across the box within its σt.
+    let (unpruned, _) = fit(dir.path(), "unpruned", &["--prune-fraction", "0"]).unwrap();
+    let mut moving: serde_json::Value = serde_json::from_slice(&unpruned).unwrap();
     for kernel in moving["kernels"].as_array_mut().unwrap() {
         kernel["velocity"] = serde_json::json!([8.0, 0.0, 0.0]);
     }
@@ -204,6 +210,10 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
         &["--lr-acceleration", "0.01"],
         &["--lr-angular-velocity", "0.01"],
         &["--early-stop", "off"],
+        &["--prune-fraction", "0.3"],
+        &["--prune-rounds", "2"],
+        &["--opacity-regulariser", "0.01"],
+        &["--scale-regulariser", "0.01"],
     ] {
         let mut args = vec!["--blend", "additive"];
         args.extend_from_slice(extra);
@@ -214,6 +224,23 @@ fn every_fit_flag_acts_on_the_alpha_fit_or_is_refused_naming_its_blend() {
             "{extra:?}: {error}"
         );
     }
+    // Rounds of no pruning, and a fraction that would remove every kernel.
+    let error = fit(
+        dir.path(),
+        "refused",
+        &["--prune-fraction", "0", "--prune-rounds", "2"],
+    )
+    .expect_err("refused");
+    assert!(
+        error.starts_with("exit Some(2)") && error.contains("--prune-rounds spreads"),
+        "{error}"
+    );
+    let error = fit(dir.path(), "refused", &["--prune-fraction", "1"]).expect_err("refused");
+    assert!(
+        error.starts_with("exit Some(2)")
+            && error.contains("--prune-fraction 1 must lie in [0, 1)"),
+        "{error}"
+    );
     // A start count with a start that has its own.
     let error = fit(dir.path(), "refused", &["--start-kernels", "50"]).expect_err("refused");
     assert!(
@@ -338,6 +365,17 @@ fn an_early_stop_without_heldout_views_is_refused_naming_it() {
     fit(dir.path(), "plain", &[]).expect("the fit without --early-stop");
 }
 
+/// Runs `fit` with `extra` (see [`fit`]) and checks that it is refused with exit status 2,
+/// a message that `says` it, no panic and no scene written.
+fn assert_refused(dir: &Path, extra: &[&str], says: &str) {
+    let error = fit(dir, "refused", extra).expect_err("refused");
+    assert!(
+        error.starts_with("exit Some(2)") && error.contains(says) && !error.contains("panicked"),
+        "{extra:?}: {error}"
+    );
+    assert!(!dir.join("refused.json").exists());
+}
+
 /// `--loss l1-dssim` changes the fit, `--dssim-weight` its weight; the reported loss stays
 /// the MSE (the first step's, before any update, is the same under both losses); the fit
 /// has the same bits on 1 and 3 threads; `--dssim-weight` is refused naming it where it
@@ -386,14 +424,7 @@ fn the_loss_flags_act_and_are_refused_naming_them_where_they_cannot() {
             "--dssim-weight acts on the alpha blend",
         ),
     ] {
-        let error = fit(dir.path(), "refused", extra).expect_err("refused");
-        assert!(
-            error.starts_with("exit Some(2)")
-                && error.contains(says)
-                && !error.contains("panicked"),
-            "{extra:?}: {error}"
-        );
-        assert!(!dir.path().join("refused.json").exists());
+        assert_refused(dir.path(), extra, says);
     }
 }
 
@@ -447,13 +478,6 @@ fn the_motion_and_window_flags_act_and_are_refused_naming_them_where_they_cannot
             "--window acts on the alpha blend",
         ),
     ] {
-        let error = fit(dir.path(), "refused", &extra).expect_err("refused");
-        assert!(
-            error.starts_with("exit Some(2)")
-                && error.contains(says)
-                && !error.contains("panicked"),
-            "{extra:?}: {error}"
-        );
-        assert!(!dir.path().join("refused.json").exists());
+        assert_refused(dir.path(), &extra, says);
     }
 }

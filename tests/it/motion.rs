@@ -585,12 +585,8 @@ fn one_alpha_kernel(kernel: Kernel) -> Scene {
         .unwrap()
 }
 
-/// A ball thrown under gravity (SPEC §9): fitted from a start that knows its launch but not
-/// its fall, the acceleration group alone (every other rate 0, no density rules) finds the
-/// fall: the fitted acceleration is within 3 % of the truth and the training loss falls
-/// below a thousandth of its start.
-#[test]
-fn the_acceleration_group_finds_a_thrown_balls_fall() {
+/// A ball thrown under gravity (SPEC §9): launched along x and z, falling along -y.
+fn thrown_ball() -> Kernel {
     let mut ball = Kernel::new(
         [0.0, 0.1, 0.0, 0.5],
         [0.12, 0.12, 0.12, 10.0],
@@ -598,6 +594,16 @@ fn the_acceleration_group_finds_a_thrown_balls_fall() {
     );
     ball.velocity = [0.4, 0.0, 0.1];
     ball.acceleration = [0.0, -1.6, 0.0];
+    ball
+}
+
+/// A ball thrown under gravity (SPEC §9): fitted from a start that knows its launch but not
+/// its fall, the acceleration group alone (every other rate 0, no density rules) finds the
+/// fall: the fitted acceleration is within 3 % of the truth and the training loss falls
+/// below a thousandth of its start.
+#[test]
+fn the_acceleration_group_finds_a_thrown_balls_fall() {
+    let ball = thrown_ball();
     let truth = one_alpha_kernel(ball);
     let mut start = truth.clone();
     start.accelerations.clear();
@@ -662,13 +668,7 @@ fn the_angular_velocity_group_finds_a_spinning_sticks_turn() {
 /// motion everywhere the plate's acceleration moves too.
 #[test]
 fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
-    let mut ball = Kernel::new(
-        [0.0, 0.1, 0.0, 0.5],
-        [0.12, 0.12, 0.12, 10.0],
-        [0.9, 0.5, 0.2],
-    );
-    ball.velocity = [0.4, 0.0, 0.1];
-    ball.acceleration = [0.0, -1.6, 0.0];
+    let ball = thrown_ball();
     let plate = Kernel::new(
         [0.3, -0.3, 0.0, 0.5],
         [0.15, 0.03, 0.15, 10.0],
@@ -704,6 +704,7 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
             densify_fraction: 1.0,
             densify_threshold: 0.0,
             opacity_reset_every: 0,
+            prune_fraction: 0.0,
             motion,
             ..DEFAULT_ALPHA
         };

@@ -10,7 +10,7 @@
 //! | split | above `min_scale`: spatial σ / 1.6, then cloned | above `percent_dense` of the box: two children ±σ/2 along the largest axis, σ / 1.6 |
 //! | split in time | `st` above `min_time_scale`: two halves `±st/√2` on the path, `st/√2` and `A/√2` each (temporal mean, variance and integral kept) | σt above `time_split_fraction` of the range and moving more than its σ in one σt: two children `±σt/2` on the path, σt / 1.6 each (opacity kept) |
 //! | merge | the same Gaussian within `merge_tolerance` σ, and halves of one path rejoined | — (opaque kernels do not add) |
-//! | prune | peak \|amplitude\| below `prune_below` | opacity below `prune_opacity` |
+//! | prune | peak \|amplitude\| below `prune_below` | opacity below `prune_opacity`; once growth ends, the lowest spatio-temporal scores ([`prune`], called by the training loop) |
 //! | opacity reset | — | every `opacity_reset_every` steps, every opacity to at most `reset_opacity` |
 //!
 //! The additive split in time keeps the pair's integral because additive kernels add; an
@@ -20,6 +20,7 @@
 
 pub mod additive;
 pub mod alpha;
+pub mod prune;
 pub mod shape;
 
 use crate::backward::Gradients;
@@ -28,6 +29,7 @@ use crate::model::scene::Scene;
 
 pub use additive::AdditiveRules;
 pub use alpha::AlphaRules;
+pub use prune::SpacetimePrune;
 pub use shape::ShapeBound;
 
 /// A kernel's line of descent, carried from round to round: how many splits in time made
