@@ -282,15 +282,20 @@ impl Scene {
         };
         scene.reserve(kernels.len());
         for (index, kernel) in kernels.iter().enumerate() {
-            let kernel = kernel.checked(index, origin)?;
-            scene.means.push(kernel.mean);
-            scene.scales.push(kernel.scale);
-            scene.amplitudes.push(kernel.amplitude);
-            scene.rotations.push(kernel.rotation);
-            scene.velocities.push(kernel.velocity);
-            scene.push_motion(kernel.acceleration, kernel.angular_velocity);
+            scene.push_kernel(&kernel.checked(index, origin)?);
         }
         Ok(scene)
+    }
+
+    /// Appends `kernel`'s fields (not the alpha blend's opacity and SH, which the caller
+    /// pushes for an alpha scene).
+    pub fn push_kernel(&mut self, kernel: &Kernel) {
+        self.means.push(kernel.mean);
+        self.scales.push(kernel.scale);
+        self.amplitudes.push(kernel.amplitude);
+        self.rotations.push(kernel.rotation);
+        self.velocities.push(kernel.velocity);
+        self.push_motion(kernel.acceleration, kernel.angular_velocity);
     }
 
     /// Appends the SPEC §9 fields of the kernel just pushed (the last one of

@@ -65,21 +65,25 @@ fn random_start_options() -> splat4d::fit::alpha::AlphaFitOptions {
     }
 }
 
+/// A fit with `options` of `dataset`'s training views (held out: its test views) from a
+/// random start in `bounds`: the fitted scene and every step's record.
+fn fit_from_random_start(
+    dataset: &splat4d::model::Dataset,
+    bounds: &splat4d::fit::init::SpaceTimeBox,
+    options: &splat4d::fit::alpha::AlphaFitOptions,
+) -> (Scene, Vec<splat4d::fit::train::StepRecord>) {
+    let mut fitted = random_alpha_scene(bounds, [0.0; 3], [0.3; 3], options).unwrap();
+    let training = options.training(bounds);
+    let records = fit(&mut fitted, &dataset.train, &dataset.test, &training, |_, _| {}).unwrap();
+    (fitted, records)
+}
+
 #[test]
 fn an_occluding_scene_is_recovered_from_a_random_start() {
     let scene = occluding_scene();
     let (dataset, options) = occluding_dataset(&scene);
     let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
-    let fit_options = random_start_options();
-    let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
-    let records = fit(
-        &mut fitted,
-        &dataset.train,
-        &dataset.test,
-        &fit_options.training(&bounds),
-        |_, _| {},
-    )
-    .unwrap();
+    let (fitted, records) = fit_from_random_start(&dataset, &bounds, &random_start_options());
     let heldout = records.last().unwrap().heldout_psnr.unwrap();
     let mut context = RenderContext::new();
     let train = psnr(evaluate(&fitted, &dataset.train, &options, &mut context).unwrap());
@@ -947,15 +951,7 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
             prune_fraction,
             ..random_start_options()
         };
-        let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
-        let records = fit(
-            &mut fitted,
-            &dataset.train,
-            &dataset.test,
-            &fit_options.training(&bounds),
-            |_, _| {},
-        )
-        .unwrap();
+        let (fitted, records) = fit_from_random_start(&dataset, &bounds, &fit_options);
         (records.last().unwrap().heldout_psnr.unwrap(), fitted.len())
     };
     let (whole, pruned) = (run(0.0), run(0.5));

@@ -125,12 +125,7 @@ pub fn densify_and_prune(
     let mut lines = Vec::new();
     let mut push =
         |kernel: Kernel, (i, line): (usize, Line), source: Option<usize>, next: &mut Scene| {
-            next.means.push(kernel.mean);
-            next.scales.push(kernel.scale);
-            next.amplitudes.push(kernel.amplitude);
-            next.rotations.push(kernel.rotation);
-            next.velocities.push(kernel.velocity);
-            next.push_motion(kernel.acceleration, kernel.angular_velocity);
+            next.push_kernel(&kernel);
             opacities.push(scene.opacities[i]);
             sh.extend_from_slice(scene.sh_of(i));
             sources.push(source);

@@ -104,13 +104,7 @@ pub fn keep_kernels(scene: &mut Scene, keep: &[usize]) -> Vec<Option<usize>> {
         ..Scene::default()
     };
     for &i in keep {
-        let kernel = scene.kernel(i);
-        next.means.push(kernel.mean);
-        next.scales.push(kernel.scale);
-        next.amplitudes.push(kernel.amplitude);
-        next.rotations.push(kernel.rotation);
-        next.velocities.push(kernel.velocity);
-        next.push_motion(kernel.acceleration, kernel.angular_velocity);
+        next.push_kernel(&scene.kernel(i));
         next.opacities.push(scene.opacities[i]);
         next.sh.extend_from_slice(scene.sh_of(i));
     }
