@@ -74,7 +74,14 @@ fn fit_from_random_start(
 ) -> (Scene, Vec<splat4d::fit::train::StepRecord>) {
     let mut fitted = random_alpha_scene(bounds, [0.0; 3], [0.3; 3], options).unwrap();
     let training = options.training(bounds);
-    let records = fit(&mut fitted, &dataset.train, &dataset.test, &training, |_, _| {}).unwrap();
+    let records = fit(
+        &mut fitted,
+        &dataset.train,
+        &dataset.test,
+        &training,
+        |_, _| {},
+    )
+    .unwrap();
     (fitted, records)
 }
 
