@@ -279,7 +279,7 @@ pub struct FitArgs {
     /// Remove this fraction of the kernels, in [0, 1), once growth ends: those of lowest
     /// spatio-temporal score (each kernel's Σ α·T over the training views' pixels, weighted
     /// up to 2× for a kernel that lives many frames; 4DGS-1K's criterion; 0: none)
-    /// [default: 0.5].
+    /// [default: 0.5 where the training views' background is flat, else 0].
     #[arg(long, value_name = "FRACTION", value_parser = super::args::finite, help_heading = ALPHA)]
     prune_fraction: Option<f64>,
     /// Spread --prune-fraction over N rounds, --densify-every steps apart, the first when

@@ -161,7 +161,9 @@ pub const DEFAULT_LR_ANGULAR_VELOCITY: f64 = 1e-3;
 /// kernels, 8–16 % less CPU time, and the held-out PSNR equal or higher in every run (the
 /// D-NeRF-like proxy at 100² 36.64 → 36.64 and 36.12 → 36.28 dB; the occluding data's test
 /// views 37.81 → 37.78 and 36.88 → 37.61 dB, its val views +0.63 and +0.71 dB). 0.8, the
-/// share 4DGS-1K removes, lost 5 dB on the proxy, 0.65 lost 0.3 dB.
+/// share 4DGS-1K removes, lost 5 dB on the proxy, 0.65 lost 0.3 dB. It applies where the
+/// training views' background is flat ([`crate::fit::plan::default_prune_fraction`]): on
+/// the phone-like proxy's photos it lost 2.34 dB.
 pub const DEFAULT_PRUNE_FRACTION: f64 = 0.5;
 
 /// The rounds that remove [`DEFAULT_PRUNE_FRACTION`] together (`--prune-rounds`).

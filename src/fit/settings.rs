@@ -39,7 +39,8 @@ use crate::fit::coarse::CoarseToFine;
 use crate::fit::defaults::{DEFAULT_DSSIM_WEIGHT, DEFAULT_MOTION_AFTER_SPLITS};
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
-    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, fit_blend, prepare_alpha,
+    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, default_prune_fraction, fit_blend,
+    prepare_alpha,
 };
 use crate::fit::ssim::L1Dssim;
 use crate::fit::train::{EarlyStop, LossName, TrainingLoss};
@@ -540,8 +541,19 @@ impl FitSettings {
                         ),
                     ));
                 }
-                prepare_alpha(&options, init, dataset, self.background, origin)
-                    .map(|ready| ready.record_data(dataset))
+                let options = AlphaFitOptions {
+                    prune_fraction: self
+                        .prune_fraction
+                        .unwrap_or_else(|| default_prune_fraction(&dataset.train, self.background)),
+                    ..options
+                };
+                let mut ready = prepare_alpha(&options, init, dataset, self.background, origin)?;
+                if self.prune_fraction.is_none() && options.prune_fraction == 0.0 {
+                    ready.notes.push(
+                        "no pruning by score: the photos' background is not flat, so every kernel carries part of the picture (give `prune_fraction` to prune)".into(),
+                    );
+                }
+                Ok(ready.record_data(dataset))
             }
             Blend::Additive => {
                 let plan = self.additive_plan(why)?;

@@ -971,3 +971,29 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
         whole.1
     );
 }
+
+/// The pruning by score's default share follows the data: half the kernels where the views'
+/// background is flat (the occluding data over black), none where the photos are textured
+/// to their borders (the same views with a checkered backdrop painted behind every pixel
+/// the scene leaves black).
+#[test]
+fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos() {
+    use splat4d::fit::plan::{DEFAULT_PRUNE_FRACTION, default_prune_fraction};
+    let (dataset, _) = occluding_dataset(&occluding_scene());
+    assert_eq!(
+        default_prune_fraction(&dataset.train, None),
+        DEFAULT_PRUNE_FRACTION
+    );
+    let mut photos = dataset.train.clone();
+    for view in &mut photos {
+        let image = std::sync::Arc::make_mut(&mut view.image);
+        let width = image.width as usize;
+        for (p, pixel) in image.pixels.chunks_mut(3).enumerate() {
+            if pixel.iter().all(|&v| v == 0.0) {
+                let checker = ((p % width) / 4 + (p / width) / 4) % 2;
+                pixel.copy_from_slice(&[0.2 + 0.5 * checker as f32, 0.4, 0.3]);
+            }
+        }
+    }
+    assert_eq!(default_prune_fraction(&photos, None), 0.0);
+}
