@@ -495,13 +495,62 @@ impl FitSettings {
                 "`dssim_weight` weighs the D-SSIM term of the `l1-dssim` loss, and this fit's `loss` is mse: add `loss` l1-dssim, or leave `dssim_weight` out",
             ));
         }
-        if self.prune_rounds.is_some() && options.prune_fraction == 0.0 {
+        self.check_prune_rounds(options.prune_fraction)?;
+        Ok(options)
+    }
+
+    /// An error naming `prune_rounds` when it is chosen and the fit's pruning share
+    /// `prune_fraction` is 0 (no pruning to spread), or `Ok`.
+    fn check_prune_rounds(&self, prune_fraction: f64) -> Result<()> {
+        if self.prune_rounds.is_some() && prune_fraction == 0.0 {
             return Err(Error::setting(
                 &["prune_rounds"],
                 "`prune_rounds` spreads the pruning of `prune_fraction` over rounds, and this fit's `prune_fraction` is 0 (no pruning): give `prune_fraction`, or leave `prune_rounds` out",
             ));
         }
-        Ok(options)
+        Ok(())
+    }
+
+    /// The alpha fit's `options` for `dataset` (its training frames from `origin`): the
+    /// pruning share where the caller gave none ([`default_prune_fraction`]), and every
+    /// chosen setting that the data leaves without effect refused by name: `early_stop`
+    /// without held-out views, a `window` that cuts no training view, `prune_rounds` where
+    /// the data's pruning share is 0.
+    fn alpha_options_for(
+        &self,
+        options: AlphaFitOptions,
+        dataset: &Dataset,
+        origin: &str,
+    ) -> Result<AlphaFitOptions> {
+        if matches!(self.early_stop, Some(Some(_)))
+            && dataset.val.is_empty()
+            && dataset.test.is_empty()
+        {
+            return Err(Error::setting(
+                &["early_stop"],
+                format!(
+                    "{origin}: `early_stop` reads the held-out PSNR, and the dataset has no `val` or `test` views: give a dataset with held-out views, or leave `early_stop` out"
+                ),
+            ));
+        }
+        if let Some(Some(side)) = self.window
+            && let Some(([1, 1], _)) = crate::fit::window::finest_grid(side, &dataset.train)
+        {
+            return Err(Error::setting(
+                &["window"],
+                format!(
+                    "{origin}: `window` {side} cuts only views of 1.5×{side} pixels or more on a side, and no training view is that large, so every step would fit whole views: give a smaller side, or `window` off"
+                ),
+            ));
+        }
+        let prune_fraction = self
+            .prune_fraction
+            .unwrap_or_else(|| default_prune_fraction(&dataset.train, self.background));
+        self.check_prune_rounds(prune_fraction)?;
+        Ok(AlphaFitOptions {
+            prune_fraction,
+            ..options
+        })
     }
 
     /// The fit of `dataset` from `init` (named `init_name`), ready to run: the blend chosen
@@ -520,33 +569,7 @@ impl FitSettings {
             Blend::Alpha => {
                 let options = self.alpha_options(why)?;
                 self.check_start(blend, &init, init_name)?;
-                if matches!(self.early_stop, Some(Some(_)))
-                    && dataset.val.is_empty()
-                    && dataset.test.is_empty()
-                {
-                    return Err(Error::setting(
-                        &["early_stop"],
-                        format!(
-                            "{origin}: `early_stop` reads the held-out PSNR, and the dataset has no `val` or `test` views: give a dataset with held-out views, or leave `early_stop` out"
-                        ),
-                    ));
-                }
-                if let Some(Some(side)) = self.window
-                    && let Some(([1, 1], _)) = crate::fit::window::finest_grid(side, &dataset.train)
-                {
-                    return Err(Error::setting(
-                        &["window"],
-                        format!(
-                            "{origin}: `window` {side} cuts only views of 1.5×{side} pixels or more on a side, and no training view is that large, so every step would fit whole views: give a smaller side, or `window` off"
-                        ),
-                    ));
-                }
-                let options = AlphaFitOptions {
-                    prune_fraction: self
-                        .prune_fraction
-                        .unwrap_or_else(|| default_prune_fraction(&dataset.train, self.background)),
-                    ..options
-                };
+                let options = self.alpha_options_for(options, dataset, origin)?;
                 let mut ready = prepare_alpha(&options, init, dataset, self.background, origin)?;
                 if self.prune_fraction.is_none() && options.prune_fraction == 0.0 {
                     ready.notes.push(

@@ -65,20 +65,20 @@ fn random_start_options() -> splat4d::fit::alpha::AlphaFitOptions {
     }
 }
 
-/// A fit with `options` of `dataset`'s training views (held out: its test views) from a
-/// random start in `bounds`: the fitted scene and every step's record.
+/// A fit of `dataset`'s training views (held out: its test views) as `training` says, from
+/// a random start in `bounds` made with `options`: the fitted scene and every step's record.
 fn fit_from_random_start(
     dataset: &splat4d::model::Dataset,
     bounds: &splat4d::fit::init::SpaceTimeBox,
     options: &splat4d::fit::alpha::AlphaFitOptions,
+    training: &splat4d::fit::train::Training,
 ) -> (Scene, Vec<splat4d::fit::train::StepRecord>) {
     let mut fitted = random_alpha_scene(bounds, [0.0; 3], [0.3; 3], options).unwrap();
-    let training = options.training(bounds);
     let records = fit(
         &mut fitted,
         &dataset.train,
         &dataset.test,
-        &training,
+        training,
         |_, _| {},
     )
     .unwrap();
@@ -90,7 +90,13 @@ fn an_occluding_scene_is_recovered_from_a_random_start() {
     let scene = occluding_scene();
     let (dataset, options) = occluding_dataset(&scene);
     let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
-    let (fitted, records) = fit_from_random_start(&dataset, &bounds, &random_start_options());
+    let fit_options = random_start_options();
+    let (fitted, records) = fit_from_random_start(
+        &dataset,
+        &bounds,
+        &fit_options,
+        &fit_options.training(&bounds),
+    );
     let heldout = records.last().unwrap().heldout_psnr.unwrap();
     let mut context = RenderContext::new();
     let train = psnr(evaluate(&fitted, &dataset.train, &options, &mut context).unwrap());
@@ -395,20 +401,12 @@ fn windows_fit_the_occluding_scene_as_whole_views_do() {
     let bounds = alpha_bounds(&dataset.train, "<dataset>").unwrap();
     let fit_options = random_start_options();
     let heldout_psnr = |window: Option<u32>, batch_size: usize| {
-        let mut fitted = random_alpha_scene(&bounds, [0.0; 3], [0.3; 3], &fit_options).unwrap();
         let training = splat4d::fit::train::Training {
             window,
             batch_size,
             ..fit_options.training(&bounds)
         };
-        let records = fit(
-            &mut fitted,
-            &dataset.train,
-            &dataset.test,
-            &training,
-            |_, _| {},
-        )
-        .unwrap();
+        let (_, records) = fit_from_random_start(&dataset, &bounds, &fit_options, &training);
         records.last().unwrap().heldout_psnr.unwrap()
     };
     let (whole, windows) = (heldout_psnr(None, 4), heldout_psnr(Some(20), 16));
@@ -958,7 +956,8 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
             prune_fraction,
             ..random_start_options()
         };
-        let (fitted, records) = fit_from_random_start(&dataset, &bounds, &fit_options);
+        let training = fit_options.training(&bounds);
+        let (fitted, records) = fit_from_random_start(&dataset, &bounds, &fit_options, &training);
         (records.last().unwrap().heldout_psnr.unwrap(), fitted.len())
     };
     let (whole, pruned) = (run(0.0), run(0.5));
@@ -975,7 +974,7 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
 /// The pruning by score's default share follows the data: half the kernels where the views'
 /// background is flat (the occluding data over black), none where the photos are textured
 /// to their borders (the same views with a checkered backdrop painted behind every pixel
-/// the scene leaves black).
+/// the scene leaves black), where `prune_rounds` is then refused.
 #[test]
 fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos() {
     use splat4d::fit::plan::{DEFAULT_PRUNE_FRACTION, default_prune_fraction};
@@ -996,4 +995,28 @@ fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos
         }
     }
     assert_eq!(default_prune_fraction(&photos, None), 0.0);
+    // Where the data's share is 0, a chosen `prune_rounds` has nothing to spread: refused
+    // by name before any work.
+    let photos = splat4d::model::Dataset {
+        train: photos,
+        ..dataset
+    };
+    let settings = splat4d::fit::settings::FitSettings {
+        prune_rounds: Some(2),
+        ..Default::default()
+    };
+    let Err(error) = settings.prepare(
+        None,
+        splat4d::fit::plan::Init::Auto,
+        "auto",
+        &photos,
+        "<photos>",
+    ) else {
+        panic!("prune_rounds was not refused");
+    };
+    let error = error.to_string();
+    assert!(
+        error.contains("`prune_rounds` spreads the pruning"),
+        "{error}"
+    );
 }
