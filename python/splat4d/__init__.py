@@ -197,7 +197,10 @@ def fit(
     """Fits a scene to the dataset folder ``views``, as ``splat4d fit --views`` does, with the
     same plan and defaults: each keyword option is one of its flags (``--lr-mean`` is
     ``lr_mean``, ``--box`` is ``box``; ``splat4d help fit`` and ``docs/commands.md`` list
-    them); an option the chosen blend does not use is refused by name.
+    them, all but ``--views``, ``--out`` and ``--max-memory``), taking what the flag takes:
+    its text, or a number, a list of numbers, ``True`` for a switch, ``None`` for the
+    default. A value the flag refuses, and an option the fit cannot act on (another blend's,
+    ``window`` larger than every view, …), raise the command line's ``UsageError`` naming it.
 
     ``progress`` is called after every step with ``{"step", "steps", "seconds", "loss",
     "heldout_psnr", "kernels", "seconds_left"}``; an exception it raises (or Ctrl-C) stops the fit and is

@@ -1,6 +1,7 @@
 //! Datasets and fits from Python: `load_dataset` (a dataset folder's views as cameras,
 //! times and images) and `fit` (the command line's `splat4d fit`, its options as keyword
-//! arguments named like its flags, the same defaults: [`splat4d::fit::settings`]).
+//! arguments named like its flags, set by the library's one definition of them with the
+//! same values, defaults and refusals: [`splat4d::tasks::fit_options`]).
 //!
 //! A fit runs with the GIL released; each step hands its record to the progress callback
 //! (and checks for Ctrl-C). An exception there stops the fit at that step and is raised.
@@ -9,18 +10,18 @@ use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::path::PathBuf;
 
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
-use splat4d::fit::settings::FitSettings;
+use pyo3::types::{PyDict, PyList, PyString};
+use splat4d::Error;
 use splat4d::fit::train::StepRecord;
-use splat4d::io::dataset::{DatasetOptions, MAX_DOWNSCALE, load_dataset as read_dataset};
+use splat4d::io::dataset::{DatasetOptions, load_dataset as read_dataset};
 use splat4d::io::scene_file::load_scene_as_stored;
 use splat4d::model::View;
 use splat4d::tasks::fit::{FitProgress, FitRequest, fit_dataset};
-use splat4d::{Blend, Error};
+use splat4d::tasks::fit_options::{FIT_OPTIONS, OptionValue};
 
 use crate::arrays::owned_array;
 use crate::camera::Camera;
-use crate::errors::{lib, to_py, usage};
+use crate::errors::{lib, to_py};
 use crate::scene::Scene;
 
 /// A view as a dict: its camera, time, image `(H, W, 3)` float32, name and loss weights
@@ -84,254 +85,71 @@ pub fn load_dataset<'py>(
 }
 
 fn check_downscale(py: Python<'_>, downscale: u32) -> PyResult<()> {
-    if (1..=MAX_DOWNSCALE).contains(&downscale) {
-        return Ok(());
-    }
-    Err(to_py(
-        py,
-        Error::setting(
-            &["downscale"],
-            format!("`downscale` {downscale} must be between 1 and {MAX_DOWNSCALE}"),
-        ),
-    ))
+    lib(py, splat4d::tasks::fit_options::check_downscale(downscale))
 }
 
-/// The names `fit` takes as keyword options: the command line's flags (`--lr-mean` is
-/// `lr_mean`), which the library's messages name.
-pub const OPTIONS: [&str; 53] = [
-    "init",
-    "blend",
-    "downscale",
-    "strict",
-    "allow_outside_images",
-    "log",
-    "threads",
-    "dilation",
-    "cutoff",
-    "exp",
-    "steps",
-    "batch",
-    "start_kernels",
-    "max_kernels",
-    "eval_every",
-    "seed",
-    "background",
-    "lr_mean",
-    "lr_time",
-    "lr_velocity",
-    "lr_scale",
-    "lr_amplitude",
-    "lr_background",
-    "lr_opacity",
-    "lr_rotation",
-    "lr_sh",
-    "lr_final",
-    "densify_every",
-    "densify_from",
-    "densify_until",
-    "densify_threshold",
-    "max_growth",
-    "prune_below",
-    "freeze_mean",
-    "freeze_time",
-    "freeze_amplitude",
-    "freeze_background",
-    "mode",
-    "fit_velocity",
-    "fit_scale",
-    "adaptive",
-    "min_improvement",
-    "merge_tolerance",
-    "min_scale",
-    "box",
-    "time_range",
-    "init_scale",
-    "init_amplitude",
-    "sh",
-    "sh_raise_every",
-    "opacity_reset_every",
-    "percent_dense",
-    "time_split_fraction",
-];
-
-/// One option's value, `None` when given as `None`.
-fn value<'py, T: FromPyObjectOwned<'py>>(
-    value: &Bound<'py, PyAny>,
-    name: &'static str,
-) -> PyResult<Option<T>> {
-    if value.is_none() {
-        return Ok(None);
-    }
-    value.extract::<T>().map(Some).map_err(|e| {
-        let e: PyErr = e.into();
-        to_py(
-            value.py(),
-            Error::setting(&[name], format!("`{name}`: {}", e.value(value.py()))),
-        )
-    })
+/// An option's value from Python, owned: [`OptionValue`] borrows it.
+enum Given {
+    Switch(bool),
+    Text(String),
+    List(Vec<String>),
 }
 
-/// A finite number (NaN and ±∞ are refused, as the command line refuses them).
-fn number(v: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Option<f64>> {
-    let x = value::<f64>(v, name)?;
-    match x {
-        Some(x) if !x.is_finite() => Err(to_py(
-            v.py(),
-            Error::setting(&[name], format!("`{name}` {x} is not finite")),
-        )),
-        _ => Ok(x),
+impl Given {
+    fn value(&self) -> OptionValue<'_> {
+        match self {
+            Given::Switch(on) => OptionValue::Switch(*on),
+            Given::Text(text) => OptionValue::Text(text),
+            Given::List(items) => OptionValue::List(items),
+        }
     }
 }
 
-/// Finite numbers, `K` of them.
-fn numbers<const K: usize>(v: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Option<[f64; K]>> {
-    let x = value::<[f64; K]>(v, name)?;
-    if let Some(x) = x
-        && !x.iter().all(|v| v.is_finite())
-    {
-        return Err(to_py(
-            v.py(),
-            Error::setting(&[name], format!("`{name}` {x:?} is not finite")),
-        ));
+/// A Python value as an option's: `True`/`False` a switch's state; a string, or a path,
+/// the text its flag takes; a list, tuple or array a list's numbers; any other value
+/// (a number) as `str()` writes it, which Python writes so that it reads back the same
+/// (`repr` of a float, the digits of an int).
+fn given(v: &Bound<'_, PyAny>) -> PyResult<Given> {
+    if let Ok(on) = v.extract::<bool>() {
+        return Ok(Given::Switch(on));
     }
-    Ok(x)
+    if let Ok(text) = v.cast::<PyString>() {
+        return Ok(Given::Text(text.to_cow()?.into_owned()));
+    }
+    if v.hasattr("__fspath__")? {
+        let path = v.py().import("os")?.call_method1("fspath", (v,))?;
+        return Ok(Given::Text(path.str()?.to_cow()?.into_owned()));
+    }
+    // A list, a tuple, an array (a 0-d array or a number does not iterate).
+    if let Ok(items) = v.try_iter() {
+        let items = items
+            .map(|item| Ok(item?.str()?.to_cow()?.into_owned()))
+            .collect::<PyResult<_>>()?;
+        return Ok(Given::List(items));
+    }
+    Ok(Given::Text(v.str()?.to_cow()?.into_owned()))
 }
 
-fn flag(v: &Bound<'_, PyAny>, name: &'static str) -> PyResult<bool> {
-    Ok(value::<bool>(v, name)?.unwrap_or(false))
-}
-
-/// A fit's request from its keyword options (the others as the command line's defaults).
+/// A fit's request from its keyword options (the others at the command line's defaults):
+/// each set as the library sets a named option ([`FitRequest::set`]).
 fn request(
     py: Python<'_>,
     views: PathBuf,
     out: PathBuf,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<FitRequest> {
-    let mut s = FitSettings::default();
-    let mut request = FitRequest {
-        views,
-        downscale: 1,
-        strict: false,
-        allow_outside_images: false,
-        init: "auto".into(),
-        settings: FitSettings::default(),
-        blend: None,
-        out,
-        log: None,
-        threads: None,
-        view: None,
-        frames: None,
-        fps: None,
-    };
+    let mut request = FitRequest::new(views, out);
     for (key, v) in options.into_iter().flat_map(|d| d.iter()) {
         let key: String = key.extract()?;
-        let Some(&name) = OPTIONS.iter().find(|n| **n == key) else {
-            return Err(usage(
-                py,
-                format!(
-                    "fit: no option `{key}` (the options are the command line's flags: {})",
-                    OPTIONS.join(", ")
-                ),
-            ));
+        let given = match v.is_none() {
+            // `None`: the option's default (an unknown name is still refused).
+            true if FIT_OPTIONS.contains(&key.as_str()) => continue,
+            true => Given::Switch(false),
+            false => given(&v)?,
         };
-        let v = &v;
-        match name {
-            "init" => request.init = value::<String>(v, name)?.unwrap_or_else(|| "auto".into()),
-            "blend" => {
-                request.blend = match value::<String>(v, name)?.as_deref() {
-                    None | Some("auto") => None,
-                    Some(text) => Some(text.parse::<Blend>().map_err(|e| {
-                        to_py(py, Error::setting(&["blend"], format!("`blend`: {e}")))
-                    })?),
-                }
-            }
-            "downscale" => {
-                request.downscale = value::<u32>(v, name)?.unwrap_or(1);
-                check_downscale(py, request.downscale)?;
-            }
-            "strict" => request.strict = flag(v, name)?,
-            "allow_outside_images" => request.allow_outside_images = flag(v, name)?,
-            "log" => request.log = value::<PathBuf>(v, name)?,
-            "threads" => request.threads = value::<usize>(v, name)?,
-            "dilation" => s.render.dilation = number(v, name)?.unwrap_or(s.render.dilation),
-            "cutoff" => s.render.cutoff = number(v, name)?.unwrap_or(s.render.cutoff),
-            "exp" => {
-                if let Some(text) = value::<String>(v, name)? {
-                    s.render.exp = text.parse().map_err(|e: String| {
-                        to_py(py, Error::setting(&["exp"], format!("`exp`: {e}")))
-                    })?;
-                }
-            }
-            _ => setting(py, &mut s, name, v)?,
-        }
+        lib(py, request.set(&key, given.value()))?;
     }
-    request.settings = s;
     Ok(request)
-}
-
-/// Sets the [`FitSettings`] option `name` (every option but the request's own).
-fn setting(
-    py: Python<'_>,
-    s: &mut FitSettings,
-    name: &'static str,
-    v: &Bound<'_, PyAny>,
-) -> PyResult<()> {
-    let r = &mut s.rates;
-    match name {
-        "steps" => s.steps = value(v, name)?,
-        "batch" => s.batch = value(v, name)?,
-        "start_kernels" => s.start_kernels = value(v, name)?,
-        "max_kernels" => s.max_kernels = value(v, name)?,
-        "eval_every" => s.eval_every = value(v, name)?,
-        "seed" => s.seed = value(v, name)?,
-        "background" => s.background = numbers::<3>(v, name)?,
-        "lr_mean" => r.mean = number(v, name)?,
-        "lr_time" => r.time = number(v, name)?,
-        "lr_velocity" => r.velocity = number(v, name)?,
-        "lr_scale" => r.scale = number(v, name)?,
-        "lr_amplitude" => r.amplitude = number(v, name)?,
-        "lr_background" => r.background = number(v, name)?,
-        "lr_opacity" => r.opacity = number(v, name)?,
-        "lr_rotation" => r.rotation = number(v, name)?,
-        "lr_sh" => r.sh = number(v, name)?,
-        "lr_final" => s.lr_final = number(v, name)?,
-        "densify_every" => s.densify_every = value(v, name)?,
-        "densify_from" => s.densify_from = number(v, name)?,
-        "densify_until" => s.densify_until = number(v, name)?,
-        "densify_threshold" => s.densify_threshold = number(v, name)?,
-        "max_growth" => s.max_growth = number(v, name)?,
-        "prune_below" => s.prune_below = number(v, name)?,
-        "freeze_mean" => s.freeze_mean = flag(v, name)?,
-        "freeze_time" => s.freeze_time = flag(v, name)?,
-        "freeze_amplitude" => s.freeze_amplitude = flag(v, name)?,
-        "freeze_background" => s.freeze_background = flag(v, name)?,
-        "mode" => {
-            s.mode = match value::<String>(v, name)? {
-                None => None,
-                Some(text) => Some(text.parse().map_err(|e: String| {
-                    to_py(py, Error::setting(&["mode"], format!("`mode`: {e}")))
-                })?),
-            }
-        }
-        "fit_velocity" => s.fit_velocity = flag(v, name)?,
-        "fit_scale" => s.fit_scale = flag(v, name)?,
-        "adaptive" => s.adaptive = flag(v, name)?,
-        "min_improvement" => s.min_improvement = number(v, name)?,
-        "merge_tolerance" => s.merge_tolerance = number(v, name)?,
-        "min_scale" => s.min_scale = number(v, name)?,
-        "box" => s.bounds = numbers::<6>(v, name)?,
-        "time_range" => s.time_range = numbers::<2>(v, name)?,
-        "init_scale" => s.init_scale = numbers::<4>(v, name)?,
-        "init_amplitude" => s.init_amplitude = number(v, name)?,
-        "sh" => s.sh = value(v, name)?,
-        "sh_raise_every" => s.sh_raise_every = value(v, name)?,
-        "opacity_reset_every" => s.opacity_reset_every = value(v, name)?,
-        "percent_dense" => s.percent_dense = number(v, name)?,
-        "time_split_fraction" => s.time_split_fraction = number(v, name)?,
-        _ => unreachable!("every name of OPTIONS has its arm"),
-    }
-    Ok(())
 }
 
 /// What unwinds out of a fit whose progress callback raised (or saw Ctrl-C).

@@ -37,6 +37,9 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(image::load_image, m)?)?;
     m.add_function(wrap_pyfunction!(fit::load_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(fit::fit, m)?)?;
-    m.add("FIT_OPTIONS", fit::OPTIONS.to_vec())?;
+    m.add(
+        "FIT_OPTIONS",
+        splat4d::tasks::fit_options::FIT_OPTIONS.to_vec(),
+    )?;
     Ok(())
 }

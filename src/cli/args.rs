@@ -2,8 +2,6 @@
 
 use std::path::PathBuf;
 
-use splat4d::fit::coarse::CoarseToFine;
-use splat4d::fit::defaults::{DEFAULT_COARSE_ENDS, DEFAULT_EARLY_STOP};
 use splat4d::fit::train::EarlyStop;
 use splat4d::render::{DEFAULT_CUTOFF, DEFAULT_DILATION, RenderOptions};
 use splat4d::simd::ExpMode;
@@ -80,88 +78,34 @@ impl RenderFlags {
     }
 }
 
-/// A finite number (NaN and ±∞ are refused when the flags are read, before any work).
+/// A finite number (NaN and ±∞ are refused when the flags are read, before any work): the
+/// library's parser of a fit's options ([`splat4d::tasks::fit_options::finite`]).
 pub fn finite(text: &str) -> Result<f64, String> {
-    match text.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        Ok(v) => Err(format!("{v} is not finite")),
-        Err(e) => Err(format!("`{text}`: {e}")),
-    }
-}
-
-/// `off`, or the shorter side (pixels, ≥ 1) a coarse stage keeps: the default stages'
-/// ends ([`splat4d::fit::defaults::DEFAULT_COARSE_ENDS`]) with that side.
-pub fn coarse_to_fine(text: &str) -> Result<CoarseToFine, String> {
-    let text = text.trim();
-    if text == "off" {
-        return Ok(CoarseToFine::Off);
-    }
-    match text.parse::<u32>() {
-        Ok(min_side) if min_side >= 1 => Ok(CoarseToFine::Auto {
-            min_side,
-            ends: DEFAULT_COARSE_ENDS,
-        }),
-        _ => Err(format!(
-            "`{text}`: give `off` or the shorter side in pixels (an integer ≥ 1) a coarse stage keeps"
-        )),
-    }
+    splat4d::tasks::fit_options::finite(text)
 }
 
 /// What `--window` chose: a side, or none (`off`).
 #[derive(Clone, Copy, Debug)]
 pub struct WindowChoice(pub Option<u32>);
 
-/// `off`, or a window's largest side in pixels (an integer ≥ 16, a tile).
+/// `off`, or a window's largest side ([`splat4d::tasks::fit_options::window`]).
 pub fn window(text: &str) -> Result<WindowChoice, String> {
-    let text = text.trim();
-    if text == "off" {
-        return Ok(WindowChoice(None));
-    }
-    match text.parse::<u32>() {
-        Ok(side) if side >= 16 => Ok(WindowChoice(Some(side))),
-        _ => Err(format!(
-            "`{text}`: give `off` or a window side in pixels (an integer ≥ 16)"
-        )),
-    }
+    splat4d::tasks::fit_options::window(text).map(WindowChoice)
 }
 
 /// What `--early-stop` chose: a rule, or none (`off`).
 #[derive(Clone, Copy, Debug)]
 pub struct EarlyStopChoice(pub Option<EarlyStop>);
 
-/// `off`, or the fraction of the steps (in (0, 1]) without a gain that ends a fit, with
-/// the default gain ([`splat4d::fit::defaults::DEFAULT_EARLY_STOP`]).
+/// `off`, or the fraction of the steps without a gain that ends a fit
+/// ([`splat4d::tasks::fit_options::early_stop`]).
 pub fn early_stop(text: &str) -> Result<EarlyStopChoice, String> {
-    let text = text.trim();
-    if text == "off" {
-        return Ok(EarlyStopChoice(None));
-    }
-    match text.parse::<f64>() {
-        Ok(flat_fraction) if flat_fraction > 0.0 && flat_fraction <= 1.0 => {
-            Ok(EarlyStopChoice(Some(EarlyStop {
-                flat_fraction,
-                ..DEFAULT_EARLY_STOP
-            })))
-        }
-        _ => Err(format!(
-            "`{text}`: give `off` or a fraction of the steps in (0, 1]"
-        )),
-    }
+    splat4d::tasks::fit_options::early_stop(text).map(EarlyStopChoice)
 }
 
-/// `N` comma-separated finite numbers.
+/// `N` comma-separated finite numbers ([`splat4d::tasks::fit_options::numbers`]).
 pub fn parse_list<const N: usize>(text: &str) -> Result<[f64; N], String> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("`{v}`: {e}")))
-        .collect::<Result<_, _>>()?;
-    let array: [f64; N] = values
-        .try_into()
-        .map_err(|v: Vec<f64>| format!("expected {N} comma-separated numbers, got {}", v.len()))?;
-    match array.iter().find(|v| !v.is_finite()) {
-        Some(v) => Err(format!("{v} is not finite")),
-        None => Ok(array),
-    }
+    splat4d::tasks::fit_options::numbers(text)
 }
 
 /// A comma-separated list of times.

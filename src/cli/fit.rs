@@ -4,13 +4,13 @@
 
 use std::path::PathBuf;
 
-use splat4d::Blend;
 use splat4d::Result;
 use splat4d::fit::additive::FitMode;
 use splat4d::fit::coarse::CoarseToFine;
 use splat4d::fit::settings::{FitSettings, MotionName, RateSettings};
 use splat4d::fit::train::LossName;
 use splat4d::tasks::fit::{FitRequest, fit_dataset};
+use splat4d::tasks::fit_options::blend_choice;
 
 use super::args::{EarlyStopChoice, RenderFlags, WindowChoice, parse_list};
 
@@ -244,7 +244,7 @@ pub struct FitArgs {
     /// Fit downscaled views first: at 1/4 size until 30 % of the steps and 1/2 until 60 %,
     /// each only where every training view keeps at least SIDE pixels on its shorter side;
     /// `off`: every step at full size [default: 100].
-    #[arg(long, value_name = "SIDE|off", value_parser = super::args::coarse_to_fine, help_heading = ALPHA)]
+    #[arg(long, value_name = "SIDE|off", value_parser = splat4d::tasks::fit_options::coarse_to_fine, help_heading = ALPHA)]
     coarse_to_fine: Option<CoarseToFine>,
     /// Stop when the held-out PSNR has not risen by 0.05 dB over this fraction of the steps,
     /// once no more kernels are added (0.15 was measured); `off`: every step runs [default:
@@ -296,11 +296,10 @@ pub struct FitArgs {
     scale_regulariser: Option<f64>,
 }
 
-pub fn run(args: &FitArgs) -> Result<()> {
-    let blend = match args.blend.as_str() {
-        "auto" => None,
-        other => Some(other.parse::<Blend>().map_err(splat4d::Error::Usage)?),
-    };
+/// The fit request of `args` (the flags mapped onto the library's fields, the blend read as
+/// [`blend_choice`] reads the `blend` option).
+fn request(args: &FitArgs) -> Result<FitRequest> {
+    let blend = blend_choice(&args.blend)?;
     let settings = FitSettings {
         steps: args.steps,
         batch: args.batch,
@@ -377,9 +376,212 @@ pub fn run(args: &FitArgs) -> Result<()> {
         threads: args.render.threads(),
         view: args.view,
     };
+    Ok(request)
+}
+
+pub fn run(args: &FitArgs) -> Result<()> {
+    let request = request(args)?;
     if !splat4d::fit::spread::is_leader() {
         // Spread over MPI ranks: rank 0 alone shows progress and the summary.
         return fit_dataset(&request, &mut splat4d::model::Silent).map(|_| ());
     }
     super::with_progress(|bars| fit_dataset(&request, bars))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat4d::tasks::fit_options::{FIT_OPTIONS, OptionValue};
+
+    /// The flags of `fit` that are no option of [`FIT_OPTIONS`] (the Python package's
+    /// `fit` options), each with why.
+    const CLI_ONLY: &[(&str, &str)] = &[
+        // Python's `fit(views, …)`: its first argument.
+        ("views", "the dataset, given as the call's first argument"),
+        // Python's `fit(…, out=…)`: an argument of its own, optional (the scene is returned).
+        ("out", "the output scene, an argument of the call"),
+        // Global to every command and to the process (`splat4d::io::memory::set_limit`):
+        // an interpreter's fits are bounded by the memory the machine has.
+        ("max_memory", "a bound on the whole process"),
+        // clap's.
+        ("help", "the help text"),
+    ];
+
+    /// Values of every option, as its flag's arguments (none: a switch given).
+    const SAMPLES: &[(&str, &[&str])] = &[
+        ("strict", &[]),
+        ("init", &["random:30"]),
+        ("blend", &["alpha"]),
+        ("blend", &["additive"]),
+        ("blend", &["auto"]),
+        ("log", &["fit.jsonl"]),
+        ("view", &[]),
+        ("view", &["9000"]),
+        ("downscale", &["2"]),
+        ("allow_outside_images", &[]),
+        ("frames", &["0:10:2"]),
+        ("fps", &["30"]),
+        ("dilation", &["0.5"]),
+        ("cutoff", &["0.01"]),
+        ("exp", &["std"]),
+        ("threads", &["2"]),
+        ("steps", &["5"]),
+        ("batch", &["1"]),
+        ("start_kernels", &["50"]),
+        ("max_kernels", &["21"]),
+        ("eval_every", &["1"]),
+        ("seed", &["7"]),
+        ("background", &["0.5,0.25,0"]),
+        ("lr_mean", &["0.01"]),
+        ("lr_time", &["0.02"]),
+        ("lr_amplitude", &["0.03"]),
+        ("lr_velocity", &["0.04"]),
+        ("lr_scale", &["0.05"]),
+        ("lr_final", &["0.5"]),
+        ("freeze_mean", &[]),
+        ("freeze_time", &[]),
+        ("freeze_amplitude", &[]),
+        ("densify_every", &["2"]),
+        ("densify_from", &["0.5"]),
+        ("densify_until", &["0.1"]),
+        ("densify_threshold", &["1e9"]),
+        ("max_growth", &["0.5"]),
+        ("prune_below", &["0.2"]),
+        ("mode", &["paper"]),
+        ("fit_velocity", &[]),
+        ("fit_scale", &[]),
+        ("adaptive", &[]),
+        ("min_improvement", &["0.1"]),
+        ("merge_tolerance", &["0.2"]),
+        ("min_scale", &["0.1"]),
+        ("box", &["-1,-1,-1,1,1,1"]),
+        ("time_range", &["0,1"]),
+        ("init_scale", &["0.1,0.1,0.1,0.5"]),
+        ("init_amplitude", &["-0.5"]),
+        ("lr_background", &["0.01"]),
+        ("freeze_background", &[]),
+        ("sh", &["8"]),
+        ("sh_raise_every", &["1"]),
+        ("lr_opacity", &["0.2"]),
+        ("lr_rotation", &["0.05"]),
+        ("lr_acceleration", &["0.01"]),
+        ("lr_angular_velocity", &["0.02"]),
+        ("lr_sh", &["0.05"]),
+        ("opacity_reset_every", &["2"]),
+        ("percent_dense", &["0.5"]),
+        ("time_split_fraction", &["0.01"]),
+        ("coarse_to_fine", &["4"]),
+        ("coarse_to_fine", &["off"]),
+        ("early_stop", &["0.2"]),
+        ("early_stop", &["off"]),
+        ("window", &["64"]),
+        ("window", &["off"]),
+        ("loss", &["mse"]),
+        ("loss", &["l1-dssim"]),
+        ("dssim_weight", &["0.3"]),
+        ("motion", &["auto"]),
+        ("motion", &["off"]),
+        ("motion_after_splits", &["2"]),
+        ("prune_fraction", &["0.3"]),
+        ("prune_rounds", &["2"]),
+        ("opacity_regulariser", &["0.01"]),
+        ("scale_regulariser", &["0.01"]),
+    ];
+
+    /// Values each flag and its option refuse.
+    const REFUSED: &[(&str, &str)] = &[
+        ("window", "8"),
+        ("coarse_to_fine", "0"),
+        ("early_stop", "2"),
+        ("downscale", "0"),
+        ("lr_mean", "nan"),
+        ("background", "1,2"),
+        ("blend", "both"),
+        ("loss", "l2"),
+        ("motion", "some"),
+        ("steps", "-1"),
+    ];
+
+    fn flag(name: &str) -> String {
+        format!("--{}", name.replace('_', "-"))
+    }
+
+    /// The request of `splat4d fit --views v --out o.json EXTRA`, or clap's or the
+    /// request's refusal.
+    fn parsed(extra: &[&str]) -> std::result::Result<FitRequest, String> {
+        let mut argv = vec!["splat4d", "fit", "--views", "v", "--out", "o.json"];
+        argv.extend(extra);
+        let cli =
+            <crate::cli::Cli as clap::Parser>::try_parse_from(argv).map_err(|e| e.to_string())?;
+        match cli.command {
+            Some(crate::cli::Command::Fit(args)) => request(&args).map_err(|e| e.to_string()),
+            _ => unreachable!("a fit"),
+        }
+    }
+
+    fn by_name() -> FitRequest {
+        FitRequest::new("v".into(), "o.json".into())
+    }
+
+    #[test]
+    fn every_flag_is_an_option_or_the_command_lines_own() {
+        let flags = crate::cli::flags::command_flags(&["splat4d".into(), "fit".into()]);
+        for flag in &flags {
+            let name = flag.trim_start_matches("--").replace('-', "_");
+            assert!(
+                FIT_OPTIONS.contains(&name.as_str()) || CLI_ONLY.iter().any(|(n, _)| *n == name),
+                "{flag} is no option of splat4d::tasks::fit_options::FIT_OPTIONS (the Python package's) and not in CLI_ONLY"
+            );
+        }
+        for name in FIT_OPTIONS {
+            assert!(
+                flags.contains(&flag(name)),
+                "option `{name}` is no flag of fit"
+            );
+        }
+        // The global flags `fit` takes too (`--max-memory`).
+        let global = crate::cli::flags::command_flags(&["splat4d".into()]);
+        for (name, _) in CLI_ONLY {
+            assert!(
+                flags.contains(&flag(name)) || global.contains(&flag(name)),
+                "CLI_ONLY's `{name}` is no flag of fit"
+            );
+        }
+    }
+
+    #[test]
+    fn every_option_sets_what_its_flag_sets_and_refuses_what_it_refuses() {
+        assert_eq!(parsed(&[]).unwrap(), by_name());
+        for name in FIT_OPTIONS {
+            assert!(
+                SAMPLES.iter().any(|(n, _)| n == name),
+                "`{name}` has no value in SAMPLES"
+            );
+        }
+        for &(name, values) in SAMPLES {
+            let flag = flag(name);
+            let mut argv = vec![flag.as_str()];
+            argv.extend(values);
+            let value = match values {
+                [] => OptionValue::Switch(true),
+                [text] => OptionValue::Text(text),
+                _ => unreachable!(),
+            };
+            let mut request = by_name();
+            request.set(name, value).unwrap();
+            assert_eq!(parsed(&argv).unwrap(), request, "{argv:?}");
+            if !matches!(values, ["auto"]) {
+                assert_ne!(request, by_name(), "{argv:?} changed nothing");
+            }
+        }
+        for &(name, text) in REFUSED {
+            let flag = flag(name);
+            let error = by_name().set(name, OptionValue::Text(text)).unwrap_err();
+            assert!(
+                matches!(&error, splat4d::Error::Setting { fields, .. } if fields == &[name]),
+                "{name} {text}: {error}"
+            );
+            assert!(parsed(&[&flag, text]).is_err(), "{flag} {text}");
+        }
+    }
 }

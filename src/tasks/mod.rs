@@ -9,6 +9,7 @@
 //! | [`render::grad`] | `grad` |
 //! | [`dataset::write_dataset`] | `dataset` |
 //! | [`fit::fit_dataset`] | `fit` |
+//! | [`fit_options::FIT_OPTIONS`] | `fit`'s flags as named options (the Python package's) |
 //! | [`scene_files::write_toy`] | `toy` |
 //! | [`scene_files::import_gltf`] | `import-gltf` |
 //! | [`scene_files::export_ply`] | `export-ply` |
@@ -23,6 +24,7 @@
 pub mod bench;
 pub mod dataset;
 pub mod fit;
+pub mod fit_options;
 pub mod render;
 pub mod report;
 pub mod scene_files;
