@@ -664,6 +664,24 @@ pub fn default_prune_fraction(train: &[View], background: Option<[f64; 3]>) -> f
     }
 }
 
+/// The alpha fit's steps and steps between density rounds when the caller gives no step
+/// count: [`DEFAULT_SMALL_VIEWS`]'s where no training view has more pixels than its
+/// `max_pixels` (a step is then cheap, and twice the steps at the same rounds measured
+/// better; `docs/fitting.md`, "Steps"), else [`DEFAULT_ALPHA`]'s.
+#[must_use]
+pub fn alpha_schedule(train: &[View]) -> (usize, usize) {
+    let largest = train
+        .iter()
+        .map(|v| u64::from(v.image.width) * u64::from(v.image.height))
+        .max()
+        .unwrap_or(0);
+    if largest <= DEFAULT_SMALL_VIEWS.max_pixels {
+        (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every)
+    } else {
+        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every)
+    }
+}
+
 /// The automatic alpha start (see [`prepare_alpha`]) and a note saying which it is.
 fn alpha_auto_start(
     dataset: &Dataset,

@@ -39,8 +39,8 @@ use crate::fit::coarse::CoarseToFine;
 use crate::fit::defaults::{DEFAULT_DSSIM_WEIGHT, DEFAULT_MOTION_AFTER_SPLITS};
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
-    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, check_fit_numbers, default_prune_fraction, fit_blend,
-    prepare_alpha,
+    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule, check_fit_numbers,
+    default_prune_fraction, fit_blend, prepare_alpha,
 };
 use crate::fit::ssim::L1Dssim;
 use crate::fit::train::{EarlyStop, LossName, TrainingLoss};
@@ -512,7 +512,8 @@ impl FitSettings {
     }
 
     /// The alpha fit's `options` for `dataset` (its training frames from `origin`): the
-    /// pruning share where the caller gave none ([`default_prune_fraction`]), and every
+    /// pruning share where the caller gave none ([`default_prune_fraction`]), the steps and
+    /// the density period where it gave no step count ([`alpha_schedule`]), and every
     /// chosen setting that the data leaves without effect refused by name: `early_stop`
     /// without held-out views, a `window` that cuts no training view, `prune_rounds` where
     /// the data's pruning share is 0.
@@ -547,8 +548,17 @@ impl FitSettings {
             .prune_fraction
             .unwrap_or_else(|| default_prune_fraction(&dataset.train, self.background));
         self.check_prune_rounds(prune_fraction)?;
+        let (steps, densify_every) = match self.steps {
+            Some(_) => (options.steps, options.densify_every),
+            None => {
+                let (steps, densify_every) = alpha_schedule(&dataset.train);
+                (steps, self.densify_every.unwrap_or(densify_every))
+            }
+        };
         Ok(AlphaFitOptions {
             prune_fraction,
+            steps,
+            densify_every,
             ..options
         })
     }

@@ -1020,3 +1020,53 @@ fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos
         "{error}"
     );
 }
+
+/// The alpha fit's steps follow the views' size when none are given: twice the steps at the
+/// same density rounds on views of at most 128×128 pixels (the occluding data's 48×48),
+/// the default's on larger ones; a given step count keeps the default density period, and
+/// a given density period is kept.
+#[test]
+fn the_step_count_follows_the_view_size_when_none_is_given() {
+    use splat4d::fit::density::DensityRules;
+    use splat4d::fit::plan::{DEFAULT_ALPHA, DEFAULT_SMALL_VIEWS, Init, alpha_schedule};
+    use splat4d::fit::settings::FitSettings;
+    let (dataset, _) = occluding_dataset(&occluding_scene());
+    let schedule = |settings: FitSettings, dataset: &splat4d::model::Dataset| {
+        let ready = settings
+            .prepare(None, Init::Auto, "auto", dataset, "<occluding>")
+            .unwrap();
+        let Some(DensityRules::Alpha(rules)) = ready.training.density else {
+            panic!("no alpha density rules");
+        };
+        (ready.training.steps, rules.every)
+    };
+    let small = (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every);
+    assert_eq!(alpha_schedule(&dataset.train), small);
+    assert_eq!(
+        small.0 / small.1,
+        DEFAULT_ALPHA.steps / DEFAULT_ALPHA.densify_every
+    );
+    assert_eq!(schedule(FitSettings::default(), &dataset), small);
+    let given_steps = FitSettings {
+        steps: Some(300),
+        ..Default::default()
+    };
+    assert_eq!(
+        schedule(given_steps, &dataset),
+        (300, DEFAULT_ALPHA.densify_every)
+    );
+    let given_period = FitSettings {
+        densify_every: Some(50),
+        ..Default::default()
+    };
+    assert_eq!(schedule(given_period, &dataset), (small.0, 50));
+    // One view of 129×128 pixels makes the views large.
+    let mut large = dataset.train.clone();
+    let mut view = large[0].clone();
+    view.image = std::sync::Arc::new(splat4d::model::Image::filled(129, 128, [0.0; 3]));
+    large.push(view);
+    assert_eq!(
+        alpha_schedule(&large),
+        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every)
+    );
+}
