@@ -269,7 +269,9 @@ pub struct FitArgs {
     /// Which kernels carry fitted SPEC §9 motion (an acceleration and an angular velocity,
     /// at `--lr-acceleration` and `--lr-angular-velocity`): `auto`, those that keep
     /// splitting in time (after `--motion-after-splits` splits of their line, instead of a
-    /// further split); `all`, every kernel; `off`, none [default: all].
+    /// further split) or whose velocity gradient keeps turning over their life (a steady
+    /// acceleration gradient in 2 density intervals running); `all`, every kernel; `off`,
+    /// none [default: all].
     #[arg(long, value_name = "auto|all|off", help_heading = ALPHA)]
     motion: Option<MotionName>,
     /// With `--motion auto`: the splits in time of a kernel's line after which a kernel

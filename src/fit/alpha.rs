@@ -21,7 +21,7 @@
 
 use crate::fit::adam::{AdamConfig, Field, ParameterGroup};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::density::{AlphaRules, DensityRules, ShapeBound, SpacetimePrune};
+use crate::fit::density::{AlphaRules, DensityRules, ShapeBound, SpacetimePrune, TurningRule};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras};
 use crate::fit::regularise::Regularisers;
 use crate::fit::train::{EarlyStop, Training, TrainingLoss};
@@ -142,16 +142,19 @@ pub struct AlphaFitOptions {
 
 /// Which kernels of an alpha fit carry fitted SPEC §9 motion: an acceleration and an
 /// angular velocity, each fitted at its group's rate when that rate is above 0.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MotionFit {
     /// No kernel: the fit adds no SPEC §9 field.
     Off,
     /// The kernels that keep splitting in time: a kernel that spans motion after this many
     /// splits in time of its line gets motion instead of a further split
-    /// ([`crate::fit::density::alpha`]); the others' SPEC §9 fields stay zero.
+    /// ([`crate::fit::density::alpha`]); and the kernels whose velocity gradient keeps
+    /// turning ([`crate::fit::density::turning`]). The others' SPEC §9 fields stay zero.
     WhereNeeded {
         /// Splits in time of a kernel's line before it gets motion.
         after_time_splits: u32,
+        /// The turning trigger's thresholds (`None`: only the splits in time give motion).
+        turning: Option<TurningRule>,
     },
     /// Every kernel, from the first step.
     Everywhere,
@@ -183,9 +186,13 @@ impl AlphaFitOptions {
             diagonal,
             time_range,
             motion_after_time_splits: match self.motion {
-                MotionFit::WhereNeeded { after_time_splits } if self.fits_motion() => {
-                    Some(after_time_splits)
-                }
+                MotionFit::WhereNeeded {
+                    after_time_splits, ..
+                } if self.fits_motion() => Some(after_time_splits),
+                _ => None,
+            },
+            motion_when_turning: match self.motion {
+                MotionFit::WhereNeeded { turning, .. } if self.fits_motion() => turning,
                 _ => None,
             },
         }

@@ -36,7 +36,9 @@ use crate::fit::additive::FitMode;
 use crate::fit::additive::LearningRates;
 use crate::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit};
 use crate::fit::coarse::CoarseToFine;
-use crate::fit::defaults::{DEFAULT_DSSIM_WEIGHT, DEFAULT_MOTION_AFTER_SPLITS};
+use crate::fit::defaults::{
+    DEFAULT_DSSIM_WEIGHT, DEFAULT_MOTION_AFTER_SPLITS, DEFAULT_MOTION_TURNING,
+};
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
     DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule, check_fit_numbers,
@@ -699,16 +701,29 @@ impl FitSettings {
     }
 
     /// The motion chosen: `motion` (else the default's kind) with `motion_after_splits`
-    /// (else the default's, else [`DEFAULT_MOTION_AFTER_SPLITS`]).
+    /// (else the default's, else [`DEFAULT_MOTION_AFTER_SPLITS`]) and the default's turning
+    /// rule (else [`DEFAULT_MOTION_TURNING`]).
     fn motion_fit(&self, default: MotionFit) -> MotionFit {
-        let (default_name, default_after) = match default {
-            MotionFit::WhereNeeded { after_time_splits } => (MotionName::Auto, after_time_splits),
-            MotionFit::Everywhere => (MotionName::All, DEFAULT_MOTION_AFTER_SPLITS),
-            MotionFit::Off => (MotionName::Off, DEFAULT_MOTION_AFTER_SPLITS),
+        let (default_name, default_after, default_turning) = match default {
+            MotionFit::WhereNeeded {
+                after_time_splits,
+                turning,
+            } => (MotionName::Auto, after_time_splits, turning),
+            MotionFit::Everywhere => (
+                MotionName::All,
+                DEFAULT_MOTION_AFTER_SPLITS,
+                Some(DEFAULT_MOTION_TURNING),
+            ),
+            MotionFit::Off => (
+                MotionName::Off,
+                DEFAULT_MOTION_AFTER_SPLITS,
+                Some(DEFAULT_MOTION_TURNING),
+            ),
         };
         match self.motion.unwrap_or(default_name) {
             MotionName::Auto => MotionFit::WhereNeeded {
                 after_time_splits: self.motion_after_splits.unwrap_or(default_after),
+                turning: default_turning,
             },
             MotionName::All => MotionFit::Everywhere,
             MotionName::Off => MotionFit::Off,

@@ -286,6 +286,7 @@ mod tests {
             diagonal: 1.0,
             time_range: 1.0,
             motion_after_time_splits: None,
+            motion_when_turning: None,
         };
         Training {
             steps: 1000,

@@ -644,7 +644,7 @@ pub fn fit(
                 stats.add_view(screen, weight);
             },
         )?;
-        keep_motion_where_fitted(training, &stats, &mut grads);
+        keep_motion_where_fitted(training, &mut stats, &mut grads);
         if !seen_any && (step == first_epoch || step == steps) {
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
@@ -781,7 +781,7 @@ fn spacetime_scores_in(
 
 /// With motion only where needed ([`DensityRules::fits_motion_where_needed`]), zeroes the
 /// SPEC §9 gradients of the kernels that carry none ([`DensityStats`]' lines); else nothing.
-fn keep_motion_where_fitted(training: &Training, stats: &DensityStats, grads: &mut Gradients) {
+fn keep_motion_where_fitted(training: &Training, stats: &mut DensityStats, grads: &mut Gradients) {
     if let Some(rules) = &training.density
         && rules.fits_motion_where_needed()
     {

@@ -18,8 +18,10 @@ use rand::RngExt;
 use splat4d::model::random::seeded_rng;
 
 use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit, alpha_bounds};
+use splat4d::fit::defaults::DEFAULT_MOTION_TURNING;
+use splat4d::fit::density::TurningRule;
 use splat4d::fit::plan::DEFAULT_ALPHA;
-use splat4d::fit::train::{Training, fit};
+use splat4d::fit::train::{Training, TrainingLoss, fit};
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
 
 /// Fields checked per kernel: mean (4), velocity (3), acceleration (3), quaternion (4),
@@ -721,8 +723,10 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
         start
     };
     let still = |scene: &Scene, i: usize| scene.velocities[i] == [0.0; 3];
+    // The splits in time alone: the turning trigger is the next test's.
     let auto = fitted(MotionFit::WhereNeeded {
         after_time_splits: 0,
+        turning: None,
     });
     let balls: Vec<usize> = (0..auto.len()).filter(|&i| !still(&auto, i)).collect();
     assert_eq!(balls.len(), 1, "the ball's kernel was not split in time");
@@ -740,5 +744,87 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
         (0..everywhere.len())
             .any(|i| still(&everywhere, i) && everywhere.acceleration(i) != [0.0; 3]),
         "with motion everywhere, the plate's acceleration should move too"
+    );
+}
+
+/// The thrown ball and a still plate apart from it, fitted with density rounds every 50
+/// steps in which no kernel grows (only the SPEC §9 rates above 0, so the ball's one
+/// straight path cannot settle; the MSE loss): `motion` where needed by the turning
+/// trigger alone (never by splits in time) gives the ball's kernel fitted motion, and it
+/// finds a fall, while the plate keeps exactly zero acceleration and angular velocity.
+/// Without the trigger the ball gets none. (A plate that the ball crosses in the views, as
+/// in the test above, feels the ball's misfit as a steady pull too, and moves.)
+#[test]
+fn motion_where_the_velocity_gradient_keeps_turning_goes_to_the_ball_not_the_plate() {
+    let ball = thrown_ball();
+    let plate = Kernel::new(
+        [1.2, -0.5, 0.0, 0.5],
+        [0.15, 0.03, 0.15, 10.0],
+        [0.2, 0.6, 0.3],
+    );
+    let truth = Scene::from_kernels(&[ball, plate], [0.0; 3], "<motion>")
+        .unwrap()
+        .into_alpha(vec![0.9, 0.9], 0, Vec::new(), "<motion>")
+        .unwrap();
+    let spec = DatasetSpec {
+        views: 6,
+        times: 5,
+        width: 48,
+        height: 48,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let bounds = alpha_bounds(&dataset.train, "<motion>").unwrap();
+    let fitted = |turning: Option<TurningRule>| {
+        let options = AlphaFitOptions {
+            steps: 400,
+            rates: AlphaRates {
+                acceleration: 2e-2,
+                angular_velocity: 1e-3,
+                ..NO_RATES
+            },
+            sh_count: 0,
+            eval_every: 0,
+            final_rate_factor: 0.05,
+            densify_every: 50,
+            // Rounds after steps 50, 100, …, 200, in which no kernel grows.
+            densify_from: 0.0,
+            densify_until: 0.5,
+            densify_fraction: 0.0,
+            opacity_reset_every: 0,
+            prune_fraction: 0.0,
+            loss: TrainingLoss::Mse,
+            motion: MotionFit::WhereNeeded {
+                after_time_splits: u32::MAX,
+                turning,
+            },
+            ..DEFAULT_ALPHA
+        };
+        let mut start = truth.clone();
+        start.accelerations.clear();
+        fit(
+            &mut start,
+            &dataset.train,
+            &[],
+            &options.training(&bounds),
+            |_, _| {},
+        )
+        .unwrap();
+        start
+    };
+    let turning = fitted(Some(DEFAULT_MOTION_TURNING));
+    assert_eq!(turning.len(), 2);
+    assert!(
+        turning.acceleration(0)[1] < -0.5,
+        "the ball: {:?}",
+        turning.acceleration(0)
+    );
+    assert_eq!(turning.acceleration(1), [0.0; 3], "the plate");
+    assert_eq!(turning.angular_velocity(1), [0.0; 4], "the plate");
+    let without = fitted(None);
+    assert_eq!(
+        without.acceleration(0),
+        [0.0; 3],
+        "the ball, without the trigger"
     );
 }

@@ -19,6 +19,10 @@
 //!   still spans motion splits in time, and its children move. The training loop keeps
 //!   the other kernels' SPEC §9 gradients at zero
 //!   ([`DensityStats::keep_motion_to_moving_kernels`]).
+//! - **motion when turning** (when `motion_when_turning` is a rule): before any of the
+//!   above, every kept kernel whose velocity gradient keeps turning from interval to
+//!   interval ([`super::turning`]) is given SPEC §9 motion the same way, whether it grows
+//!   this round or not.
 //! - **split** when its largest σ exceeds `percent_dense` of the box's diagonal: two
 //!   children one σ apart along that axis, spatial σ / 1.6 each.
 //! - **clone** otherwise: a copy in place, with fresh optimiser moments.
@@ -28,7 +32,7 @@
 //! is lowered to at most `reset_opacity`: what the views need regains its opacity, the rest
 //! fades below `prune_opacity` and is pruned.
 
-use crate::fit::density::{DensityStats, Line};
+use crate::fit::density::{DensityStats, Line, Turning, TurningRule};
 use crate::model::scene::{Kernel, Scene};
 
 /// The alpha rule set (see the module docs).
@@ -66,6 +70,9 @@ pub struct AlphaRules {
     /// fitted SPEC §9 motion instead of a further split; `None`: never (no kernel's motion
     /// is fitted, or every kernel's is).
     pub motion_after_time_splits: Option<u32>,
+    /// A kernel whose velocity gradient keeps turning by this rule is given fitted SPEC §9
+    /// motion ([`super::turning`]); `None`: never.
+    pub motion_when_turning: Option<TurningRule>,
 }
 
 impl AlphaRules {
@@ -102,15 +109,15 @@ pub fn reset_opacities(scene: &mut Scene, ceiling: f64) {
     }
 }
 
-/// One round: prune transparent kernels, then clone, split, split in time or give motion to
-/// the ones with the largest mean screen-space gradient. Returns, per kernel of the new
-/// scene, the old kernel whose optimiser state it keeps (`None`: fresh), and its line of
-/// descent.
+/// One round: prune transparent kernels, give motion to those whose velocity gradient keeps
+/// turning, then clone, split, split in time or give motion to the ones with the largest
+/// mean screen-space gradient. Returns, per kernel of the new scene, the old kernel whose
+/// optimiser state it keeps (`None`: fresh), its line of descent and its turning state.
 pub fn densify_and_prune(
     scene: &mut Scene,
     stats: &DensityStats,
     rules: &AlphaRules,
-) -> (Vec<Option<usize>>, Vec<Line>) {
+) -> (Vec<Option<usize>>, Vec<Line>, Vec<Turning>) {
     let n = scene.len();
     let keep: Vec<usize> = (0..n)
         .filter(|&i| scene.opacities[i] >= rules.prune_opacity)
@@ -122,6 +129,9 @@ pub fn densify_and_prune(
         ..Scene::default()
     };
     let (mut opacities, mut sh, mut sources) = (Vec::new(), Vec::new(), Vec::new());
+    let turning: Vec<Turning> = (0..n)
+        .map(|i| turning_after_round(stats, i, rules))
+        .collect();
     let mut lines = Vec::new();
     let mut push =
         |kernel: Kernel, (i, line): (usize, Line), source: Option<usize>, next: &mut Scene| {
@@ -132,7 +142,10 @@ pub fn densify_and_prune(
             lines.push(line);
         };
     for &i in &keep {
-        let (kernel, line) = (scene.kernel(i), stats.line(i));
+        let (kernel, line) = (
+            scene.kernel(i),
+            moving_if_turning(stats.line(i), turning[i], rules),
+        );
         if !grow[i] {
             push(kernel, (i, line), Some(i), &mut next);
             continue;
@@ -170,7 +183,32 @@ pub fn densify_and_prune(
     next.sh_count = scene.sh_count;
     next.sh = sh;
     *scene = next;
-    (sources, lines)
+    // The kernel kept (or given motion) keeps its turning state; new ones start afresh.
+    let turning = sources
+        .iter()
+        .map(|source| source.map_or_else(Turning::default, |i| turning[i]))
+        .collect();
+    (sources, lines, turning)
+}
+
+/// Kernel `i`'s turning state after this round ([`super::turning`]); the default without
+/// the rule, or once it moves.
+fn turning_after_round(stats: &DensityStats, i: usize, rules: &AlphaRules) -> Turning {
+    match rules.motion_when_turning {
+        Some(rule) if !stats.line(i).moving => rule.after_round(stats.turning(i), stats.pull(i)),
+        _ => Turning::default(),
+    }
+}
+
+/// `line`, moving when its kernel's velocity gradient keeps turning (state `turning`).
+fn moving_if_turning(line: Line, turning: Turning, rules: &AlphaRules) -> Line {
+    let turns = rules
+        .motion_when_turning
+        .is_some_and(|rule| rule.keeps_turning(turning));
+    Line {
+        moving: line.moving || turns,
+        ..line
+    }
 }
 
 /// Whether a kernel of `line` that spans motion is given fitted motion rather than split in
@@ -261,6 +299,7 @@ fn split_in_time(kernel: Kernel) -> [Kernel; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::density::TurningRule;
 
     /// Rules with every visible kernel allowed to grow, in a unit box and time range.
     fn grow_all() -> AlphaRules {
@@ -279,6 +318,7 @@ mod tests {
             diagonal: 1.0,
             time_range: 1.0,
             motion_after_time_splits: None,
+            motion_when_turning: None,
         }
     }
 
@@ -313,7 +353,7 @@ mod tests {
     #[test]
     fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (sources, lines) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+        let (sources, lines, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
         assert_eq!(sources, vec![None, None]);
         let child = Line {
             time_splits: 1,
@@ -355,12 +395,12 @@ mod tests {
         // A first split in time, as without the rule.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let fresh = seen_once_on(Line::default());
-        let (_, lines) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
+        let (_, lines, _) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
         assert_eq!(lines, vec![once_split; 2]);
         // A kernel split once that still spans motion: kept whole, moments kept, moving.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let before = scene.clone();
-        let (sources, lines) =
+        let (sources, lines, _) =
             densify_and_prune(&mut scene, &seen_once_on(once_split), &motion_after_one);
         assert_eq!(sources, vec![Some(0)]);
         let moving = Line {
@@ -370,7 +410,7 @@ mod tests {
         assert_eq!(lines, vec![moving]);
         assert_eq!(scene.kernel(0), before.kernel(0));
         // A moving kernel that still spans motion splits in time, its children moving.
-        let (sources, lines) =
+        let (sources, lines, _) =
             densify_and_prune(&mut scene, &seen_once_on(moving), &motion_after_one);
         assert_eq!(sources, vec![None, None]);
         let children = Line {
@@ -380,9 +420,93 @@ mod tests {
         assert_eq!(lines, vec![children; 2]);
         // Without the rule, the kernel split once splits again.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (_, lines) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
+        let (_, lines, _) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
         assert_eq!(lines.len(), 2);
         assert!(lines.iter().all(|l| l.time_splits == 2 && !l.moving));
+    }
+
+    /// The statistics of one kernel, `stats`, after `steps` steps in which its
+    /// acceleration gradient was `g`, and seen once.
+    fn pulled(mut stats: DensityStats, g: [f64; 3], steps: usize) -> DensityStats {
+        for _ in 0..steps {
+            let mut grads = crate::backward::Gradients {
+                v_accelerations: vec![g],
+                v_angular_velocities: vec![[0.0; 4]],
+                ..Default::default()
+            };
+            stats.keep_motion_to_moving_kernels(&mut grads);
+        }
+        stats.add_view([(0, [1.0, 0.0])].into_iter(), 1.0);
+        stats
+    }
+
+    #[test]
+    fn a_kernel_whose_velocity_gradient_keeps_turning_gets_motion_and_its_copy_starts_afresh() {
+        let rules = AlphaRules {
+            motion_when_turning: Some(TurningRule {
+                min_steadiness: 3.0,
+                min_cosine: 0.5,
+                rounds: 2,
+            }),
+            fraction: 0.0,
+            ..grow_all()
+        };
+        // A still kernel, steadily pulled towards a fall: one round counts, the second
+        // makes it move (no kernel grows; the kernel and its moments are kept).
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        let before = scene.clone();
+        let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
+        let (sources, lines, turning) = densify_and_prune(&mut scene, &stats, &rules);
+        assert_eq!(
+            (sources, lines.clone()),
+            (vec![Some(0)], vec![Line::default()])
+        );
+        assert_eq!(turning[0].rounds(), 1);
+        let stats = pulled(
+            stats.next_window_turning(lines, turning),
+            [0.0, -1.0, 0.0],
+            100,
+        );
+        let (_, lines, _) = densify_and_prune(&mut scene, &stats, &rules);
+        assert!(lines[0].moving);
+        assert_eq!(scene.kernel(0), before.kernel(0));
+        // Without the rule, the same pulls give no motion.
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
+        let (_, lines, turning) = densify_and_prune(&mut scene, &stats, &grow_all());
+        assert_eq!(turning[0], Turning::default());
+        let stats = pulled(
+            stats.next_window_turning(lines, turning),
+            [0.0, -1.0, 0.0],
+            100,
+        );
+        let (_, lines, _) = densify_and_prune(&mut scene, &stats, &grow_all());
+        assert!(!lines[0].moving);
+        // A pull that reverses each round never counts twice.
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        let mut stats = pulled(DensityStats::new(1), [1.0, 0.0, 0.0], 100);
+        for sign in [-1.0, 1.0, -1.0] {
+            let (_, lines, turning) = densify_and_prune(&mut scene, &stats, &rules);
+            assert!(!lines[0].moving && turning[0].rounds() == 1);
+            stats = pulled(
+                stats.next_window_turning(lines, turning),
+                [sign, 0.0, 0.0],
+                100,
+            );
+        }
+        // Once counted, a cloned kernel keeps its count and its copy starts at zero.
+        let clone_all = AlphaRules {
+            fraction: 1.0,
+            ..rules
+        };
+        let mut scene = one_kernel([0.0; 3], 0.3);
+        let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
+        let (sources, _, turning) = densify_and_prune(&mut scene, &stats, &clone_all);
+        assert_eq!(sources, vec![Some(0), None]);
+        assert_eq!(
+            turning.iter().map(Turning::rounds).collect::<Vec<_>>(),
+            [1, 0]
+        );
     }
 
     #[test]
@@ -392,7 +516,7 @@ mod tests {
             moving: true,
             ..still
         };
-        let stats = DensityStats::new(3).next_window(vec![still, moving, still]);
+        let mut stats = DensityStats::new(3).next_window(vec![still, moving, still]);
         let mut grads = crate::backward::Gradients {
             v_accelerations: vec![[1.0, 2.0, 3.0]; 3],
             v_angular_velocities: vec![[4.0, 5.0, 6.0, 7.0]; 3],
@@ -407,13 +531,20 @@ mod tests {
             grads.v_angular_velocities,
             vec![[0.0; 4], [4.0, 5.0, 6.0, 7.0], [0.0; 4]]
         );
+        // The still kernels' acceleration gradients went to their pulls, the moving one's
+        // did not.
+        let mut pull = crate::fit::density::Pull::default();
+        pull.add([1.0, 2.0, 3.0]);
+        assert_eq!(stats.pull(0), &pull);
+        assert_eq!(stats.pull(1), &crate::fit::density::Pull::default());
+        assert_eq!(stats.pull(2), &pull);
     }
 
     #[test]
     fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
         for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
             let mut scene = one_kernel(velocity, time_sigma);
-            let (sources, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+            let (sources, _, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }

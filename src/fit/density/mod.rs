@@ -22,6 +22,7 @@ pub mod additive;
 pub mod alpha;
 pub mod prune;
 pub mod shape;
+pub mod turning;
 
 use crate::backward::Gradients;
 use crate::model::error::Result;
@@ -31,6 +32,7 @@ pub use additive::AdditiveRules;
 pub use alpha::AlphaRules;
 pub use prune::SpacetimePrune;
 pub use shape::ShapeBound;
+pub use turning::{Pull, Turning, TurningRule};
 
 /// A kernel's line of descent, carried from round to round: how many splits in time made
 /// it, and whether it carries fitted SPEC §9 motion (the alpha rules' motion where needed,
@@ -44,9 +46,11 @@ pub struct Line {
 }
 
 /// Per-kernel statistics between two rounds, filled by the training loop: every step's
-/// positional gradients ([`DensityStats::add_step`]) and every view's screen gradients
-/// ([`DensityStats::add_view`]); the training loss at the last two rounds; and each
-/// kernel's [`Line`], which the rounds carry on.
+/// positional gradients ([`DensityStats::add_step`]), every view's screen gradients
+/// ([`DensityStats::add_view`]) and, for the kernels without fitted motion, every step's
+/// acceleration gradient ([`DensityStats::keep_motion_to_moving_kernels`]); the training
+/// loss at the last two rounds; and each kernel's [`Line`] and [`Turning`] state, which the
+/// rounds carry on.
 #[derive(Clone, Debug, Default)]
 pub struct DensityStats {
     /// `Σ g̃` over steps (for the direction of an additive clone).
@@ -59,12 +63,17 @@ pub struct DensityStats {
     screen_sum: Vec<f64>,
     /// Views in which the kernel reached the screen.
     views_seen: Vec<u32>,
+    /// `Σ ∂L/∂a` and `Σ |∂L/∂a|²` over steps, of kernels without fitted motion
+    /// ([`turning`]).
+    pulls: Vec<Pull>,
     /// Training loss at this round.
     loss: Option<f64>,
     /// Training loss at the round before.
     previous_loss: Option<f64>,
     /// Each kernel's line of descent.
     lines: Vec<Line>,
+    /// Each kernel's turning state as of the last round.
+    turning: Vec<Turning>,
 }
 
 impl DensityStats {
@@ -77,20 +86,32 @@ impl DensityStats {
             steps_seen: vec![0; n],
             screen_sum: vec![0.0; n],
             views_seen: vec![0; n],
+            pulls: vec![Pull::default(); n],
             loss: None,
             previous_loss: None,
             lines: vec![Line::default(); n],
+            turning: vec![Turning::default(); n],
         }
     }
 
     /// Statistics after a round that left one kernel per entry of `lines` (their lines of
-    /// descent): per-kernel sums cleared, this round's loss becomes the previous one.
+    /// descent), each with no turning state: per-kernel sums cleared, this round's loss
+    /// becomes the previous one.
     #[must_use]
     pub fn next_window(&self, lines: Vec<Line>) -> Self {
+        let turning = vec![Turning::default(); lines.len()];
+        self.next_window_turning(lines, turning)
+    }
+
+    /// [`DensityStats::next_window`], each kernel with its entry of `turning`.
+    #[must_use]
+    pub fn next_window_turning(&self, lines: Vec<Line>, turning: Vec<Turning>) -> Self {
+        assert_eq!(lines.len(), turning.len(), "one turning state per line");
         let n = lines.len();
         DensityStats {
             previous_loss: self.loss,
             lines,
+            turning,
             ..DensityStats::new(n)
         }
     }
@@ -101,12 +122,29 @@ impl DensityStats {
         self.lines[i]
     }
 
+    /// Kernel `i`'s turning state as of the last round.
+    #[must_use]
+    pub fn turning(&self, i: usize) -> Turning {
+        self.turning[i]
+    }
+
+    /// Kernel `i`'s acceleration gradients since the last round, while it had no fitted
+    /// motion ([`turning`]).
+    #[must_use]
+    pub fn pull(&self, i: usize) -> &Pull {
+        &self.pulls[i]
+    }
+
     /// Zeroes the SPEC §9 gradients (acceleration, angular velocity) of every kernel that
-    /// does not carry fitted motion, so that Adam leaves them (and their moments) at zero.
-    pub fn keep_motion_to_moving_kernels(&self, grads: &mut Gradients) {
+    /// does not carry fitted motion, so that Adam leaves them (and their moments) at zero;
+    /// their acceleration gradients are first added to the kernels' pulls ([`turning`]).
+    pub fn keep_motion_to_moving_kernels(&mut self, grads: &mut Gradients) {
         for (i, line) in self.lines.iter().enumerate() {
             if !line.moving {
                 if let Some(a) = grads.v_accelerations.get_mut(i) {
+                    if *a != [0.0; 3] {
+                        self.pulls[i].add(*a);
+                    }
                     *a = [0.0; 3];
                 }
                 if let Some(w) = grads.v_angular_velocities.get_mut(i) {
@@ -211,6 +249,8 @@ pub struct DensityChange {
     pub sources: Option<Vec<Option<usize>>>,
     /// The new scene's lines of descent (moved into the statistics).
     lines: Vec<Line>,
+    /// The new scene's turning states (moved into the statistics; empty: none).
+    turning: Vec<Turning>,
 }
 
 impl DensityRules {
@@ -224,12 +264,14 @@ impl DensityRules {
         (until.max(0.0) as usize).min(steps)
     }
 
-    /// Whether only the kernels that keep splitting in time carry fitted SPEC §9 motion
-    /// ([`alpha`]): the others' SPEC §9 gradients are then kept at zero
+    /// Whether only the kernels that keep splitting in time or whose velocity gradient
+    /// keeps turning over their life carry fitted SPEC §9 motion ([`alpha`], [`turning`]): the others'
+    /// SPEC §9 gradients are then kept at zero
     /// ([`DensityStats::keep_motion_to_moving_kernels`]).
     #[must_use]
     pub fn fits_motion_where_needed(&self) -> bool {
-        matches!(self, DensityRules::Alpha(rules) if rules.motion_after_time_splits.is_some())
+        matches!(self, DensityRules::Alpha(rules)
+            if rules.motion_after_time_splits.is_some() || rules.motion_when_turning.is_some())
     }
 
     /// The most kernels the rules may reach.
@@ -274,14 +316,18 @@ impl DensityRules {
                     change.opacities_reset = true;
                 }
                 if rules.round_due(step, steps) {
-                    let (sources, lines) = alpha::densify_and_prune(scene, stats, rules);
+                    let (sources, lines, turning) = alpha::densify_and_prune(scene, stats, rules);
                     change.sources = Some(sources);
                     change.lines = lines;
+                    change.turning = turning;
                 }
             }
         }
         if change.sources.is_some() {
-            *stats = stats.next_window(std::mem::take(&mut change.lines));
+            let lines = std::mem::take(&mut change.lines);
+            let mut turning = std::mem::take(&mut change.turning);
+            turning.resize(lines.len(), Turning::default());
+            *stats = stats.next_window_turning(lines, turning);
         }
         Ok(change)
     }
