@@ -71,7 +71,8 @@ pub struct FitArgs {
     #[command(flatten)]
     render: RenderFlags,
 
-    /// Adam steps (default: 4000 additive, 6000 alpha).
+    /// Adam steps (default: 4000 additive; alpha 12000 where no training view has more than
+    /// 128×128 pixels, else 6000).
     #[arg(long, help_heading = BOTH)]
     steps: Option<usize>,
     /// Views per step (default: 8 additive, 4 alpha).
@@ -130,7 +131,8 @@ pub struct FitArgs {
     /// Keep the amplitudes fixed (alpha: the colour's base; its SH still move).
     #[arg(long, help_heading = BOTH)]
     freeze_amplitude: bool,
-    /// Steps between density rounds (default: 50 additive, 100 alpha).
+    /// Steps between density rounds (default: 50 additive; alpha 100, or 200 with the
+    /// small views' 12000 steps when `--steps` is not given).
     #[arg(long, help_heading = BOTH)]
     densify_every: Option<usize>,
     /// Fraction of the steps before the first density round (default: 0.3 additive, 0.05
@@ -259,7 +261,8 @@ pub struct FitArgs {
     window: Option<WindowChoice>,
     /// The loss the gradient is taken of: `mse` (SPEC §6), or `l1-dssim`, 3D Gaussian
     /// splatting's (1 - λ)·L1 + λ·(1 - SSIM) with an 11×11 Gaussian window (σ 1.5); the
-    /// reported loss and PSNR stay the MSE's [default: l1-dssim].
+    /// reported loss and PSNR stay the MSE's [default: l1-dssim where the training views'
+    /// background is flat, else mse].
     #[arg(long, value_name = "mse|l1-dssim", help_heading = ALPHA)]
     loss: Option<LossName>,
     /// λ, the weight of 1 - SSIM in `--loss l1-dssim` (refused with the mse loss), in

@@ -44,7 +44,7 @@ use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scen
 use crate::fit::rig_start::{find_rig, rig_alpha_scene, rig_bounds};
 use crate::fit::stereo::plane_sweep;
 use crate::fit::time_left::TimeLeft;
-use crate::fit::train::{StepRecord, Training, fit};
+use crate::fit::train::{StepRecord, Training, TrainingLoss, fit};
 use crate::model::{
     Blend, Camera, Dataset, Error, Result, Scene, Up, View, check_non_negative_setting,
 };
@@ -647,20 +647,38 @@ fn windows_note(side: u32, train: &[View]) -> Option<String> {
     })
 }
 
-/// The pruning by score's share when the caller gives none: [`DEFAULT_PRUNE_FRACTION`]
-/// where the training views' background is flat (renders of an object, where the kernels of
-/// lowest score are nearly invisible: equal or better held-out PSNR with half the kernels on
-/// the D-NeRF-like proxy and the occluding data), else 0 (photos, where every kernel
-/// carries part of the picture: the phone-like proxy at ⅛ lost 2.34 dB held out, 38.00 →
-/// 35.66 dB, for 8 % less CPU time; `docs/fitting.md`). `background` as the fit takes it
-/// (else the border median).
+/// The alpha defaults that follow the training views' background: whether it is flat
+/// ([`flat_background`] around `background` as the fit takes it, else the border median),
+/// scanned once for both.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BackgroundDefaults {
+    /// The pruning by score's share: [`DEFAULT_PRUNE_FRACTION`] over a flat background
+    /// (renders of an object, where the kernels of lowest score are nearly invisible: equal
+    /// or better held-out PSNR with half the kernels on the D-NeRF-like proxy and the
+    /// occluding data), else 0 (photos, where every kernel carries part of the picture: the
+    /// phone-like proxy at ⅛ lost 2.34 dB held out, 38.00 → 35.66 dB, for 8 % less CPU
+    /// time; `docs/fitting.md`).
+    pub prune_fraction: f64,
+    /// The training loss: [`DEFAULT_LOSS`] (3DGS's) over a flat background, else
+    /// [`DEFAULT_PHOTO_LOSS`].
+    pub loss: TrainingLoss,
+}
+
+/// The [`BackgroundDefaults`] of the training views `train`, `background` as the caller
+/// gave it.
 #[must_use]
-pub fn default_prune_fraction(train: &[View], background: Option<[f64; 3]>) -> f64 {
+pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> BackgroundDefaults {
     let background = background.unwrap_or_else(|| border_median(train));
     if flat_background(train, background) {
-        DEFAULT_PRUNE_FRACTION
+        BackgroundDefaults {
+            prune_fraction: DEFAULT_PRUNE_FRACTION,
+            loss: DEFAULT_LOSS,
+        }
     } else {
-        0.0
+        BackgroundDefaults {
+            prune_fraction: 0.0,
+            loss: DEFAULT_PHOTO_LOSS,
+        }
     }
 }
 

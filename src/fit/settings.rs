@@ -41,8 +41,8 @@ use crate::fit::defaults::{
 };
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
-    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule, check_fit_numbers,
-    default_prune_fraction, fit_blend, prepare_alpha,
+    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule, background_defaults, check_fit_numbers,
+    fit_blend, prepare_alpha,
 };
 use crate::fit::ssim::L1Dssim;
 use crate::fit::train::{EarlyStop, LossName, TrainingLoss};
@@ -491,14 +491,21 @@ impl FitSettings {
         self.check_blend(Blend::Alpha, why)?;
         let options = self.alpha();
         self.check_motion(&options)?;
-        if self.dssim_weight.is_some() && options.loss.name() != LossName::L1Dssim {
+        self.check_dssim_weight(options.loss)?;
+        self.check_prune_rounds(options.prune_fraction)?;
+        Ok(options)
+    }
+
+    /// An error naming `dssim_weight` when it is chosen and the fit's `loss` is not
+    /// `l1-dssim` (no D-SSIM term to weigh), or `Ok`.
+    fn check_dssim_weight(&self, loss: TrainingLoss) -> Result<()> {
+        if self.dssim_weight.is_some() && loss.name() != LossName::L1Dssim {
             return Err(Error::setting(
                 &["dssim_weight"],
                 "`dssim_weight` weighs the D-SSIM term of the `l1-dssim` loss, and this fit's `loss` is mse: add `loss` l1-dssim, or leave `dssim_weight` out",
             ));
         }
-        self.check_prune_rounds(options.prune_fraction)?;
-        Ok(options)
+        Ok(())
     }
 
     /// An error naming `prune_rounds` when it is chosen and the fit's pruning share
@@ -514,7 +521,7 @@ impl FitSettings {
     }
 
     /// The alpha fit's `options` for `dataset` (its training frames from `origin`): the
-    /// pruning share where the caller gave none ([`default_prune_fraction`]), the steps and
+    /// pruning share and the loss where the caller gave none ([`background_defaults`]), the steps and
     /// the density period where it gave no step count ([`alpha_schedule`]), and every
     /// chosen setting that the data leaves without effect refused by name: `early_stop`
     /// without held-out views, a `window` that cuts no training view, `prune_rounds` where
@@ -546,10 +553,14 @@ impl FitSettings {
                 ),
             ));
         }
-        let prune_fraction = self
-            .prune_fraction
-            .unwrap_or_else(|| default_prune_fraction(&dataset.train, self.background));
+        let by_background = background_defaults(&dataset.train, self.background);
+        let prune_fraction = self.prune_fraction.unwrap_or(by_background.prune_fraction);
         self.check_prune_rounds(prune_fraction)?;
+        let loss = match self.loss {
+            Some(_) => options.loss,
+            None => by_background.loss,
+        };
+        self.check_dssim_weight(loss)?;
         let (steps, densify_every) = match self.steps {
             Some(_) => (options.steps, options.densify_every),
             None => {
@@ -559,6 +570,7 @@ impl FitSettings {
         };
         Ok(AlphaFitOptions {
             prune_fraction,
+            loss,
             steps,
             densify_every,
             ..options
@@ -586,6 +598,11 @@ impl FitSettings {
                 if self.prune_fraction.is_none() && options.prune_fraction == 0.0 {
                     ready.notes.push(
                         "no pruning by score: the photos' background is not flat, so every kernel carries part of the picture (give `prune_fraction` to prune)".into(),
+                    );
+                }
+                if self.loss.is_none() && options.loss.name() != DEFAULT_ALPHA.loss.name() {
+                    ready.notes.push(
+                        "training with the MSE: on photos, whose background is not flat, it measured better than the 3DGS loss (give `loss` l1-dssim for it)".into(),
                     );
                 }
                 Ok(ready.record_data(dataset))

@@ -971,17 +971,24 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
     );
 }
 
-/// The pruning by score's default share follows the data: half the kernels where the views'
-/// background is flat (the occluding data over black), none where the photos are textured
-/// to their borders (the same views with a checkered backdrop painted behind every pixel
-/// the scene leaves black), where `prune_rounds` is then refused.
+/// The pruning by score's default share and the loss follow the data: half the kernels
+/// and the 3DGS loss where the views' background is flat (the occluding data over black),
+/// no pruning and the MSE where the photos are textured to their borders (the same views
+/// with a checkered backdrop painted behind every pixel the scene leaves black), where
+/// `prune_rounds` and `dssim_weight` are then refused.
 #[test]
-fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos() {
-    use splat4d::fit::plan::{DEFAULT_PRUNE_FRACTION, default_prune_fraction};
+fn the_default_pruning_share_and_loss_follow_the_background() {
+    use splat4d::fit::plan::{
+        BackgroundDefaults, DEFAULT_LOSS, DEFAULT_PHOTO_LOSS, DEFAULT_PRUNE_FRACTION,
+        background_defaults,
+    };
     let (dataset, _) = occluding_dataset(&occluding_scene());
     assert_eq!(
-        default_prune_fraction(&dataset.train, None),
-        DEFAULT_PRUNE_FRACTION
+        background_defaults(&dataset.train, None),
+        BackgroundDefaults {
+            prune_fraction: DEFAULT_PRUNE_FRACTION,
+            loss: DEFAULT_LOSS
+        }
     );
     let mut photos = dataset.train.clone();
     for view in &mut photos {
@@ -994,7 +1001,14 @@ fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos
             }
         }
     }
-    assert_eq!(default_prune_fraction(&photos, None), 0.0);
+    assert_eq!(
+        background_defaults(&photos, None),
+        BackgroundDefaults {
+            prune_fraction: 0.0,
+            loss: DEFAULT_PHOTO_LOSS
+        }
+    );
+    assert_ne!(DEFAULT_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
     // Where the data's share is 0, a chosen `prune_rounds` has nothing to spread: refused
     // by name before any work.
     let photos = splat4d::model::Dataset {
@@ -1005,18 +1019,28 @@ fn the_default_pruning_share_is_half_over_a_flat_background_and_none_over_photos
         prune_rounds: Some(2),
         ..Default::default()
     };
-    let Err(error) = settings.prepare(
+    let refusal = |settings: splat4d::fit::settings::FitSettings| match settings.prepare(
         None,
         splat4d::fit::plan::Init::Auto,
         "auto",
         &photos,
         "<photos>",
-    ) else {
-        panic!("prune_rounds was not refused");
+    ) {
+        Err(error) => error.to_string(),
+        Ok(_) => panic!("{settings:?} was not refused"),
     };
-    let error = error.to_string();
+    let error = refusal(settings);
     assert!(
         error.contains("`prune_rounds` spreads the pruning"),
+        "{error}"
+    );
+    // Where the data's loss is the MSE, a chosen `dssim_weight` has no term to weigh.
+    let error = refusal(splat4d::fit::settings::FitSettings {
+        dssim_weight: Some(0.3),
+        ..Default::default()
+    });
+    assert!(
+        error.contains("`dssim_weight` weighs the D-SSIM term"),
         "{error}"
     );
 }
