@@ -20,8 +20,10 @@ use splat4d::model::random::seeded_rng;
 use splat4d::fit::alpha::{AlphaFitOptions, AlphaRates, MotionFit, alpha_bounds};
 use splat4d::fit::defaults::DEFAULT_MOTION_TURNING;
 use splat4d::fit::density::TurningRule;
+use splat4d::fit::init::SpaceTimeBox;
 use splat4d::fit::plan::DEFAULT_ALPHA;
 use splat4d::fit::train::{Training, TrainingLoss, fit};
+use splat4d::model::Dataset;
 use splat4d::scenes::dataset::{DatasetSpec, render_dataset};
 
 /// Fields checked per kernel: mean (4), velocity (3), acceleration (3), quaternion (4),
@@ -663,20 +665,15 @@ fn the_angular_velocity_group_finds_a_spinning_sticks_turn() {
     );
 }
 
-/// A thrown ball beside a still plate, fitted with a density round in which every kernel
-/// grows (`motion` where needed, after 0 splits in time; only the acceleration rate above
-/// 0): the ball's kernel, which spans motion, gets fitted motion instead of a split in time
-/// and finds a fall, while the still plate and its clones keep no acceleration at all. With
-/// motion everywhere the plate's acceleration moves too.
-#[test]
-fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
-    let ball = thrown_ball();
+/// The thrown ball and a still plate centred at `plate` (alpha, opacities 0.9), its
+/// dataset (6 views, 5 times, 48×48) and the training cameras' box.
+fn ball_and_plate(plate: [f64; 3]) -> (Scene, Dataset, SpaceTimeBox) {
     let plate = Kernel::new(
-        [0.3, -0.3, 0.0, 0.5],
+        [plate[0], plate[1], plate[2], 0.5],
         [0.15, 0.03, 0.15, 10.0],
         [0.2, 0.6, 0.3],
     );
-    let truth = Scene::from_kernels(&[ball, plate], [0.0; 3], "<motion>")
+    let truth = Scene::from_kernels(&[thrown_ball(), plate], [0.0; 3], "<motion>")
         .unwrap()
         .into_alpha(vec![0.9, 0.9], 0, Vec::new(), "<motion>")
         .unwrap();
@@ -689,6 +686,17 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
     };
     let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
     let bounds = alpha_bounds(&dataset.train, "<motion>").unwrap();
+    (truth, dataset, bounds)
+}
+
+/// A thrown ball beside a still plate, fitted with a density round in which every kernel
+/// grows (`motion` where needed, after 0 splits in time; only the acceleration rate above
+/// 0): the ball's kernel, which spans motion, gets fitted motion instead of a split in time
+/// and finds a fall, while the still plate and its clones keep no acceleration at all. With
+/// motion everywhere the plate's acceleration moves too.
+#[test]
+fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
+    let (truth, dataset, bounds) = ball_and_plate([0.3, -0.3, 0.0]);
     let fitted = |motion: MotionFit| {
         let options = AlphaFitOptions {
             steps: 400,
@@ -756,25 +764,7 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
 /// in the test above, feels the ball's misfit as a steady pull too, and moves.)
 #[test]
 fn motion_where_the_velocity_gradient_keeps_turning_goes_to_the_ball_not_the_plate() {
-    let ball = thrown_ball();
-    let plate = Kernel::new(
-        [1.2, -0.5, 0.0, 0.5],
-        [0.15, 0.03, 0.15, 10.0],
-        [0.2, 0.6, 0.3],
-    );
-    let truth = Scene::from_kernels(&[ball, plate], [0.0; 3], "<motion>")
-        .unwrap()
-        .into_alpha(vec![0.9, 0.9], 0, Vec::new(), "<motion>")
-        .unwrap();
-    let spec = DatasetSpec {
-        views: 6,
-        times: 5,
-        width: 48,
-        height: 48,
-        ..DatasetSpec::default()
-    };
-    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
-    let bounds = alpha_bounds(&dataset.train, "<motion>").unwrap();
+    let (truth, dataset, bounds) = ball_and_plate([1.2, -0.5, 0.0]);
     let fitted = |turning: Option<TurningRule>| {
         let options = AlphaFitOptions {
             steps: 400,
