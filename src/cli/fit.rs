@@ -72,7 +72,7 @@ pub struct FitArgs {
     render: RenderFlags,
 
     /// Adam steps (default: 4000 additive; alpha 12000 where no training view has more than
-    /// 128×128 pixels, else 6000).
+    /// 128×128 pixels and their background is flat, else 6000).
     #[arg(long, help_heading = BOTH)]
     steps: Option<usize>,
     /// Views per step (default: 8 additive, 4 alpha).
@@ -273,8 +273,8 @@ pub struct FitArgs {
     /// at `--lr-acceleration` and `--lr-angular-velocity`): `auto`, those that keep
     /// splitting in time (after `--motion-after-splits` splits of their line, instead of a
     /// further split) or whose velocity gradient keeps turning over their life (a steady
-    /// acceleration gradient in 2 density intervals running); `all`, every kernel; `off`,
-    /// none [default: all].
+    /// acceleration gradient in 2 density intervals running; it needs `--lr-acceleration`
+    /// above 0); `all`, every kernel; `off`, none [default: all].
     #[arg(long, value_name = "auto|all|off", help_heading = ALPHA)]
     motion: Option<MotionName>,
     /// With `--motion auto`: the splits in time of a kernel's line after which a kernel

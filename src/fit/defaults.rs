@@ -96,10 +96,10 @@ pub const DEFAULT_COARSE: CoarseToFine = CoarseToFine::Auto {
 pub const DEFAULT_WINDOW: Option<u32> = Some(200);
 
 /// The alpha fit's schedule on small views ([`crate::fit::plan::alpha_schedule`]): where
-/// no training view has more than `max_pixels` pixels, a step is cheap and the fit is
-/// limited by its steps, not its pixels, so it takes `steps` steps and densifies every
-/// `densify_every` (the same number of density rounds as [`DEFAULT_ALPHA`]'s, so the same
-/// kernel count). Larger views keep [`DEFAULT_ALPHA`]'s 6000 steps.
+/// no training view has more than `max_pixels` pixels and their background is flat, a step
+/// is cheap and the fit is limited by its steps, not its pixels, so it takes `steps` steps
+/// and densifies every `densify_every` (the same number of density rounds as
+/// [`DEFAULT_ALPHA`]'s). Larger views and photos keep [`DEFAULT_ALPHA`]'s 6000 steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SmallViewSchedule {
     /// The largest view, in pixels, that counts as small.
@@ -177,13 +177,13 @@ pub const DEFAULT_MOTION_AFTER_SPLITS: u32 = 1;
 /// whose velocity gradient's first moment in time (its acceleration gradient, summed over
 /// a density interval) is steady, `|Σg|/√Σ|g|²` at least 3, in 2 consecutive intervals
 /// each within 60° of the one before, gets fitted SPEC §9 motion. For noise of mean zero
-/// `z²` is about χ² with 3 degrees of freedom, so an interval of noise passes 3 with
-/// probability 0.03. Measured with `--motion auto` (`docs/fitting.md`, "Motion"; one run
+/// `z²` is about χ²₃/3 (mean 1), so an interval of noise passes 3 with probability about
+/// 6e-6 and 2 with about 0.007. Measured with `--motion auto` (`docs/fitting.md`, "Motion"; one run
 /// each): on the thrown ball 41.31 dB held out against 40.25 dB with the splits-in-time
 /// trigger alone (775 of 2678 kernels moving, 5 % more CPU), on the D-NeRF-like proxy at
 /// 100² 37.14 against 36.79 dB. Steadiness 4: 41.00 dB (295 moving); 2 in 3 intervals:
-/// 41.21 dB (541); steadiness 2: 41.63 dB, but 1422 of 2715 kernels moving (an interval of
-/// noise passes 2 with probability 0.26). The pull between intervals of the velocity
+/// 41.21 dB (541); steadiness 2: 41.63 dB, with 1422 of 2715 kernels moving (steady
+/// pulls, not noise, which passes 2 with probability 0.007). The pull between intervals of the velocity
 /// gradient itself (its cosine below 0.5 twice running, steadiness 2) almost never
 /// turned: 1 kernel on the ball, 40.24 dB.
 pub const DEFAULT_MOTION_TURNING: TurningRule = TurningRule {

@@ -652,6 +652,8 @@ fn windows_note(side: u32, train: &[View]) -> Option<String> {
 /// scanned once for both.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BackgroundDefaults {
+    /// Whether the background is flat.
+    pub flat: bool,
     /// The pruning by score's share: [`DEFAULT_PRUNE_FRACTION`] over a flat background
     /// (renders of an object, where the kernels of lowest score are nearly invisible: equal
     /// or better held-out PSNR with half the kernels on the D-NeRF-like proxy and the
@@ -671,11 +673,13 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
     let background = background.unwrap_or_else(|| border_median(train));
     if flat_background(train, background) {
         BackgroundDefaults {
+            flat: true,
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS,
         }
     } else {
         BackgroundDefaults {
+            flat: false,
             prune_fraction: 0.0,
             loss: DEFAULT_PHOTO_LOSS,
         }
@@ -683,17 +687,18 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
 }
 
 /// The alpha fit's steps and steps between density rounds when the caller gives no step
-/// count: [`DEFAULT_SMALL_VIEWS`]'s where no training view has more pixels than its
+/// count: [`DEFAULT_SMALL_VIEWS`]'s where the training views' background is flat
+/// (`flat_background`: renders of an object) and none of them has more pixels than its
 /// `max_pixels` (a step is then cheap, and twice the steps at the same rounds measured
-/// better; `docs/fitting.md`, "Steps"), else [`DEFAULT_ALPHA`]'s.
+/// better; `docs/fitting.md`, "Steps"), else [`DEFAULT_ALPHA`]'s (photos gained nothing).
 #[must_use]
-pub fn alpha_schedule(train: &[View]) -> (usize, usize) {
+pub fn alpha_schedule(train: &[View], flat_background: bool) -> (usize, usize) {
     let largest = train
         .iter()
         .map(|v| u64::from(v.image.width) * u64::from(v.image.height))
         .max()
         .unwrap_or(0);
-    if largest <= DEFAULT_SMALL_VIEWS.max_pixels {
+    if flat_background && largest <= DEFAULT_SMALL_VIEWS.max_pixels {
         (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every)
     } else {
         (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every)

@@ -556,15 +556,12 @@ impl FitSettings {
         let by_background = background_defaults(&dataset.train, self.background);
         let prune_fraction = self.prune_fraction.unwrap_or(by_background.prune_fraction);
         self.check_prune_rounds(prune_fraction)?;
-        let loss = match self.loss {
-            Some(_) => options.loss,
-            None => by_background.loss,
-        };
+        let loss = self.training_loss(by_background.loss);
         self.check_dssim_weight(loss)?;
         let (steps, densify_every) = match self.steps {
             Some(_) => (options.steps, options.densify_every),
             None => {
-                let (steps, densify_every) = alpha_schedule(&dataset.train);
+                let (steps, densify_every) = alpha_schedule(&dataset.train, by_background.flat);
                 (steps, self.densify_every.unwrap_or(densify_every))
             }
         };

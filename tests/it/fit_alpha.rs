@@ -986,9 +986,29 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
     assert_eq!(
         background_defaults(&dataset.train, None),
         BackgroundDefaults {
+            flat: true,
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS
         }
+    );
+    // Over the flat background a chosen `dssim_weight` weighs the default 3DGS loss.
+    let weighted = splat4d::fit::settings::FitSettings {
+        dssim_weight: Some(0.5),
+        ..Default::default()
+    }
+    .prepare(
+        None,
+        splat4d::fit::plan::Init::Auto,
+        "auto",
+        &dataset,
+        "<occluding>",
+    )
+    .unwrap();
+    assert_eq!(
+        weighted.training.loss,
+        splat4d::fit::train::TrainingLoss::L1Dssim(splat4d::fit::ssim::L1Dssim {
+            dssim_weight: 0.5
+        })
     );
     let mut photos = dataset.train.clone();
     for view in &mut photos {
@@ -1004,6 +1024,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
     assert_eq!(
         background_defaults(&photos, None),
         BackgroundDefaults {
+            flat: false,
             prune_fraction: 0.0,
             loss: DEFAULT_PHOTO_LOSS
         }
@@ -1046,9 +1067,9 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
 }
 
 /// The alpha fit's steps follow the views' size when none are given: twice the steps at the
-/// same density rounds on views of at most 128×128 pixels (the occluding data's 48×48),
-/// the default's on larger ones; a given step count keeps the default density period, and
-/// a given density period is kept.
+/// same density rounds on views of at most 128×128 pixels over a flat background (the
+/// occluding data's 48×48), the default's on larger ones and on photos; a given step count
+/// keeps the default density period, and a given density period is kept.
 #[test]
 fn the_step_count_follows_the_view_size_when_none_is_given() {
     use splat4d::fit::density::DensityRules;
@@ -1065,7 +1086,7 @@ fn the_step_count_follows_the_view_size_when_none_is_given() {
         (ready.training.steps, rules.every)
     };
     let small = (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every);
-    assert_eq!(alpha_schedule(&dataset.train), small);
+    assert_eq!(alpha_schedule(&dataset.train, true), small);
     assert_eq!(
         small.0 / small.1,
         DEFAULT_ALPHA.steps / DEFAULT_ALPHA.densify_every
@@ -1089,8 +1110,8 @@ fn the_step_count_follows_the_view_size_when_none_is_given() {
     let mut view = large[0].clone();
     view.image = std::sync::Arc::new(splat4d::model::Image::filled(129, 128, [0.0; 3]));
     large.push(view);
-    assert_eq!(
-        alpha_schedule(&large),
-        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every)
-    );
+    let default = (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every);
+    assert_eq!(alpha_schedule(&large, true), default);
+    // Photos (a background that is not flat) keep the default's schedule at any size.
+    assert_eq!(alpha_schedule(&dataset.train, false), default);
 }
