@@ -689,6 +689,27 @@ fn ball_and_plate(plate: [f64; 3]) -> (Scene, Dataset, SpaceTimeBox) {
     (truth, dataset, bounds)
 }
 
+/// `truth` with its accelerations taken away, fitted by `options` to `dataset`'s training
+/// views in `bounds`.
+fn fitted_from_no_acceleration(
+    truth: &Scene,
+    dataset: &Dataset,
+    bounds: &SpaceTimeBox,
+    options: &AlphaFitOptions,
+) -> Scene {
+    let mut start = truth.clone();
+    start.accelerations.clear();
+    fit(
+        &mut start,
+        &dataset.train,
+        &[],
+        &options.training(bounds),
+        |_, _| {},
+    )
+    .unwrap();
+    start
+}
+
 /// A thrown ball beside a still plate, fitted with a density round in which every kernel
 /// grows (`motion` where needed, after 0 splits in time; only the acceleration rate above
 /// 0): the ball's kernel, which spans motion, gets fitted motion instead of a split in time
@@ -718,17 +739,7 @@ fn motion_where_needed_goes_only_to_kernels_that_keep_splitting_in_time() {
             motion,
             ..DEFAULT_ALPHA
         };
-        let mut start = truth.clone();
-        start.accelerations.clear();
-        fit(
-            &mut start,
-            &dataset.train,
-            &[],
-            &options.training(&bounds),
-            |_, _| {},
-        )
-        .unwrap();
-        start
+        fitted_from_no_acceleration(&truth, &dataset, &bounds, &options)
     };
     let still = |scene: &Scene, i: usize| scene.velocities[i] == [0.0; 3];
     // The splits in time alone: the turning trigger is the next test's.
@@ -790,17 +801,7 @@ fn motion_where_the_velocity_gradient_keeps_turning_goes_to_the_ball_not_the_pla
             },
             ..DEFAULT_ALPHA
         };
-        let mut start = truth.clone();
-        start.accelerations.clear();
-        fit(
-            &mut start,
-            &dataset.train,
-            &[],
-            &options.training(&bounds),
-            |_, _| {},
-        )
-        .unwrap();
-        start
+        fitted_from_no_acceleration(&truth, &dataset, &bounds, &options)
     };
     let turning = fitted(Some(DEFAULT_MOTION_TURNING));
     assert_eq!(turning.len(), 2);
