@@ -71,11 +71,12 @@ pub struct FitArgs {
     #[command(flatten)]
     render: RenderFlags,
 
-    /// Adam steps (default: 4000 additive; alpha 12000 where no training view has more than
-    /// 128×128 pixels and their background is flat, else 6000).
+    /// Adam steps (default: 4000 additive; alpha 12000 where the training views' background
+    /// is flat (renders of an object), else 6000).
     #[arg(long, help_heading = BOTH)]
     steps: Option<usize>,
-    /// Views per step (default: 8 additive, 4 alpha).
+    /// Views per step (default: 8 additive; alpha 2 with the 12000 steps of renders of an
+    /// object when `--steps` is not given, else 4).
     #[arg(long, help_heading = BOTH)]
     batch: Option<usize>,
     /// Kernels `auto` starts from (default: 4 additive, where 1 is one kernel at the centre
@@ -132,7 +133,7 @@ pub struct FitArgs {
     #[arg(long, help_heading = BOTH)]
     freeze_amplitude: bool,
     /// Steps between density rounds (default: 50 additive; alpha 100, or 200 with the
-    /// small views' 12000 steps when `--steps` is not given).
+    /// 12000 steps of renders of an object when `--steps` is not given).
     #[arg(long, help_heading = BOTH)]
     densify_every: Option<usize>,
     /// Fraction of the steps before the first density round (default: 0.3 additive, 0.05

@@ -686,22 +686,20 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
     }
 }
 
-/// The alpha fit's steps and steps between density rounds when the caller gives no step
-/// count: [`DEFAULT_SMALL_VIEWS`]'s where the training views' background is flat
-/// (`flat_background`: renders of an object) and none of them has more pixels than its
-/// `max_pixels` (a step is then cheap, and twice the steps at the same rounds measured
-/// better; `docs/fitting.md`, "Steps"), else [`DEFAULT_ALPHA`]'s (photos gained nothing).
+/// The alpha fit's steps, density period and batch when the caller gives no step count:
+/// [`DEFAULT_OBJECT_SCHEDULE`] where the training views' background is flat
+/// (`flat_background`: renders of an object; twice the steps of half as many views measured
+/// better at every size, `docs/fitting.md`, "Steps"), else [`DEFAULT_ALPHA`]'s (photos lost).
 #[must_use]
-pub fn alpha_schedule(train: &[View], flat_background: bool) -> (usize, usize) {
-    let largest = train
-        .iter()
-        .map(|v| u64::from(v.image.width) * u64::from(v.image.height))
-        .max()
-        .unwrap_or(0);
-    if flat_background && largest <= DEFAULT_SMALL_VIEWS.max_pixels {
-        (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every)
+pub fn alpha_schedule(flat_background: bool) -> AlphaSchedule {
+    if flat_background {
+        DEFAULT_OBJECT_SCHEDULE
     } else {
-        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every)
+        AlphaSchedule {
+            steps: DEFAULT_ALPHA.steps,
+            densify_every: DEFAULT_ALPHA.densify_every,
+            batch_size: DEFAULT_ALPHA.batch_size,
+        }
     }
 }
 

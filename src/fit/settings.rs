@@ -522,7 +522,7 @@ impl FitSettings {
 
     /// The alpha fit's `options` for `dataset` (its training frames from `origin`): the
     /// pruning share and the loss where the caller gave none ([`background_defaults`]), the steps and
-    /// the density period where it gave no step count ([`alpha_schedule`]), and every
+    /// the density period and the batch where it gave no step count ([`alpha_schedule`]), and every
     /// chosen setting that the data leaves without effect refused by name: `early_stop`
     /// without held-out views, a `window` that cuts no training view, `prune_rounds` where
     /// the data's pruning share is 0.
@@ -558,11 +558,15 @@ impl FitSettings {
         self.check_prune_rounds(prune_fraction)?;
         let loss = self.training_loss(by_background.loss);
         self.check_dssim_weight(loss)?;
-        let (steps, densify_every) = match self.steps {
-            Some(_) => (options.steps, options.densify_every),
+        let (steps, densify_every, batch_size) = match self.steps {
+            Some(_) => (options.steps, options.densify_every, options.batch_size),
             None => {
-                let (steps, densify_every) = alpha_schedule(&dataset.train, by_background.flat);
-                (steps, self.densify_every.unwrap_or(densify_every))
+                let schedule = alpha_schedule(by_background.flat);
+                (
+                    schedule.steps,
+                    self.densify_every.unwrap_or(schedule.densify_every),
+                    self.batch.unwrap_or(schedule.batch_size),
+                )
             }
         };
         Ok(AlphaFitOptions {
@@ -570,6 +574,7 @@ impl FitSettings {
             loss,
             steps,
             densify_every,
+            batch_size,
             ..options
         })
     }

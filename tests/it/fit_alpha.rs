@@ -1066,52 +1066,61 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
     );
 }
 
-/// The alpha fit's steps follow the views' size when none are given: twice the steps at the
-/// same density rounds on views of at most 128×128 pixels over a flat background (the
-/// occluding data's 48×48), the default's on larger ones and on photos; a given step count
-/// keeps the default density period, and a given density period is kept.
+/// Renders of an object (the occluding data, over a flat background) take twice the steps
+/// of 2 views at the same density rounds where no step count is given; photos keep the
+/// default's; a given step count keeps the default density period and batch, and a given
+/// density period or batch is kept.
 #[test]
-fn the_step_count_follows_the_view_size_when_none_is_given() {
+fn the_schedule_follows_the_background_when_no_step_count_is_given() {
     use splat4d::fit::density::DensityRules;
-    use splat4d::fit::plan::{DEFAULT_ALPHA, DEFAULT_SMALL_VIEWS, Init, alpha_schedule};
+    use splat4d::fit::plan::{DEFAULT_ALPHA, DEFAULT_OBJECT_SCHEDULE, Init, alpha_schedule};
     use splat4d::fit::settings::FitSettings;
     let (dataset, _) = occluding_dataset(&occluding_scene());
-    let schedule = |settings: FitSettings, dataset: &splat4d::model::Dataset| {
+    let schedule = |settings: FitSettings| {
         let ready = settings
-            .prepare(None, Init::Auto, "auto", dataset, "<occluding>")
+            .prepare(None, Init::Auto, "auto", &dataset, "<occluding>")
             .unwrap();
         let Some(DensityRules::Alpha(rules)) = ready.training.density else {
             panic!("no alpha density rules");
         };
-        (ready.training.steps, rules.every)
+        (ready.training.steps, rules.every, ready.training.batch_size)
     };
-    let small = (DEFAULT_SMALL_VIEWS.steps, DEFAULT_SMALL_VIEWS.densify_every);
-    assert_eq!(alpha_schedule(&dataset.train, true), small);
+    let object = DEFAULT_OBJECT_SCHEDULE;
+    assert_eq!(alpha_schedule(true), object);
     assert_eq!(
-        small.0 / small.1,
+        object.steps / object.densify_every,
         DEFAULT_ALPHA.steps / DEFAULT_ALPHA.densify_every
     );
-    assert_eq!(schedule(FitSettings::default(), &dataset), small);
+    assert_eq!(
+        object.steps * object.batch_size,
+        DEFAULT_ALPHA.steps * DEFAULT_ALPHA.batch_size
+    );
+    assert_eq!(
+        schedule(FitSettings::default()),
+        (object.steps, object.densify_every, object.batch_size)
+    );
     let given_steps = FitSettings {
         steps: Some(300),
         ..Default::default()
     };
     assert_eq!(
-        schedule(given_steps, &dataset),
-        (300, DEFAULT_ALPHA.densify_every)
+        schedule(given_steps),
+        (300, DEFAULT_ALPHA.densify_every, DEFAULT_ALPHA.batch_size)
     );
-    let given_period = FitSettings {
+    let given_period_and_batch = FitSettings {
         densify_every: Some(50),
+        batch: Some(3),
         ..Default::default()
     };
-    assert_eq!(schedule(given_period, &dataset), (small.0, 50));
-    // One view of 129×128 pixels makes the views large.
-    let mut large = dataset.train.clone();
-    let mut view = large[0].clone();
-    view.image = std::sync::Arc::new(splat4d::model::Image::filled(129, 128, [0.0; 3]));
-    large.push(view);
-    let default = (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.densify_every);
-    assert_eq!(alpha_schedule(&large, true), default);
-    // Photos (a background that is not flat) keep the default's schedule at any size.
-    assert_eq!(alpha_schedule(&dataset.train, false), default);
+    assert_eq!(schedule(given_period_and_batch), (object.steps, 50, 3));
+    // Photos (a background that is not flat) keep the default's schedule.
+    let photos = alpha_schedule(false);
+    assert_eq!(
+        (photos.steps, photos.densify_every, photos.batch_size),
+        (
+            DEFAULT_ALPHA.steps,
+            DEFAULT_ALPHA.densify_every,
+            DEFAULT_ALPHA.batch_size
+        )
+    );
 }
