@@ -33,7 +33,7 @@ use crate::backward::Gradients;
 use crate::fit::adam::{Adam, AdamConfig, Field, ParameterGroup, non_finite_parameter};
 use crate::fit::coarse::{SizeStage, StagedViews};
 use crate::fit::density::prune::{keep_kernels, kept_after_pruning, temporal_weight, time_spacing};
-use crate::fit::density::{DensityRules, DensityStats, Line, ShapeBound, SpacetimePrune, Turning};
+use crate::fit::density::{DensityRules, DensityStats, Line, ShapeBound, SpacetimePrune};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::regularise::Regularisers;
 use crate::fit::spread;
@@ -713,17 +713,12 @@ fn run_density_rules(
     }
     if let Some(fraction) = prune.and_then(|rule| rule.due(step, rules.growth_ends(steps))) {
         let sources = prune_by_score(fraction, scene, (train, render, slots), adam)?;
-        // The kept kernels keep their lines of descent and their turning counts.
-        let (lines, turning) = sources
+        // The kept kernels keep their lines of descent (their turning counts too).
+        let lines = sources
             .iter()
-            .map(|source| {
-                source.map_or_else(
-                    || (Line::default(), Turning::default()),
-                    |i| (stats.line(i), stats.turning(i)),
-                )
-            })
-            .unzip();
-        *stats = stats.next_window_turning(lines, turning);
+            .map(|source| source.map_or_else(Line::default, |i| stats.line(i)))
+            .collect();
+        *stats = stats.next_window(lines);
     }
     Ok(())
 }

@@ -112,12 +112,13 @@ pub fn reset_opacities(scene: &mut Scene, ceiling: f64) {
 /// One round: prune transparent kernels, give motion to those whose velocity gradient keeps
 /// turning, then clone, split, split in time or give motion to the ones with the largest
 /// mean screen-space gradient. Returns, per kernel of the new scene, the old kernel whose
-/// optimiser state it keeps (`None`: fresh), its line of descent and its turning state.
+/// optimiser state it keeps (`None`: fresh) and its line of descent: a kept kernel (or one
+/// given motion) keeps its turning state, a new one starts afresh.
 pub fn densify_and_prune(
     scene: &mut Scene,
     stats: &DensityStats,
     rules: &AlphaRules,
-) -> (Vec<Option<usize>>, Vec<Line>, Vec<Turning>) {
+) -> (Vec<Option<usize>>, Vec<Line>) {
     let n = scene.len();
     let keep: Vec<usize> = (0..n)
         .filter(|&i| scene.opacities[i] >= rules.prune_opacity)
@@ -129,9 +130,6 @@ pub fn densify_and_prune(
         ..Scene::default()
     };
     let (mut opacities, mut sh, mut sources) = (Vec::new(), Vec::new(), Vec::new());
-    let turning: Vec<Turning> = (0..n)
-        .map(|i| turning_after_round(stats, i, rules))
-        .collect();
     let mut lines = Vec::new();
     let mut push =
         |kernel: Kernel, (i, line): (usize, Line), source: Option<usize>, next: &mut Scene| {
@@ -139,13 +137,16 @@ pub fn densify_and_prune(
             opacities.push(scene.opacities[i]);
             sh.extend_from_slice(scene.sh_of(i));
             sources.push(source);
-            lines.push(line);
+            lines.push(match source {
+                Some(_) => line,
+                None => Line {
+                    turning: Turning::default(),
+                    ..line
+                },
+            });
         };
     for &i in &keep {
-        let (kernel, line) = (
-            scene.kernel(i),
-            moving_if_turning(stats.line(i), turning[i], rules),
-        );
+        let (kernel, line) = (scene.kernel(i), line_after_round(stats, i, rules));
         if !grow[i] {
             push(kernel, (i, line), Some(i), &mut next);
             continue;
@@ -183,30 +184,24 @@ pub fn densify_and_prune(
     next.sh_count = scene.sh_count;
     next.sh = sh;
     *scene = next;
-    // The kernel kept (or given motion) keeps its turning state; new ones start afresh.
-    let turning = sources
-        .iter()
-        .map(|source| source.map_or_else(Turning::default, |i| turning[i]))
-        .collect();
-    (sources, lines, turning)
+    (sources, lines)
 }
 
-/// Kernel `i`'s turning state after this round ([`super::turning`]); the default without
-/// the rule, or once it moves.
-fn turning_after_round(stats: &DensityStats, i: usize, rules: &AlphaRules) -> Turning {
-    match rules.motion_when_turning {
-        Some(rule) if !stats.line(i).moving => rule.after_round(stats.turning(i), stats.pull(i)),
+/// Kernel `i`'s line after this round's turning rule ([`super::turning`]): its turning state
+/// moved on by the interval's pull (the default without the rule, or once it moves), and
+/// moving when that state keeps turning.
+fn line_after_round(stats: &DensityStats, i: usize, rules: &AlphaRules) -> Line {
+    let line = stats.line(i);
+    let turning = match rules.motion_when_turning {
+        Some(rule) if !line.moving => rule.after_round(line.turning, stats.pull(i)),
         _ => Turning::default(),
-    }
-}
-
-/// `line`, moving when its kernel's velocity gradient keeps turning (state `turning`).
-fn moving_if_turning(line: Line, turning: Turning, rules: &AlphaRules) -> Line {
+    };
     let turns = rules
         .motion_when_turning
         .is_some_and(|rule| rule.keeps_turning(turning));
     Line {
         moving: line.moving || turns,
+        turning,
         ..line
     }
 }
@@ -353,11 +348,12 @@ mod tests {
     #[test]
     fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (sources, lines, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+        let (sources, lines) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
         assert_eq!(sources, vec![None, None]);
         let child = Line {
             time_splits: 1,
             moving: false,
+            ..Line::default()
         };
         assert_eq!(lines, vec![child; 2]);
         assert_eq!(scene.len(), 2);
@@ -391,16 +387,17 @@ mod tests {
         let once_split = Line {
             time_splits: 1,
             moving: false,
+            ..Line::default()
         };
         // A first split in time, as without the rule.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let fresh = seen_once_on(Line::default());
-        let (_, lines, _) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
+        let (_, lines) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
         assert_eq!(lines, vec![once_split; 2]);
         // A kernel split once that still spans motion: kept whole, moments kept, moving.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let before = scene.clone();
-        let (sources, lines, _) =
+        let (sources, lines) =
             densify_and_prune(&mut scene, &seen_once_on(once_split), &motion_after_one);
         assert_eq!(sources, vec![Some(0)]);
         let moving = Line {
@@ -410,17 +407,18 @@ mod tests {
         assert_eq!(lines, vec![moving]);
         assert_eq!(scene.kernel(0), before.kernel(0));
         // A moving kernel that still spans motion splits in time, its children moving.
-        let (sources, lines, _) =
+        let (sources, lines) =
             densify_and_prune(&mut scene, &seen_once_on(moving), &motion_after_one);
         assert_eq!(sources, vec![None, None]);
         let children = Line {
             time_splits: 2,
             moving: true,
+            ..Line::default()
         };
         assert_eq!(lines, vec![children; 2]);
         // Without the rule, the kernel split once splits again.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (_, lines, _) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
+        let (_, lines) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
         assert_eq!(lines.len(), 2);
         assert!(lines.iter().all(|l| l.time_splits == 2 && !l.moving));
     }
@@ -456,43 +454,28 @@ mod tests {
         let mut scene = one_kernel([0.0; 3], 0.3);
         let before = scene.clone();
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (sources, lines, turning) = densify_and_prune(&mut scene, &stats, &rules);
-        assert_eq!(
-            (sources, lines.clone()),
-            (vec![Some(0)], vec![Line::default()])
-        );
-        assert_eq!(turning[0].rounds(), 1);
-        let stats = pulled(
-            stats.next_window_turning(lines, turning),
-            [0.0, -1.0, 0.0],
-            100,
-        );
-        let (_, lines, _) = densify_and_prune(&mut scene, &stats, &rules);
+        let (sources, lines) = densify_and_prune(&mut scene, &stats, &rules);
+        assert_eq!(sources, vec![Some(0)]);
+        assert!(!lines[0].moving && lines[0].turning.rounds() == 1);
+        let stats = pulled(stats.next_window(lines), [0.0, -1.0, 0.0], 100);
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &rules);
         assert!(lines[0].moving);
         assert_eq!(scene.kernel(0), before.kernel(0));
         // Without the rule, the same pulls give no motion.
         let mut scene = one_kernel([0.0; 3], 0.3);
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (_, lines, turning) = densify_and_prune(&mut scene, &stats, &grow_all());
-        assert_eq!(turning[0], Turning::default());
-        let stats = pulled(
-            stats.next_window_turning(lines, turning),
-            [0.0, -1.0, 0.0],
-            100,
-        );
-        let (_, lines, _) = densify_and_prune(&mut scene, &stats, &grow_all());
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all());
+        assert_eq!(lines[0].turning, Turning::default());
+        let stats = pulled(stats.next_window(lines), [0.0, -1.0, 0.0], 100);
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all());
         assert!(!lines[0].moving);
         // A pull that reverses each round never counts twice.
         let mut scene = one_kernel([0.0; 3], 0.3);
         let mut stats = pulled(DensityStats::new(1), [1.0, 0.0, 0.0], 100);
         for sign in [-1.0, 1.0, -1.0] {
-            let (_, lines, turning) = densify_and_prune(&mut scene, &stats, &rules);
-            assert!(!lines[0].moving && turning[0].rounds() == 1);
-            stats = pulled(
-                stats.next_window_turning(lines, turning),
-                [sign, 0.0, 0.0],
-                100,
-            );
+            let (_, lines) = densify_and_prune(&mut scene, &stats, &rules);
+            assert!(!lines[0].moving && lines[0].turning.rounds() == 1);
+            stats = pulled(stats.next_window(lines), [sign, 0.0, 0.0], 100);
         }
         // Once counted, a cloned kernel keeps its count and its copy starts at zero.
         let clone_all = AlphaRules {
@@ -501,10 +484,13 @@ mod tests {
         };
         let mut scene = one_kernel([0.0; 3], 0.3);
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (sources, _, turning) = densify_and_prune(&mut scene, &stats, &clone_all);
+        let (sources, lines) = densify_and_prune(&mut scene, &stats, &clone_all);
         assert_eq!(sources, vec![Some(0), None]);
         assert_eq!(
-            turning.iter().map(Turning::rounds).collect::<Vec<_>>(),
+            lines
+                .iter()
+                .map(|line| line.turning.rounds())
+                .collect::<Vec<_>>(),
             [1, 0]
         );
     }
@@ -544,7 +530,7 @@ mod tests {
     fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
         for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
             let mut scene = one_kernel(velocity, time_sigma);
-            let (sources, _, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+            let (sources, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }

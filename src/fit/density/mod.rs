@@ -35,22 +35,23 @@ pub use shape::ShapeBound;
 pub use turning::{Pull, Turning, TurningRule};
 
 /// A kernel's line of descent, carried from round to round: how many splits in time made
-/// it, and whether it carries fitted SPEC §9 motion (the alpha rules' motion where needed,
-/// [`alpha`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// it, whether it carries fitted SPEC §9 motion (the alpha rules' motion where needed,
+/// [`alpha`]) and how its velocity gradient has been turning ([`turning`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Line {
     /// Splits in time among the kernel's ancestors and itself.
     pub time_splits: u32,
     /// Whether its acceleration and angular velocity are fitted.
     pub moving: bool,
+    /// Its turning state as of the last round (the default for a new kernel).
+    pub turning: Turning,
 }
 
 /// Per-kernel statistics between two rounds, filled by the training loop: every step's
 /// positional gradients ([`DensityStats::add_step`]), every view's screen gradients
 /// ([`DensityStats::add_view`]) and, for the kernels without fitted motion, every step's
 /// acceleration gradient ([`DensityStats::keep_motion_to_moving_kernels`]); the training
-/// loss at the last two rounds; and each kernel's [`Line`] and [`Turning`] state, which the
-/// rounds carry on.
+/// loss at the last two rounds; and each kernel's [`Line`], which the rounds carry on.
 #[derive(Clone, Debug, Default)]
 pub struct DensityStats {
     /// `Σ g̃` over steps (for the direction of an additive clone).
@@ -72,8 +73,6 @@ pub struct DensityStats {
     previous_loss: Option<f64>,
     /// Each kernel's line of descent.
     lines: Vec<Line>,
-    /// Each kernel's turning state as of the last round.
-    turning: Vec<Turning>,
 }
 
 impl DensityStats {
@@ -90,28 +89,17 @@ impl DensityStats {
             loss: None,
             previous_loss: None,
             lines: vec![Line::default(); n],
-            turning: vec![Turning::default(); n],
         }
     }
 
     /// Statistics after a round that left one kernel per entry of `lines` (their lines of
-    /// descent), each with no turning state: per-kernel sums cleared, this round's loss
-    /// becomes the previous one.
+    /// descent): per-kernel sums cleared, this round's loss becomes the previous one.
     #[must_use]
     pub fn next_window(&self, lines: Vec<Line>) -> Self {
-        let turning = vec![Turning::default(); lines.len()];
-        self.next_window_turning(lines, turning)
-    }
-
-    /// [`DensityStats::next_window`], each kernel with its entry of `turning`.
-    #[must_use]
-    pub fn next_window_turning(&self, lines: Vec<Line>, turning: Vec<Turning>) -> Self {
-        assert_eq!(lines.len(), turning.len(), "one turning state per line");
         let n = lines.len();
         DensityStats {
             previous_loss: self.loss,
             lines,
-            turning,
             ..DensityStats::new(n)
         }
     }
@@ -120,12 +108,6 @@ impl DensityStats {
     #[must_use]
     pub fn line(&self, i: usize) -> Line {
         self.lines[i]
-    }
-
-    /// Kernel `i`'s turning state as of the last round.
-    #[must_use]
-    pub fn turning(&self, i: usize) -> Turning {
-        self.turning[i]
     }
 
     /// Kernel `i`'s acceleration gradients since the last round, while it had no fitted
@@ -249,8 +231,6 @@ pub struct DensityChange {
     pub sources: Option<Vec<Option<usize>>>,
     /// The new scene's lines of descent (moved into the statistics).
     lines: Vec<Line>,
-    /// The new scene's turning states (moved into the statistics; empty: none).
-    turning: Vec<Turning>,
 }
 
 impl DensityRules {
@@ -316,18 +296,14 @@ impl DensityRules {
                     change.opacities_reset = true;
                 }
                 if rules.round_due(step, steps) {
-                    let (sources, lines, turning) = alpha::densify_and_prune(scene, stats, rules);
+                    let (sources, lines) = alpha::densify_and_prune(scene, stats, rules);
                     change.sources = Some(sources);
                     change.lines = lines;
-                    change.turning = turning;
                 }
             }
         }
         if change.sources.is_some() {
-            let lines = std::mem::take(&mut change.lines);
-            let mut turning = std::mem::take(&mut change.turning);
-            turning.resize(lines.len(), Turning::default());
-            *stats = stats.next_window_turning(lines, turning);
+            *stats = stats.next_window(std::mem::take(&mut change.lines));
         }
         Ok(change)
     }
