@@ -520,18 +520,19 @@ impl FitSettings {
         Ok(())
     }
 
-    /// The alpha fit's `options` for `dataset` (its training frames from `origin`): the
-    /// pruning share and the loss where the caller gave none ([`background_defaults`]), the steps and
-    /// the density period and the batch where it gave no step count ([`alpha_schedule`]), and every
-    /// chosen setting that the data leaves without effect refused by name: `early_stop`
-    /// without held-out views, a `window` that cuts no training view, `prune_rounds` where
-    /// the data's pruning share is 0.
+    /// The alpha fit's `options` for `dataset` (its training frames from `origin`), with
+    /// notes on what the data chose: the pruning share and the loss where the caller gave
+    /// none ([`background_defaults`]), the steps, the density period and the batch where it
+    /// gave no step count ([`alpha_schedule`]), and every chosen setting that the data
+    /// leaves without effect refused by name: `early_stop` without held-out views, a
+    /// `window` that cuts no training view, `prune_rounds` where the data's pruning share
+    /// is 0.
     fn alpha_options_for(
         &self,
         options: AlphaFitOptions,
         dataset: &Dataset,
         origin: &str,
-    ) -> Result<AlphaFitOptions> {
+    ) -> Result<(AlphaFitOptions, Vec<String>)> {
         if matches!(self.early_stop, Some(Some(_)))
             && dataset.val.is_empty()
             && dataset.test.is_empty()
@@ -554,6 +555,7 @@ impl FitSettings {
             ));
         }
         let by_background = background_defaults(&dataset.train, self.background);
+        let notes = self.photo_notes(by_background.flat);
         let prune_fraction = self.prune_fraction.unwrap_or(by_background.prune_fraction);
         self.check_prune_rounds(prune_fraction)?;
         let loss = self.training_loss(by_background.loss);
@@ -569,14 +571,31 @@ impl FitSettings {
                 )
             }
         };
-        Ok(AlphaFitOptions {
+        let options = AlphaFitOptions {
             prune_fraction,
             loss,
             steps,
             densify_every,
             batch_size,
             ..options
-        })
+        };
+        Ok((options, notes))
+    }
+
+    /// The notes on what photos (training views whose background is not flat, `flat`
+    /// false) change in the defaults the caller left: no pruning by score, the MSE.
+    fn photo_notes(&self, flat: bool) -> Vec<String> {
+        let mut notes = Vec::new();
+        if flat {
+            return notes;
+        }
+        if self.prune_fraction.is_none() {
+            notes.push("no pruning by score: the photos' background is not flat, so every kernel carries part of the picture (give `prune_fraction` to prune)".into());
+        }
+        if self.loss.is_none() {
+            notes.push("training with the MSE: on photos, whose background is not flat, it measured better than the 3DGS loss (give `loss` l1-dssim for it)".into());
+        }
+        notes
     }
 
     /// The fit of `dataset` from `init` (named `init_name`), ready to run: the blend chosen
@@ -595,18 +614,9 @@ impl FitSettings {
             Blend::Alpha => {
                 let options = self.alpha_options(why)?;
                 self.check_start(blend, &init, init_name)?;
-                let options = self.alpha_options_for(options, dataset, origin)?;
+                let (options, notes) = self.alpha_options_for(options, dataset, origin)?;
                 let mut ready = prepare_alpha(&options, init, dataset, self.background, origin)?;
-                if self.prune_fraction.is_none() && options.prune_fraction == 0.0 {
-                    ready.notes.push(
-                        "no pruning by score: the photos' background is not flat, so every kernel carries part of the picture (give `prune_fraction` to prune)".into(),
-                    );
-                }
-                if self.loss.is_none() && options.loss.name() != DEFAULT_ALPHA.loss.name() {
-                    ready.notes.push(
-                        "training with the MSE: on photos, whose background is not flat, it measured better than the 3DGS loss (give `loss` l1-dssim for it)".into(),
-                    );
-                }
+                ready.notes.extend(notes);
                 Ok(ready.record_data(dataset))
             }
             Blend::Additive => {

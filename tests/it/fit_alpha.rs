@@ -1032,6 +1032,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
     assert_ne!(DEFAULT_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
     // Where the data's share is 0, a chosen `prune_rounds` has nothing to spread: refused
     // by name before any work.
+    let dataset_train = dataset.train.clone();
     let photos = splat4d::model::Dataset {
         train: photos,
         ..dataset
@@ -1064,6 +1065,26 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
         error.contains("`dssim_weight` weighs the D-SSIM term"),
         "{error}"
     );
+    // A note says what the photos changed, and only where the caller left it.
+    let notes = |settings: splat4d::fit::settings::FitSettings, dataset| {
+        let ready = settings
+            .prepare(None, splat4d::fit::plan::Init::Auto, "auto", dataset, "<d>")
+            .unwrap();
+        let says = |what: &str| ready.notes.iter().any(|note| note.starts_with(what));
+        (says("no pruning by score"), says("training with the MSE"))
+    };
+    assert_eq!(notes(Default::default(), &photos), (true, true));
+    let chosen = splat4d::fit::settings::FitSettings {
+        prune_fraction: Some(0.0),
+        loss: Some(splat4d::fit::train::LossName::Mse),
+        ..Default::default()
+    };
+    assert_eq!(notes(chosen, &photos), (false, false));
+    let flat = splat4d::model::Dataset {
+        train: dataset_train,
+        ..photos.clone()
+    };
+    assert_eq!(notes(Default::default(), &flat), (false, false));
 }
 
 /// Renders of an object (the occluding data, over a flat background) take twice the steps
