@@ -6,7 +6,10 @@
 //! caller left the choice to the plan). [`FitSettings::additive_plan`] turns it into the
 //! additive fit's [`FitPlan`] (SPEC §5–6), [`FitSettings::alpha_options`] into the alpha
 //! fit's [`AlphaFitOptions`] (SPEC §8); the defaults are those of
-//! [`crate::fit::defaults`] (through [`FitPlan::default`] and [`DEFAULT_ALPHA`]).
+//! [`crate::fit::defaults`] (through [`FitPlan::default`] and [`DEFAULT_ALPHA`]), and
+//! [`FitSettings::prepare`] then sets the alpha defaults the caller left by the data: the
+//! pruning share and the loss by its background, the steps, batch and density period by
+//! [`alpha_schedule`] where no step count was given.
 //!
 //! Three kinds of setting ([`BOTH_BLENDS`], [`ADDITIVE_ONLY`], [`ALPHA_ONLY`]):
 //! - **both blends**: steps, batch, seed, start and budget counts, the background, the

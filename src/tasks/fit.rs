@@ -200,6 +200,9 @@ pub fn fit_dataset(request: &FitRequest, progress: &mut dyn FitProgress) -> Resu
         &dataset,
         &origin.display().to_string(),
     )?;
+    if let Some(note) = idle_ranks_note(ready.training.batch_size) {
+        ready.notes.push(note);
+    }
     for note in &ready.notes {
         progress.note(note);
     }
@@ -299,6 +302,23 @@ fn dataset_options(request: &FitRequest) -> DatasetOptions {
         frames: request.frames,
         fps: request.fps,
     }
+}
+
+/// A note when the fit is spread over more MPI ranks than a step has views: rank `r` renders
+/// the batch positions `p ≡ r (mod N)` ([`crate::fit::spread`]), so ranks from `batch` on
+/// only wait. The batch is not raised to the rank count, since the fitted scene must not
+/// depend on it.
+fn idle_ranks_note(batch: usize) -> Option<String> {
+    let ranks = crate::fit::spread::ranks()?.size();
+    (ranks > batch).then(|| {
+        let idle = match ranks - batch {
+            1 => "1 rank renders nothing and only waits".to_string(),
+            n => format!("{n} ranks render nothing and only wait"),
+        };
+        format!(
+            "{ranks} ranks and {batch} views a step: {idle} (give `batch` {ranks} or more to use every rank)"
+        )
+    })
 }
 
 /// The dataset, read with `options`; its notes, and what the user should know about its

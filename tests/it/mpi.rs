@@ -1,6 +1,7 @@
 //! `mpirun -n N splat4d fit …` (cargo feature `mpi`, an MPI launcher on `PATH`): the fitted
-//! scene is the one-process scene, byte for byte, for 2 and 3 ranks and any thread count;
-//! rank 0 alone writes; a failing rank stops them all with its message.
+//! scene is the one-process scene, byte for byte, for 2 and 3 ranks and any thread count
+//! (3 ranks on a batch of 2 too, with a note naming the idle rank); rank 0 alone writes; a
+//! failing rank stops them all with its message.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -77,6 +78,25 @@ fn every_rank_count_fits_the_one_process_scene() {
             std::fs::remove_file(d.join("spread.json")).unwrap();
         }
     }
+    // More ranks than views a step: the idle ranks are named in a note, and the scene is
+    // the one-process scene still.
+    fn batch_of_two(out: &str) -> Vec<&str> {
+        let mut args = fit_args(out, "1", "alpha");
+        args.extend(["--batch", "2"]);
+        args
+    }
+    ok(splat4d(&batch_of_two("alone.json"), d));
+    let out = mpirun(3, &batch_of_two("spread.json"), d);
+    ok(out.clone());
+    assert!(
+        stderr(&out).contains("3 ranks and 2 views a step: 1 rank renders nothing"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(
+        std::fs::read(d.join("alone.json")).unwrap()
+            == std::fs::read(d.join("spread.json")).unwrap()
+    );
     // A rank that fails stops all of them, with its message and the exit status.
     std::fs::write(d.join("start.json"), "{").unwrap();
     let mut args = fit_args("bad.json", "1", "alpha");
