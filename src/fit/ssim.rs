@@ -26,8 +26,11 @@
 //! `x = w ⊙ C`, `y = w ⊙ T`.
 //!
 //! The fast path ([`L1Dssim::loss_and_gradient`]) filters in f32 (each window separable: a
-//! row pass, then a column pass, each output a sum over its taps in order) and sums the loss
-//! in f64 in [`sum_in_blocks`]'s fixed order: the same bits on any thread count. Its twin
+//! row pass, then a column pass, each output a sum over its taps in order, 32 outputs at a
+//! time in registers) and sums the loss in f64 in [`sum_in_blocks`]'s fixed order: the same
+//! bits on any thread count. Its line loops are compiled for each [`SimdPath`] and run on the
+//! widest the CPU has; each is one IEEE operation per value, none fused, so the same bits on
+//! every path. Its twin
 //! [`reference_loss`] / [`reference_gradient`] does everything in f64 from the definitions
 //! (2D windows summed directly, the gradient by the chain rule window by window).
 
@@ -36,6 +39,7 @@ use rayon::prelude::*;
 use crate::fit::loss::{SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW};
 use crate::model::{Image, View};
 use crate::parallel::{lane_sum, sum_in_blocks};
+use crate::simd::SimdPath;
 
 /// Side of the training SSIM's window: the reported SSIM's ([`crate::fit::loss::ssim`]).
 pub const WINDOW: usize = SSIM_WINDOW;
@@ -63,6 +67,8 @@ pub fn window() -> [f64; WINDOW] {
 /// The buffers of [`L1Dssim::loss_and_gradient`], kept between calls (one per view slot).
 #[derive(Default)]
 pub struct SsimScratch {
+    /// Each channel value's weight.
+    weights: ChannelWeights,
     /// `x, y, x², y², xy`.
     maps: [Vec<f32>; 5],
     /// Their filtered values `μx, μy, E[x²], E[y²], E[xy]`.
@@ -95,63 +101,115 @@ fn total_weight(weights: Option<&[f32]>, pixels: usize) -> f64 {
     }
 }
 
-/// `out[i] = g[HALF] c[i] + Σ_{k < HALF} g[k] (lo_k[i] + hi_k[i])`, the taps paired by the
-/// window's symmetry (`lo_k`, `hi_k`: the inputs `HALF - k` before and after), in that
-/// order; `taps(k)` gives `(lo_k, hi_k)`, `c` the centre. The same operations on every
-/// path (no fused multiply-add), so the same bits.
-#[inline(always)]
-fn symmetric_taps<'a>(
-    out: &mut [f32],
-    centre: &[f32],
-    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
-    g: &[f32; WINDOW],
-) {
-    for (o, &c) in out.iter_mut().zip(centre) {
-        *o = g[HALF] * c;
-    }
-    for (k, &gk) in g.iter().enumerate().take(HALF) {
-        let (lo, hi) = taps(k);
-        for ((o, &a), &b) in out.iter_mut().zip(lo).zip(hi) {
-            *o += gk * (a + b);
+/// One line of a filter pass: `out[i] = g[HALF] c[i] + Σ_{k < HALF} g[k] (lo_k[i] +
+/// hi_k[i])`, the taps paired by the window's symmetry (`taps[k] = (lo_k, hi_k)`: the inputs
+/// `HALF - k` before and after; `c` the centre), summed in that order. Each block of
+/// [`BLOCK`] outputs is summed in registers over all its taps and stored once.
+struct TapsLine<'a> {
+    out: &'a mut [f32],
+    centre: &'a [f32],
+    taps: [(&'a [f32], &'a [f32]); HALF],
+    g: &'a [f32; WINDOW],
+}
+
+/// Outputs [`TapsLine`] sums in registers at once: two AVX-512 registers, four AVX2.
+const BLOCK: usize = 32;
+
+impl LineJob for TapsLine<'_> {
+    #[inline(always)]
+    fn run(self) {
+        let TapsLine {
+            out,
+            centre,
+            taps,
+            g,
+        } = self;
+        let n = out.len();
+        // Whole blocks, the last one ending at the line's end (overlapping the one before:
+        // its values are written twice, the same); a line shorter than a block is summed
+        // value by value.
+        let whole = n / BLOCK * BLOCK;
+        let last = (whole < n && n >= BLOCK).then_some(n - BLOCK);
+        for at in (0..whole).step_by(BLOCK).chain(last) {
+            // Slices of BLOCK values: their indices below need no check.
+            let mut sum = [0.0_f32; BLOCK];
+            let c = &centre[at..at + BLOCK];
+            for j in 0..BLOCK {
+                sum[j] = g[HALF] * c[j];
+            }
+            for (&(lo, hi), &gk) in taps.iter().zip(g) {
+                let (lo, hi) = (&lo[at..at + BLOCK], &hi[at..at + BLOCK]);
+                for j in 0..BLOCK {
+                    sum[j] += gk * (lo[j] + hi[j]);
+                }
+            }
+            out[at..at + BLOCK].copy_from_slice(&sum);
+        }
+        for i in if n < BLOCK { 0..n } else { n..n } {
+            let mut sum = g[HALF] * centre[i];
+            for (&(lo, hi), &gk) in taps.iter().zip(g) {
+                sum += gk * (lo[i] + hi[i]);
+            }
+            out[i] = sum;
         }
     }
 }
 
-/// [`symmetric_taps`] compiled for AVX2 (8 lanes; the same operations, so the same bits).
+/// The work on one line of an element-wise or filter pass, compiled for each path by
+/// [`on_path`].
+trait LineJob {
+    /// Does the line's work; implementations are `#[inline(always)]`, so that each path's
+    /// copy is compiled with its target features.
+    fn run(self);
+}
+
+/// Runs `job` compiled for `path`: inlined into a function with the path's target
+/// features, so that its loops are vectorised at the path's width. Every operation is one
+/// IEEE operation per element (no fused multiply-add is formed), so the same bits on every
+/// path.
+#[inline(always)]
+fn on_path(path: SimdPath, job: impl LineJob) {
+    match path {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a detected path is one the CPU has (`SimdPath::available`).
+        SimdPath::Avx512 => unsafe { on_avx512(job) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        SimdPath::Avx2 => unsafe { on_avx2(job) },
+        _ => job.run(),
+    }
+}
+
+/// [`on_path`]'s AVX-512 copy.
+///
+/// # Safety
+/// The CPU must have AVX-512 F/BW/DQ/VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2")]
+unsafe fn on_avx512(job: impl LineJob) {
+    job.run();
+}
+
+/// [`on_path`]'s AVX2 copy.
 ///
 /// # Safety
 /// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn symmetric_taps_avx2<'a>(
-    out: &mut [f32],
-    centre: &[f32],
-    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
-    g: &[f32; WINDOW],
-) {
-    symmetric_taps(out, centre, taps, g);
-}
-
-/// [`symmetric_taps`] on the widest path this CPU has.
-fn filter_line<'a>(
-    out: &mut [f32],
-    centre: &[f32],
-    taps: impl Fn(usize) -> (&'a [f32], &'a [f32]),
-    g: &[f32; WINDOW],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        unsafe { symmetric_taps_avx2(out, centre, taps, g) };
-        return;
-    }
-    symmetric_taps(out, centre, taps, g);
+unsafe fn on_avx2(job: impl LineJob) {
+    job.run();
 }
 
 /// Filters the interleaved RGB plane `src` (`width × height` pixels) by the separable window
 /// `g`, zero-padded ("same" size), into `dst`, through `rows` (both resized): a row pass,
-/// then a column pass, each output [`symmetric_taps`] of its line.
-fn blur(src: &[f32], dst: &mut Vec<f32>, rows: &mut Vec<f32>, width: usize, g: &[f32; WINDOW]) {
+/// then a column pass, each output line a [`TapsLine`], on `path`.
+fn blur(
+    path: SimdPath,
+    src: &[f32],
+    (dst, rows): (&mut Vec<f32>, &mut Vec<f32>),
+    width: usize,
+    g: &[f32; WINDOW],
+) {
     let stride = 3 * width;
     // Every value is written below.
     rows.resize(src.len(), 0.0);
@@ -169,7 +227,16 @@ fn blur(src: &[f32], dst: &mut Vec<f32>, rows: &mut Vec<f32>, width: usize, g: &
                 padded[3 * HALF..3 * HALF + stride].copy_from_slice(row);
                 let padded = &*padded;
                 let at = |k: usize| &padded[3 * k..3 * k + stride];
-                filter_line(out, at(HALF), |k| (at(k), at(WINDOW - 1 - k)), g);
+                let taps = std::array::from_fn(|k| (at(k), at(WINDOW - 1 - k)));
+                on_path(
+                    path,
+                    TapsLine {
+                        out,
+                        centre: at(HALF),
+                        taps,
+                        g,
+                    },
+                );
             },
         );
     // Column pass, rows outside the image zero.
@@ -186,71 +253,149 @@ fn blur(src: &[f32], dst: &mut Vec<f32>, rows: &mut Vec<f32>, width: usize, g: &
     dst.par_chunks_mut(stride).enumerate().for_each(|(y, out)| {
         let y = y as isize;
         let half = HALF as isize;
-        filter_line(
-            out,
-            row(y),
-            |k| (row(y - half + k as isize), row(y + half - k as isize)),
-            g,
+        let taps =
+            std::array::from_fn(|k| (row(y - half + k as isize), row(y + half - k as isize)));
+        on_path(
+            path,
+            TapsLine {
+                out,
+                centre: row(y),
+                taps,
+                g,
+            },
         );
     });
 }
 
-/// Pixel `k / 3`'s weight (1 without weights).
-fn weight_at(weights: Option<&[f32]>, k: usize) -> f32 {
-    weights.map_or(1.0, |w| w[k / 3])
+/// Each channel value's weight `w_p` (pixel `p = k / 3`), 1 everywhere without weights:
+/// kept between calls, refilled when the weights or the size change.
+#[derive(Default)]
+struct ChannelWeights {
+    values: Vec<f32>,
+    /// Whether `values` are all 1.
+    ones: bool,
 }
 
-impl SsimScratch {
-    /// `x, y, x², y², xy` of the weighted images `w ⊙ c`, `w ⊙ t` into `maps` (sized),
-    /// rows of `line` values in parallel.
-    fn products(&mut self, (c, t): (&[f32], &[f32]), weights: Option<&[f32]>, line: usize) {
-        let [x, y, xx, yy, xy] = &mut self.maps;
-        x.par_chunks_mut(line)
-            .zip(y.par_chunks_mut(line))
-            .zip(xx.par_chunks_mut(line))
-            .zip(yy.par_chunks_mut(line))
-            .zip(xy.par_chunks_mut(line))
-            .enumerate()
-            .for_each(|(row, ((((x, y), xx), yy), xy))| {
-                for i in 0..x.len() {
-                    let k = row * line + i;
-                    let w = weight_at(weights, k);
-                    let (a, b) = (w * c[k], w * t[k]);
-                    (x[i], y[i], xx[i], yy[i], xy[i]) = (a, b, a * a, b * b, a * b);
-                }
-            });
+impl ChannelWeights {
+    /// The weights of `n` channel values from the per-pixel `weights`.
+    fn of(&mut self, weights: Option<&[f32]>, n: usize) -> &[f32] {
+        match weights {
+            Some(w) => {
+                self.values.clear();
+                self.values
+                    .extend(w.iter().take(n / 3).flat_map(|&w| [w; 3]));
+                self.ones = false;
+            }
+            None if self.ones && self.values.len() == n => {}
+            None => {
+                self.values.clear();
+                self.values.resize(n, 1.0);
+                self.ones = true;
+            }
+        }
+        &self.values
     }
+}
 
-    /// From the filtered moments: the map `S` (into the x² buffer, no longer needed) and
-    /// `M1, M2, M3`, the partial derivatives times `scale w_p` (`scale = -λ weight / 3W`).
-    fn map_and_partials(&mut self, scale: f32, weights: Option<&[f32]>, line: usize) {
+/// One line of `x = w c`, `y = w t` and `x², y², xy` (all slices one line long).
+struct ProductsLine<'a> {
+    /// The render, the target and the weights.
+    inputs: (&'a [f32], &'a [f32], &'a [f32]),
+    /// `x, y, x², y², xy`.
+    out: [&'a mut [f32]; 5],
+}
+
+impl LineJob for ProductsLine<'_> {
+    #[inline(always)]
+    fn run(self) {
+        let ((c, t, w), [x, y, xx, yy, xy]) = (self.inputs, self.out);
+        let n = x.len();
+        let (c, t, w) = (&c[..n], &t[..n], &w[..n]);
+        let (y, xx, yy, xy) = (&mut y[..n], &mut xx[..n], &mut yy[..n], &mut xy[..n]);
+        for i in 0..n {
+            let (a, b) = (w[i] * c[i], w[i] * t[i]);
+            (x[i], y[i], xx[i], yy[i], xy[i]) = (a, b, a * a, b * b, a * b);
+        }
+    }
+}
+
+/// One line of the SSIM map `S` and `M1, M2, M3` (the module docs, times `scale w`) from
+/// its filtered moments (all slices one line long).
+struct MapLine<'a> {
+    /// `μx, μy, E[x²], E[y²], E[xy]`.
+    moments: [&'a [f32]; 5],
+    /// The weights and `scale`.
+    weights: (&'a [f32], f32),
+    /// `S, M1, M2, M3`.
+    out: [&'a mut [f32]; 4],
+}
+
+impl LineJob for MapLine<'_> {
+    #[inline(always)]
+    fn run(self) {
+        let [mx, my, exx, eyy, exy] = self.moments;
+        let ((w, scale), [map, m1, m2, m3]) = (self.weights, self.out);
         let (c1, c2) = (C1 as f32, C2 as f32);
-        let [mx, my, exx, eyy, exy] = &self.filtered;
-        let [m1, m2, m3] = &mut self.back;
-        let map = &mut self.maps[2];
-        map.par_chunks_mut(line)
-            .zip(m1.par_chunks_mut(line))
-            .zip(m2.par_chunks_mut(line))
-            .zip(m3.par_chunks_mut(line))
-            .enumerate()
-            .for_each(|(row, (((map, m1), m2), m3))| {
-                for i in 0..map.len() {
-                    let k = row * line + i;
-                    let (ux, uy) = (mx[k], my[k]);
-                    let a = 2.0 * ux * uy + c1;
-                    let b = 2.0 * (exy[k] - ux * uy) + c2;
-                    let cc = ux * ux + uy * uy + c1;
-                    let d = (exx[k] - ux * ux) + (eyy[k] - uy * uy) + c2;
-                    // 1/(C D); 1/D - 1/C = (C - D)/(C D); 1/D = C/(C D).
-                    let inv = 1.0 / (cc * d);
-                    let s = a * b * inv;
-                    let m = scale * weight_at(weights, k);
-                    map[i] = s;
-                    m1[i] = m * (2.0 * uy * (b - a) * inv + 2.0 * ux * s * ((cc - d) * inv));
-                    m2[i] = m * (-s * cc * inv);
-                    m3[i] = m * (2.0 * a * inv);
-                }
-            });
+        let n = map.len();
+        let (mx, my, exx, eyy, exy, w) =
+            (&mx[..n], &my[..n], &exx[..n], &eyy[..n], &exy[..n], &w[..n]);
+        let (m1, m2, m3) = (&mut m1[..n], &mut m2[..n], &mut m3[..n]);
+        for i in 0..n {
+            let (ux, uy) = (mx[i], my[i]);
+            let a = 2.0 * ux * uy + c1;
+            let b = 2.0 * (exy[i] - ux * uy) + c2;
+            let cc = ux * ux + uy * uy + c1;
+            let d = (exx[i] - ux * ux) + (eyy[i] - uy * uy) + c2;
+            // 1/(C D); 1/D - 1/C = (C - D)/(C D); 1/D = C/(C D).
+            let inv = 1.0 / (cc * d);
+            let s = a * b * inv;
+            let m = scale * w[i];
+            map[i] = s;
+            m1[i] = m * (2.0 * uy * (b - a) * inv + 2.0 * ux * s * ((cc - d) * inv));
+            m2[i] = m * (-s * cc * inv);
+            m3[i] = m * (2.0 * a * inv);
+        }
+    }
+}
+
+/// One line of `∂L/∂C = w (G*M1 + 2 x G*M2 + y G*M3) + l1 w sign(c - t)` (all slices one
+/// line long; the sign 0 where `c = t` or either is NaN).
+struct GradientLine<'a> {
+    /// The render, the target and the weights.
+    inputs: (&'a [f32], &'a [f32], &'a [f32]),
+    /// `G*M1, G*M2, G*M3`, `x` and `y`.
+    filtered: ([&'a [f32]; 3], &'a [f32], &'a [f32]),
+    /// `(1 - λ) scale`.
+    l1: f32,
+    out: &'a mut [f32],
+}
+
+impl LineJob for GradientLine<'_> {
+    #[inline(always)]
+    fn run(self) {
+        let ((c, t, w), ([g1, g2, g3], x, y), v) = (self.inputs, self.filtered, self.out);
+        let n = v.len();
+        let (c, t, w, g1, g2, g3, x, y) = (
+            &c[..n],
+            &t[..n],
+            &w[..n],
+            &g1[..n],
+            &g2[..n],
+            &g3[..n],
+            &x[..n],
+            &y[..n],
+        );
+        for i in 0..n {
+            let sign = if c[i] > t[i] {
+                1.0
+            } else if c[i] < t[i] {
+                -1.0
+            } else {
+                0.0
+            };
+            let w = w[i];
+            v[i] = w * (g1[i] + 2.0 * x[i] * g2[i] + y[i] * g3[i]) + self.l1 * w * sign;
+        }
     }
 }
 
@@ -265,6 +410,20 @@ impl L1Dssim {
         v_image: &mut Vec<f32>,
         scratch: &mut SsimScratch,
     ) -> f64 {
+        self.loss_and_gradient_on(SimdPath::detect(), image, view, weight, v_image, scratch)
+    }
+
+    /// [`L1Dssim::loss_and_gradient`] with its loops compiled for `path` (one the CPU has).
+    fn loss_and_gradient_on(
+        &self,
+        path: SimdPath,
+        image: &Image,
+        view: &View,
+        weight: f64,
+        v_image: &mut Vec<f32>,
+        scratch: &mut SsimScratch,
+    ) -> f64 {
+        path.assert_available();
         let target = &view.image;
         assert_eq!(
             (image.width, image.height),
@@ -282,25 +441,76 @@ impl L1Dssim {
         }
         let lambda = self.dssim_weight;
         let g = window().map(|v| v as f32);
-        // Elementwise loops go a row at a time, rows in parallel.
-        let line = 3 * width;
-        let w_at = |k: usize| weight_at(weights, k);
-        let (c, t) = (&image.pixels[..], &target.pixels[..]);
-        for buffer in scratch.maps.iter_mut().chain(&mut scratch.back) {
+        let SsimScratch {
+            weights: channel_weights,
+            maps,
+            filtered,
+            rows,
+            back,
+            back_filtered,
+        } = scratch;
+        for buffer in maps.iter_mut().chain(back.iter_mut()) {
             buffer.resize(n, 0.0);
         }
-        scratch.products((c, t), weights, line);
-        for (source, out) in scratch.maps.iter().zip(scratch.filtered.iter_mut()) {
-            blur(source, out, &mut scratch.rows, width, &g);
+        let w = channel_weights.of(weights, n);
+        // Element-wise loops go a row at a time, rows in parallel.
+        let line = 3 * width;
+        let (c, t) = (&image.pixels[..], &target.pixels[..]);
+        let lines = |k: usize| k * line..(k + 1) * line;
+
+        // The moments, filtered.
+        {
+            let [x, y, xx, yy, xy] = maps;
+            x.par_chunks_mut(line)
+                .zip(y.par_chunks_mut(line))
+                .zip(xx.par_chunks_mut(line))
+                .zip(yy.par_chunks_mut(line))
+                .zip(xy.par_chunks_mut(line))
+                .enumerate()
+                .for_each(|(row, ((((x, y), xx), yy), xy))| {
+                    let r = lines(row);
+                    let inputs = (&c[r.clone()], &t[r.clone()], &w[r]);
+                    let out = [x, y, xx, yy, xy];
+                    on_path(path, ProductsLine { inputs, out });
+                });
         }
+        for (source, out) in maps.iter().zip(filtered.iter_mut()) {
+            blur(path, source, (out, rows), width, &g);
+        }
+
+        // The map (into the x² buffer, no longer needed) and M1, M2, M3.
         let scale = (weight / (3.0 * total)) as f32;
-        scratch.map_and_partials(-(lambda as f32) * scale, weights, line);
+        {
+            let filtered = &*filtered;
+            let [m1, m2, m3] = back;
+            maps[2]
+                .par_chunks_mut(line)
+                .zip(m1.par_chunks_mut(line))
+                .zip(m2.par_chunks_mut(line))
+                .zip(m3.par_chunks_mut(line))
+                .enumerate()
+                .for_each(|(row, (((map, m1), m2), m3))| {
+                    let r = lines(row);
+                    let moments = filtered.each_ref().map(|f| &f[r.clone()]);
+                    let weights = (&w[r], -(lambda as f32) * scale);
+                    let out = [map, m1, m2, m3];
+                    on_path(
+                        path,
+                        MapLine {
+                            moments,
+                            weights,
+                            out,
+                        },
+                    );
+                });
+        }
+
         // The loss, in f64 in a fixed order.
-        let map = &scratch.maps[2];
+        let map = &maps[2];
         let [sum] = sum_in_blocks(n / 3, |range| {
             [lane_sum(range.len(), |i| {
                 let p = range.start + i;
-                let w = f64::from(w_at(3 * p));
+                let w = f64::from(w[3 * p]);
                 if w == 0.0 {
                     return 0.0;
                 }
@@ -313,26 +523,31 @@ impl L1Dssim {
                 w * terms
             })]
         });
-        for (source, out) in scratch.back.iter().zip(scratch.back_filtered.iter_mut()) {
-            blur(source, out, &mut scratch.rows, width, &g);
+
+        // The gradient: M1, M2, M3 filtered again, then per value.
+        for (source, out) in back.iter().zip(back_filtered.iter_mut()) {
+            blur(path, source, (out, rows), width, &g);
         }
-        let [g1, g2, g3] = &scratch.back_filtered;
         let l1 = (1.0 - lambda) as f32 * scale;
-        let (x, y) = (&scratch.maps[0], &scratch.maps[1]);
+        let (x, y) = (&maps[0], &maps[1]);
         v_image
             .par_chunks_mut(line)
             .enumerate()
             .for_each(|(row, v)| {
-                for (i, v) in v.iter_mut().enumerate() {
-                    let k = row * line + i;
-                    let w = w_at(k);
-                    let sign = match c[k].partial_cmp(&t[k]) {
-                        Some(std::cmp::Ordering::Greater) => 1.0,
-                        Some(std::cmp::Ordering::Less) => -1.0,
-                        _ => 0.0,
-                    };
-                    *v = w * (g1[k] + 2.0 * x[k] * g2[k] + y[k] * g3[k]) + l1 * w * sign;
-                }
+                let r = lines(row);
+                let inputs = (&c[r.clone()], &t[r.clone()], &w[r.clone()]);
+                let filtered = back_filtered.each_ref().map(|f| &f[r.clone()]);
+                let filtered = (filtered, &x[r.clone()], &y[r]);
+                let (l1, out) = (l1, v);
+                on_path(
+                    path,
+                    GradientLine {
+                        inputs,
+                        filtered,
+                        l1,
+                        out,
+                    },
+                );
             });
         sum / (3.0 * total)
     }
@@ -703,6 +918,45 @@ mod tests {
             "{} against {expected}",
             sum / f64::from(count)
         );
+    }
+
+    #[test]
+    fn every_simd_path_gives_the_same_bits() {
+        // 45 × 37: lines of 135 values, whole blocks and an overlapping last one; and 7 × 5,
+        // lines shorter than a block.
+        let mut rng = crate::model::random::seeded_rng(19);
+        for (width, height) in [(45, 37), (7, 5)] {
+            let (image, target) = (
+                random_image(&mut rng, width, height),
+                random_image(&mut rng, width, height),
+            );
+            let weights: Vec<f32> = (0..width * height)
+                .map(|_| rng.random_range(0.0..1.0))
+                .collect();
+            for weights in [None, Some(weights)] {
+                let view = view_of(&target, weights);
+                let on = |path| {
+                    let mut v = Vec::new();
+                    let loss = L1Dssim { dssim_weight: 0.2 }.loss_and_gradient_on(
+                        path,
+                        &image,
+                        &view,
+                        1.0,
+                        &mut v,
+                        &mut SsimScratch::default(),
+                    );
+                    (
+                        loss.to_bits(),
+                        v.iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
+                    )
+                };
+                let baseline = on(SimdPath::Baseline);
+                assert!(baseline.1.iter().filter(|&&g| g != 0).count() > 100);
+                for &path in SimdPath::available() {
+                    assert!(on(path) == baseline, "{path} differs");
+                }
+            }
+        }
     }
 
     #[test]
