@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use crate::fit::loss::{SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW};
 use crate::model::{Image, View};
 use crate::parallel::{lane_sum, sum_in_blocks};
-use crate::simd::SimdPath;
+use crate::simd::{LineJob, SimdPath, on_path};
 
 /// Side of the training SSIM's window: the reported SSIM's ([`crate::fit::loss::ssim`]).
 pub const WINDOW: usize = SSIM_WINDOW;
@@ -153,51 +153,6 @@ impl LineJob for TapsLine<'_> {
             out[i] = sum;
         }
     }
-}
-
-/// The work on one line of an element-wise or filter pass, compiled for each path by
-/// [`on_path`].
-trait LineJob {
-    /// Does the line's work; implementations are `#[inline(always)]`, so that each path's
-    /// copy is compiled with its target features.
-    fn run(self);
-}
-
-/// Runs `job` compiled for `path`: inlined into a function with the path's target
-/// features, so that its loops are vectorised at the path's width. Every operation is one
-/// IEEE operation per element (no fused multiply-add is formed), so the same bits on every
-/// path.
-#[inline(always)]
-fn on_path(path: SimdPath, job: impl LineJob) {
-    match path {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: a detected path is one the CPU has (`SimdPath::available`).
-        SimdPath::Avx512 => unsafe { on_avx512(job) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: as above.
-        SimdPath::Avx2 => unsafe { on_avx2(job) },
-        _ => job.run(),
-    }
-}
-
-/// [`on_path`]'s AVX-512 copy.
-///
-/// # Safety
-/// The CPU must have AVX-512 F/BW/DQ/VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2")]
-unsafe fn on_avx512(job: impl LineJob) {
-    job.run();
-}
-
-/// [`on_path`]'s AVX2 copy.
-///
-/// # Safety
-/// The CPU must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn on_avx2(job: impl LineJob) {
-    job.run();
 }
 
 /// Filters the interleaved RGB plane `src` (`width × height` pixels) by the separable window

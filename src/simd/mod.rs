@@ -16,7 +16,7 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `path` | [`SimdPath`]: the paths this CPU runs, the widest chosen (`SPLAT4D_SIMD` names a narrower one) |
+//! | `path` | [`SimdPath`]: the paths this CPU runs, the widest chosen (`SPLAT4D_SIMD` names a narrower one); `on_path`: a portable loop compiled for each |
 //! | `exp` | [`ExpMode`] and [`fast_exp_neg_half`]: `exp(-½ q)` in f32, by libm or by an inlined polynomial |
 //! | `rows` | [`RowForm`]s (per kernel, once per frame) and a kernel's constants on the 16 rows of a tile; `RowEntry`: one kernel on one row, and its lanes' `t`, `q` and `G` |
 //! | `tile` | the half-row set-up of a tile: per half row (8 pixels) the entries of the kernels whose padded ellipse reaches it, in list order |
@@ -44,6 +44,7 @@ pub(crate) use exp::{exp_constants, gaussian};
 pub use frame::BinnedFrame;
 pub(crate) use frame::{read_planes, size_image, stream_tile_rows, write_planes};
 pub use path::SimdPath;
+pub(crate) use path::{LineJob, on_path};
 pub(crate) use rows::{RowBlock, RowEntry, TileGeometry, TileKernel, kernel_rows, prefetch_form};
 pub use rows::{RowForm, row_forms};
 pub(crate) use tile::{HalfRow, TileScratch, half_rows, prepare_tile, prepare_tile_range};

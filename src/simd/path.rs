@@ -84,6 +84,51 @@ impl SimdPath {
     }
 }
 
+/// A loop not written with intrinsics (an element-wise pass over a line of values, a
+/// filter's taps), compiled for each path by [`on_path`].
+pub(crate) trait LineJob {
+    /// Does the line's work; implementations are `#[inline(always)]`, so that each path's
+    /// copy is compiled with its target features.
+    fn run(self);
+}
+
+/// Runs `job` compiled for `path`: inlined into a function with the path's target
+/// features, so that its loops are vectorised at the path's width. Every operation is one
+/// IEEE operation per element (no fused multiply-add is formed), so the same bits on every
+/// path.
+#[inline(always)]
+pub(crate) fn on_path(path: SimdPath, job: impl LineJob) {
+    match path {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a detected path is one the CPU has (`SimdPath::available`).
+        SimdPath::Avx512 => unsafe { on_avx512(job) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        SimdPath::Avx2 => unsafe { on_avx2(job) },
+        _ => job.run(),
+    }
+}
+
+/// [`on_path`]'s AVX-512 copy.
+///
+/// # Safety
+/// The CPU must have AVX-512 F/BW/DQ/VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2")]
+unsafe fn on_avx512(job: impl LineJob) {
+    job.run();
+}
+
+/// [`on_path`]'s AVX2 copy.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn on_avx2(job: impl LineJob) {
+    job.run();
+}
+
 impl fmt::Display for SimdPath {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
