@@ -1,5 +1,6 @@
 //! The instruction-set paths of the per-pixel loops and which of them this CPU runs:
-//! detected once per process, the widest chosen unless `SPLAT4D_SIMD` names a narrower one.
+//! detected once per process, the widest chosen unless `SPLAT4D_SIMD` names a narrower one;
+//! and `on_path`, which runs a portable loop compiled for a path.
 //! Not part of SPEC: every path gives the same bits (see the rule in [`super`]).
 
 use std::fmt;
@@ -96,11 +97,16 @@ pub(crate) trait LineJob {
 /// features, so that its loops are vectorised at the path's width. Every operation is one
 /// IEEE operation per element (no fused multiply-add is formed), so the same bits on every
 /// path.
+///
+/// # Panics
+/// When this CPU cannot run `path` (checked on every call: a few nanoseconds against a
+/// line's work).
 #[inline(always)]
 pub(crate) fn on_path(path: SimdPath, job: impl LineJob) {
+    path.assert_available();
     match path {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: a detected path is one the CPU has (`SimdPath::available`).
+        // SAFETY: the CPU has the path (checked just above).
         SimdPath::Avx512 => unsafe { on_avx512(job) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
