@@ -406,62 +406,107 @@ impl L1Dssim {
         for buffer in maps.iter_mut().chain(back.iter_mut()) {
             buffer.resize(n, 0.0);
         }
-        let w = channel_weights.of(weights, n);
-        // Element-wise loops go a row at a time, rows in parallel.
-        let line = 3 * width;
-        let (c, t) = (&image.pixels[..], &target.pixels[..]);
-        let lines = |k: usize| k * line..(k + 1) * line;
-
-        // The moments, filtered.
-        {
-            let [x, y, xx, yy, xy] = maps;
-            x.par_chunks_mut(line)
-                .zip(y.par_chunks_mut(line))
-                .zip(xx.par_chunks_mut(line))
-                .zip(yy.par_chunks_mut(line))
-                .zip(xy.par_chunks_mut(line))
-                .enumerate()
-                .for_each(|(row, ((((x, y), xx), yy), xy))| {
-                    let r = lines(row);
-                    let inputs = (&c[r.clone()], &t[r.clone()], &w[r]);
-                    let out = [x, y, xx, yy, xy];
-                    on_path(path, ProductsLine { inputs, out });
-                });
-        }
+        let planes = Planes {
+            path,
+            render: &image.pixels,
+            target: &target.pixels,
+            weights: channel_weights.of(weights, n),
+            line: 3 * width,
+        };
+        planes.products(maps);
         for (source, out) in maps.iter().zip(filtered.iter_mut()) {
             blur(path, source, (out, rows), width, &g);
         }
-
-        // The map (into the x² buffer, no longer needed) and M1, M2, M3.
         let scale = (weight / (3.0 * total)) as f32;
-        {
-            let filtered = &*filtered;
-            let [m1, m2, m3] = back;
-            maps[2]
-                .par_chunks_mut(line)
-                .zip(m1.par_chunks_mut(line))
-                .zip(m2.par_chunks_mut(line))
-                .zip(m3.par_chunks_mut(line))
-                .enumerate()
-                .for_each(|(row, (((map, m1), m2), m3))| {
-                    let r = lines(row);
-                    let moments = filtered.each_ref().map(|f| &f[r.clone()]);
-                    let weights = (&w[r], -(lambda as f32) * scale);
-                    let out = [map, m1, m2, m3];
-                    on_path(
-                        path,
-                        MapLine {
-                            moments,
-                            weights,
-                            out,
-                        },
-                    );
-                });
+        // The map goes into the x² buffer, no longer needed.
+        let [x, y, map, _, _] = maps;
+        planes.map_and_partials(filtered, -(lambda as f32) * scale, map, back);
+        let sum = planes.loss_sum(map, lambda);
+        for (source, out) in back.iter().zip(back_filtered.iter_mut()) {
+            blur(path, source, (out, rows), width, &g);
         }
+        let l1 = (1.0 - lambda) as f32 * scale;
+        planes.gradient((back_filtered, x, y), l1, v_image);
+        sum / (3.0 * total)
+    }
+}
 
-        // The loss, in f64 in a fixed order.
-        let map = &maps[2];
-        let [sum] = sum_in_blocks(n / 3, |range| {
+/// What the phases of one loss read: the path, the render, the target and each value's
+/// weight (interleaved RGB), and the values on a line. Element-wise loops go a line at a
+/// time, lines in parallel.
+struct Planes<'a> {
+    path: SimdPath,
+    render: &'a [f32],
+    target: &'a [f32],
+    weights: &'a [f32],
+    line: usize,
+}
+
+impl Planes<'_> {
+    /// The values of line `k`.
+    fn range(&self, k: usize) -> std::ops::Range<usize> {
+        k * self.line..(k + 1) * self.line
+    }
+
+    /// The render, target and weights of line `k`.
+    fn inputs(&self, k: usize) -> (&[f32], &[f32], &[f32]) {
+        let r = self.range(k);
+        (
+            &self.render[r.clone()],
+            &self.target[r.clone()],
+            &self.weights[r],
+        )
+    }
+
+    /// `x, y, x², y², xy` into `maps` (sized).
+    fn products(&self, [x, y, xx, yy, xy]: &mut [Vec<f32>; 5]) {
+        let line = self.line;
+        x.par_chunks_mut(line)
+            .zip(y.par_chunks_mut(line))
+            .zip(xx.par_chunks_mut(line))
+            .zip(yy.par_chunks_mut(line))
+            .zip(xy.par_chunks_mut(line))
+            .enumerate()
+            .for_each(|(k, ((((x, y), xx), yy), xy))| {
+                let inputs = self.inputs(k);
+                let out = [x, y, xx, yy, xy];
+                on_path(self.path, ProductsLine { inputs, out });
+            });
+    }
+
+    /// The map `S` into `map` and `M1, M2, M3` into `back` (sized) from the `filtered`
+    /// moments, `scale = -λ weight / 3W`.
+    fn map_and_partials(
+        &self,
+        filtered: &[Vec<f32>; 5],
+        scale: f32,
+        map: &mut [f32],
+        [m1, m2, m3]: &mut [Vec<f32>; 3],
+    ) {
+        let line = self.line;
+        map.par_chunks_mut(line)
+            .zip(m1.par_chunks_mut(line))
+            .zip(m2.par_chunks_mut(line))
+            .zip(m3.par_chunks_mut(line))
+            .enumerate()
+            .for_each(|(k, (((map, m1), m2), m3))| {
+                let r = self.range(k);
+                let moments = filtered.each_ref().map(|f| &f[r.clone()]);
+                let weights = (&self.weights[r], scale);
+                let out = [map, m1, m2, m3];
+                let job = MapLine {
+                    moments,
+                    weights,
+                    out,
+                };
+                on_path(self.path, job);
+            });
+    }
+
+    /// `Σ_p w_p Σ_c [(1 - λ) |C - T| + λ (1 - S)]` in f64 in a fixed order.
+    fn loss_sum(&self, map: &[f32], lambda: f64) -> f64 {
+        let (c, t, w) = (self.render, self.target, self.weights);
+        let [sum] = sum_in_blocks(c.len() / 3, |range| {
             [lane_sum(range.len(), |i| {
                 let p = range.start + i;
                 let w = f64::from(w[3 * p]);
@@ -477,33 +522,31 @@ impl L1Dssim {
                 w * terms
             })]
         });
+        sum
+    }
 
-        // The gradient: M1, M2, M3 filtered again, then per value.
-        for (source, out) in back.iter().zip(back_filtered.iter_mut()) {
-            blur(path, source, (out, rows), width, &g);
-        }
-        let l1 = (1.0 - lambda) as f32 * scale;
-        let (x, y) = (&maps[0], &maps[1]);
+    /// `∂L/∂C` into `v_image` (sized) from `G*M1, G*M2, G*M3` and `x, y`; `l1 = (1 - λ)
+    /// weight / 3W`.
+    fn gradient(
+        &self,
+        (back_filtered, x, y): (&[Vec<f32>; 3], &[f32], &[f32]),
+        l1: f32,
+        v_image: &mut [f32],
+    ) {
         v_image
-            .par_chunks_mut(line)
+            .par_chunks_mut(self.line)
             .enumerate()
-            .for_each(|(row, v)| {
-                let r = lines(row);
-                let inputs = (&c[r.clone()], &t[r.clone()], &w[r.clone()]);
+            .for_each(|(k, out)| {
+                let r = self.range(k);
                 let filtered = back_filtered.each_ref().map(|f| &f[r.clone()]);
-                let filtered = (filtered, &x[r.clone()], &y[r]);
-                let (l1, out) = (l1, v);
-                on_path(
-                    path,
-                    GradientLine {
-                        inputs,
-                        filtered,
-                        l1,
-                        out,
-                    },
-                );
+                let job = GradientLine {
+                    inputs: self.inputs(k),
+                    filtered: (filtered, &x[r.clone()], &y[r]),
+                    l1,
+                    out,
+                };
+                on_path(self.path, job);
             });
-        sum / (3.0 * total)
     }
 }
 
