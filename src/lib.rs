@@ -41,7 +41,7 @@
 //! | model | [`model`] | [`Scene`]/[`Kernel`], [`Camera`], [`Image`], views, errors, seeded randomness: data and math, no files |
 //! | | [`parallel`] | arrays filled in parallel, the same for any thread count |
 //! | stages | [`slice`](mod@slice) → [`project`] → [`tiles`] → [`raster`] | the forward render, one function per stage from plain data to plain data |
-//! | | [`simd`] | what stage 4 of either blend and its backward share, the same bits on every instruction-set path: the paths, `exp(-½ q)`, the row forms, the tile set-up |
+//! | | [`simd`] | what stage 4 of either blend and its backward share, the same bits on every instruction-set path: the paths, `exp(-½ q)`, the row forms, the tile set-up; portable loops compiled for each path |
 //! | | [`colour`], [`composite`] | alpha scenes (SPEC §8): SH colour and depth order per kernel; front-to-back compositing per pixel |
 //! | | [`backward`] | the exact gradient (SPEC §6, §8), the stages mirrored in reverse |
 //! | | [`render`](mod@render), [`overlay`], [`volume`] | the [`RenderContext`] that runs the stages and owns their buffers; a debug overlay; Eq. 1 on a 3D grid |

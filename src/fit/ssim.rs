@@ -145,12 +145,14 @@ impl LineJob for TapsLine<'_> {
             }
             out[at..at + BLOCK].copy_from_slice(&sum);
         }
-        for i in if n < BLOCK { 0..n } else { n..n } {
-            let mut sum = g[HALF] * centre[i];
-            for (&(lo, hi), &gk) in taps.iter().zip(g) {
-                sum += gk * (lo[i] + hi[i]);
+        if n < BLOCK {
+            for i in 0..n {
+                let mut sum = g[HALF] * centre[i];
+                for (&(lo, hi), &gk) in taps.iter().zip(g) {
+                    sum += gk * (lo[i] + hi[i]);
+                }
+                out[i] = sum;
             }
-            out[i] = sum;
         }
     }
 }
@@ -223,7 +225,8 @@ fn blur(
 }
 
 /// Each channel value's weight `w_p` (pixel `p = k / 3`), 1 everywhere without weights:
-/// kept between calls, refilled when the weights or the size change.
+/// the ones kept between calls (refilled when the size changes), given weights laid out on
+/// every call.
 #[derive(Default)]
 struct ChannelWeights {
     values: Vec<f32>,
@@ -236,6 +239,7 @@ impl ChannelWeights {
     fn of(&mut self, weights: Option<&[f32]>, n: usize) -> &[f32] {
         match weights {
             Some(w) => {
+                assert_eq!(w.len(), n / 3, "one weight per pixel");
                 self.values.clear();
                 self.values
                     .extend(w.iter().take(n / 3).flat_map(|&w| [w; 3]));
@@ -782,7 +786,7 @@ mod tests {
     fn the_fast_loss_and_gradient_match_the_f64_twin_on_random_and_hard_inputs() {
         let mut rng = crate::model::random::seeded_rng(3);
         // Larger than the window, with a border on every side; then the window's size.
-        for (w, h) in [(23, 17), (11, 11), (40, 3)] {
+        for (w, h) in [(23, 17), (11, 11), (40, 3), (32, 5)] {
             let (image, target) = (random_image(&mut rng, w, h), random_image(&mut rng, w, h));
             for lambda in [0.2, 0.0, 1.0] {
                 assert_matches_reference(&image, &target, None, lambda);
@@ -919,10 +923,10 @@ mod tests {
 
     #[test]
     fn every_simd_path_gives_the_same_bits() {
-        // 45 × 37: lines of 135 values, whole blocks and an overlapping last one; and 7 × 5,
-        // lines shorter than a block.
+        // 45 × 37: lines of 135 values, whole blocks and an overlapping last one; 32 × 5:
+        // lines of 96, whole blocks only; 7 × 5: lines shorter than a block.
         let mut rng = crate::model::random::seeded_rng(19);
-        for (width, height) in [(45, 37), (7, 5)] {
+        for (width, height) in [(45, 37), (32, 5), (7, 5)] {
             let (image, target) = (
                 random_image(&mut rng, width, height),
                 random_image(&mut rng, width, height),
@@ -953,6 +957,41 @@ mod tests {
                     assert!(on(path) == baseline, "{path} differs");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn a_scratch_kept_between_calls_gives_a_fresh_ones_bits() {
+        // Weighted, then unweighted (the ones refilled), then another size, then weighted.
+        let mut rng = crate::model::random::seeded_rng(23);
+        let mut kept = SsimScratch::default();
+        for (width, height, weighted) in [
+            (30, 20, true),
+            (30, 20, false),
+            (41, 9, false),
+            (41, 9, true),
+        ] {
+            let (image, target) = (
+                random_image(&mut rng, width, height),
+                random_image(&mut rng, width, height),
+            );
+            let weights = weighted.then(|| {
+                (0..width * height)
+                    .map(|_| rng.random_range(0.0..1.0))
+                    .collect()
+            });
+            let view = view_of(&target, weights);
+            let loss = L1Dssim { dssim_weight: 0.2 };
+            let mut with_kept = Vec::new();
+            let kept_loss = loss.loss_and_gradient(&image, &view, 1.0, &mut with_kept, &mut kept);
+            let (fresh_loss, fresh) = fast(&image, &view, 0.2);
+            assert_eq!(kept_loss.to_bits(), fresh_loss.to_bits());
+            assert!(
+                with_kept
+                    .iter()
+                    .zip(&fresh)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
         }
     }
 

@@ -12,7 +12,9 @@
 //! accumulation's FMA rounds like `acc + a G` because `a G` is exact; every conversion is
 //! exact. So every path gives the same values bit for bit, and only the vector width
 //! differs. A [`BinnedFrame`] carries the path its loops run on; its constructors check that
-//! the CPU has it, and every `unsafe` call of a path's loops relies on that check.
+//! the CPU has it, and every `unsafe` call of a path's loops relies on that check; `on_path`
+//! (a portable loop compiled for each path, as the training SSIM's line loops are) checks on
+//! every call.
 //!
 //! | file | what |
 //! |---|---|
