@@ -8,21 +8,19 @@ use std::sync::Arc;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use splat4d::fit::ssim::{L1Dssim, SsimScratch};
+use splat4d::model::random::{log_uniform, seeded_rng};
 use splat4d::model::{Image, View};
 use splat4d::scenes::synthetic::bench_camera;
 
 const SIZES: [(u32, u32); 3] = [(100, 100), (200, 200), (400, 400)];
 
-/// A seeded image of smooth and sharp detail in `[0, 1]` (a linear congruential sequence
-/// over a ramp: no dependency on an RNG crate).
+/// A seeded image of smooth and sharp detail in `[0, 1]`: a ramp across each row plus
+/// seeded noise (the project's seeded randomness).
 fn seeded_image(width: u32, height: u32, seed: u64) -> Image {
-    let mut state = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+    let mut rng = seeded_rng(seed);
     let pixels = (0..3 * width * height)
         .map(|i| {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            let noise = (state >> 40) as f32 / (1u64 << 24) as f32;
+            let noise = log_uniform(&mut rng, 1e-3, 1.0) as f32;
             let ramp = (i % (3 * width)) as f32 / (3 * width) as f32;
             0.7 * ramp + 0.3 * noise
         })

@@ -241,8 +241,7 @@ impl ChannelWeights {
             Some(w) => {
                 assert_eq!(w.len(), n / 3, "one weight per pixel");
                 self.values.clear();
-                self.values
-                    .extend(w.iter().take(n / 3).flat_map(|&w| [w; 3]));
+                self.values.extend(w.iter().flat_map(|&w| [w; 3]));
                 self.ones = false;
             }
             None if self.ones && self.values.len() == n => {}
