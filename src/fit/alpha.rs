@@ -125,6 +125,10 @@ pub struct AlphaFitOptions {
     /// A start from a point cloud is completed by plane-sweep kernels on the pixels the
     /// cloud leaves unexplained ([`crate::fit::plan`]).
     pub fill_uncovered: bool,
+    /// A start from a point cloud or a plane sweep gets kernels on a far shell for the
+    /// training pixels it leaves unexplained, when they are at least 1 % of them
+    /// ([`crate::fit::shell`]; not the rig's start).
+    pub far_shell: bool,
     /// The per-view loss the gradient is taken of ([`TrainingLoss`]).
     pub loss: TrainingLoss,
     /// Which kernels carry fitted SPEC §9 motion ([`MotionFit`]).

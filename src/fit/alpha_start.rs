@@ -8,11 +8,12 @@ use rand::RngExt;
 
 use crate::fit::alpha::AlphaFitOptions;
 use crate::fit::init::SpaceTimeBox;
+use crate::fit::shell::{ShellPoint, coverage, far_shell_points};
 use crate::fit::stereo::SweptPoint;
 use crate::model::error::{Error, Result};
 use crate::model::random::{random_rotation, seeded_rng};
 use crate::model::scene::{Kernel, Scene};
-use crate::model::{Camera, DatasetPoint, View};
+use crate::model::{DatasetPoint, View};
 
 /// One kernel of a start: at `mean` (x, y, z, t), spatial σ `0.5 spacing`, temporal σ
 /// `time_scale`, `colour`, a random rotation from `rng`.
@@ -82,15 +83,20 @@ pub fn random_alpha_scene(
 /// list; each kernel's spatial
 /// σ is half the mean distance to its three nearest chosen points (3DGS's start, which
 /// follows the cloud's density: sparse background, dense surfaces), σt `start_time_scale`
-/// of the time range, centred in time.
+/// of the time range, centred in time; then, with [`AlphaFitOptions::far_shell`], the far
+/// shell for the pixels of `views` they leave unexplained ([`with_far_shell`]). Returns the
+/// scene and the shell's kernel count.
 pub fn point_cloud_alpha_scene(
     points: &[DatasetPoint],
+    views: &[View],
     bounds: &SpaceTimeBox,
     background: [f64; 3],
     options: &AlphaFitOptions,
-) -> Result<Scene> {
+) -> Result<(Scene, usize)> {
     let kernels = point_cloud_kernels(points, bounds, options);
-    alpha_start(&kernels, background, options, "<point cloud start>")
+    let (kernels, shell) = with_far_shell(kernels, views, bounds, background, options);
+    let scene = alpha_start(&kernels, background, options, "<point cloud start>")?;
+    Ok((scene, shell))
 }
 
 /// The kernels of [`point_cloud_alpha_scene`].
@@ -125,11 +131,22 @@ fn point_cloud_kernels(
         .collect()
 }
 
+/// How a start from a point cloud or a plane sweep was completed: the swept kernels it
+/// holds beside the cloud's, and the far shell's ([`crate::fit::shell`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Completion {
+    /// Kernels from plane-sweep points on pixels the cloud leaves unexplained.
+    pub swept: usize,
+    /// Kernels on the far shell for pixels the start leaves unexplained.
+    pub shell: usize,
+}
+
 /// A start from a point cloud that covers only part of what the views show, completed from
 /// a plane sweep: the point cloud's kernels ([`point_cloud_alpha_scene`]), then a kernel
 /// (as [`swept_alpha_scene`] makes them) for every swept point whose reference pixel no
-/// cloud kernel covers in that view ([`uncovered`]), up to `options.max_kernels` in all.
-/// Returns the scene and how many swept kernels it holds.
+/// cloud kernel covers in that view ([`uncovered`]), then, with
+/// [`AlphaFitOptions::far_shell`], the far shell ([`with_far_shell`]); up to
+/// `options.max_kernels` in all.
 pub fn completed_alpha_scene(
     cloud: &[DatasetPoint],
     swept: &[SweptPoint],
@@ -137,23 +154,67 @@ pub fn completed_alpha_scene(
     bounds: &SpaceTimeBox,
     background: [f64; 3],
     options: &AlphaFitOptions,
-) -> Result<(Scene, usize)> {
+) -> Result<(Scene, Completion)> {
     let mut kernels = point_cloud_kernels(cloud, bounds, options);
     let extra = uncovered(swept, &kernels, views);
     let room = options.max_kernels.saturating_sub(kernels.len());
     let filled = swept_kernels(&extra, bounds, options, room);
-    let count = filled.len();
+    let swept = filled.len();
     kernels.extend(filled);
-    Ok((
-        alpha_start(
-            &kernels,
-            background,
-            options,
-            "<point cloud and plane-sweep start>",
-        )?,
-        count,
-    ))
+    let (kernels, shell) = with_far_shell(kernels, views, bounds, background, options);
+    let scene = alpha_start(
+        &kernels,
+        background,
+        options,
+        "<point cloud and plane-sweep start>",
+    )?;
+    Ok((scene, Completion { swept, shell }))
 }
+
+/// `kernels` and, with [`AlphaFitOptions::far_shell`], a kernel on the far shell for the
+/// pixels of `views` they leave unexplained ([`far_shell_points`]: about
+/// `options.start_kernels` of them, up to `options.max_kernels` in all), each with its
+/// point's colour and a spatial σ of half its spacing, centred in time with σt at least the
+/// time range (a background lives throughout); and how many the shell added.
+pub fn with_far_shell(
+    mut kernels: Vec<Kernel>,
+    views: &[View],
+    bounds: &SpaceTimeBox,
+    background: [f64; 3],
+    options: &AlphaFitOptions,
+) -> (Vec<Kernel>, usize) {
+    if !options.far_shell {
+        return (kernels, 0);
+    }
+    let room = options.max_kernels.saturating_sub(kernels.len());
+    let points: Vec<ShellPoint> = far_shell_points(
+        &kernels,
+        views,
+        bounds,
+        background,
+        options.start_kernels,
+        room,
+    );
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
+    let time_scale = options.start_time_scale.max(1.0) * time_range;
+    let mut rng = seeded_rng(options.seed ^ SHELL_SEED);
+    kernels.extend(points.iter().map(|p| {
+        let [x, y, z] = p.position;
+        start_kernel(
+            &mut rng,
+            [x, y, z, centre_time],
+            p.spacing,
+            time_scale,
+            p.colour,
+        )
+    }));
+    (kernels, points.len())
+}
+
+/// Mixed into the seed of the shell kernels' rotations, so that they do not repeat the
+/// start's.
+const SHELL_SEED: u64 = 0x5E11;
 
 /// The swept points whose reference pixel lies outside every disc that `kernels` (static
 /// starts, isotropic) project to in that view: a disc of radius
@@ -178,38 +239,6 @@ pub fn uncovered(swept: &[SweptPoint], kernels: &[Kernel], views: &[View]) -> Ve
         })
         .copied()
         .collect()
-}
-
-/// Radius of a start kernel's footprint, in its σ.
-const COVER_SIGMAS: f64 = 3.0;
-
-/// The pixels of `camera` inside some kernel's footprint ([`uncovered`]).
-fn coverage(camera: &Camera, kernels: &[Kernel]) -> Vec<bool> {
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    let mut mask = vec![false; w * h];
-    for kernel in kernels {
-        let [x, y, z, _] = kernel.mean;
-        let [u, v, depth] = camera.project_point([x, y, z]);
-        if !(depth > 0.0 && u.is_finite() && v.is_finite()) {
-            continue;
-        }
-        let sigma = kernel.scale[0].max(kernel.scale[1]).max(kernel.scale[2]);
-        let radius = (COVER_SIGMAS * sigma * camera.fx.max(camera.fy) / depth).max(1.0);
-        let rows = (v - radius).floor().max(0.0)..=(v + radius).ceil().min(h as f64 - 1.0);
-        let columns = (u - radius).floor().max(0.0)..=(u + radius).ceil().min(w as f64 - 1.0);
-        if rows.is_empty() || columns.is_empty() {
-            continue;
-        }
-        for j in *rows.start() as usize..=*rows.end() as usize {
-            for i in *columns.start() as usize..=*columns.end() as usize {
-                let (du, dv) = (i as f64 + 0.5 - u, j as f64 + 0.5 - v);
-                if du * du + dv * dv <= radius * radius {
-                    mask[j * w + i] = true;
-                }
-            }
-        }
-    }
-    mask
 }
 
 /// Per point, the mean distance to its [`SPACING_NEIGHBOURS`] nearest other points (fewer
@@ -315,18 +344,23 @@ const MAX_RINGS: usize = 4;
 
 /// A start from plane-sweep points ([`crate::fit::stereo`]): at most `options.max_kernels`
 /// of them, taken evenly through the list, each a kernel at its point and time with a
-/// spatial σ of half its spacing, coloured by it, σt `start_time_scale` of the time range.
+/// spatial σ of half its spacing, coloured by it, σt `start_time_scale` of the time range;
+/// then, with [`AlphaFitOptions::far_shell`], the far shell for the pixels of `views` they
+/// leave unexplained ([`with_far_shell`]). Returns the scene and the shell's kernel count.
 pub fn swept_alpha_scene(
     points: &[SweptPoint],
+    views: &[View],
     bounds: &SpaceTimeBox,
     background: [f64; 3],
     options: &AlphaFitOptions,
-) -> Result<Scene> {
+) -> Result<(Scene, usize)> {
     if points.is_empty() {
         return Err(Error::usage("the plane sweep kept no point to start from"));
     }
     let kernels = swept_kernels(points, bounds, options, options.max_kernels);
-    alpha_start(&kernels, background, options, "<plane-sweep start>")
+    let (kernels, shell) = with_far_shell(kernels, views, bounds, background, options);
+    let scene = alpha_start(&kernels, background, options, "<plane-sweep start>")?;
+    Ok((scene, shell))
 }
 
 /// The kernels of [`swept_alpha_scene`], at most `most` of them (none when `most` is 0).
@@ -412,6 +446,7 @@ fn finite_or(value: f64, otherwise: impl FnOnce() -> f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::Camera;
 
     #[test]
     fn a_swept_point_is_kept_only_outside_the_clouds_footprint_in_its_view() {

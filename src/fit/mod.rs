@@ -2,7 +2,7 @@
 //! groups ([`adam`]), one training loop ([`train`]) with its coarse-to-fine stages
 //! ([`coarse`]), its windows ([`window`]) and the density rules ([`density`]) for both blends, each blend's table and
 //! options ([`additive`], [`alpha`]), the starts ([`init`], [`alpha_start`], [`hull`],
-//! [`stereo`], [`rig_start`]), the defaults ([`defaults`]) and the policy that chooses among
+//! [`stereo`], [`rig_start`], and [`shell`] for what they leave unexplained), the defaults ([`defaults`]) and the policy that chooses among
 //! them ([`plan`], from the caller's [`settings`]), the estimate of a running fit's time left
 //! ([`time_left`]), and a fit spread over MPI ranks with the one-process scene ([`spread`]).
 
@@ -20,6 +20,7 @@ pub mod plan;
 pub mod regularise;
 pub mod rig_start;
 pub mod settings;
+pub mod shell;
 pub mod spread;
 pub mod ssim;
 pub mod stereo;

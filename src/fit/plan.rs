@@ -578,11 +578,14 @@ pub const MIN_SWEPT_POINTS: usize = 100;
 /// An automatic start takes, in this order, the first that gives kernels: the dataset's
 /// point cloud, completed (with [`AlphaFitOptions::fill_uncovered`]) by a plane sweep's
 /// points on the pixels the cloud leaves unexplained when it keeps at least
-/// [`MIN_SWEPT_POINTS`] of them ([`completed_alpha_scene`]); the visual hull of the training views where their background is flat
+/// [`MIN_SWEPT_POINTS`] of them ([`completed_alpha_scene`]), and, with or without the
+/// sweep, (with [`AlphaFitOptions::far_shell`]) by a far shell for what is still
+/// unexplained ([`crate::fit::shell`]); the visual hull of the training views where their background is flat
 /// ([`crate::fit::hull`]); for a rig of synchronised cameras, its plane sweeps over still
 /// and moving pixels ([`crate::fit::rig_start`]), when they keep at least
 /// [`MIN_SWEPT_POINTS`] still points; a plane sweep over neighbouring views ([`crate::fit::stereo`]),
-/// when it keeps at least [`MIN_SWEPT_POINTS`] points; kernels at random in the box.
+/// when it keeps at least [`MIN_SWEPT_POINTS`] points, with the far shell; kernels at random
+/// in the box.
 pub fn prepare_alpha(
     options: &AlphaFitOptions,
     init: Init,
@@ -716,24 +719,25 @@ fn alpha_auto_start(
     if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
         if options.fill_uncovered {
             let swept = plane_sweep(train, bounds, options.start_kernels);
-            let (scene, filled) =
+            let (scene, completion) =
                 completed_alpha_scene(points, &swept, train, bounds, background, options)?;
-            if filled >= MIN_SWEPT_POINTS {
+            if completion.swept >= MIN_SWEPT_POINTS {
                 let note = format!(
-                    "starting from the dataset's point cloud ({} points) and a plane sweep over the pixels it leaves unexplained ({filled} points)",
-                    points.len()
+                    "starting from the dataset's point cloud ({} points) and a plane sweep over the pixels it leaves unexplained ({} points){}",
+                    points.len(),
+                    completion.swept,
+                    shell_note(completion.shell)
                 );
                 return Ok((scene, note));
             }
         }
+        let (scene, shell) = point_cloud_alpha_scene(points, train, bounds, background, options)?;
         let note = format!(
-            "starting from the dataset's point cloud ({} points)",
-            points.len()
+            "starting from the dataset's point cloud ({} points){}",
+            points.len(),
+            shell_note(shell)
         );
-        return Ok((
-            point_cloud_alpha_scene(points, bounds, background, options)?,
-            note,
-        ));
+        return Ok((scene, note));
     }
     if flat_background(train, background) {
         let (cells, side) = visual_hull(train, background, bounds);
@@ -764,19 +768,27 @@ fn alpha_auto_start(
     }
     let points = plane_sweep(train, bounds, options.start_kernels);
     if points.len() >= MIN_SWEPT_POINTS {
+        let (scene, shell) = swept_alpha_scene(&points, train, bounds, background, options)?;
         let note = format!(
-            "starting from a plane sweep over neighbouring training views ({} points)",
-            points.len()
+            "starting from a plane sweep over neighbouring training views ({} points){}",
+            points.len(),
+            shell_note(shell)
         );
-        return Ok((
-            swept_alpha_scene(&points, bounds, background, options)?,
-            note,
-        ));
+        return Ok((scene, note));
     }
     Ok((
         random_alpha_scene(bounds, background, colour, options)?,
         "starting from kernels at random in the cameras' box (no point cloud, no flat background to carve a hull from, no depth the views agree on)".into(),
     ))
+}
+
+/// The start note's words on `shell` far-shell kernels (none: nothing).
+fn shell_note(shell: usize) -> String {
+    if shell == 0 {
+        String::new()
+    } else {
+        format!(", with {shell} kernels on a far shell for the pixels still unexplained")
+    }
 }
 
 /// The sphere the training cameras look at ([`box_from_cameras`]: the

@@ -295,7 +295,11 @@ fn a_plane_sweep_start_lies_on_the_surfaces_and_beats_the_random_start() {
         .unwrap();
         records.last().unwrap().heldout_psnr.unwrap()
     };
-    let swept = heldout_psnr(swept_alpha_scene(&points, &bounds, [0.0; 3], &options).unwrap());
+    let swept = heldout_psnr(
+        swept_alpha_scene(&points, &train, &bounds, [0.0; 3], &options)
+            .unwrap()
+            .0,
+    );
     let random = heldout_psnr(random_alpha_scene(&bounds, [0.0; 3], [0.4; 3], &options).unwrap());
     eprintln!("held out after 300 steps: swept start {swept:.2} dB, random start {random:.2} dB");
     assert!(
@@ -685,9 +689,9 @@ fn frames(file: &mut serde_json::Value) -> &mut Vec<serde_json::Value> {
 
 /// `fit --views DIR` (the alpha blend) on datasets whose views see nothing (issue 45: exit
 /// 101, an index out of bounds in the alpha backward): one camera looking away fits on;
-/// every camera looking away, a principal point at 1e308, or a point cloud at 3e38 (the
-/// start outside every view) end with exit 2 and a message saying no view sees the start,
-/// and write nothing.
+/// every camera looking away or a principal point at 1e308 end with exit 2 and a message
+/// saying no view sees the start, and write nothing. A point cloud at 3e38 (outside every
+/// view) leaves every pixel unexplained: the far shell starts them, and the fit runs.
 #[test]
 fn fits_whose_views_see_nothing_end_without_a_panic() {
     use crate::common::{refused_quickly, run_limited};
@@ -727,11 +731,17 @@ fn fits_whose_views_see_nothing_end_without_a_panic() {
          end_header\n3e38 3e38 3e38 200 100 50\n3e38 -3e38 1e38 10 20 30\n",
     )
     .unwrap();
-    for views in [all, cx, cloud] {
+    for views in [all, cx] {
         let out = format!("{views}.json");
         refused_quickly(&fit(&views, &out), dir.path(), 2, "no training view");
         assert!(!dir.path().join(&out).exists(), "{views}: nothing written");
     }
+    let output = run_limited(&fit(&cloud, "cloud.json"), dir.path());
+    let stderr = crate::common::stderr(&output);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("far shell"), "{stderr}");
+    let fitted = splat4d::io::scene_file::load_scene(&dir.path().join("cloud.json")).unwrap();
+    assert!(fitted.len() > 2);
 }
 
 /// The alpha fit's start refuses, naming the file, the frame and the field, the frame
@@ -839,17 +849,20 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
         max_needle: 4.0,
         max_size: 0.05,
     };
+    // The sweep's kernels alone: the far shell (tested below) would add kernels off the wall.
     let options = splat4d::fit::alpha::AlphaFitOptions {
         steps: 200,
         sh_count: 0,
         eval_every: 0,
         fill_uncovered: true,
+        far_shell: false,
         shape_bound: bound,
         ..DEFAULT_ALPHA
     };
     let cloud_only = prepare_alpha(
         &splat4d::fit::alpha::AlphaFitOptions {
             fill_uncovered: false,
+            far_shell: false,
             ..options
         },
         Init::Auto,
@@ -904,6 +917,136 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
     let psnr = records.last().unwrap().heldout_psnr.unwrap();
     eprintln!("held out after 200 steps: {psnr:.2} dB");
     assert!(psnr > 20.0, "{psnr:.2} dB");
+}
+
+/// Where neither the point cloud nor a plane sweep explains the photos (the room's panel in
+/// the cloud, no sweep), the far shell ([`splat4d::fit::shell`]) starts the wall: its
+/// kernels lie on the shell's sphere, each projects onto an unexplained pixel of some view,
+/// the start then covers every training pixel, and a short fit from it beats the cloud
+/// alone on the held-out photos.
+#[test]
+fn a_background_nothing_explains_gets_a_far_shell_that_fits_better_than_the_cloud_alone() {
+    use splat4d::fit::plan::{Init, prepare_alpha};
+    use splat4d::fit::shell::{SHELL_RADIUS, coverage};
+    use splat4d::model::{Dataset, DatasetPoint};
+    let scene = textured_room();
+    let mut photos = room_photos(&scene, 16);
+    let test: Vec<_> = (0..photos.len())
+        .rev()
+        .filter(|k| k % 5 == 2)
+        .map(|k| photos.remove(k))
+        .collect();
+    let cloud: Vec<DatasetPoint> = (0..scene.len())
+        .filter(|&i| scene.means[i][2] > 0.0)
+        .map(|i| DatasetPoint {
+            position: [scene.means[i][0], scene.means[i][1], scene.means[i][2]],
+            colour: scene.amplitudes[i].map(|c| c as f32),
+        })
+        .collect();
+    let dataset = Dataset {
+        train: photos,
+        test,
+        points: Some(cloud.clone()),
+        ..Dataset::default()
+    };
+    let options = splat4d::fit::alpha::AlphaFitOptions {
+        steps: 300,
+        sh_count: 0,
+        eval_every: 0,
+        fill_uncovered: false,
+        far_shell: true,
+        ..DEFAULT_ALPHA
+    };
+    let ready = |far_shell| {
+        prepare_alpha(
+            &splat4d::fit::alpha::AlphaFitOptions {
+                far_shell,
+                ..options
+            },
+            Init::Auto,
+            &dataset,
+            Some([0.0; 3]),
+            "<room>",
+        )
+        .unwrap()
+    };
+    let (mut alone, mut shelled) = (ready(false), ready(true));
+    assert_eq!(alone.scene.len(), cloud.len());
+    let added = shelled.scene.len() - cloud.len();
+    eprintln!("{}; {added} shell kernels", shelled.notes.join("; "));
+    assert!(
+        (100..=options.start_kernels).contains(&added),
+        "{added} shell kernels"
+    );
+    assert!(shelled.notes.iter().any(|n| n.contains("far shell")));
+    // On the sphere around the box's centre, of SHELL_RADIUS times the largest camera
+    // distance.
+    let bounds = alpha_bounds(&dataset.train, "<room>").unwrap();
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds.min[a] + bounds.max[a]));
+    let distance = |p: [f64; 3]| {
+        (0..3)
+            .map(|a| (p[a] - centre[a]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let farthest = dataset
+        .train
+        .iter()
+        .map(|v| distance(v.camera.centre()))
+        .fold(0.0, f64::max);
+    let radius = SHELL_RADIUS * farthest;
+    let shell_kernels: Vec<Kernel> = (cloud.len()..shelled.scene.len())
+        .map(|i| shelled.scene.kernel(i))
+        .collect();
+    for kernel in &shell_kernels {
+        let [x, y, z, _] = kernel.mean;
+        let off = (distance([x, y, z]) - radius).abs();
+        assert!(
+            off <= 1e-9 * radius,
+            "{:?} is {off} off the sphere",
+            kernel.mean
+        );
+        assert!(
+            dataset.train.iter().any(|v| {
+                let [u, w, depth] = v.camera.project_point([x, y, z]);
+                depth > 0.0 && (0.0..64.0).contains(&u) && (0.0..48.0).contains(&w)
+            }),
+            "{:?} is in no view",
+            kernel.mean
+        );
+    }
+    // The cloud and the shell together leave no training pixel unexplained but those of
+    // the (black) background.
+    let start: Vec<Kernel> = (0..shelled.scene.len())
+        .map(|i| shelled.scene.kernel(i))
+        .collect();
+    for view in &dataset.train {
+        let covered = coverage(&view.camera, &start);
+        let left = covered
+            .iter()
+            .enumerate()
+            .filter(|&(p, c)| {
+                !*c && view.image.pixels[3 * p..3 * p + 3]
+                    .iter()
+                    .any(|v| *v > 0.02)
+            })
+            .count();
+        assert!(left == 0, "{}: {left} pixels unexplained", view.name);
+    }
+    let heldout = |ready: &mut splat4d::fit::plan::ReadyFit| {
+        let records = fit(
+            &mut ready.scene,
+            &dataset.train,
+            &dataset.test,
+            &ready.training,
+            |_, _| {},
+        )
+        .unwrap();
+        records.last().unwrap().heldout_psnr.unwrap()
+    };
+    let (alone, shelled) = (heldout(&mut alone), heldout(&mut shelled));
+    eprintln!("held out after 300 steps: the cloud {alone:.2} dB, with the shell {shelled:.2} dB");
+    assert!(shelled > alone + 1.0, "{shelled:.2} against {alone:.2} dB");
 }
 
 /// The spatio-temporal score of pruning ([`splat4d::fit::density::prune`]) on the occluding
