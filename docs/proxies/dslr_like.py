@@ -3,12 +3,17 @@
 # 27-degree arc, rendered by splat4d as pinhole images. The sparse model
 # (sparse/0/{cameras,images,points3D}.txt, PINHOLE) has a point cloud on the figurine ONLY,
 # as COLMAP's often is: the table and the backdrop behind it have no point.
-# Usage: python3 dslr_like.py SPLAT4D_BINARY OUT_DIR   (needs numpy; ~1 minute)
+# Usage: python3 dslr_like.py SPLAT4D_BINARY OUT_DIR [plain|far]   (needs numpy; ~1 minute)
+# `plain`: the backdrop is a plain painted wall instead (a soft shading), as a room's walls
+# are. `far`: the patterned backdrop is 13 times as far and as large (z = -30), beyond the
+# depths a plane sweep tries, as distant scenery is.
 # The capture is OUT_DIR/cap: splat4d fit --views OUT_DIR/cap --downscale 4 --out f.json
 # (every 8th photo, 0, 8, 16, is held out: 20 training views).
 import json, math, random, subprocess, os, sys
 import numpy as np
 BIN, OUT = sys.argv[1], sys.argv[2]
+MODE = sys.argv[3] if len(sys.argv) > 3 else ''
+PLAIN, FAR = MODE == 'plain', MODE == 'far'
 os.makedirs(OUT, exist_ok=True)
 random.seed(3); rng = np.random.default_rng(3)
 K = []
@@ -28,9 +33,19 @@ for x in np.arange(-3.5, 3.5, sp):          # table (wood-like stripes and a pap
         paper = -1.1 < p[0] < -0.3 and -0.9 < p[2] < -0.2
         base = [0.92, 0.92, 0.88] if paper else ([0.65, 0.45, 0.3] if int(math.floor(p[0] * 3 + 0.3 * math.sin(4 * p[2]))) % 2 else [0.5, 0.34, 0.22])
         add(p, [sp * 0.5, 0.006, sp * 0.5], tex(p, base, 40.0 if paper else 24.0))
+G = 13.0 if FAR else 1.0                    # the far backdrop: 13 times as far, as large
 for x in np.arange(-4.0, 4.0, sp):          # backdrop (a patterned cloth)
     for y in np.arange(-0.5, 3.0, sp):
         p = [x + random.uniform(-.01, .01), y + random.uniform(-.01, .01), -2.2]
+        if FAR:
+            chk = (int(math.floor(x * 2.5)) + int(math.floor(y * 2.5))) % 2
+            c = tex(p, [0.3, 0.45, 0.75] if chk else [0.75, 0.7, 0.4], 24.0)
+            add([G * p[0], G * (p[1] + 0.5) - 8.5, G * p[2]], [G * sp * 0.5, G * sp * 0.5, 0.08], c)
+            continue
+        if PLAIN:  # a soft light from the upper left, nothing to match between views
+            shade = 0.8 + 0.12 * math.tanh(0.5 * (y - 1.0) - 0.3 * x)
+            add(p, [sp, sp, 0.006], [0.86 * shade, 0.82 * shade, 0.74 * shade])
+            continue
         chk = (int(math.floor(x * 2.5)) + int(math.floor(y * 2.5))) % 2
         add(p, [sp * 0.5, sp * 0.5, 0.006], tex(p, [0.3, 0.45, 0.75] if chk else [0.75, 0.7, 0.4], 24.0))
 obj = []                                     # the figurine: surface kernels, their points kept
