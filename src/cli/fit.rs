@@ -80,7 +80,8 @@ pub struct FitArgs {
     #[arg(long, help_heading = BOTH)]
     batch: Option<usize>,
     /// Kernels `auto` starts from (default: 4 additive, where 1 is one kernel at the centre
-    /// of the box; 2000 alpha, the hull's, plane sweep's or random start's count).
+    /// of the box; 2000 alpha, the hull's, plane sweep's or random start's count, and the
+    /// most a far shell adds).
     #[arg(long, help_heading = BOTH)]
     start_kernels: Option<usize>,
     /// Budget of the density rounds: never more kernels than this (default: 100000

@@ -73,7 +73,8 @@ pub struct AlphaFitOptions {
     pub seed: u64,
     /// Rendering options.
     pub render: RenderOptions,
-    /// Kernels of a random, hull or plane-sweep start.
+    /// Kernels of a random, hull or plane-sweep start, and the most the far shell adds
+    /// ([`crate::fit::shell`]).
     pub start_kernels: usize,
     /// Most points of a dataset's point cloud a start takes (evenly through the list): the
     /// bound on a fit's first steps' cost when a capture ships a dense cloud.

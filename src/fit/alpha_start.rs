@@ -144,22 +144,25 @@ pub struct Completion {
 /// A start from a point cloud that covers only part of what the views show, completed from
 /// a plane sweep: the point cloud's kernels ([`point_cloud_alpha_scene`]), then a kernel
 /// (as [`swept_alpha_scene`] makes them) for every swept point whose reference pixel no
-/// cloud kernel covers in that view ([`uncovered`]), then, with
-/// [`AlphaFitOptions::far_shell`], the far shell ([`with_far_shell`]); up to
-/// `options.max_kernels` in all.
+/// cloud kernel covers in that view ([`uncovered`]), up to `options.max_kernels` in all,
+/// when there are at least `min_swept` of them (else `None`: the cloud explains the views);
+/// then, with [`AlphaFitOptions::far_shell`], the far shell ([`with_far_shell`]).
 pub fn completed_alpha_scene(
     cloud: &[DatasetPoint],
     swept: &[SweptPoint],
     views: &[View],
     bounds: &SpaceTimeBox,
     background: [f64; 3],
-    options: &AlphaFitOptions,
-) -> Result<(Scene, Completion)> {
+    (options, min_swept): (&AlphaFitOptions, usize),
+) -> Result<Option<(Scene, Completion)>> {
     let mut kernels = point_cloud_kernels(cloud, bounds, options);
     let extra = uncovered(swept, &kernels, views);
     let room = options.max_kernels.saturating_sub(kernels.len());
     let filled = swept_kernels(&extra, bounds, options, room);
     let swept = filled.len();
+    if swept < min_swept {
+        return Ok(None);
+    }
     kernels.extend(filled);
     let (kernels, shell) = with_far_shell(kernels, views, bounds, background, options);
     let scene = alpha_start(
@@ -168,7 +171,7 @@ pub fn completed_alpha_scene(
         options,
         "<point cloud and plane-sweep start>",
     )?;
-    Ok((scene, Completion { swept, shell }))
+    Ok(Some((scene, Completion { swept, shell })))
 }
 
 /// `kernels` and, with [`AlphaFitOptions::far_shell`], a kernel on the far shell for the
@@ -192,8 +195,7 @@ pub fn with_far_shell(
         views,
         bounds,
         background,
-        options.start_kernels,
-        room,
+        options.start_kernels.min(room),
     );
     let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
     let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);

@@ -25,8 +25,9 @@
 //!   background ([`start_amplitude`]), so the sign follows the data.
 //!
 //! **The alpha fit** ([`prepare_alpha`]): an automatic start from the dataset's point cloud
-//! (completed by a plane sweep over the pixels it leaves unexplained), else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
-//! sweep, else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
+//! (completed by a plane sweep over the pixels it leaves unexplained, and both by a far
+//! shell over what is still unexplained), else a visual hull, else a rig's sweeps of its still and moving pixels, else a plane
+//! sweep (with the far shell), else kernels at random, in the training cameras' box, over the given background or the border median (kept fixed).
 //!
 //! **Numbers**: every default (steps, rates, batch, the density rules of both blends) is a
 //! constant of [`crate::fit::defaults`], re-exported here.
@@ -719,9 +720,14 @@ fn alpha_auto_start(
     if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
         if options.fill_uncovered {
             let swept = plane_sweep(train, bounds, options.start_kernels);
-            let (scene, completion) =
-                completed_alpha_scene(points, &swept, train, bounds, background, options)?;
-            if completion.swept >= MIN_SWEPT_POINTS {
+            if let Some((scene, completion)) = completed_alpha_scene(
+                points,
+                &swept,
+                train,
+                bounds,
+                background,
+                (options, MIN_SWEPT_POINTS),
+            )? {
                 let note = format!(
                     "starting from the dataset's point cloud ({} points) and a plane sweep over the pixels it leaves unexplained ({} points){}",
                     points.len(),

@@ -7,12 +7,13 @@
 //!
 //! **The shell.** A training pixel is *unexplained* when no start kernel covers it, its
 //! loss weight is above 0 and, where the views' background is flat
-//! ([`crate::fit::hull::flat_background`]), its colour differs from it by more than
-//! [`BACKGROUND_TOLERANCE`] in some channel (a flat background needs no kernel). With `U`
+//! ([`crate::fit::hull::flat_background`]), it is foreground to the visual hull
+//! ([`crate::fit::hull::is_foreground`]: off the background by more than 1/255 in some
+//! channel; a flat background needs no kernel). With `U`
 //! unexplained pixels over all views (the shell acts only when they are at least
 //! [`MIN_UNEXPLAINED_SHARE`] of the pixels), `U₁` in the view with the most, and a budget of
 //! `N` kernels, each view is visited on a grid of stride `s = ⌈√(U₁ / N)⌉` (pixels
-//! `(s/2 + a s, s/2 + b s)`), views in order, and `s` is widened until at most `N` points are
+//! `(s/2 + a s, s/2 + b s)`, the first at most half the view's side in), views in order, and `s` is widened until at most `N` points are
 //! placed (a view's own grid spans what it alone sees; views that see the same background
 //! add little). A grid pixel still unexplained gets a kernel where its ray `o + λ d` (`o` the camera
 //! centre, `d` the unit direction through the pixel's centre) meets the sphere
@@ -30,7 +31,9 @@
 //! one kernel, not one a view. Everything is in the order of the views and their pixels: the same kernels
 //! for any thread count.
 
-use crate::fit::hull::flat_background;
+use glam::{DMat3, DVec3};
+
+use crate::fit::hull::{flat_background, is_foreground};
 use crate::fit::init::SpaceTimeBox;
 use crate::model::scene::Kernel;
 use crate::model::{Camera, View};
@@ -38,18 +41,16 @@ use crate::model::{Camera, View};
 /// Radius of a start kernel's footprint, in its σ.
 pub const COVER_SIGMAS: f64 = 3.0;
 
-/// The shell's radius in the largest camera distance from the centre of the cameras' box.
-/// Measured on the DSLR-like proxy started from its cloud without a sweep
-/// (`docs/fitting.md`): 3 median distances gave 27.87 dB held out, 1.5 gave 35.18 dB (the
-/// cloud alone 26.82 dB): a background nearer the shell is nearer where the fit needs it.
+/// The shell's radius in the largest camera distance from the centre of the cameras' box
+/// (every camera inside). Measured on the DSLR-like proxy started from its cloud without a
+/// sweep (`docs/fitting.md`): 34.82 dB held out (the cloud alone 26.82 dB); with the radius
+/// in median camera distances instead, 3 gave 27.87 dB and 1.5 gave 35.18 dB: the proxy's
+/// table and backdrop are nearer the smaller sphere, so the fit has less far to move them.
 pub const SHELL_RADIUS: f64 = 1.5;
 
 /// The share of the training pixels that must be unexplained for the shell to act: fewer,
 /// scattered ones are left to densification.
 pub const MIN_UNEXPLAINED_SHARE: f64 = 0.01;
-
-/// A pixel whose every channel is within this of the fit's background needs no kernel.
-pub const BACKGROUND_TOLERANCE: f32 = 0.02;
 
 /// The pixels of `camera` (row-major) inside some kernel's footprint (module doc).
 #[must_use]
@@ -99,7 +100,7 @@ pub struct ShellPoint {
 }
 
 /// The far shell's points for the pixels of `views` that `kernels` leave unexplained
-/// against `background` (module doc): at most `budget` of them (and `most`).
+/// against `background` (module doc): at most `budget` of them.
 #[must_use]
 pub fn far_shell_points(
     kernels: &[Kernel],
@@ -107,7 +108,6 @@ pub fn far_shell_points(
     bounds: &SpaceTimeBox,
     background: [f64; 3],
     budget: usize,
-    most: usize,
 ) -> Vec<ShellPoint> {
     let placement = Placement {
         views,
@@ -124,22 +124,23 @@ pub fn far_shell_points(
         counts.iter().copied().max().unwrap_or(0),
     );
     let pixels: usize = views.iter().map(|view| view.camera.pixel_count()).sum();
-    let budget = budget.min(most);
-    if (total as f64) < MIN_UNEXPLAINED_SHARE * pixels as f64 || budget == 0 {
+    if total == 0 || (total as f64) < MIN_UNEXPLAINED_SHARE * pixels as f64 || budget == 0 {
         return Vec::new();
     }
+    // At the widest stride every view's grid is its centre pixel alone.
     let widest = views
         .iter()
         .map(|view| view.camera.width.max(view.camera.height) as usize)
         .max()
         .unwrap_or(1);
-    let mut stride = stride_for(largest, budget);
+    let mut stride = stride_for(largest, budget).min(widest);
     loop {
         let placed = placement.place(stride);
         if placed.len() <= budget || stride >= widest {
             return placed.into_iter().take(budget).collect();
         }
-        stride = stride_for(placed.len() * stride * stride, budget).max(stride + 1);
+        let spread = placed.len().saturating_mul(stride).saturating_mul(stride);
+        stride = stride_for(spread, budget).max(stride + 1).min(widest);
     }
 }
 
@@ -182,8 +183,8 @@ impl Placement<'_> {
                 paint(&mut mask, camera, point.position, 0.5 * point.spacing);
             }
             let (w, h) = (camera.width as usize, camera.height as usize);
-            for j in (stride / 2..h).step_by(stride) {
-                for i in (stride / 2..w).step_by(stride) {
+            for j in ((stride / 2).min(h / 2)..h).step_by(stride) {
+                for i in ((stride / 2).min(w / 2)..w).step_by(stride) {
                     if !unexplained(view, &mask, j * w + i, self.background) {
                         continue;
                     }
@@ -209,7 +210,7 @@ fn unexplained(view: &View, mask: &[bool], p: usize, background: Option<[f32; 3]
         return false;
     }
     let colour = &view.image.pixels[3 * p..3 * p + 3];
-    background.is_none_or(|b| (0..3).any(|c| (colour[c] - b[c]).abs() > BACKGROUND_TOLERANCE))
+    background.is_none_or(|b| is_foreground(colour, b))
 }
 
 /// The shell's sphere: its centre and radius (module doc).
@@ -241,22 +242,19 @@ impl Shell {
     /// point's camera depth; `None` when the numbers are not finite.
     fn meet(&self, camera: &Camera, i: usize, j: usize) -> Option<([f64; 3], f64)> {
         let origin = camera.centre();
-        let local = [
+        let local = DVec3::new(
             (i as f64 + 0.5 - camera.cx) / camera.fx,
             (j as f64 + 0.5 - camera.cy) / camera.fy,
             1.0,
-        ];
-        let norm = local.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let rotation = camera.rotation();
-        // Rcᵀ: camera axes to world.
-        let direction: [f64; 3] =
-            std::array::from_fn(|a| (0..3).map(|b| rotation[b][a] * local[b]).sum::<f64>() / norm);
-        let offset: [f64; 3] = std::array::from_fn(|a| origin[a] - self.centre[a]);
-        let inside = offset.iter().map(|v| v * v).sum::<f64>();
-        let b = (0..3).map(|a| direction[a] * offset[a]).sum::<f64>();
-        let along = -b + (b * b - (inside - self.radius * self.radius)).sqrt();
-        let position: [f64; 3] = std::array::from_fn(|a| origin[a] + along * direction[a]);
-        let depth = along / norm;
+        );
+        // Rc⁻¹ (Rc need not be orthonormal, SPEC §3): camera axes to world.
+        let rows = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
+        let direction = (rows.inverse() * local).normalize();
+        let offset = DVec3::from(origin) - DVec3::from(self.centre);
+        let b = direction.dot(offset);
+        let along = -b + (b * b - (offset.length_squared() - self.radius * self.radius)).sqrt();
+        let position: [f64; 3] = (DVec3::from(origin) + along * direction).into();
+        let depth = camera.to_camera_space(position)[2];
         (position.iter().all(|v| v.is_finite()) && depth.is_finite() && depth > 0.0)
             .then_some((position, depth))
     }
@@ -299,7 +297,7 @@ mod tests {
                 view([4.0 * angle.sin(), 0.0, 4.0 * angle.cos()], [0.6, 0.4, 0.2])
             })
             .collect();
-        let points = far_shell_points(&[], &views, &bounds(), [0.0; 3], 300, usize::MAX);
+        let points = far_shell_points(&[], &views, &bounds(), [0.0; 3], 300);
         assert!((100..=300).contains(&points.len()), "{}", points.len());
         // The sphere: 1.5 times the largest camera distance (4) around the origin.
         for p in &points {
@@ -321,19 +319,19 @@ mod tests {
         }
         // Views that see the same background share its points: five views add far fewer
         // than five times one view's.
-        let one = far_shell_points(&[], &views[..1], &bounds(), [0.0; 3], 300, usize::MAX);
+        let one = far_shell_points(&[], &views[..1], &bounds(), [0.0; 3], 300);
         assert!(
             points.len() < 2 * one.len(),
             "{} {}",
             points.len(),
             one.len()
         );
-        // `most` caps the count; the same input gives the same points.
-        let capped = far_shell_points(&[], &views, &bounds(), [0.0; 3], 300, 7);
+        // The budget caps the count; the same input gives the same points.
+        let capped = far_shell_points(&[], &views, &bounds(), [0.0; 3], 7);
         assert!((1..=7).contains(&capped.len()), "{}", capped.len());
         assert_eq!(
             points,
-            far_shell_points(&[], &views, &bounds(), [0.0; 3], 300, usize::MAX)
+            far_shell_points(&[], &views, &bounds(), [0.0; 3], 300)
         );
     }
 
@@ -342,26 +340,117 @@ mod tests {
         let eye = [0.0, 0.0, 4.0];
         // A flat background the views show everywhere: nothing to start.
         let flat = [view(eye, [0.2; 3]), view([1.0, 0.0, 4.0], [0.2; 3])];
-        assert!(far_shell_points(&[], &flat, &bounds(), [0.2; 3], 300, usize::MAX).is_empty());
+        assert!(far_shell_points(&[], &flat, &bounds(), [0.2; 3], 300).is_empty());
         // Every pixel's weight 0 (outside the photo): nothing.
         let mut weightless = view(eye, [0.9; 3]);
         weightless.weights = Some(vec![0.0; 40 * 30]);
-        assert!(
-            far_shell_points(&[], &[weightless], &bounds(), [0.0; 3], 300, usize::MAX).is_empty()
-        );
+        assert!(far_shell_points(&[], &[weightless], &bounds(), [0.0; 3], 300).is_empty());
         // One big kernel at the origin covering the whole view: nothing unexplained.
         let big = Kernel::new([0.0; 4], [2.0, 2.0, 2.0, 1.0], [0.5; 3]);
         let seen = [view(eye, [0.9; 3])];
         assert!(coverage(&seen[0].camera, &[big]).iter().all(|c| *c));
-        assert!(far_shell_points(&[big], &seen, &bounds(), [0.0; 3], 300, usize::MAX).is_empty());
+        assert!(far_shell_points(&[big], &seen, &bounds(), [0.0; 3], 300).is_empty());
         // Fewer than 1 % of the pixels unexplained (11 of 1200 weighted): left to
         // densification.
         let mut corner = seen[0].clone();
         let mut weights = vec![1.0; 40 * 30];
         weights[..1200 - 11].fill(0.0);
+        corner.weights = Some(weights.clone());
+        assert!(far_shell_points(&[], &[corner.clone()], &bounds(), [0.0; 3], 300).is_empty());
+        // 12 of 1200 (1 %): started, only where the weights count.
+        weights[1200 - 12] = 1.0;
         corner.weights = Some(weights);
-        assert!(far_shell_points(&[], &[corner], &bounds(), [0.0; 3], 300, usize::MAX).is_empty());
+        let started = far_shell_points(&[], &[corner], &bounds(), [0.0; 3], 300);
+        assert!(!started.is_empty());
+        for p in &started {
+            let [u, v, _] = seen[0].camera.project_point(p.position);
+            assert!(v > 29.0 && u > 40.0 - 12.0, "({u}, {v})");
+        }
         // A budget of 0 places nothing.
-        assert!(far_shell_points(&[], &seen, &bounds(), [0.0; 3], 0, usize::MAX).is_empty());
+        assert!(far_shell_points(&[], &seen, &bounds(), [0.0; 3], 0).is_empty());
+    }
+
+    #[test]
+    fn a_flat_background_is_left_out_and_its_foreground_started_in_its_colour() {
+        // A 10×10 red patch on a flat grey background.
+        let mut seen = view([0.0, 0.0, 4.0], [0.2; 3]);
+        let mut image = (*seen.image).clone();
+        for j in 10..20 {
+            for i in 15..25 {
+                let k = 3 * (j * 40 + i);
+                image.pixels[k..k + 3].copy_from_slice(&[0.9, 0.1, 0.1]);
+            }
+        }
+        seen.image = image.into();
+        let points = far_shell_points(&[], &[seen.clone()], &bounds(), [0.2; 3], 300);
+        assert!(points.len() >= 4, "{}", points.len());
+        for p in &points {
+            assert_eq!(p.colour, [0.9f32, 0.1, 0.1].map(f64::from));
+            let [u, v, _] = seen.camera.project_point(p.position);
+            assert!(
+                (15.0..25.0).contains(&u) && (10.0..20.0).contains(&v),
+                "({u}, {v})"
+            );
+        }
+    }
+
+    #[test]
+    fn a_budget_of_one_over_views_apart_still_places_one() {
+        // Five views looking different ways (no two share a direction): a budget of 1.
+        let views: Vec<View> = (0..5)
+            .map(|k| {
+                let angle = (72.0 * f64::from(k)).to_radians();
+                view([4.0 * angle.sin(), 0.0, 4.0 * angle.cos()], [0.6; 3])
+            })
+            .collect();
+        assert_eq!(
+            far_shell_points(&[], &views, &bounds(), [0.0; 3], 1).len(),
+            1
+        );
+        // A view 2000×100: rows are not lost to a stride past its height.
+        let mut wide = view([0.0, 0.0, 4.0], [0.6; 3]);
+        wide.camera =
+            Camera::look_at([0.0, 0.0, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 2000, 100).unwrap();
+        wide.image = Image::filled(2000, 100, [0.6; 3]).into();
+        let placed = far_shell_points(&[], &[wide], &bounds(), [0.0; 3], 3);
+        assert!((1..=3).contains(&placed.len()), "{}", placed.len());
+    }
+
+    #[test]
+    fn a_pixels_shell_point_lies_on_the_sphere_and_projects_back_to_the_pixel() {
+        let shell = Shell {
+            centre: [0.1, -0.2, 0.3],
+            radius: 7.0,
+        };
+        let orthonormal =
+            Camera::look_at([1.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 30).unwrap();
+        // Rc scaled and sheared (SPEC §3 allows any invertible Rc).
+        let mut sheared = orthonormal;
+        for (r, factor) in [(0, 1.7), (1, 0.6), (2, 1.3)] {
+            for c in 0..4 {
+                sheared.world_to_camera[r][c] *= factor;
+            }
+        }
+        sheared.world_to_camera[0][1] += 0.3;
+        // At the sphere's centre.
+        let centred = Camera::look_at(
+            [0.1, -0.2, 0.3],
+            [0.0, 0.0, -5.0],
+            [0.0, 1.0, 0.0],
+            45.0,
+            40,
+            30,
+        )
+        .unwrap();
+        for camera in [orthonormal, sheared, centred] {
+            for (i, j) in [(0, 0), (39, 29), (17, 11)] {
+                let (position, depth) = shell.meet(&camera, i, j).unwrap();
+                assert!((distance(position, shell.centre) - 7.0).abs() < 1e-9);
+                let [u, v, z] = camera.project_point(position);
+                assert!((u - (i as f64 + 0.5)).abs() < 1e-9, "{u} for {i}");
+                assert!((v - (j as f64 + 0.5)).abs() < 1e-9, "{v} for {j}");
+                assert!((z - depth).abs() < 1e-9 * depth && depth > 0.0);
+            }
+        }
     }
 }
