@@ -5,14 +5,17 @@
 # as COLMAP's often is: the table and the backdrop behind it have no point.
 # Usage: python3 dslr_like.py SPLAT4D_BINARY OUT_DIR [plain|far]   (needs numpy; ~1 minute)
 # `plain`: the backdrop is a plain painted wall instead (a soft shading), as a room's walls
-# are. `far`: the patterned backdrop is 13 times as far and as large (z = -30), beyond the
-# depths a plane sweep tries, as distant scenery is.
+# are. `far`: the patterned backdrop is 13 times as far and as large (z = -28.6), beyond
+# the depths a plane sweep tries, as distant scenery is. Both draw the same random numbers
+# as the default, so the figurine and its cloud are the default's.
 # The capture is OUT_DIR/cap: splat4d fit --views OUT_DIR/cap --downscale 4 --out f.json
 # (every 8th photo, 0, 8, 16, is held out: 20 training views).
 import json, math, random, subprocess, os, sys
 import numpy as np
 BIN, OUT = sys.argv[1], sys.argv[2]
 MODE = sys.argv[3] if len(sys.argv) > 3 else ''
+if MODE not in ('', 'plain', 'far'):
+    sys.exit("dslr_like.py: the third argument is `plain` or `far`, not `%s`" % MODE)
 PLAIN, FAR = MODE == 'plain', MODE == 'far'
 os.makedirs(OUT, exist_ok=True)
 random.seed(3); rng = np.random.default_rng(3)
@@ -43,6 +46,7 @@ for x in np.arange(-4.0, 4.0, sp):          # backdrop (a patterned cloth)
             add([G * p[0], G * (p[1] + 0.5) - 8.5, G * p[2]], [G * sp * 0.5, G * sp * 0.5, 0.08], c)
             continue
         if PLAIN:  # a soft light from the upper left, nothing to match between views
+            random.uniform(-0.06, 0.06)  # the draw tex() makes, to keep the sequence in step
             shade = 0.8 + 0.12 * math.tanh(0.5 * (y - 1.0) - 0.3 * x)
             add(p, [sp, sp, 0.006], [0.86 * shade, 0.82 * shade, 0.74 * shade])
             continue
