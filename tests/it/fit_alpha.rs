@@ -813,16 +813,10 @@ fn the_alpha_start_refuses_frames_that_give_no_finite_box() {
     }
 }
 
-/// A point cloud that covers only part of what the photos show (the room's panel, not the
-/// wall behind: COLMAP's cloud on a figurine, not on the table and backdrop) gets its start
-/// completed by plane-sweep kernels on the pixels it leaves unexplained, and those lie on
-/// the wall; after a fit with the shape bound, no kernel is a needle longer than the bound
-/// or wider than its share of the distance to the nearest camera.
-#[test]
-fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_fit() {
-    use splat4d::fit::density::ShapeBound;
-    use splat4d::fit::density::shape::nearest_distance;
-    use splat4d::fit::plan::{Init, prepare_alpha};
+/// The textured room's photos (16, every fifth from the third held out) with a point cloud
+/// on its panel's kernels (z = 0.2) and none on the wall's (z = -1): COLMAP's cloud on a
+/// figurine, not on the table and backdrop. Returns the dataset and the cloud.
+fn room_with_panel_cloud() -> (splat4d::model::Dataset, Vec<splat4d::model::DatasetPoint>) {
     use splat4d::model::{Dataset, DatasetPoint};
     let scene = textured_room();
     let mut photos = room_photos(&scene, 16);
@@ -831,7 +825,6 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
         .filter(|k| k % 5 == 2)
         .map(|k| photos.remove(k))
         .collect();
-    // The cloud: the panel's kernels (z = 0.2), none of the wall's (z = -1).
     let cloud: Vec<DatasetPoint> = (0..scene.len())
         .filter(|&i| scene.means[i][2] > 0.0)
         .map(|i| DatasetPoint {
@@ -845,6 +838,20 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
         points: Some(cloud.clone()),
         ..Dataset::default()
     };
+    (dataset, cloud)
+}
+
+/// A point cloud that covers only part of what the photos show (the room's panel, not the
+/// wall behind: COLMAP's cloud on a figurine, not on the table and backdrop) gets its start
+/// completed by plane-sweep kernels on the pixels it leaves unexplained, and those lie on
+/// the wall; after a fit with the shape bound, no kernel is a needle longer than the bound
+/// or wider than its share of the distance to the nearest camera.
+#[test]
+fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_fit() {
+    use splat4d::fit::density::ShapeBound;
+    use splat4d::fit::density::shape::nearest_distance;
+    use splat4d::fit::plan::{Init, prepare_alpha};
+    let (dataset, cloud) = room_with_panel_cloud();
     let bound = ShapeBound {
         max_needle: 4.0,
         max_size: 0.05,
@@ -928,27 +935,7 @@ fn an_uncovered_background_gets_start_kernels_and_the_shape_bound_holds_after_a_
 fn a_background_nothing_explains_gets_a_far_shell_that_fits_better_than_the_cloud_alone() {
     use splat4d::fit::plan::{Init, prepare_alpha};
     use splat4d::fit::shell::{SHELL_RADIUS, coverage};
-    use splat4d::model::{Dataset, DatasetPoint};
-    let scene = textured_room();
-    let mut photos = room_photos(&scene, 16);
-    let test: Vec<_> = (0..photos.len())
-        .rev()
-        .filter(|k| k % 5 == 2)
-        .map(|k| photos.remove(k))
-        .collect();
-    let cloud: Vec<DatasetPoint> = (0..scene.len())
-        .filter(|&i| scene.means[i][2] > 0.0)
-        .map(|i| DatasetPoint {
-            position: [scene.means[i][0], scene.means[i][1], scene.means[i][2]],
-            colour: scene.amplitudes[i].map(|c| c as f32),
-        })
-        .collect();
-    let dataset = Dataset {
-        train: photos,
-        test,
-        points: Some(cloud.clone()),
-        ..Dataset::default()
-    };
+    let (dataset, cloud) = room_with_panel_cloud();
     let options = splat4d::fit::alpha::AlphaFitOptions {
         steps: 300,
         sh_count: 0,
