@@ -175,8 +175,8 @@ pub fn completed_alpha_scene(
 }
 
 /// `kernels` and, with [`AlphaFitOptions::far_shell`], a kernel on the far shell for the
-/// pixels of `views` they leave unexplained ([`far_shell_points`]: about
-/// `options.start_kernels` of them, up to `options.max_kernels` in all), each with its
+/// pixels of `views` they leave unexplained ([`far_shell_points`]: at most
+/// `options.start_kernels` of them, and `options.max_kernels` kernels in all), each with its
 /// point's colour and a spatial σ of half its spacing, centred in time with σt at least the
 /// time range (a background lives throughout); and how many the shell added.
 pub fn with_far_shell(

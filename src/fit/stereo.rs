@@ -289,11 +289,25 @@ struct Reference {
 /// How closely a neighbour's depth must agree with a point's, relative to the depth.
 pub const AGREEMENT: f64 = 0.02;
 
-/// Rc⁻¹ (= Rcᵀ) and the centre: camera space to world.
+/// Rc⁻¹ and the centre: camera space to world. `Rc` need not be orthonormal (SPEC §3); when
+/// it is, to 1e-6 in `Rc Rcᵀ` (rotations from files written to 7 digits or more), `Rc⁻¹` is
+/// taken as `Rcᵀ`: a point then lands within about `1e-6 f` pixels of its pixel.
 fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
     let r = camera.rotation();
-    let transpose = std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]));
-    (transpose, camera.centre())
+    let transpose: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]));
+    let orthonormal = (0..3).all(|a| {
+        (0..3).all(|b| {
+            let dot: f64 = (0..3).map(|k| r[a][k] * r[b][k]).sum();
+            (dot - f64::from(u8::from(a == b))).abs() <= 1e-6
+        })
+    });
+    if orthonormal {
+        return (transpose, camera.centre());
+    }
+    // glam's matrices are column-major: the transpose's columns are Rc's rows.
+    let inverse = glam::DMat3::from_cols_array_2d(&transpose).inverse();
+    let rows = inverse.transpose().to_cols_array_2d();
+    (rows, camera.centre())
 }
 
 /// The world point at camera depth `depth` through pixel `(i, j)`'s centre.
@@ -464,6 +478,34 @@ fn texture(image: &Image, w: usize, h: usize, i: usize, j: usize) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pixels_point_at_a_depth_projects_back_to_it_through_any_invertible_rc() {
+        let orthonormal =
+            Camera::look_at([1.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 30).unwrap();
+        let mut sheared = orthonormal;
+        for (r, factor) in [(0, 1.7), (1, 0.6), (2, 1.3)] {
+            for c in 0..4 {
+                sheared.world_to_camera[r][c] *= factor;
+            }
+        }
+        sheared.world_to_camera[0][1] += 0.3;
+        for camera in [orthonormal, sheared] {
+            let to_world = camera_to_world(&camera);
+            for (i, j, depth) in [(0, 0, 2.0), (39, 29, 5.0), (17, 11, 0.5)] {
+                let [u, v, z] = camera.project_point(pixel_point(&camera, &to_world, i, j, depth));
+                assert!((u - (i as f64 + 0.5)).abs() < 1e-9, "{u} for {i}");
+                assert!((v - (j as f64 + 0.5)).abs() < 1e-9, "{v} for {j}");
+                assert!((z - depth).abs() < 1e-9, "{z} for {depth}");
+            }
+        }
+        // The loaders' orthonormal rotations keep the transpose, bit for bit.
+        let r = orthonormal.rotation();
+        assert_eq!(
+            camera_to_world(&orthonormal).0,
+            std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]))
+        );
+    }
 
     /// Every window summed afresh: each row of the window left to right, the rows top to
     /// bottom, divided by the window's size.
