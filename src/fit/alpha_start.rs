@@ -110,10 +110,8 @@ fn point_cloud_kernels(
     let chosen: Vec<&DatasetPoint> = points.iter().step_by(stride).collect();
     let positions: Vec<[f64; 3]> = chosen.iter().map(|p| p.position).collect();
     let spacings = neighbour_spacings(&positions);
-    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
-    let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
+    let (centre_time, time_scale) = throughout(bounds, options);
     let mut rng = seeded_rng(options.seed);
-    let time_scale = options.start_time_scale.max(1.0) * time_range;
     chosen
         .iter()
         .zip(&spacings)
@@ -129,6 +127,15 @@ fn point_cloud_kernels(
             )
         })
         .collect()
+}
+
+/// The time mean and σt of a start kernel that lives throughout the data (a point cloud's, the
+/// far shell's): the middle of the time range, σt `start_time_scale` of it but at least all of
+/// it.
+fn throughout(bounds: &SpaceTimeBox, options: &AlphaFitOptions) -> (f64, f64) {
+    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
+    let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
+    (centre_time, options.start_time_scale.max(1.0) * time_range)
 }
 
 /// How a start from a point cloud or a plane sweep was completed: the swept kernels it
@@ -197,9 +204,7 @@ pub fn with_far_shell(
         background,
         options.start_kernels.min(room),
     );
-    let time_range = (bounds.time[1] - bounds.time[0]).max(1e-9);
-    let centre_time = 0.5 * (bounds.time[0] + bounds.time[1]);
-    let time_scale = options.start_time_scale.max(1.0) * time_range;
+    let (centre_time, time_scale) = throughout(bounds, options);
     let mut rng = seeded_rng(options.seed ^ SHELL_SEED);
     kernels.extend(points.iter().map(|p| {
         let [x, y, z] = p.position;

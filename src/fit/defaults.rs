@@ -150,8 +150,8 @@ pub const DEFAULT_FILL_UNCOVERED: bool = true;
 /// A start from a point cloud or a plane sweep gets kernels on a far shell for the training
 /// pixels it leaves unexplained, when they are at least 1 % of them
 /// ([`crate::fit::shell`]). Measured on the DSLR-like proxy started from its cloud without
-/// the sweep (`docs/fitting.md`): 26.82 → 34.82 dB held out (the training views 29.16 →
-/// 37.92 dB), 144 → 152 s. With the sweep, and on the other proxies, the start leaves
+/// the sweep (`docs/fitting.md`): 26.82 → 33.69 dB held out (the training views 29.16 →
+/// 37.40 dB), 144 → 135 s. With the sweep, and on the other proxies, the start leaves
 /// under 1 % unexplained and the shell adds nothing (the same bytes).
 pub const DEFAULT_FAR_SHELL: bool = true;
 

@@ -31,10 +31,11 @@
 //! one kernel, not one a view. Everything is in the order of the views and their pixels: the same kernels
 //! for any thread count.
 
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 
 use crate::fit::hull::{flat_background, is_foreground};
 use crate::fit::init::SpaceTimeBox;
+use crate::fit::stereo::{camera_to_world, pixel_point};
 use crate::model::scene::Kernel;
 use crate::model::{Camera, View};
 
@@ -43,7 +44,7 @@ pub const COVER_SIGMAS: f64 = 3.0;
 
 /// The shell's radius in the largest camera distance from the centre of the cameras' box
 /// (every camera inside). Measured on the DSLR-like proxy started from its cloud without a
-/// sweep (`docs/fitting.md`): 34.82 dB held out (the cloud alone 26.82 dB); with the radius
+/// sweep (`docs/fitting.md`): 33.69 dB held out (the cloud alone 26.82 dB); with the radius
 /// in median camera distances instead, 3 gave 27.87 dB and 1.5 gave 35.18 dB: the proxy's
 /// table and backdrop are nearer the smaller sphere, so the fit has less far to move them.
 pub const SHELL_RADIUS: f64 = 1.5;
@@ -178,6 +179,7 @@ impl Placement<'_> {
         let mut placed: Vec<ShellPoint> = Vec::new();
         for (view, start) in self.views.iter().zip(&self.masks) {
             let camera = &view.camera;
+            let to_world = camera_to_world(camera);
             let mut mask = start.clone();
             for point in &placed {
                 paint(&mut mask, camera, point.position, 0.5 * point.spacing);
@@ -188,7 +190,7 @@ impl Placement<'_> {
                     if !unexplained(view, &mask, j * w + i, self.background) {
                         continue;
                     }
-                    let Some((position, depth)) = self.shell.meet(camera, i, j) else {
+                    let Some((position, depth)) = self.shell.meet(camera, &to_world, i, j) else {
                         continue;
                     };
                     placed.push(ShellPoint {
@@ -239,21 +241,22 @@ impl Shell {
     }
 
     /// Where pixel `(i, j)`'s ray from `camera` (inside the sphere) leaves it, and that
-    /// point's camera depth; `None` when the numbers are not finite.
-    fn meet(&self, camera: &Camera, i: usize, j: usize) -> Option<([f64; 3], f64)> {
-        let origin = camera.centre();
-        let local = DVec3::new(
-            (i as f64 + 0.5 - camera.cx) / camera.fx,
-            (j as f64 + 0.5 - camera.cy) / camera.fy,
-            1.0,
-        );
-        // Rc⁻¹ (Rc need not be orthonormal, SPEC §3): camera axes to world.
-        let rows = DMat3::from_cols_array_2d(&camera.rotation()).transpose();
-        let direction = (rows.inverse() * local).normalize();
-        let offset = DVec3::from(origin) - DVec3::from(self.centre);
+    /// point's camera depth; `None` when the numbers are not finite. `to_world` is the
+    /// camera's [`camera_to_world`] (the plane sweep's: any invertible `Rc`, SPEC §3).
+    fn meet(
+        &self,
+        camera: &Camera,
+        to_world: &([[f64; 3]; 3], [f64; 3]),
+        i: usize,
+        j: usize,
+    ) -> Option<([f64; 3], f64)> {
+        let origin = DVec3::from(to_world.1);
+        let direction =
+            (DVec3::from(pixel_point(camera, to_world, i, j, 1.0)) - origin).normalize();
+        let offset = origin - DVec3::from(self.centre);
         let b = direction.dot(offset);
         let along = -b + (b * b - (offset.length_squared() - self.radius * self.radius)).sqrt();
-        let position: [f64; 3] = (DVec3::from(origin) + along * direction).into();
+        let position: [f64; 3] = (origin + along * direction).into();
         let depth = camera.to_camera_space(position)[2];
         (position.iter().all(|v| v.is_finite()) && depth.is_finite() && depth > 0.0)
             .then_some((position, depth))
@@ -425,13 +428,7 @@ mod tests {
         let orthonormal =
             Camera::look_at([1.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 30).unwrap();
         // Rc scaled and sheared (SPEC §3 allows any invertible Rc).
-        let mut sheared = orthonormal;
-        for (r, factor) in [(0, 1.7), (1, 0.6), (2, 1.3)] {
-            for c in 0..4 {
-                sheared.world_to_camera[r][c] *= factor;
-            }
-        }
-        sheared.world_to_camera[0][1] += 0.3;
+        let sheared = orthonormal.sheared();
         // At the sphere's centre.
         let centred = Camera::look_at(
             [0.1, -0.2, 0.3],
@@ -443,8 +440,9 @@ mod tests {
         )
         .unwrap();
         for camera in [orthonormal, sheared, centred] {
+            let to_world = camera_to_world(&camera);
             for (i, j) in [(0, 0), (39, 29), (17, 11)] {
-                let (position, depth) = shell.meet(&camera, i, j).unwrap();
+                let (position, depth) = shell.meet(&camera, &to_world, i, j).unwrap();
                 assert!((distance(position, shell.centre) - 7.0).abs() < 1e-9);
                 let [u, v, z] = camera.project_point(position);
                 assert!((u - (i as f64 + 0.5)).abs() < 1e-9, "{u} for {i}");

@@ -292,7 +292,7 @@ pub const AGREEMENT: f64 = 0.02;
 /// Rc⁻¹ and the centre: camera space to world. `Rc` need not be orthonormal (SPEC §3); when
 /// it is, to 1e-6 in `Rc Rcᵀ` (rotations from files written to 7 digits or more), `Rc⁻¹` is
 /// taken as `Rcᵀ`: a point then lands within about `1e-6 f` pixels of its pixel.
-fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
+pub(crate) fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
     let r = camera.rotation();
     let transpose: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]));
     let orthonormal = (0..3).all(|a| {
@@ -310,8 +310,9 @@ fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
     (rows, camera.centre())
 }
 
-/// The world point at camera depth `depth` through pixel `(i, j)`'s centre.
-fn pixel_point(
+/// The world point at camera depth `depth` through pixel `(i, j)`'s centre (`to_world` from
+/// [`camera_to_world`]).
+pub(crate) fn pixel_point(
     camera: &Camera,
     (rotation, centre): &([[f64; 3]; 3], [f64; 3]),
     i: usize,
@@ -483,14 +484,7 @@ mod tests {
     fn a_pixels_point_at_a_depth_projects_back_to_it_through_any_invertible_rc() {
         let orthonormal =
             Camera::look_at([1.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0, 40, 30).unwrap();
-        let mut sheared = orthonormal;
-        for (r, factor) in [(0, 1.7), (1, 0.6), (2, 1.3)] {
-            for c in 0..4 {
-                sheared.world_to_camera[r][c] *= factor;
-            }
-        }
-        sheared.world_to_camera[0][1] += 0.3;
-        for camera in [orthonormal, sheared] {
+        for camera in [orthonormal, orthonormal.sheared()] {
             let to_world = camera_to_world(&camera);
             for (i, j, depth) in [(0, 0, 2.0), (39, 29, 5.0), (17, 11, 0.5)] {
                 let [u, v, z] = camera.project_point(pixel_point(&camera, &to_world, i, j, depth));

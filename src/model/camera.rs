@@ -376,6 +376,22 @@ impl Camera {
     }
 }
 
+/// Test support: the camera with its `Rc` (and `tc`) scaled row by row and sheared, no longer
+/// orthonormal (SPEC §3 allows any invertible `Rc`).
+#[cfg(test)]
+impl Camera {
+    pub(crate) fn sheared(&self) -> Camera {
+        let mut sheared = *self;
+        for (r, factor) in [(0, 1.7), (1, 0.6), (2, 1.3)] {
+            for c in 0..4 {
+                sheared.world_to_camera[r][c] *= factor;
+            }
+        }
+        sheared.world_to_camera[0][1] += 0.3;
+        sheared
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
