@@ -143,6 +143,22 @@ pub struct AlphaFitOptions {
     pub opacity_regulariser: f64,
     /// `λs` of the L1 on the spatial scales over the box diagonal (0: off).
     pub scale_regulariser: f64,
+    /// The kernel count the density rounds grow towards, where `densify_fraction` alone
+    /// would stay short of it ([`crate::fit::plan::budget_growth`]); `None`: the growth is
+    /// `densify_fraction`.
+    pub kernel_budget: Option<KernelBudget>,
+}
+
+/// A kernel budget that follows the image size: the density rounds of a fit may grow its
+/// start to `per_view_pixel` kernels per pixel of its largest training view (at the fit's
+/// size), each round by at most `max_growth` of the visible kernels, never by less than the
+/// options' `densify_fraction`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KernelBudget {
+    /// Kernels per pixel of the largest training view.
+    pub per_view_pixel: f64,
+    /// The largest growth per round it may ask for.
+    pub max_growth: f64,
 }
 
 /// Which kernels of an alpha fit carry fitted SPEC §9 motion: an acceleration and an

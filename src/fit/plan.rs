@@ -617,7 +617,15 @@ pub fn prepare_alpha(
             scene
         }
     };
-    let mut training = options.training(&bounds);
+    let growth = budget_growth(options, scene.len(), train);
+    if growth > options.densify_fraction {
+        notes.push(growth_note(growth, options, train));
+    }
+    let mut training = AlphaFitOptions {
+        densify_fraction: growth,
+        ..*options
+    }
+    .training(&bounds);
     training.coarse = options.coarse.stages(train);
     if !training.coarse.is_empty() {
         notes.push(format!(
@@ -638,6 +646,56 @@ pub fn prepare_alpha(
         notes.push(grid);
     }
     Ok(ReadyFit::new(scene, training, notes))
+}
+
+/// The growth per density round of an alpha fit that starts from `start` kernels: the
+/// options' `densify_fraction`, raised where their [`crate::fit::alpha::KernelBudget`] asks for more. The
+/// budget is `per_view_pixel` kernels per pixel of the largest training view (at most
+/// `max_kernels`); the growth `g` that takes the start there in the run's `n` rounds,
+/// `(1 + g)ⁿ · start = budget`, is taken when it lies above `densify_fraction`, at most
+/// the budget's `max_growth`, rounded to 1e-4 so that no last bit of `powf` decides a
+/// kernel count.
+#[must_use]
+pub fn budget_growth(options: &AlphaFitOptions, start: usize, train: &[View]) -> f64 {
+    let floor = options.densify_fraction;
+    let Some(budget) = options.kernel_budget else {
+        return floor;
+    };
+    let rounds = density_rounds(options);
+    let target =
+        (budget.per_view_pixel * largest_view_pixels(train)).min(options.max_kernels as f64);
+    if rounds == 0 || start == 0 || target <= start as f64 {
+        return floor;
+    }
+    let needed = (target / start as f64).powf(1.0 / rounds as f64) - 1.0;
+    let needed = (needed * 1e4).round() / 1e4;
+    needed.min(budget.max_growth).max(floor)
+}
+
+/// How many density rounds an alpha fit with `options` runs.
+fn density_rounds(options: &AlphaFitOptions) -> usize {
+    let rules = options.rules(1.0, 1.0);
+    (1..=options.steps)
+        .filter(|&step| rules.round_due(step, options.steps))
+        .count()
+}
+
+/// The pixel count of the largest of `train`.
+fn largest_view_pixels(train: &[View]) -> f64 {
+    train
+        .iter()
+        .map(|v| f64::from(v.image.width) * f64::from(v.image.height))
+        .fold(0.0, f64::max)
+}
+
+/// The note on a growth raised to `growth` by the options' kernel budget.
+fn growth_note(growth: f64, options: &AlphaFitOptions, train: &[View]) -> String {
+    let per_pixel = options.kernel_budget.map_or(0.0, |b| b.per_view_pixel);
+    let budget = (per_pixel * largest_view_pixels(train)).min(options.max_kernels as f64);
+    format!(
+        "kernel budget: growing up to {budget:.0} kernels ({per_pixel} a pixel of the largest view), at most {:.2} % of the visible kernels a density round (give --max-growth to choose)",
+        100.0 * growth
+    )
 }
 
 /// The note on a fit's windows of side `side` over the full-size views `train`: the finest
@@ -668,6 +726,8 @@ pub struct BackgroundDefaults {
     /// The training loss: [`DEFAULT_LOSS`] (3DGS's) over a flat background, else
     /// [`DEFAULT_PHOTO_LOSS`].
     pub loss: TrainingLoss,
+    /// The kernel budget: none over a flat background, else [`DEFAULT_KERNEL_BUDGET`].
+    pub kernel_budget: Option<crate::fit::alpha::KernelBudget>,
 }
 
 /// The [`BackgroundDefaults`] of the training views `train`, `background` as the caller
@@ -680,12 +740,14 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
             flat: true,
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS,
+            kernel_budget: None,
         }
     } else {
         BackgroundDefaults {
             flat: false,
             prune_fraction: 0.0,
             loss: DEFAULT_PHOTO_LOSS,
+            kernel_budget: Some(DEFAULT_KERNEL_BUDGET),
         }
     }
 }
@@ -990,6 +1052,88 @@ mod tests {
         let centre = one.prepare(Init::Auto, &views()).unwrap().scene;
         assert_eq!(centre.len(), 1);
         assert_eq!(centre.means[0][3], 0.5, "the middle of the training times");
+    }
+
+    /// The alpha defaults with the photos' kernel budget.
+    fn photo_options() -> AlphaFitOptions {
+        AlphaFitOptions {
+            kernel_budget: Some(DEFAULT_KERNEL_BUDGET),
+            ..DEFAULT_ALPHA
+        }
+    }
+
+    /// `views()` with `width × height` images.
+    fn views_of(width: u32, height: u32) -> Vec<View> {
+        views()
+            .into_iter()
+            .map(|view| View {
+                image: Image::filled(width, height, [0.0; 3]).into(),
+                ..view
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_kernel_budget_raises_the_growth_to_reach_it_in_the_runs_rounds() {
+        let options = photo_options();
+        assert_eq!(density_rounds(&options), 33);
+        let budget = options.kernel_budget.unwrap();
+        let train = views_of(480, 270);
+        let target = budget.per_view_pixel * 480.0 * 270.0;
+        let growth = budget_growth(&options, 1132, &train);
+        assert!(growth > options.densify_fraction && growth <= budget.max_growth);
+        let reached = 1132.0 * (1.0 + growth).powi(33);
+        assert!(
+            (reached / target - 1.0).abs() < 0.01,
+            "{reached} against {target}"
+        );
+        // The largest view sets the budget.
+        let mut mixed = views_of(100, 100);
+        mixed[2] = train[0].clone();
+        assert_eq!(budget_growth(&options, 1132, &mixed), growth);
+    }
+
+    #[test]
+    fn a_kernel_budget_never_lowers_the_growth_nor_passes_its_bounds() {
+        let options = photo_options();
+        let floor = options.densify_fraction;
+        let budget = options.kernel_budget.unwrap();
+        // A budget the start already reaches, or 5 % a round reaches, keeps the floor.
+        assert_eq!(budget_growth(&options, 3000, &views_of(100, 150)), floor);
+        assert_eq!(budget_growth(&options, 1000, &views_of(100, 100)), floor);
+        // No start, no rounds, no budget: the floor.
+        assert_eq!(budget_growth(&options, 0, &views_of(480, 270)), floor);
+        let no_rounds = AlphaFitOptions {
+            densify_every: 0,
+            ..options
+        };
+        assert_eq!(budget_growth(&no_rounds, 10, &views_of(480, 270)), floor);
+        let no_budget = AlphaFitOptions {
+            kernel_budget: None,
+            ..options
+        };
+        assert_eq!(budget_growth(&no_budget, 10, &views_of(480, 270)), floor);
+        // A far budget stops at its largest growth; max_kernels bounds the target.
+        assert_eq!(
+            budget_growth(&options, 10, &views_of(1920, 1080)),
+            budget.max_growth
+        );
+        let capped = AlphaFitOptions {
+            max_kernels: 2000,
+            ..options
+        };
+        let growth = budget_growth(&capped, 100, &views_of(1920, 1080));
+        let reached = 100.0 * (1.0 + growth).powi(33);
+        assert!(
+            growth > floor && (reached / 2000.0 - 1.0).abs() < 0.01,
+            "{reached}"
+        );
+        // A given growth above the budget's largest is kept.
+        let fast = AlphaFitOptions {
+            densify_fraction: 0.2,
+            ..options
+        };
+        assert_eq!(budget_growth(&fast, 10, &views_of(1920, 1080)), 0.2);
     }
 
     #[test]

@@ -577,6 +577,9 @@ impl FitSettings {
         let options = AlphaFitOptions {
             prune_fraction,
             loss,
+            kernel_budget: by_background
+                .kernel_budget
+                .filter(|_| self.max_growth.is_none()),
             steps,
             densify_every,
             batch_size,
