@@ -3,7 +3,9 @@
 //! … 90 % of the run, the estimate against the time that was left, and the worst error.
 //!
 //! `cargo run --release -p splat4d-benches --example time_left -- LOG.jsonl WIDTHxHEIGHT
-//! [--loss mse|l1-dssim] [--window N|off]`
+//! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]` (`G` the
+//! growth a round the fit took: the note `kernel budget: … at most G % …` gives it for
+//! photos; photos take `--prune-fraction 0`)
 //!
 //! The run's steps are the log's; its coarse stages are read from the log's `downscale`
 //! column; `WIDTHxHEIGHT` is the first training view's size at full size.
@@ -55,7 +57,9 @@ fn stages(records: &[StepRecord]) -> Vec<SizeStage> {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [log, size, options @ ..] = &args[..] else {
-        panic!("usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off]");
+        panic!(
+            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]"
+        );
     };
     let (width, height) = size.split_once('x').expect("WIDTHxHEIGHT");
     let view_size = [width.parse().unwrap(), height.parse().unwrap()];
@@ -70,6 +74,12 @@ fn main() {
             }
             ("--window", Some("off")) => options_of_fit.window = None,
             ("--window", Some(side)) => options_of_fit.window = Some(side.parse().unwrap()),
+            ("--prune-fraction", Some(share)) => {
+                options_of_fit.prune_fraction = share.parse().unwrap();
+            }
+            ("--max-growth", Some(share)) => {
+                options_of_fit.densify_fraction = share.parse().unwrap();
+            }
             _ => panic!("unknown option {pair:?}"),
         }
     }

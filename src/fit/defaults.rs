@@ -174,7 +174,11 @@ pub const DEFAULT_SHAPE_BOUND: ShapeBound = ShapeBound::OFF;
 /// Measured on a real phone capture, instant-ngp's `fox` (50 photos, 7 held out) at
 /// `--downscale 4` (270×480), one run each, 2 cores (`docs/fitting.md`, "A real capture"):
 /// growing 5 % a round ended with 4878 kernels and 27.81 dB held out (mean of the views'
-/// PSNR) in 367 s; 10 % a round with 22 999 kernels and 30.26 dB in 638 s.
+/// PSNR) in 367 s; 10 % a round with 22 999 kernels and 30.26 dB in 638 s; this budget
+/// (9.95 % a round) 22 724 kernels and 30.16 dB in 626 s; 11.3 % a round (a budget of 0.3
+/// a pixel) 33 940 kernels and 30.97 dB in 773 s. The phone-like proxy at ¼ size: 38.23 →
+/// 38.65 dB held out (39.20 → 41.04 dB per view), 223 → 605 s. On the DSLR-like proxy
+/// 10 % a round took 896 s for 41.31 against 40.72 dB: this budget leaves it at 5 %.
 pub const DEFAULT_KERNEL_BUDGET: KernelBudget = KernelBudget {
     per_view_pixel: 0.2,
     max_growth: 0.1,
