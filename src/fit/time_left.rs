@@ -26,10 +26,9 @@
 //! count is extrapolated along its recent growth per step, `(k / k_w)^(1/w)` over the
 //! window of `w` steps, at most the rules' `(1 + share)^(1/every)` (each density round adds
 //! a share of the kernels, so the count grows geometrically, and a window holding one round
-//! more than its share of steps must not compound; a straight line fell 47 % short on a
-//! real capture whose budget grew it 20-fold; never down: the pruning early in a fit is
-//! followed by growth) until the last
-//! step at which the density rules may add kernels
+//! more than its share of steps must not compound; a straight line fell 42–46 % short on
+//! a real capture whose budget grew it 20-fold; never down: the pruning early in a fit is
+//! followed by growth) until the last step at which the density rules may add kernels
 //! (never beyond their budget), and held after it (times the share the pruning by score
 //! keeps, [`crate::fit::density::prune`], while that is still to come):
 //!
