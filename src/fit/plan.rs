@@ -662,8 +662,7 @@ pub fn budget_growth(options: &AlphaFitOptions, start: usize, train: &[View]) ->
         return floor;
     };
     let rounds = density_rounds(options);
-    let target =
-        (budget.per_view_pixel * largest_view_pixels(train)).min(options.max_kernels as f64);
+    let target = budget_target(budget.per_view_pixel, options, train);
     if rounds == 0 || start == 0 || target <= start as f64 {
         return floor;
     }
@@ -680,20 +679,22 @@ fn density_rounds(options: &AlphaFitOptions) -> usize {
         .count()
 }
 
-/// The pixel count of the largest of `train`.
-fn largest_view_pixels(train: &[View]) -> f64 {
-    train
+/// The kernels a budget of `per_view_pixel` allows a fit with `options` of `train`:
+/// `per_view_pixel` times the pixels of the largest view, at most `max_kernels`.
+fn budget_target(per_view_pixel: f64, options: &AlphaFitOptions, train: &[View]) -> f64 {
+    let largest = train
         .iter()
         .map(|v| f64::from(v.image.width) * f64::from(v.image.height))
-        .fold(0.0, f64::max)
+        .fold(0.0, f64::max);
+    (per_view_pixel * largest).min(options.max_kernels as f64)
 }
 
 /// The note on a growth raised to `growth` by the options' kernel budget.
 fn growth_note(growth: f64, options: &AlphaFitOptions, train: &[View]) -> String {
     let per_pixel = options.kernel_budget.map_or(0.0, |b| b.per_view_pixel);
-    let budget = (per_pixel * largest_view_pixels(train)).min(options.max_kernels as f64);
+    let budget = budget_target(per_pixel, options, train);
     format!(
-        "kernel budget: growing up to {budget:.0} kernels ({per_pixel} a pixel of the largest view), at most {:.2} % of the visible kernels a density round (give --max-growth to choose)",
+        "kernel budget: growing up to {budget:.0} kernels ({per_pixel} a pixel of the largest view), at most {:.2} % of the visible kernels a density round (give `max_growth` to choose)",
         100.0 * growth
     )
 }
