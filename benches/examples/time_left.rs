@@ -3,9 +3,10 @@
 //! … 90 % of the run, the estimate against the time that was left, and the worst error.
 //!
 //! `cargo run --release -p splat4d-benches --example time_left -- LOG.jsonl WIDTHxHEIGHT
-//! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]` (`G` the
-//! growth a round the fit took: the note `kernel budget: … at most G % …` gives it for
-//! photos; photos take `--prune-fraction 0`)
+//! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]
+//! [--densify-every N]` (`G` the growth a round the fit took: the note `kernel budget: … at
+//! most G % …` gives it; photos take `--prune-fraction 0`; renders of an object with the
+//! default 12 000 steps `--densify-every 200`)
 //!
 //! The run's steps are the log's; its coarse stages are read from the log's `downscale`
 //! column; `WIDTHxHEIGHT` is the first training view's size at full size.
@@ -58,7 +59,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [log, size, options @ ..] = &args[..] else {
         panic!(
-            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]"
+            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F] [--densify-every N]"
         );
     };
     let (width, height) = size.split_once('x').expect("WIDTHxHEIGHT");
@@ -79,6 +80,9 @@ fn main() {
             }
             ("--max-growth", Some(share)) => {
                 options_of_fit.densify_fraction = share.parse().unwrap();
+            }
+            ("--densify-every", Some(steps)) => {
+                options_of_fit.densify_every = steps.parse().unwrap();
             }
             _ => panic!("unknown option {pair:?}"),
         }

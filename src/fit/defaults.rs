@@ -165,7 +165,8 @@ pub const DEFAULT_FAR_SHELL: bool = true;
 pub const DEFAULT_SHAPE_BOUND: ShapeBound = ShapeBound::OFF;
 /// The kernel budget of an alpha fit of photos (training views whose background is not
 /// flat) where `--max-growth` is not given ([`KernelBudget`],
-/// [`crate::fit::plan::budget_growth`]; renders of an object have none, not measured):
+/// [`crate::fit::plan::budget_growth`]; renders of an object have
+/// [`DEFAULT_OBJECT_KERNEL_BUDGET`]):
 /// 0.2 kernels per pixel of the largest training view, reached by growing at most 10 % a
 /// round. It raises the growth only where the 5 % of [`DEFAULT_ALPHA`] stays short of it,
 /// so fits of photos up to about 200×200 pixels (the photo proxies at ⅛, the DSLR-like
@@ -179,9 +180,29 @@ pub const DEFAULT_SHAPE_BOUND: ShapeBound = ShapeBound::OFF;
 /// a pixel) 33 940 kernels and 30.97 dB in 773 s. The phone-like proxy at ¼ size: 38.23 →
 /// 38.65 dB held out (39.20 → 41.04 dB per view), 223 → 605 s. On the DSLR-like proxy
 /// 10 % a round took 896 s for 41.31 against 40.72 dB: this budget leaves it at 5 %.
-pub const DEFAULT_KERNEL_BUDGET: KernelBudget = KernelBudget {
+pub const DEFAULT_PHOTO_KERNEL_BUDGET: KernelBudget = KernelBudget {
     per_view_pixel: 0.2,
     max_growth: 0.1,
+};
+
+/// The kernel budget of an alpha fit of renders of an object (training views whose
+/// background is flat) where `--max-growth` is not given: 0.5 kernels per pixel of the
+/// largest training view, reached by growing at most 15 % a round. At 100×100 the start's
+/// 2000 kernels nearly reach it already, so fits of that size keep the 5 % of
+/// [`DEFAULT_ALPHA`] (unchanged); at 400×400 it raises the growth to 11.8 % a round.
+///
+/// Measured on the NeRF-synthetic `lego` (static; 87 training views, every 8th of its 100
+/// held out) at `--downscale 2` (400×400), one run each, 2 cores (`docs/fitting.md`,
+/// "Renders at 400×400"): growing 5 % a round (no budget) ended with 2133 kernels and
+/// 26.93 dB held out in 141 s; 8.76 % a round (a budget of 0.2 a pixel) 6880 kernels and
+/// 29.91 dB in 216 s; 10 % 10 115 kernels and 30.98 dB in 274 s; this budget (11.83 %)
+/// 17 286 kernels and 32.26 dB in 344 s. Half the kernels are still pruned by score when
+/// growth ends ([`DEFAULT_PRUNE_FRACTION`]): 10 % a round without pruning kept 20 230
+/// kernels for 31.52 dB in 331 s. The D-NeRF-like proxy at 400×400: 38.28 → 38.79 dB held
+/// out, 2866 → 22 473 kernels, about 4.4× the time.
+pub const DEFAULT_OBJECT_KERNEL_BUDGET: KernelBudget = KernelBudget {
+    per_view_pixel: 0.5,
+    max_growth: 0.15,
 };
 
 /// The weight `λ` of `1 - SSIM` in the 3DGS loss (`--loss l1-dssim`; [`crate::fit::ssim`]):

@@ -7,21 +7,24 @@
 //! SSIM pass, [`crate::fit::ssim`]), counted in kernels:
 //!
 //! ```text
-//! d = c (k + κ P r(n)^0.7),    r(n) = f(n) / n²
+//! d = c (k (k / 10⁴)^0.2 + κ P r(n)^0.7),    r(n) = f(n) / n²
 //! ```
 //!
 //! `k` kernels; `P` the pixels of the first training view at full size; `r` the fraction of
 //! them a step renders of each view: `1/n²` on views downscaled by `n`
 //! ([`crate::fit::coarse`]), times the fraction `f` of the view that one window holds
 //! ([`crate::fit::window`]; 1 for whole views), so a full-size step on 2×2 windows costs
-//! what a ½-size step on whole views does. `κ`, the fixed cost in kernels per pixel, is 0.5
+//! what a ½-size step on whole views does. `κ`, the fixed cost in kernels per pixel, is 0.3
 //! under L1 + D-SSIM and 0.4 under the MSE (its render and backward fused). A kernel's cost
-//! hardly grows with the pixels; the fixed cost grows as their power 0.7, between the 0.8 of
-//! a quiet machine and about 0.5 of a loaded one (on a loaded machine small steps wait
-//! longer; `docs/fitting.md`, "Time left", has the measurements behind these constants).
+//! grows slowly with their count, as `(k / 10⁴)^0.2` (more pairs per tile to sort, fewer of
+//! them in cache: at ½ size on `lego`'s 400×400 renders a step took 1.7 µs a kernel more
+//! between 7 k and 20 k kernels, 2.7 µs between 20 k and 29 k), and hardly with the pixels;
+//! the fixed cost grows as their power 0.7, between the 0.8 of a quiet machine and about
+//! 0.5 of a loaded one (on a loaded machine small steps wait longer; `docs/fitting.md`,
+//! "Time left", has the measurements behind these constants).
 //!
 //! `c` is the median, over the blocks of 50 steps in the recent window (the last fifth of
-//! the steps run, at least 50), of each block's seconds over its summed `k + κ P r^0.7`: a
+//! the steps run, at least 50), of each block's seconds over its summed step costs `d / c`: a
 //! median, so that a spell of load or a slow density round moves it little. The kernel
 //! count is extrapolated along its recent growth per step, `(k / k_w)^(1/w)` over the
 //! window of `w` steps, at most the rules' `(1 + share)^(1/every)` (each density round adds
@@ -33,7 +36,7 @@
 //! keeps, [`crate::fit::density::prune`], while that is still to come):
 //!
 //! ```text
-//! left = c Σ_{s > now} (k(s) + κ P r(n(s))^0.7)
+//! left = c Σ_{s > now} (k(s) (k(s) / 10⁴)^0.2 + κ P r(n(s))^0.7)
 //! ```
 
 use crate::fit::coarse::{SizeStage, downscale_at};
@@ -59,7 +62,14 @@ const FIXED_PER_PIXEL_MSE: f64 = 0.4;
 
 /// The fixed cost of a step, in kernels per pixel of the full-size view, under
 /// L1 + D-SSIM (the SSIM pass, the unfused render and backward).
-const FIXED_PER_PIXEL_DSSIM: f64 = 0.5;
+const FIXED_PER_PIXEL_DSSIM: f64 = 0.3;
+
+/// The exponent of a kernel's cost in the kernel count, relative to
+/// [`KERNEL_COUNT_REFERENCE`] (see the module docs).
+const KERNEL_EXPONENT: f64 = 0.2;
+
+/// The kernel count at which a kernel costs one unit.
+const KERNEL_COUNT_REFERENCE: f64 = 10_000.0;
 
 /// The estimate of a running fit's time left (see the module docs).
 #[derive(Clone, Debug)]
@@ -204,11 +214,12 @@ impl TimeLeft {
     }
 
     /// The cost of a step with `kernels` on views downscaled by `n`, in kernels: the
-    /// kernels plus the fixed cost of the pixels it renders (see the module docs).
+    /// kernels, each dearer as they grow, plus the fixed cost of the pixels it renders (see
+    /// the module docs).
     fn step_cost(&self, kernels: f64, n: u32) -> f64 {
         let [width, height] = self.window.1;
         let pixels = f64::from(width) * f64::from(height);
-        kernels
+        kernels * (kernels.max(1.0) / KERNEL_COUNT_REFERENCE).powf(KERNEL_EXPONENT)
             + self.fixed_per_pixel
                 * pixels
                 * pixel_ratio(n, self.window.0, self.window.1).powf(PIXEL_EXPONENT)
@@ -479,12 +490,22 @@ mod tests {
             .collect()
     }
 
+    /// How a recorded fit grew: its growth a round, its steps between rounds and the share
+    /// of the kernels its pruning by score removed when growth ended (0: none).
+    #[derive(Clone, Copy)]
+    struct Growth {
+        share: f64,
+        every: usize,
+        pruned: f64,
+    }
+
     /// The alpha fit's defaults for a run of `records`, with coarse stages `stages` (as the
-    /// plan chooses them for the recorded views), loss `loss` and growth a round `growth`.
+    /// plan chooses them for the recorded views), loss `loss` and growth `growth`.
     fn default_training(
         records: &[StepRecord],
         stages: &[(u32, f64)],
-        (loss, growth): (TrainingLoss, f64),
+        loss: TrainingLoss,
+        growth: &Growth,
     ) -> Training {
         let bounds = crate::fit::init::SpaceTimeBox {
             min: [-1.0; 3],
@@ -498,47 +519,78 @@ mod tests {
                 .map(|&(downscale, until)| SizeStage { downscale, until })
                 .collect(),
             loss,
-            // The recorded fits ran before the pruning by score.
-            prune: None,
             ..crate::fit::alpha::AlphaFitOptions {
-                densify_fraction: growth,
+                densify_fraction: growth.share,
+                densify_every: growth.every,
+                prune_fraction: growth.pruned,
                 ..crate::fit::defaults::DEFAULT_ALPHA
             }
             .training(&bounds)
         }
     }
 
-    /// Three default fits recorded on a 2-core machine, replayed through the estimate:
+    /// Five default fits recorded on a 2-core machine, replayed through the estimate:
     /// within 30 % of the time left at every 5 % of the run from 10 % to 90 %.
     #[test]
     fn recorded_default_fits_are_estimated_within_thirty_percent_from_a_tenth() {
         let dn400 = recorded(include_str!("../../tests/data/time_left/fin_dn400.txt"));
         let phone = recorded(include_str!("../../tests/data/time_left/ph4.txt"));
         let fox = recorded(include_str!("../../tests/data/time_left/fox4_budget.txt"));
+        let dn400_budget = recorded(include_str!("../../tests/data/time_left/dn400_budget.txt"));
+        let lego = recorded(include_str!(
+            "../../tests/data/time_left/lego400_budget.txt"
+        ));
+        let coarse_to_fine = [(4, 0.3), (2, 0.6)];
+        let photos = [(2, 0.6)];
+        let dssim = crate::fit::defaults::DEFAULT_LOSS;
+        // The first three ran before the pruning by score, 6000 steps with a round every 100.
+        let before_pruning = |share| Growth {
+            share,
+            every: 100,
+            pruned: 0.0,
+        };
+        // The objects' kernel budget grew the last two by 11.83 % a round, every 200 of
+        // their 12 000 steps, and half their kernels were pruned when growth ended.
+        let object_budget = Growth {
+            share: 0.1183,
+            every: 200,
+            pruned: 0.5,
+        };
         let fits = [
             (
-                default_training(
-                    &dn400,
-                    &[(4, 0.3), (2, 0.6)],
-                    (crate::fit::defaults::DEFAULT_LOSS, 0.05),
-                ),
-                [400, 400],
                 &dn400,
+                &coarse_to_fine[..],
+                dssim,
+                before_pruning(0.05),
+                [400, 400],
             ),
             (
-                default_training(&phone, &[(2, 0.6)], (TrainingLoss::Mse, 0.05)),
-                [270, 480],
                 &phone,
+                &photos[..],
+                TrainingLoss::Mse,
+                before_pruning(0.05),
+                [270, 480],
+            ),
+            // The photos' kernel budget grew it by 9.95 % a round.
+            (
+                &fox,
+                &photos[..],
+                TrainingLoss::Mse,
+                before_pruning(0.0995),
+                [270, 480],
             ),
             (
-                // The photos' kernel budget grew it by 9.95 % a round.
-                default_training(&fox, &[(2, 0.6)], (TrainingLoss::Mse, 0.0995)),
-                [270, 480],
-                &fox,
+                &dn400_budget,
+                &coarse_to_fine[..],
+                dssim,
+                object_budget,
+                [400, 400],
             ),
+            (&lego, &coarse_to_fine[..], dssim, object_budget, [400, 400]),
         ];
         let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
-        for (training, size, records) in fits {
+        for (records, stages, loss, growth, size) in fits {
+            let training = default_training(records, stages, loss, &growth);
             assert_eq!(training.window, Some(200));
             let points = replay(&training, size, records, &fractions);
             assert_eq!(points.len(), fractions.len());

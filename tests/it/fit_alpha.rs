@@ -1101,16 +1101,18 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
     );
 }
 
-/// The pruning by score's default share and the loss follow the data: half the kernels
-/// and the 3DGS loss where the views' background is flat (the occluding data over black),
-/// no pruning, the MSE and the photos' kernel budget where the photos are textured to their borders (the same views
+/// The pruning by score's default share, the loss and the kernel budget follow the data:
+/// half the kernels, the 3DGS loss and the objects' budget where the views' background is
+/// flat (the occluding data over black), no pruning, the MSE and the photos' budget where
+/// the photos are textured to their borders (the same views
 /// with a checkered backdrop painted behind every pixel the scene leaves black), where
 /// `prune_rounds` and `dssim_weight` are then refused.
 #[test]
 fn the_default_pruning_share_and_loss_follow_the_background() {
     use splat4d::fit::plan::{
-        BackgroundDefaults, DEFAULT_KERNEL_BUDGET, DEFAULT_LOSS, DEFAULT_PHOTO_LOSS,
-        DEFAULT_PRUNE_FRACTION, background_defaults,
+        BackgroundDefaults, DEFAULT_LOSS, DEFAULT_OBJECT_KERNEL_BUDGET,
+        DEFAULT_PHOTO_KERNEL_BUDGET, DEFAULT_PHOTO_LOSS, DEFAULT_PRUNE_FRACTION,
+        background_defaults,
     };
     let (dataset, _) = occluding_dataset(&occluding_scene());
     assert_eq!(
@@ -1119,7 +1121,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
             flat: true,
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS,
-            kernel_budget: None,
+            kernel_budget: Some(DEFAULT_OBJECT_KERNEL_BUDGET),
         }
     );
     // Over the flat background a chosen `dssim_weight` weighs the default 3DGS loss.
@@ -1158,7 +1160,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
             flat: false,
             prune_fraction: 0.0,
             loss: DEFAULT_PHOTO_LOSS,
-            kernel_budget: Some(DEFAULT_KERNEL_BUDGET),
+            kernel_budget: Some(DEFAULT_PHOTO_KERNEL_BUDGET),
         }
     );
     assert_ne!(DEFAULT_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
