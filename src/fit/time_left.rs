@@ -17,11 +17,11 @@
 //! what a ½-size step on whole views does. `κ`, the fixed cost in kernels per pixel, is 0.3
 //! under L1 + D-SSIM and 0.4 under the MSE (its render and backward fused). A kernel's cost
 //! grows slowly with their count, as `(k / 10⁴)^0.2` (more pairs per tile to sort, fewer of
-//! them in cache: at ½ size on `lego`'s 400×400 renders a step took 1.7 µs a kernel more
-//! between 7 k and 20 k kernels, 2.7 µs between 20 k and 29 k), and hardly with the pixels;
-//! the fixed cost grows as their power 0.7, between the 0.8 of a quiet machine and about
-//! 0.5 of a loaded one (on a loaded machine small steps wait longer; `docs/fitting.md`,
-//! "Time left", has the measurements behind these constants).
+//! them in cache: at ½ size on `lego`'s 400×400 renders each kernel added cost a step
+//! 1.7 µs between 7 k and 20 k kernels, 2.7 µs between 20 k and 29 k), and hardly with the
+//! pixels; the fixed cost grows as their power 0.7, between the 0.8 of a quiet machine and
+//! about 0.5 of a loaded one (on a loaded machine small steps wait longer;
+//! `docs/fitting.md`, "Time left", has the measurements behind these constants).
 //!
 //! `c` is the median, over the blocks of 50 steps in the recent window (the last fifth of
 //! the steps run, at least 50), of each block's seconds over its summed step costs `d / c`: a
