@@ -89,8 +89,10 @@ pub struct TimeLeft {
     window: (Option<u32>, [u32; 2]),
     /// The fixed cost of a step, in kernels per pixel of the full-size view.
     fixed_per_pixel: f64,
-    /// `(seconds, kernels, downscale)` after each step so far.
-    history: Vec<(f64, usize, u32)>,
+    /// `(seconds, kernels, cost)` after each step so far: the step's
+    /// [`TimeLeft::step_cost`], computed once as it is recorded (the estimate is asked for
+    /// after every step and reads the costs of a fifth of them).
+    history: Vec<(f64, usize, f64)>,
 }
 
 impl TimeLeft {
@@ -122,8 +124,8 @@ impl TimeLeft {
 
     /// Records a step.
     pub fn record(&mut self, record: &StepRecord) {
-        self.history
-            .push((record.seconds, record.kernels, record.downscale));
+        let cost = self.step_cost(record.kernels as f64, record.downscale);
+        self.history.push((record.seconds, record.kernels, cost));
     }
 
     /// Seconds left after the steps recorded; `None` before two steps.
@@ -199,7 +201,7 @@ impl TimeLeft {
         let rate = |from: usize, to: usize| {
             let units: f64 = self.history[from..to]
                 .iter()
-                .map(|&(_, k, n)| self.step_cost(k as f64, n))
+                .map(|&(_, _, cost)| cost)
                 .sum();
             (self.history[to - 1].0 - self.history[from - 1].0) / units.max(1e-12)
         };
