@@ -4,15 +4,18 @@
 //!
 //! `cargo run --release -p splat4d-benches --example time_left -- LOG.jsonl WIDTHxHEIGHT
 //! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]
-//! [--densify-every N]` (`G` the growth a round the fit took: the note `kernel budget: … at
-//! most G % …` gives it; photos take `--prune-fraction 0`; renders of an object with the
-//! default 12 000 steps `--densify-every 200`)
+//! [--densify-every N] [--growth-target K]` (`G` the growth a round the fit took, or with
+//! `--growth-target` the largest it could take; `K` the kernels its budget grew towards: the
+//! note `kernel budget: growing towards K kernels … by at most G % …` gives both; photos
+//! take `--prune-fraction 0`; renders of an object with the default 12 000 steps
+//! `--densify-every 200`)
 //!
 //! The run's steps are the log's; its coarse stages are read from the log's `downscale`
 //! column; `WIDTHxHEIGHT` is the first training view's size at full size.
 
 use splat4d::fit::coarse::SizeStage;
 use splat4d::fit::defaults::{DEFAULT_ALPHA, DEFAULT_DSSIM_WEIGHT};
+use splat4d::fit::density::{DensityRules, GrowthTarget};
 use splat4d::fit::init::SpaceTimeBox;
 use splat4d::fit::ssim::L1Dssim;
 use splat4d::fit::time_left::replay;
@@ -59,12 +62,13 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [log, size, options @ ..] = &args[..] else {
         panic!(
-            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F] [--densify-every N]"
+            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F] [--densify-every N] [--growth-target K]"
         );
     };
     let (width, height) = size.split_once('x').expect("WIDTHxHEIGHT");
     let view_size = [width.parse().unwrap(), height.parse().unwrap()];
     let mut options_of_fit = DEFAULT_ALPHA;
+    let (mut max_growth, mut growth_target) = (None, None);
     for pair in options.chunks(2) {
         match (pair[0].as_str(), pair.get(1).map(String::as_str)) {
             ("--loss", Some("mse")) => options_of_fit.loss = TrainingLoss::Mse,
@@ -78,9 +82,8 @@ fn main() {
             ("--prune-fraction", Some(share)) => {
                 options_of_fit.prune_fraction = share.parse().unwrap();
             }
-            ("--max-growth", Some(share)) => {
-                options_of_fit.densify_fraction = share.parse().unwrap();
-            }
+            ("--max-growth", Some(share)) => max_growth = Some(share.parse().unwrap()),
+            ("--growth-target", Some(kernels)) => growth_target = Some(kernels.parse().unwrap()),
             ("--densify-every", Some(steps)) => {
                 options_of_fit.densify_every = steps.parse().unwrap();
             }
@@ -94,7 +97,20 @@ fn main() {
         max: [1.0; 3],
         time: [0.0, 1.0],
     };
+    if growth_target.is_none()
+        && let Some(share) = max_growth
+    {
+        options_of_fit.densify_fraction = share;
+    }
     let mut training = options_of_fit.training(&bounds);
+    if let (Some(kernels), Some(DensityRules::Alpha(rules))) =
+        (growth_target, &mut training.density)
+    {
+        rules.growth_target = Some(GrowthTarget {
+            kernels,
+            max_share: max_growth.unwrap_or(0.15),
+        });
+    }
     training.coarse = stages(&records);
     let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
     let points = replay(&training, view_size, &records, &fractions);

@@ -152,9 +152,10 @@ pub struct FitArgs {
     #[arg(long, value_parser = super::args::finite, help_heading = BOTH)]
     densify_threshold: Option<f64>,
     /// Largest fraction of the kernels densified in one round (default: 0.5 additive;
-    /// alpha, 0.05 of the visible kernels, raised where the rounds would otherwise stay
-    /// short of a kernel budget: photos up to 0.1 for 0.2 kernels per pixel of the largest
-    /// training view, renders of an object up to 0.15 for 0.5).
+    /// alpha, 0.05 of the visible kernels, raised each round to what reaches a kernel
+    /// budget in the rounds left: photos up to 0.1 for 0.2 kernels per pixel of the largest
+    /// training view, renders of an object up to 0.15 for 40 √pixels of it after the
+    /// pruning by score).
     #[arg(long, value_parser = super::args::finite, help_heading = BOTH)]
     max_growth: Option<f64>,
     /// Kernels are pruned below this: additive, their peak |amplitude| (default 2/255);

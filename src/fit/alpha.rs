@@ -143,20 +143,27 @@ pub struct AlphaFitOptions {
     pub opacity_regulariser: f64,
     /// `λs` of the L1 on the spatial scales over the box diagonal (0: off).
     pub scale_regulariser: f64,
-    /// The kernel count the density rounds grow towards, where `densify_fraction` alone
-    /// would stay short of it ([`crate::fit::plan::budget_growth`]); `None`: the growth is
-    /// `densify_fraction`.
+    /// The kernel count the fit ends with, which the density rounds grow towards where
+    /// `densify_fraction` alone would stay short of it ([`crate::fit::plan::growth_target`]);
+    /// `None`: the growth is `densify_fraction`.
     pub kernel_budget: Option<KernelBudget>,
 }
 
-/// A kernel budget that follows the image size: the density rounds of a fit may grow its
-/// start to `per_view_pixel` kernels per pixel of its largest training view (at the fit's
-/// size), each round by at most `max_growth` of the visible kernels, never by less than the
+/// A kernel budget that follows the image size: the kernels a fit ends with,
+/// `coefficient · P^exponent` for the `P` pixels of its largest training view (at the fit's
+/// size), at most `max_per_pixel · P`. Its density rounds grow towards that count divided by the share the pruning by
+/// score keeps, each round by the share of the visible kernels that reaches it in the rounds
+/// left ([`crate::fit::density::GrowthTarget`]), at most `max_growth` and never less than the
 /// options' `densify_fraction`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KernelBudget {
-    /// Kernels per pixel of the largest training view.
-    pub per_view_pixel: f64,
+    /// The kernels per `P^exponent`.
+    pub coefficient: f64,
+    /// The power of the largest view's pixel count `P` the budget follows: 1 for a share of
+    /// the pixels, ½ for a count that grows with the views' side.
+    pub exponent: f64,
+    /// The most kernels a pixel of the largest view the budget gives (small views).
+    pub max_per_pixel: f64,
     /// The largest growth per round it may ask for.
     pub max_growth: f64,
 }
@@ -216,6 +223,8 @@ impl AlphaFitOptions {
                 MotionFit::WhereNeeded { turning, .. } if self.fits_motion() => turning,
                 _ => None,
             },
+            // The views' size decides it: the plan sets it from `kernel_budget`.
+            growth_target: None,
         }
     }
 

@@ -165,43 +165,55 @@ pub const DEFAULT_FAR_SHELL: bool = true;
 pub const DEFAULT_SHAPE_BOUND: ShapeBound = ShapeBound::OFF;
 /// The kernel budget of an alpha fit of photos (training views whose background is not
 /// flat) where `--max-growth` is not given ([`KernelBudget`],
-/// [`crate::fit::plan::budget_growth`]; renders of an object have
-/// [`DEFAULT_OBJECT_KERNEL_BUDGET`]):
-/// 0.2 kernels per pixel of the largest training view, reached by growing at most 10 % a
-/// round. It raises the growth only where the 5 % of [`DEFAULT_ALPHA`] stays short of it,
-/// so fits of photos up to about 200×200 pixels (the photo proxies at ⅛, the DSLR-like
-/// proxy) are unchanged.
+/// [`crate::fit::plan::growth_target`]; renders of an object have
+/// [`DEFAULT_OBJECT_KERNEL_BUDGET`]): 0.2 kernels per pixel of the largest training view,
+/// each density round growing by the share that reaches it in the rounds left, at most
+/// 10 % and at least the 5 % of [`DEFAULT_ALPHA`], so fits of photos up to about 200×200
+/// pixels (the photo proxies at ⅛, the DSLR-like proxy) stay at 5 %.
 ///
 /// Measured on a real phone capture, instant-ngp's `fox` (50 photos, 7 held out) at
 /// `--downscale 4` (270×480), one run each, 2 cores (`docs/fitting.md`, "A real capture"):
 /// growing 5 % a round ended with 4878 kernels and 27.81 dB held out (mean of the views'
-/// PSNR) in 367 s; 10 % a round with 22 999 kernels and 30.26 dB in 638 s; this budget
-/// (9.95 % a round) 22 724 kernels and 30.16 dB in 626 s; 11.3 % a round (a budget of 0.3
-/// a pixel) 33 940 kernels and 30.97 dB in 773 s. The phone-like proxy at ¼ size: 38.23 →
-/// 38.65 dB held out (39.20 → 41.04 dB per view), 223 → 605 s. On the DSLR-like proxy
-/// 10 % a round took 896 s for 41.31 against 40.72 dB: this budget leaves it at 5 %.
+/// PSNR) in 367 s; 10 % a round with 22 999 kernels and 30.26 dB in 638 s; this budget as
+/// one growth for the whole run (9.95 % a round) 22 724 kernels and 30.16 dB in 626 s;
+/// 11.3 % a round (a budget of 0.3 a pixel) 33 940 kernels and 30.97 dB in 773 s; this
+/// budget steered towards each round asks the cap every round there, 22 999 kernels and
+/// 30.26 dB in 595 s (the same bytes as 10 %). The
+/// phone-like proxy at ¼ size: 38.23 → 38.65 dB held out (39.20 → 41.04 dB per view),
+/// 223 → 605 s. On the DSLR-like proxy 10 % a round took 896 s for 41.31 against
+/// 40.72 dB: this budget leaves it at 5 %.
 pub const DEFAULT_PHOTO_KERNEL_BUDGET: KernelBudget = KernelBudget {
-    per_view_pixel: 0.2,
+    coefficient: 0.2,
+    exponent: 1.0,
+    max_per_pixel: 0.2,
     max_growth: 0.1,
 };
 
 /// The kernel budget of an alpha fit of renders of an object (training views whose
-/// background is flat) where `--max-growth` is not given: 0.5 kernels per pixel of the
-/// largest training view, reached by growing at most 15 % a round. At 100×100 the start's
-/// 2000 kernels nearly reach it already, so fits of that size keep the 5 % of
-/// [`DEFAULT_ALPHA`] (unchanged); at 400×400 it raises the growth to 11.8 % a round.
+/// background is flat) where `--max-growth` is not given: 40 √P kernels for the `P` pixels
+/// of the largest training view (4000 at 100×100, 16 000 at 400×400; at most P/2, the
+/// first budget's, below 160×160) after the pruning by score ([`DEFAULT_PRUNE_FRACTION`]), so the rounds grow towards twice that, each by the
+/// share that reaches it in the rounds left, at most 15 % and at least 5 %. An object's
+/// detail does not grow with the pixels: a share of them would ask 16 times the kernels
+/// at 400×400 for what 100×100 needs 1 of; the views' side asks 4.
 ///
 /// Measured on the NeRF-synthetic `lego` (static; 87 training views, every 8th of its 100
-/// held out) at `--downscale 2` (400×400), one run each, 2 cores (`docs/fitting.md`,
-/// "Renders at 400×400"): growing 5 % a round (no budget) ended with 2133 kernels and
-/// 26.93 dB held out in 141 s; 8.76 % a round (a budget of 0.2 a pixel) 6880 kernels and
-/// 29.91 dB in 216 s; 10 % 10 115 kernels and 30.98 dB in 274 s; this budget (11.83 %)
-/// 17 286 kernels and 32.26 dB in 344 s. Half the kernels are still pruned by score when
-/// growth ends ([`DEFAULT_PRUNE_FRACTION`]): 10 % a round without pruning kept 20 230
-/// kernels for 31.52 dB in 331 s. The D-NeRF-like proxy at 400×400: 38.28 → 38.79 dB held
-/// out, 2866 → 22 473 kernels, 134.8 → 304.9 s (2.3×) on the same machine.
+/// held out), one run each, 2 cores (`docs/fitting.md`, "Renders of an object"). At
+/// `--downscale 8` (100×100): growing 5 % a round (the default before, whose start of 2000
+/// kernels fell to about 1100 transparent-pruned ones before growing) ended with 1993
+/// kernels and 31.91 dB held out in 70 s; 7 % a round 3775 kernels and 32.86 dB in 92 s;
+/// 10 % 9528 kernels and 33.83 dB in 173 s; the fit before this work (6000 steps of 4
+/// views, no pruning) 7511 kernels and 32.46 dB in 119 s. At `--downscale 2` (400×400):
+/// 5 % a round 2133 kernels and 26.93 dB in 141 s; 8.76 % 6880 kernels and 29.91 dB in
+/// 216 s; 10 % 10 115 kernels and 30.98 dB in 274 s; a budget of 0.5 a pixel as one growth
+/// for the whole run (11.83 %) 17 286 kernels and 32.26 dB in 344 s. This budget: 4000
+/// kernels and 32.86 dB in 108 s at 100×100, 16 000 kernels and 32.08 dB in 326 s at
+/// 400×400. The D-NeRF-like proxy: 38.16 → 38.46 dB held out at 100×100 (71 → 78 s), 38.79 dB
+/// either way at 400×400 (305 → 252 s), all on one Intel Xeon.
 pub const DEFAULT_OBJECT_KERNEL_BUDGET: KernelBudget = KernelBudget {
-    per_view_pixel: 0.5,
+    coefficient: 40.0,
+    exponent: 0.5,
+    max_per_pixel: 0.5,
     max_growth: 0.15,
 };
 

@@ -33,13 +33,13 @@
 //! constant of [`crate::fit::defaults`], re-exported here.
 
 use crate::fit::additive::{AdditiveFitOptions, FitMode, LearningRates};
-use crate::fit::alpha::{AlphaFitOptions, alpha_bounds};
+use crate::fit::alpha::{AlphaFitOptions, KernelBudget, alpha_bounds};
 use crate::fit::alpha_start::{
     completed_alpha_scene, hull_alpha_scene, point_cloud_alpha_scene, random_alpha_scene,
     swept_alpha_scene,
 };
 pub use crate::fit::defaults::*;
-use crate::fit::density::AdditiveRules;
+use crate::fit::density::{AdditiveRules, DensityRules, GrowthTarget};
 use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::rig_start::{find_rig, rig_alpha_scene, rig_bounds};
@@ -617,15 +617,14 @@ pub fn prepare_alpha(
             scene
         }
     };
-    let growth = budget_growth(options, scene.len(), train);
-    if growth > options.densify_fraction {
-        notes.push(growth_note(growth, options, train));
+    let target = growth_target(options, scene.len(), train);
+    let mut training = options.training(&bounds);
+    if let (Some(target), Some(budget)) = (target, options.kernel_budget) {
+        notes.push(growth_note(target, budget, options.prune_fraction));
+        if let Some(DensityRules::Alpha(rules)) = &mut training.density {
+            rules.growth_target = Some(target);
+        }
     }
-    let mut training = AlphaFitOptions {
-        densify_fraction: growth,
-        ..*options
-    }
-    .training(&bounds);
     training.coarse = options.coarse.stages(train);
     if !training.coarse.is_empty() {
         notes.push(format!(
@@ -648,54 +647,61 @@ pub fn prepare_alpha(
     Ok(ReadyFit::new(scene, training, notes))
 }
 
-/// The growth per density round of an alpha fit that starts from `start` kernels: the
-/// options' `densify_fraction`, raised where their [`crate::fit::alpha::KernelBudget`] asks for more. The
-/// budget is `per_view_pixel` kernels per pixel of the largest training view (at most
-/// `max_kernels`); the growth `g` that takes the start there in the run's `n` rounds,
-/// `(1 + g)ⁿ · start = budget`, is taken when it lies above `densify_fraction`, at most
-/// the budget's `max_growth`, rounded to 1e-4 so that no last bit of `powf` decides a
-/// kernel count.
+/// The growth target of an alpha fit with `options` of `train` that starts from `start`
+/// kernels: the count its density rounds steer towards, the options'
+/// [`crate::fit::alpha::KernelBudget`] over the share the pruning by score keeps (at most
+/// `max_kernels`), each round growing at most the budget's `max_growth`. `None` without a
+/// budget, without rounds, or when the start already holds that count.
 #[must_use]
-pub fn budget_growth(options: &AlphaFitOptions, start: usize, train: &[View]) -> f64 {
-    let floor = options.densify_fraction;
-    let Some(budget) = options.kernel_budget else {
-        return floor;
-    };
-    let rounds = density_rounds(options);
-    let target = budget_target(budget.per_view_pixel, options, train);
-    if rounds == 0 || start == 0 || target <= start as f64 {
-        return floor;
-    }
-    let needed = (target / start as f64).powf(1.0 / rounds as f64) - 1.0;
-    let needed = (needed * 1e4).round() / 1e4;
-    needed.min(budget.max_growth).max(floor)
+pub fn growth_target(
+    options: &AlphaFitOptions,
+    start: usize,
+    train: &[View],
+) -> Option<GrowthTarget> {
+    let budget = options.kernel_budget?;
+    let kept = 1.0 - options.prune_fraction.clamp(0.0, 1.0);
+    let kernels = (budget_kernels(&budget, train) / kept.max(f64::MIN_POSITIVE))
+        .min(options.max_kernels as f64);
+    let rounds = options.rules(1.0, 1.0).rounds_from(1, options.steps);
+    (rounds > 0 && kernels > start as f64).then_some(GrowthTarget {
+        kernels,
+        max_share: budget.max_growth,
+    })
 }
 
-/// How many density rounds an alpha fit with `options` runs.
-fn density_rounds(options: &AlphaFitOptions) -> usize {
-    let rules = options.rules(1.0, 1.0);
-    (1..=options.steps)
-        .filter(|&step| rules.round_due(step, options.steps))
-        .count()
-}
-
-/// The kernels a budget of `per_view_pixel` allows a fit with `options` of `train`:
-/// `per_view_pixel` times the pixels of the largest view, at most `max_kernels`.
-fn budget_target(per_view_pixel: f64, options: &AlphaFitOptions, train: &[View]) -> f64 {
+/// The kernels `budget` gives a fit of `train`: its coefficient times the pixels of the
+/// largest view to its exponent, at most its `max_per_pixel` of those pixels.
+fn budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
     let largest = train
         .iter()
         .map(|v| f64::from(v.image.width) * f64::from(v.image.height))
         .fold(0.0, f64::max);
-    (per_view_pixel * largest).min(options.max_kernels as f64)
+    (budget.coefficient * largest.powf(budget.exponent)).min(budget.max_per_pixel * largest)
 }
 
-/// The note on a growth raised to `growth` by the options' kernel budget.
-fn growth_note(growth: f64, options: &AlphaFitOptions, train: &[View]) -> String {
-    let per_pixel = options.kernel_budget.map_or(0.0, |b| b.per_view_pixel);
-    let budget = budget_target(per_pixel, options, train);
+/// The note on the growth target `target` that `budget` gives a fit whose pruning by score
+/// removes `prune_fraction` of the kernels.
+fn growth_note(target: GrowthTarget, budget: KernelBudget, prune_fraction: f64) -> String {
+    let size = if budget.exponent == 1.0 {
+        format!("{} a pixel of the largest view", budget.coefficient)
+    } else {
+        format!(
+            "{} times the largest view's pixels to the power {}, at most {} a pixel",
+            budget.coefficient, budget.exponent, budget.max_per_pixel
+        )
+    };
+    let pruned = if prune_fraction > 0.0 {
+        format!(
+            ", {:.0} after the pruning by score",
+            target.kernels * (1.0 - prune_fraction)
+        )
+    } else {
+        String::new()
+    };
     format!(
-        "kernel budget: growing up to {budget:.0} kernels ({per_pixel} a pixel of the largest view), at most {:.2} % of the visible kernels a density round (give `max_growth` to choose)",
-        100.0 * growth
+        "kernel budget: growing towards {:.0} kernels{pruned} ({size}), by at most {:.0} % of the visible kernels a density round (give `max_growth` to choose)",
+        target.kernels,
+        100.0 * target.max_share
     )
 }
 
@@ -1056,10 +1062,12 @@ mod tests {
         assert_eq!(centre.means[0][3], 0.5, "the middle of the training times");
     }
 
-    /// The alpha defaults with the photos' kernel budget.
+    /// The alpha defaults with the photos' kernel budget and no pruning by score, as
+    /// photos have them ([`background_defaults`]).
     fn photo_options() -> AlphaFitOptions {
         AlphaFitOptions {
             kernel_budget: Some(DEFAULT_PHOTO_KERNEL_BUDGET),
+            prune_fraction: 0.0,
             ..DEFAULT_ALPHA
         }
     }
@@ -1076,88 +1084,69 @@ mod tests {
     }
 
     #[test]
-    fn a_kernel_budget_raises_the_growth_to_reach_it_in_the_runs_rounds() {
+    fn a_photo_budget_is_a_share_of_the_largest_views_pixels() {
         let options = photo_options();
-        assert_eq!(density_rounds(&options), 33);
-        let budget = options.kernel_budget.unwrap();
+        assert_eq!(options.rules(1.0, 1.0).rounds_from(1, options.steps), 33);
         let train = views_of(480, 270);
-        let target = budget.per_view_pixel * 480.0 * 270.0;
-        let growth = budget_growth(&options, 1132, &train);
-        assert!(growth > options.densify_fraction && growth <= budget.max_growth);
-        let reached = 1132.0 * (1.0 + growth).powi(33);
-        assert!(
-            (reached / target - 1.0).abs() < 0.01,
-            "{reached} against {target}"
-        );
+        let target = growth_target(&options, 1132, &train).expect("a budget above the start");
+        // No pruning by score on photos: the budget is the target.
+        assert_eq!(target.kernels, 0.2 * 480.0 * 270.0);
+        assert_eq!(target.max_share, DEFAULT_PHOTO_KERNEL_BUDGET.max_growth);
         // The largest view sets the budget.
         let mut mixed = views_of(100, 100);
         mixed[2] = train[0].clone();
-        assert_eq!(budget_growth(&options, 1132, &mixed), growth);
+        assert_eq!(growth_target(&options, 1132, &mixed), Some(target));
     }
 
     /// Renders of an object on their schedule (12 000 steps, a round every 200): the
-    /// objects' budget leaves 100×100 views at the floor and raises 400×400 ones to the
-    /// 11.83 % measured on `lego`, which reaches 0.5 kernels a pixel from 2000.
+    /// objects' budget follows the views' side, 40 kernels a pixel of it, and the rounds
+    /// grow towards twice that, since the pruning by score removes half.
     #[test]
-    fn the_objects_budget_raises_400_squared_fits_and_leaves_thumbnails() {
+    fn the_objects_budget_follows_the_views_side_before_the_pruning() {
         let options = AlphaFitOptions {
             kernel_budget: Some(DEFAULT_OBJECT_KERNEL_BUDGET),
             steps: DEFAULT_OBJECT_SCHEDULE.steps,
             densify_every: DEFAULT_OBJECT_SCHEDULE.densify_every,
+            prune_fraction: DEFAULT_PRUNE_FRACTION,
             ..DEFAULT_ALPHA
         };
-        assert_eq!(density_rounds(&options), 33);
-        assert_eq!(
-            budget_growth(&options, 2000, &views_of(100, 100)),
-            options.densify_fraction
-        );
-        let growth = budget_growth(&options, 2000, &views_of(400, 400));
-        assert_eq!(growth, 0.1183);
-        let reached = 2000.0 * (1.0 + growth).powi(33);
-        assert!((reached / 80_000.0 - 1.0).abs() < 0.01, "{reached}");
+        assert_eq!(options.rules(1.0, 1.0).rounds_from(1, options.steps), 33);
+        for (side, budget) in [(100, 4000.0), (400, 16_000.0)] {
+            let target = growth_target(&options, 2000, &views_of(side, side)).unwrap();
+            assert_eq!(target.kernels, budget / (1.0 - DEFAULT_PRUNE_FRACTION));
+            assert_eq!(target.max_share, DEFAULT_OBJECT_KERNEL_BUDGET.max_growth);
+        }
+        // 100×200 views: 40 √20 000.
+        let target = growth_target(&options, 2000, &views_of(100, 200)).unwrap();
+        assert!((target.kernels - 2.0 * 40.0 * 20_000_f64.sqrt()).abs() < 1e-9);
+        // Small views: at most half a kernel a pixel (40 √P passes P/2 below 160×160).
+        let target = growth_target(&options, 200, &views_of(48, 48)).unwrap();
+        assert_eq!(target.kernels, 2.0 * 0.5 * 48.0 * 48.0);
     }
 
     #[test]
-    fn a_kernel_budget_never_lowers_the_growth_nor_passes_its_bounds() {
+    fn a_kernel_budget_gives_no_target_where_it_cannot_act() {
         let options = photo_options();
-        let floor = options.densify_fraction;
-        let budget = options.kernel_budget.unwrap();
-        // A budget the start already reaches, or 5 % a round reaches, keeps the floor.
-        assert_eq!(budget_growth(&options, 3000, &views_of(100, 150)), floor);
-        assert_eq!(budget_growth(&options, 1000, &views_of(100, 100)), floor);
-        // No start, no rounds, no budget: the floor.
-        assert_eq!(budget_growth(&options, 0, &views_of(480, 270)), floor);
+        // A start at the budget or above it.
+        assert_eq!(growth_target(&options, 3000, &views_of(100, 150)), None);
+        // No rounds, no budget.
         let no_rounds = AlphaFitOptions {
             densify_every: 0,
             ..options
         };
-        assert_eq!(budget_growth(&no_rounds, 10, &views_of(480, 270)), floor);
+        assert_eq!(growth_target(&no_rounds, 10, &views_of(480, 270)), None);
         let no_budget = AlphaFitOptions {
             kernel_budget: None,
             ..options
         };
-        assert_eq!(budget_growth(&no_budget, 10, &views_of(480, 270)), floor);
-        // A far budget stops at its largest growth; max_kernels bounds the target.
-        assert_eq!(
-            budget_growth(&options, 10, &views_of(1920, 1080)),
-            budget.max_growth
-        );
+        assert_eq!(growth_target(&no_budget, 10, &views_of(480, 270)), None);
+        // `max_kernels` bounds the target.
         let capped = AlphaFitOptions {
             max_kernels: 2000,
             ..options
         };
-        let growth = budget_growth(&capped, 100, &views_of(1920, 1080));
-        let reached = 100.0 * (1.0 + growth).powi(33);
-        assert!(
-            growth > floor && (reached / 2000.0 - 1.0).abs() < 0.01,
-            "{reached}"
-        );
-        // A given growth above the budget's largest is kept.
-        let fast = AlphaFitOptions {
-            densify_fraction: 0.2,
-            ..options
-        };
-        assert_eq!(budget_growth(&fast, 10, &views_of(1920, 1080)), 0.2);
+        let target = growth_target(&capped, 100, &views_of(1920, 1080)).unwrap();
+        assert_eq!(target.kernels, 2000.0);
     }
 
     #[test]

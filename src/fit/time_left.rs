@@ -7,7 +7,7 @@
 //! SSIM pass, [`crate::fit::ssim`]), counted in kernels:
 //!
 //! ```text
-//! d = c (k (k / 10⁴)^0.2 + κ P r(n)^0.7),    r(n) = f(n) / n²
+//! d = c (k (k / 10⁴)^0.2 + κ P r(n)^0.8),    r(n) = f(n) / n²
 //! ```
 //!
 //! `k` kernels; `P` the pixels of the first training view at full size; `r` the fraction of
@@ -19,28 +19,34 @@
 //! grows slowly with their count, as `(k / 10⁴)^0.2` (more pairs per tile to sort, fewer of
 //! them in cache: at ½ size on `lego`'s 400×400 renders each kernel added cost a step
 //! 1.7 µs between 7 k and 20 k kernels, 2.7 µs between 20 k and 29 k), and hardly with the
-//! pixels; the fixed cost grows as their power 0.7, between the 0.8 of a quiet machine and
-//! about 0.5 of a loaded one (on a loaded machine small steps wait longer;
-//! `docs/fitting.md`, "Time left", has the measurements behind these constants).
+//! pixels; the fixed cost grows as their power 0.8, that of a quiet machine (about 0.5 on
+//! a loaded one, where small steps wait longer; 0.7, a compromise between the two, was
+//! 32 % short at 15 % of a 400×400 fit once the kernel count was foreseen by its growth
+//! target; `docs/fitting.md`, "Time left", has the measurements behind these constants).
 //!
 //! `c` is the median, over the blocks of 50 steps in the recent window (the last fifth of
 //! the steps run, at least 50), of each block's seconds over its summed step costs `d / c`: a
-//! median, so that a spell of load or a slow density round moves it little. The kernel
-//! count is extrapolated along its recent growth per step, `(k / k_w)^(1/w)` over the
-//! window of `w` steps, at most the rules' `(1 + share)^(1/every)` (each density round adds
-//! a share of the kernels, so the count grows geometrically, and a window holding one round
-//! more than its share of steps must not compound; a straight line fell 42–46 % short on
-//! a real capture whose budget grew it 20-fold; never down: the pruning early in a fit is
-//! followed by growth) until the last step at which the density rules may add kernels
-//! (never beyond their budget), and held after it (times the share the pruning by score
-//! keeps, [`crate::fit::density::prune`], while that is still to come):
+//! median, so that a spell of load or a slow density round moves it little. Where the
+//! density rules grow towards a kernel count ([`crate::fit::density::GrowthTarget`], a
+//! kernel budget), the kernel count is grown as their rounds will grow it, each by the
+//! share that reaches the count in the rounds left (extrapolating the recent growth instead
+//! was 30–35 % short at 10 % of a 100×100 fit, when the start's transparent kernels had
+//! just been pruned). Otherwise it is extrapolated along its recent growth per step,
+//! `(k / k_w)^(1/w)` over the window of `w` steps, at most the rules' `(1 + share)^(1/every)`
+//! (each density round adds a share of the kernels, so the count grows geometrically, and a
+//! window holding one round more than its share of steps must not compound; a straight
+//! line fell 42–46 % short on a real capture whose budget grew it 20-fold; never down: the
+//! pruning early in a fit is followed by growth). Either way it grows until the last step at
+//! which the density rules may add kernels (never beyond their budget), and is held after it
+//! (times the share the pruning by score keeps, [`crate::fit::density::prune`], while that
+//! is still to come):
 //!
 //! ```text
-//! left = c Σ_{s > now} (k(s) (k(s) / 10⁴)^0.2 + κ P r(n(s))^0.7)
+//! left = c Σ_{s > now} (k(s) (k(s) / 10⁴)^0.2 + κ P r(n(s))^0.8)
 //! ```
 
 use crate::fit::coarse::{SizeStage, downscale_at};
-use crate::fit::density::DensityRules;
+use crate::fit::density::{AlphaRules, DensityRules};
 use crate::fit::train::{StepRecord, Training, TrainingLoss};
 use crate::fit::window::pixel_fraction;
 
@@ -54,7 +60,7 @@ const WINDOW_FRACTION: f64 = 0.2;
 const BLOCK: usize = 50;
 
 /// The exponent of the pixels rendered in a step's fixed cost (see the module docs).
-const PIXEL_EXPONENT: f64 = 0.7;
+const PIXEL_EXPONENT: f64 = 0.8;
 
 /// The fixed cost of a step, in kernels per pixel of the full-size view, under the MSE
 /// (the render and its backward fused per tile).
@@ -81,6 +87,9 @@ pub struct TimeLeft {
     max_kernels: usize,
     /// The most the kernel count can grow in a step, as a factor.
     max_growth_per_step: f64,
+    /// Alpha rules that grow towards a kernel count, and the steps after which their
+    /// rounds run: the count is then grown as they will grow it.
+    towards_target: Option<(AlphaRules, Vec<usize>)>,
     /// The share of the kernels the pruning by score keeps once growth ends (1: none).
     kept_after_growth: f64,
     /// The coarse stages.
@@ -111,6 +120,15 @@ impl TimeLeft {
                 .density
                 .as_ref()
                 .map_or(1.0, DensityRules::max_growth_per_step),
+            towards_target: match training.density {
+                Some(DensityRules::Alpha(rules)) if rules.growth_target.is_some() => {
+                    let rounds = (1..=training.steps)
+                        .filter(|&step| rules.round_due(step, training.steps))
+                        .collect();
+                    Some((rules, rounds))
+                }
+                _ => None,
+            },
             kept_after_growth: training.prune.map_or(1.0, |rule| 1.0 - rule.fraction),
             stages: training.coarse.clone(),
             window: (training.window, view_size),
@@ -140,27 +158,24 @@ impl TimeLeft {
             .min(now - 1);
         let per_unit = self.seconds_per_unit(window);
         let (_, k1, _) = self.history[now - 1];
-        let (_, k_start, _) = self.history[now - 1 - window];
         let k = k1 as f64;
-        // The kernels grow by a share of themselves each density round, so the count is
-        // extrapolated along its recent growth per step (never down).
-        let growth = if k_start > 0 {
-            (k / k_start as f64)
-                .powf(1.0 / window as f64)
-                .clamp(1.0, self.max_growth_per_step.max(1.0))
-        } else {
-            1.0
-        };
         let grow_to = self.growth_ends.min(self.steps);
         let cap = (self.max_kernels as f64).max(k);
-        // The kernels after step s: along the growth until `grow_to`, then held (the share
-        // the pruning keeps of them, when it is still to come).
-        let mut kernels_after = Vec::with_capacity(grow_to.saturating_sub(now));
-        let mut grown = k;
-        for _ in now..grow_to {
-            grown = (grown * growth).min(cap);
-            kernels_after.push(grown);
-        }
+        // The kernels after step s until `grow_to`, then held (the share the pruning keeps
+        // of them, when it is still to come).
+        let kernels_after = match &self.towards_target {
+            Some((rules, rounds)) => grown_by_rounds(rules, rounds, (k, cap), now, grow_to),
+            None => {
+                let (_, k_start, _) = self.history[now - 1 - window];
+                let growth = if k_start > 0 {
+                    (k / k_start as f64).powf(1.0 / window as f64)
+                } else {
+                    1.0
+                };
+                let growth = growth.clamp(1.0, self.max_growth_per_step.max(1.0));
+                grown_along(growth, (k, cap), now, grow_to)
+            }
+        };
         let end = kernels_after.last().copied().unwrap_or(k);
         let held = if now < grow_to {
             end * self.kept_after_growth
@@ -226,6 +241,45 @@ impl TimeLeft {
                 * pixels
                 * pixel_ratio(n, self.window.0, self.window.1).powf(PIXEL_EXPONENT)
     }
+}
+
+/// The kernels after each step from `now + 1` to `grow_to`, `k` grown by `growth` a step
+/// (a share of themselves each density round, so the count is extrapolated along its
+/// recent growth per step), at most `cap`.
+fn grown_along(growth: f64, (k, cap): (f64, f64), now: usize, grow_to: usize) -> Vec<f64> {
+    let mut grown = k;
+    (now..grow_to)
+        .map(|_| {
+            grown = (grown * growth).min(cap);
+            grown
+        })
+        .collect()
+}
+
+/// The kernels after each step from `now + 1` to `grow_to`, `k` grown as `rules` grow it
+/// towards their target: after each step of `rounds` (the steps after which their rounds
+/// run), by the share [`AlphaRules::round_share`] gives for the rounds left, at most `cap`.
+/// The pruning of transparent kernels along the way, which those shares make up for, is
+/// not foreseen.
+fn grown_by_rounds(
+    rules: &AlphaRules,
+    rounds: &[usize],
+    (k, cap): (f64, f64),
+    now: usize,
+    grow_to: usize,
+) -> Vec<f64> {
+    let first = rounds.partition_point(|&step| step <= now);
+    let mut ahead = rounds[first..].iter().peekable();
+    let mut grown = k;
+    (now + 1..=grow_to)
+        .map(|step| {
+            if ahead.next_if_eq(&&step).is_some() {
+                let share = rules.round_share(grown as usize, ahead.len() + 1);
+                grown = (grown * (1.0 + share)).min(cap);
+            }
+            grown
+        })
+        .collect()
 }
 
 /// The pixels a step on views downscaled by `n` (and windowed by `window`, of views of
@@ -294,7 +348,7 @@ pub fn replay(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::density::{AlphaRules, DensityRules};
+    use crate::fit::density::{AlphaRules, DensityRules, GrowthTarget};
 
     /// A 1000-step fit whose density rules add up to 35 % of the kernels every 100 steps
     /// until step 600.
@@ -315,6 +369,7 @@ mod tests {
             time_range: 1.0,
             motion_after_time_splits: None,
             motion_when_turning: None,
+            growth_target: None,
         };
         Training {
             steps: 1000,
@@ -492,13 +547,16 @@ mod tests {
             .collect()
     }
 
-    /// How a recorded fit grew: its growth a round, its steps between rounds and the share
-    /// of the kernels its pruning by score removed when growth ended (0: none).
+    /// How a recorded fit grew: its growth a round (with a target, the largest), its steps
+    /// between rounds, the share of the kernels its pruning by score removed when growth
+    /// ended (0: none), and the kernel count its rounds grew towards (`None`: a fixed
+    /// growth).
     #[derive(Clone, Copy)]
     struct Growth {
         share: f64,
         every: usize,
         pruned: f64,
+        target: Option<f64>,
     }
 
     /// The alpha fit's defaults for a run of `records`, with coarse stages `stages` (as the
@@ -514,7 +572,8 @@ mod tests {
             max: [1.0; 3],
             time: [0.0, 1.0],
         };
-        Training {
+        let floor = crate::fit::defaults::DEFAULT_ALPHA.densify_fraction;
+        let mut training = Training {
             steps: records.len(),
             coarse: stages
                 .iter()
@@ -522,16 +581,27 @@ mod tests {
                 .collect(),
             loss,
             ..crate::fit::alpha::AlphaFitOptions {
-                densify_fraction: growth.share,
+                densify_fraction: if growth.target.is_some() {
+                    floor
+                } else {
+                    growth.share
+                },
                 densify_every: growth.every,
                 prune_fraction: growth.pruned,
                 ..crate::fit::defaults::DEFAULT_ALPHA
             }
             .training(&bounds)
+        };
+        if let Some(DensityRules::Alpha(rules)) = &mut training.density {
+            rules.growth_target = growth.target.map(|kernels| GrowthTarget {
+                kernels,
+                max_share: growth.share,
+            });
         }
+        training
     }
 
-    /// Five default fits recorded on a 2-core machine, replayed through the estimate:
+    /// Six default fits recorded on a 2-core machine, replayed through the estimate:
     /// within 30 % of the time left at every 5 % of the run from 10 % to 90 %.
     #[test]
     fn recorded_default_fits_are_estimated_within_thirty_percent_from_a_tenth() {
@@ -542,6 +612,9 @@ mod tests {
         let lego = recorded(include_str!(
             "../../tests/data/time_left/lego400_budget.txt"
         ));
+        let lego_target = recorded(include_str!(
+            "../../tests/data/time_left/lego400_target.txt"
+        ));
         let coarse_to_fine = [(4, 0.3), (2, 0.6)];
         let photos = [(2, 0.6)];
         let dssim = crate::fit::defaults::DEFAULT_LOSS;
@@ -550,13 +623,21 @@ mod tests {
             share,
             every: 100,
             pruned: 0.0,
+            target: None,
         };
-        // The objects' kernel budget grew the last two by 11.83 % a round, every 200 of
+        // The objects' kernel budget grew the next two by 11.83 % a round, every 200 of
         // their 12 000 steps, and half their kernels were pruned when growth ended.
         let object_budget = Growth {
             share: 0.1183,
             every: 200,
             pruned: 0.5,
+            target: None,
+        };
+        // The last grew towards 32 000 kernels at up to 15 % a round, then lost half.
+        let object_target = Growth {
+            share: 0.15,
+            target: Some(32_000.0),
+            ..object_budget
         };
         let fits = [
             (
@@ -589,6 +670,13 @@ mod tests {
                 [400, 400],
             ),
             (&lego, &coarse_to_fine[..], dssim, object_budget, [400, 400]),
+            (
+                &lego_target,
+                &coarse_to_fine[..],
+                dssim,
+                object_target,
+                [400, 400],
+            ),
         ];
         let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
         for (records, stages, loss, growth, size) in fits {

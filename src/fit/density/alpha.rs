@@ -3,8 +3,12 @@
 //!
 //! Every `every` steps while the run's progress `(step - 1)/(steps - 1)` lies in
 //! `[from, until]`, the kernels whose mean screen-space positional gradient `|∂L/∂m2|`
-//! over the views that saw them is among the largest `fraction` of the visible kernels (and
-//! at least `threshold`; ties by index; never beyond `max_kernels`) grow:
+//! over the views that saw them is among the largest `share` of the visible kernels (and
+//! at least `threshold`; ties by index; never beyond `max_kernels`) grow. The share is
+//! `fraction`, or with a [`GrowthTarget`] of `K` kernels the share that would take the `n`
+//! kept kernels there in the `r` rounds left, `(K/n)^(1/r) - 1` (rounded to 1e-4), kept
+//! within `[fraction, max_share]`: a kernel budget that the pruning of transparent kernels
+//! along the way does not leave short. The kernels grown:
 //!
 //! - **split in time** when the kernel spans motion: σt above `time_split_fraction` of the
 //!   time range and `|v| σt` above its largest spatial σ. Two children at `t ± σt/2`, σt / 1.6
@@ -73,12 +77,55 @@ pub struct AlphaRules {
     /// A kernel whose velocity gradient keeps turning by this rule is given fitted SPEC §9
     /// motion ([`super::turning`]); `None`: never.
     pub motion_when_turning: Option<TurningRule>,
+    /// The kernel count the rounds grow towards (`None`: each grows by `fraction`).
+    pub growth_target: Option<GrowthTarget>,
+}
+
+/// The kernel count a fit's density rounds grow towards, each round by the share that
+/// would reach it in the rounds left (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrowthTarget {
+    /// The kernels to reach when growth ends.
+    pub kernels: f64,
+    /// The largest share of the visible kernels a round may grow.
+    pub max_share: f64,
 }
 
 impl AlphaRules {
     /// The run's progress after step `step` of `steps`: 0 at the first, 1 at the last.
     fn progress(step: usize, steps: usize) -> f64 {
         (step - 1) as f64 / (steps.max(2) - 1) as f64
+    }
+
+    /// The rounds that run after steps `step..=steps` of `steps`.
+    #[must_use]
+    pub fn rounds_from(&self, step: usize, steps: usize) -> usize {
+        (step.max(1)..=steps)
+            .filter(|&s| self.round_due(s, steps))
+            .count()
+    }
+
+    /// The share of the visible kernels a round grows when `kept` kernels are kept and
+    /// `rounds_left` rounds remain, this one included (see the module docs).
+    #[must_use]
+    pub fn round_share(&self, kept: usize, rounds_left: usize) -> f64 {
+        let Some(target) = self.growth_target else {
+            return self.fraction;
+        };
+        if kept == 0 || rounds_left == 0 || target.kernels <= kept as f64 {
+            return self.fraction;
+        }
+        let needed = (target.kernels / kept as f64).powf(1.0 / rounds_left as f64) - 1.0;
+        // Rounded, so that no last bit of `powf` decides a kernel count.
+        let needed = (needed * 1e4).round() / 1e4;
+        needed.min(target.max_share).max(self.fraction)
+    }
+
+    /// The largest share of the visible kernels a round may grow.
+    #[must_use]
+    pub fn max_share(&self) -> f64 {
+        self.growth_target
+            .map_or(self.fraction, |target| target.max_share.max(self.fraction))
     }
 
     /// Whether a round runs after `step` of `steps`.
@@ -109,21 +156,24 @@ pub fn reset_opacities(scene: &mut Scene, ceiling: f64) {
     }
 }
 
-/// One round: prune transparent kernels, give motion to those whose velocity gradient keeps
-/// turning, then clone, split, split in time or give motion to the ones with the largest
-/// mean screen-space gradient. Returns, per kernel of the new scene, the old kernel whose
-/// optimiser state it keeps (`None`: fresh) and its line of descent: a kept kernel (or one
-/// given motion) keeps its turning state, a new one starts afresh.
+/// One round, with `rounds_left` rounds left (this one included): prune transparent
+/// kernels, give motion to those whose velocity gradient keeps turning, then clone, split,
+/// split in time or give motion to the ones with the largest mean screen-space gradient.
+/// Returns, per kernel of the new scene, the old kernel whose optimiser state it keeps
+/// (`None`: fresh) and its line of descent: a kept kernel (or one given motion) keeps its
+/// turning state, a new one starts afresh.
 pub fn densify_and_prune(
     scene: &mut Scene,
     stats: &DensityStats,
     rules: &AlphaRules,
+    rounds_left: usize,
 ) -> (Vec<Option<usize>>, Vec<Line>) {
     let n = scene.len();
     let keep: Vec<usize> = (0..n)
         .filter(|&i| scene.opacities[i] >= rules.prune_opacity)
         .collect();
-    let grow = chosen_to_grow(&keep, stats, rules, n);
+    let share = rules.round_share(keep.len(), rounds_left);
+    let grow = chosen_to_grow(&keep, stats, rules, share, n);
     let mut next = Scene {
         background: scene.background,
         up: scene.up,
@@ -215,9 +265,15 @@ fn needs_motion(line: Line, rules: &AlphaRules) -> bool {
 }
 
 /// Per kernel, whether it grows this round: of the kept ones, the largest mean screen
-/// gradients at or above the threshold, ties by index, at most `fraction` of the visible
+/// gradients at or above the threshold, ties by index, at most `share` of the visible
 /// kept kernels and never beyond `max_kernels`.
-fn chosen_to_grow(keep: &[usize], stats: &DensityStats, rules: &AlphaRules, n: usize) -> Vec<bool> {
+fn chosen_to_grow(
+    keep: &[usize],
+    stats: &DensityStats,
+    rules: &AlphaRules,
+    share: f64,
+    n: usize,
+) -> Vec<bool> {
     let mut candidates: Vec<usize> = keep
         .iter()
         .copied()
@@ -230,8 +286,8 @@ fn chosen_to_grow(keep: &[usize], stats: &DensityStats, rules: &AlphaRules, n: u
             .then(a.cmp(&b))
     });
     let visible = keep.iter().filter(|&&i| stats.seen_on_screen(i)).count();
-    let budget = ((rules.fraction * visible as f64) as usize)
-        .min(rules.max_kernels.saturating_sub(keep.len()));
+    let budget =
+        ((share * visible as f64) as usize).min(rules.max_kernels.saturating_sub(keep.len()));
     candidates.truncate(budget);
     let mut grow = vec![false; n];
     for &i in &candidates {
@@ -314,6 +370,7 @@ mod tests {
             time_range: 1.0,
             motion_after_time_splits: None,
             motion_when_turning: None,
+            growth_target: None,
         }
     }
 
@@ -348,7 +405,7 @@ mod tests {
     #[test]
     fn a_kernel_that_spans_motion_splits_in_time_along_its_path() {
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (sources, lines) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+        let (sources, lines) = densify_and_prune(&mut scene, &seen_once(), &grow_all(), 1);
         assert_eq!(sources, vec![None, None]);
         let child = Line {
             time_splits: 1,
@@ -392,13 +449,13 @@ mod tests {
         // A first split in time, as without the rule.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let fresh = seen_once_on(Line::default());
-        let (_, lines) = densify_and_prune(&mut scene, &fresh, &motion_after_one);
+        let (_, lines) = densify_and_prune(&mut scene, &fresh, &motion_after_one, 1);
         assert_eq!(lines, vec![once_split; 2]);
         // A kernel split once that still spans motion: kept whole, moments kept, moving.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
         let before = scene.clone();
         let (sources, lines) =
-            densify_and_prune(&mut scene, &seen_once_on(once_split), &motion_after_one);
+            densify_and_prune(&mut scene, &seen_once_on(once_split), &motion_after_one, 1);
         assert_eq!(sources, vec![Some(0)]);
         let moving = Line {
             moving: true,
@@ -408,7 +465,7 @@ mod tests {
         assert_eq!(scene.kernel(0), before.kernel(0));
         // A moving kernel that still spans motion splits in time, its children moving.
         let (sources, lines) =
-            densify_and_prune(&mut scene, &seen_once_on(moving), &motion_after_one);
+            densify_and_prune(&mut scene, &seen_once_on(moving), &motion_after_one, 1);
         assert_eq!(sources, vec![None, None]);
         let children = Line {
             time_splits: 2,
@@ -418,7 +475,7 @@ mod tests {
         assert_eq!(lines, vec![children; 2]);
         // Without the rule, the kernel split once splits again.
         let mut scene = one_kernel([1.0, 0.0, -0.5], 0.3);
-        let (_, lines) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all());
+        let (_, lines) = densify_and_prune(&mut scene, &seen_once_on(once_split), &grow_all(), 1);
         assert_eq!(lines.len(), 2);
         assert!(lines.iter().all(|l| l.time_splits == 2 && !l.moving));
     }
@@ -454,26 +511,26 @@ mod tests {
         let mut scene = one_kernel([0.0; 3], 0.3);
         let before = scene.clone();
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (sources, lines) = densify_and_prune(&mut scene, &stats, &rules);
+        let (sources, lines) = densify_and_prune(&mut scene, &stats, &rules, 1);
         assert_eq!(sources, vec![Some(0)]);
         assert!(!lines[0].moving && lines[0].turning.rounds() == 1);
         let stats = pulled(stats.next_window(lines), [0.0, -1.0, 0.0], 100);
-        let (_, lines) = densify_and_prune(&mut scene, &stats, &rules);
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &rules, 1);
         assert!(lines[0].moving);
         assert_eq!(scene.kernel(0), before.kernel(0));
         // Without the rule, the same pulls give no motion.
         let mut scene = one_kernel([0.0; 3], 0.3);
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all());
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all(), 1);
         assert_eq!(lines[0].turning, Turning::default());
         let stats = pulled(stats.next_window(lines), [0.0, -1.0, 0.0], 100);
-        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all());
+        let (_, lines) = densify_and_prune(&mut scene, &stats, &grow_all(), 1);
         assert!(!lines[0].moving);
         // A pull that reverses each round never counts twice.
         let mut scene = one_kernel([0.0; 3], 0.3);
         let mut stats = pulled(DensityStats::new(1), [1.0, 0.0, 0.0], 100);
         for sign in [-1.0, 1.0, -1.0] {
-            let (_, lines) = densify_and_prune(&mut scene, &stats, &rules);
+            let (_, lines) = densify_and_prune(&mut scene, &stats, &rules, 1);
             assert!(!lines[0].moving && lines[0].turning.rounds() == 1);
             stats = pulled(stats.next_window(lines), [sign, 0.0, 0.0], 100);
         }
@@ -484,7 +541,7 @@ mod tests {
         };
         let mut scene = one_kernel([0.0; 3], 0.3);
         let stats = pulled(DensityStats::new(1), [0.0, -1.0, 0.0], 100);
-        let (sources, lines) = densify_and_prune(&mut scene, &stats, &clone_all);
+        let (sources, lines) = densify_and_prune(&mut scene, &stats, &clone_all, 1);
         assert_eq!(sources, vec![Some(0), None]);
         assert_eq!(
             lines
@@ -530,7 +587,7 @@ mod tests {
     fn a_still_or_short_lived_kernel_is_cloned_in_space_not_split_in_time() {
         for (velocity, time_sigma) in [([0.0; 3], 0.3), ([1.0, 0.0, 0.0], 0.01)] {
             let mut scene = one_kernel(velocity, time_sigma);
-            let (sources, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all());
+            let (sources, _) = densify_and_prune(&mut scene, &seen_once(), &grow_all(), 1);
             assert_eq!(sources, vec![Some(0), None]);
             assert_eq!(scene.means[0], scene.means[1]);
         }
@@ -548,5 +605,93 @@ mod tests {
         };
         let due: Vec<usize> = (1..=101).filter(|&s| rules.reset_due(s, 101)).collect();
         assert_eq!(due, [10, 20, 30, 40, 50]);
+    }
+
+    /// Rules that grow at least 5 % and towards `kernels`, at most 15 %, a round every 10
+    /// steps over the whole of a 330-step run (33 rounds).
+    fn towards(kernels: f64) -> AlphaRules {
+        AlphaRules {
+            every: 10,
+            fraction: 0.05,
+            max_kernels: 1_000_000,
+            growth_target: Some(GrowthTarget {
+                kernels,
+                max_share: 0.15,
+            }),
+            ..grow_all()
+        }
+    }
+
+    #[test]
+    fn a_growth_target_is_reached_in_the_rounds_left_whatever_the_pruning_on_the_way() {
+        let rules = towards(8000.0);
+        assert_eq!(rules.rounds_from(1, 330), 33);
+        assert_eq!(rules.rounds_from(321, 330), 1);
+        assert_eq!(rules.max_share(), 0.15);
+        // Each round grows its share of the kept kernels (all visible here); after the
+        // first, half of them turn transparent and are pruned, as early in a fit.
+        let mut kept = 2000_usize;
+        for round in 0..33 {
+            let share = rules.round_share(kept, 33 - round);
+            assert!((0.05..=0.15).contains(&share), "{share}");
+            kept += (share * kept as f64) as usize;
+            if round == 0 {
+                kept /= 2;
+            }
+        }
+        assert!((kept as f64 / 8000.0 - 1.0).abs() < 0.01, "{kept}");
+        // The same rules without the target grow 5 % a round, from the same collapse.
+        let mut fixed = 2000_usize;
+        for round in 0..33 {
+            fixed += (0.05 * fixed as f64) as usize;
+            if round == 0 {
+                fixed /= 2;
+            }
+        }
+        assert!(fixed < 5500, "{fixed}");
+    }
+
+    #[test]
+    fn a_growth_target_never_lowers_the_share_nor_passes_its_largest() {
+        let rules = towards(8000.0);
+        // At or past the target, or with nothing kept or no round left: the fraction.
+        for (kept, left) in [(8000, 10), (9000, 10), (0, 10), (100, 0)] {
+            assert_eq!(rules.round_share(kept, left), 0.05, "{kept} {left}");
+        }
+        // Far from it: the largest share; one round from it: what reaches it.
+        assert_eq!(rules.round_share(10, 2), 0.15);
+        assert_eq!(rules.round_share(7000, 1), 0.1429);
+        // Without a target: the fraction, whatever the count.
+        assert_eq!(grow_all().round_share(10, 2), grow_all().fraction);
+        assert_eq!(grow_all().max_share(), grow_all().fraction);
+    }
+
+    #[test]
+    fn a_round_grows_the_share_its_target_asks_for() {
+        // Ten visible kernels, each with a gradient: a target of 12 one round away grows
+        // two of them (20 %, above the 5 % floor and within 100 %).
+        let kernels: Vec<Kernel> = (0..10)
+            .map(|i| {
+                let mut kernel = one_kernel([0.0; 3], 0.01).kernel(0);
+                kernel.mean[0] = f64::from(i);
+                kernel
+            })
+            .collect();
+        let mut scene = Scene::from_kernels(&kernels, [0.0; 3], "<test>")
+            .unwrap()
+            .into_alpha(vec![0.8; 10], 0, Vec::new(), "<test>")
+            .unwrap();
+        let mut stats = DensityStats::new(10);
+        stats.add_view((0..10).map(|i| (i, [1.0, 0.0])), 1.0);
+        let rules = AlphaRules {
+            fraction: 0.05,
+            growth_target: Some(GrowthTarget {
+                kernels: 12.0,
+                max_share: 1.0,
+            }),
+            ..grow_all()
+        };
+        let (sources, _) = densify_and_prune(&mut scene, &stats, &rules, 1);
+        assert_eq!(sources.len(), 12);
     }
 }

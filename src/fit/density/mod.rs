@@ -29,7 +29,7 @@ use crate::model::error::Result;
 use crate::model::scene::Scene;
 
 pub use additive::AdditiveRules;
-pub use alpha::AlphaRules;
+pub use alpha::{AlphaRules, GrowthTarget};
 pub use prune::SpacetimePrune;
 pub use shape::ShapeBound;
 pub use turning::{Pull, Turning, TurningRule};
@@ -255,12 +255,12 @@ impl DensityRules {
     }
 
     /// The most the kernel count can grow in one step, as a factor: a round adds at most
-    /// its share of the kernels, `(1 + share)^(1/every)` a step (1 without rounds).
+    /// its largest share of the kernels, `(1 + share)^(1/every)` a step (1 without rounds).
     #[must_use]
     pub fn max_growth_per_step(&self) -> f64 {
         let (share, every) = match self {
             DensityRules::Additive(rules) => (rules.max_growth, rules.every),
-            DensityRules::Alpha(rules) => (rules.fraction, rules.every),
+            DensityRules::Alpha(rules) => (rules.max_share(), rules.every),
         };
         if every == 0 {
             1.0
@@ -277,7 +277,6 @@ impl DensityRules {
             DensityRules::Alpha(rules) => rules.max_kernels,
         }
     }
-
     /// The rules' work after step `step` (1-based) of `steps`: a round when one is due
     /// (then `stats` start a new window), an opacity reset when one is due.
     /// `training_loss` measures the loss over every training view, for rules that judge by
@@ -311,7 +310,9 @@ impl DensityRules {
                     change.opacities_reset = true;
                 }
                 if rules.round_due(step, steps) {
-                    let (sources, lines) = alpha::densify_and_prune(scene, stats, rules);
+                    let rounds_left = rules.rounds_from(step, steps);
+                    let (sources, lines) =
+                        alpha::densify_and_prune(scene, stats, rules, rounds_left);
                     change.sources = Some(sources);
                     change.lines = lines;
                 }
