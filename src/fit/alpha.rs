@@ -151,9 +151,9 @@ pub struct AlphaFitOptions {
 
 /// A kernel budget that follows the image size: the kernels a fit ends with,
 /// `coefficient · P^exponent` for the `P` pixels of its largest training view (at the fit's
-/// size), at most `max_per_pixel · P`. Its density rounds grow towards that count divided by the share the pruning by
-/// score keeps, each round by the share of the visible kernels that reaches it in the rounds
-/// left ([`crate::fit::density::GrowthTarget`]), at most `max_growth` and never less than the
+/// size), at most `max_per_pixel · P`. Its density rounds grow towards that count divided
+/// by the share the pruning by score keeps, each round by the share of the visible kernels
+/// that reaches it in the rounds left ([`crate::fit::density::GrowthTarget`]), at most `max_growth` and never less than the
 /// options' `densify_fraction`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KernelBudget {
@@ -162,7 +162,8 @@ pub struct KernelBudget {
     /// The power of the largest view's pixel count `P` the budget follows: 1 for a share of
     /// the pixels, ½ for a count that grows with the views' side.
     pub exponent: f64,
-    /// The most kernels a pixel of the largest view the budget gives (small views).
+    /// At most this many kernels per pixel of the largest view (it bounds small views'
+    /// budgets).
     pub max_per_pixel: f64,
     /// The largest growth per round it may ask for.
     pub max_growth: f64,
