@@ -122,10 +122,7 @@ impl TimeLeft {
                 .map_or(1.0, DensityRules::max_growth_per_step),
             towards_target: match training.density {
                 Some(DensityRules::Alpha(rules)) if rules.growth_target.is_some() => {
-                    let rounds = (1..=training.steps)
-                        .filter(|&step| rules.round_due(step, training.steps))
-                        .collect();
-                    Some((rules, rounds))
+                    Some((rules, rules.round_steps(training.steps).collect()))
                 }
                 _ => None,
             },

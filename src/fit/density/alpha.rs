@@ -97,12 +97,15 @@ impl AlphaRules {
         (step - 1) as f64 / (steps.max(2) - 1) as f64
     }
 
+    /// The steps of a run of `steps` after which a round runs, in order.
+    pub fn round_steps(&self, steps: usize) -> impl Iterator<Item = usize> + '_ {
+        (1..=steps).filter(move |&s| self.round_due(s, steps))
+    }
+
     /// The rounds that run after steps `step..=steps` of `steps`.
     #[must_use]
     pub fn rounds_from(&self, step: usize, steps: usize) -> usize {
-        (step.max(1)..=steps)
-            .filter(|&s| self.round_due(s, steps))
-            .count()
+        self.round_steps(steps).filter(|&s| s >= step).count()
     }
 
     /// The share of the visible kernels a round grows when `kept` kernels are kept and
