@@ -598,7 +598,7 @@ mod tests {
         training
     }
 
-    /// Six default fits recorded on a 2-core machine, replayed through the estimate:
+    /// Seven default fits recorded on a 2-core machine, replayed through the estimate:
     /// within 30 % of the time left at every 5 % of the run from 10 % to 90 %.
     #[test]
     fn recorded_default_fits_are_estimated_within_thirty_percent_from_a_tenth() {
@@ -611,6 +611,9 @@ mod tests {
         ));
         let lego_target = recorded(include_str!(
             "../../tests/data/time_left/lego400_target.txt"
+        ));
+        let lego_thumbnails = recorded(include_str!(
+            "../../tests/data/time_left/lego100_target.txt"
         ));
         let coarse_to_fine = [(4, 0.3), (2, 0.6)];
         let photos = [(2, 0.6)];
@@ -630,10 +633,11 @@ mod tests {
             pruned: 0.5,
             target: None,
         };
-        // The last grew towards 32 000 kernels at up to 15 % a round, then lost half.
-        let object_target = Growth {
+        // The last two grew towards 32 000 and 8000 kernels at up to 15 % a round, then
+        // lost half.
+        let object_target = |kernels| Growth {
             share: 0.15,
-            target: Some(32_000.0),
+            target: Some(kernels),
             ..object_budget
         };
         let fits = [
@@ -671,8 +675,15 @@ mod tests {
                 &lego_target,
                 &coarse_to_fine[..],
                 dssim,
-                object_target,
+                object_target(32_000.0),
                 [400, 400],
+            ),
+            (
+                &lego_thumbnails,
+                &[][..],
+                dssim,
+                object_target(8000.0),
+                [100, 100],
             ),
         ];
         let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
