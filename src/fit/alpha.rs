@@ -153,8 +153,8 @@ pub struct AlphaFitOptions {
 /// `coefficient · P^exponent` for the `P` pixels of its largest training view (at the fit's
 /// size), at most `max_per_pixel · P`. Its density rounds grow towards that count divided
 /// by the share the pruning by score keeps, each round by the share of the visible kernels
-/// that reaches it in the rounds left ([`crate::fit::density::GrowthTarget`]), at most `max_growth` and never less than the
-/// options' `densify_fraction`.
+/// that reaches it in the rounds left ([`crate::fit::density::GrowthTarget`]), at most
+/// `max_growth` and never less than the options' `densify_fraction`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KernelBudget {
     /// The kernels per `P^exponent`.
