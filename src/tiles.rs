@@ -117,6 +117,17 @@ impl TileBins {
         &self.proj_from_entry[self.tile_offsets[t] as usize..self.tile_offsets[t + 1] as usize]
     }
 
+    /// How many projected kernels some tile lists: the kernels whose cut-off ellipse reaches
+    /// a pixel block of the image (SPEC §5), not those merely in front of the camera.
+    #[must_use]
+    pub fn kernels_listed(&self) -> usize {
+        let mut listed = vec![false; self.pixel_bounds.len()];
+        for &p in &self.proj_from_entry {
+            listed[p as usize] = true;
+        }
+        listed.iter().filter(|&&l| l).count()
+    }
+
     /// The pixel rectangle `[x0, x1, y0, y1]` (half-open) of tile `t`, clipped to the image.
     #[must_use]
     pub fn tile_rect(&self, t: usize) -> [u32; 4] {

@@ -129,7 +129,8 @@ pub struct RenderSummary {
     out: PathBuf,
     size: (u32, u32),
     time: f64,
-    projected: usize,
+    /// Kernels some tile lists (their cut-off ellipse reaches the image).
+    on_screen: usize,
     kernels: usize,
     pairs: u64,
 }
@@ -143,7 +144,7 @@ impl fmt::Display for RenderSummary {
             self.size.0,
             self.size.1,
             self.time,
-            self.projected,
+            self.on_screen,
             self.kernels,
             self.pairs
         )
@@ -232,7 +233,7 @@ pub fn render(request: &RenderRequest) -> Result<RenderSummary> {
             out: request.out.clone(),
             size: (camera.width, camera.height),
             time: view.time,
-            projected: stats.projected,
+            on_screen: context.bins.kernels_listed(),
             kernels: scene.len(),
             pairs: stats.pairs,
         })

@@ -66,6 +66,27 @@ fn renders_exr_and_png_8_and_16_bit() {
     assert_eq!(files_in(dir.path()), ["a.exr", "a.png", "b.png"]);
 }
 
+/// `render`'s summary counts the kernels that reach the image, not every kernel in front of
+/// the camera: the blob, and a copy of it three units to the camera's right (in front, at
+/// depth 3, its ellipse some 90 pixels past the right edge).
+#[test]
+fn render_counts_on_screen_only_the_kernels_that_reach_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = r#"{"kernels": [
+        {"mean": [0.5, 0.5, 0.5, 0.5], "scale": [0.1, 0.1, 0.1, 100.0], "amplitude": [1.0, 1.0, 1.0]},
+        {"mean": [-1.6213203435596424, 0.5, -1.6213203435596424, 0.5], "scale": [0.1, 0.1, 0.1, 100.0], "amplitude": [1.0, 1.0, 1.0]}
+    ], "background": [0.0, 0.0, 0.0]}"#;
+    std::fs::write(dir.path().join("two.json"), scene).unwrap();
+    let camera = data("blob_camera.json");
+    let output = splat4d(
+        &render_args("two.json", camera.to_str().unwrap(), "two.png"),
+        dir.path(),
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    let printed = String::from_utf8_lossy(&output.stdout);
+    assert!(printed.contains(", 1 of 2 kernels on screen,"), "{printed}");
+}
+
 #[test]
 fn threads_flag_does_not_change_the_output() {
     let dir = tempfile::tempdir().unwrap();
