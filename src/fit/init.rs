@@ -46,12 +46,7 @@ pub fn box_from_cameras(cameras: &[Camera], time: [f64; 2]) -> Result<SpaceTimeB
     let mut rhs = DVec3::ZERO;
     let axes: Vec<(DVec3, DVec3)> = cameras
         .iter()
-        .map(|c| {
-            let rows = c.rotation();
-            // The optical axis is the third row of Rc (camera z in world), normalised.
-            let dir = DVec3::from(rows[2]).normalize();
-            (DVec3::from(c.centre()), dir)
-        })
+        .map(|c| (DVec3::from(c.centre()), DVec3::from(c.optical_axis())))
         .collect();
     for (centre, dir) in &axes {
         // Projector onto the plane orthogonal to the axis.

@@ -313,7 +313,7 @@ fn mean_axis(cameras: &[Camera]) -> ([f64; 3], [f64; 3]) {
     let centre: [f64; 3] =
         std::array::from_fn(|a| cameras.iter().map(|c| c.centre()[a]).sum::<f64>() / n);
     let axis: [f64; 3] =
-        std::array::from_fn(|a| cameras.iter().map(|c| c.rotation()[2][a]).sum::<f64>() / n);
+        std::array::from_fn(|a| cameras.iter().map(|c| c.optical_axis()[a]).sum::<f64>() / n);
     let norm = axis.iter().map(|v| v * v).sum::<f64>().sqrt();
     let unit = if norm > 1e-9 {
         axis.map(|v| v / norm)

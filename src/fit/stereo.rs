@@ -139,17 +139,10 @@ fn working_copy(view: &View) -> (Camera, Image) {
     (camera, view.image.downscaled(factor))
 }
 
-/// The camera's optical axis in world space (the third row of Rc).
-fn axis(camera: &Camera) -> [f64; 3] {
-    let z = camera.rotation()[2];
-    let norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-    z.map(|v| v / norm)
-}
-
 /// Up to [`NEIGHBOURS`] views near view `r` that look the same way from elsewhere.
 fn neighbours_of(r: usize, working: &[(Camera, Image)]) -> Vec<usize> {
     let reference = &working[r].0;
-    let (centre, dir) = (reference.centre(), axis(reference));
+    let (centre, dir) = (reference.centre(), reference.optical_axis());
     let cos_max = MAX_AXIS_ANGLE_DEGREES.to_radians().cos();
     let mut candidates: Vec<(f64, usize)> = working
         .iter()
@@ -161,7 +154,8 @@ fn neighbours_of(r: usize, working: &[(Camera, Image)]) -> Vec<usize> {
                 .map(|a| (other[a] - centre[a]).powi(2))
                 .sum::<f64>()
                 .sqrt();
-            let cos = (0..3).map(|a| axis(camera)[a] * dir[a]).sum::<f64>();
+            let axis = camera.optical_axis();
+            let cos = (0..3).map(|a| axis[a] * dir[a]).sum::<f64>();
             (cos >= cos_max && distance > 1e-9).then_some((distance, n))
         })
         .collect();
@@ -295,13 +289,7 @@ pub const AGREEMENT: f64 = 0.02;
 pub(crate) fn camera_to_world(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
     let r = camera.rotation();
     let transpose: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| r[b][a]));
-    let orthonormal = (0..3).all(|a| {
-        (0..3).all(|b| {
-            let dot: f64 = (0..3).map(|k| r[a][k] * r[b][k]).sum();
-            (dot - f64::from(u8::from(a == b))).abs() <= 1e-6
-        })
-    });
-    if orthonormal {
+    if camera.has_orthonormal_rotation() {
         return (transpose, camera.centre());
     }
     // glam's matrices are column-major: the transpose's columns are Rc's rows.

@@ -256,6 +256,43 @@ impl Camera {
         w2c.inverse().w_axis.truncate().into()
     }
 
+    /// The optical axis in world space, a unit vector: the direction `Rc⁻¹ (0, 0, 1)` of the
+    /// ray through the principal point, along which the camera depth grows. By the
+    /// adjugate it is `(r₀ × r₁) / det Rc` for `Rc`'s rows `r₀ r₁ r₂`: the third row itself
+    /// only when `Rc` is a rotation (SPEC §3 allows any invertible `Rc`), and when it is one
+    /// to 1e-6 in `Rc Rcᵀ` (rotations from files written to 7 digits or more) the third row,
+    /// normalised, is taken. Zero when `Rc` is singular or not finite (a loaded camera is
+    /// neither).
+    #[must_use]
+    pub fn optical_axis(&self) -> [f64; 3] {
+        let [r0, r1, r2] = self.rotation().map(DVec3::from);
+        let across = r0.cross(r1);
+        let det = across.dot(r2);
+        let axis = if self.has_orthonormal_rotation() {
+            r2
+        } else {
+            across * det.signum()
+        };
+        let norm = axis.length();
+        if det == 0.0 || !(norm.is_finite() && norm > 0.0) {
+            return [0.0; 3];
+        }
+        (axis / norm).into()
+    }
+
+    /// Whether `Rc`'s rows are orthonormal to 1e-6 in `Rc Rcᵀ` (rotations, and reflections,
+    /// from files written to 7 digits or more): then `Rcᵀ` may stand for `Rc⁻¹`.
+    #[must_use]
+    pub fn has_orthonormal_rotation(&self) -> bool {
+        let rows = self.rotation();
+        (0..3).all(|a| {
+            (0..3).all(|b| {
+                let dot: f64 = (0..3).map(|k| rows[a][k] * rows[b][k]).sum();
+                (dot - f64::from(u8::from(a == b))).abs() <= 1e-6
+            })
+        })
+    }
+
     /// A world point in camera space, `Rc p + tc` (OpenCV axes).
     #[must_use]
     pub fn to_camera_space(&self, p: [f64; 3]) -> [f64; 3] {
@@ -395,6 +432,49 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The optical axis is the ray through the principal point: points along it from the
+    /// centre project onto `(cx, cy)` at growing depth, for a rotation and for an `Rc` whose
+    /// third row is not orthogonal to the others (a shear: SPEC §3 allows any invertible
+    /// `Rc`), where the third row is not the axis.
+    #[test]
+    fn the_optical_axis_is_the_ray_through_the_principal_point() {
+        let mut camera = Camera::look_at(
+            [1.0, 2.0, 3.0],
+            [0.0, 0.5, 0.0],
+            [0.0, 1.0, 0.0],
+            60.0,
+            64,
+            48,
+        )
+        .unwrap();
+        let looking: [f64; 3] = std::array::from_fn(|a| [0.0, 0.5, 0.0][a] - [1.0, 2.0, 3.0][a]);
+        let norm = looking.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let axis = camera.optical_axis();
+        for a in 0..3 {
+            assert!((axis[a] - looking[a] / norm).abs() < 1e-12, "{axis:?}");
+        }
+        // Shear the third row towards the first (and scale it): Rc stays invertible.
+        for b in 0..4 {
+            camera.world_to_camera[2][b] =
+                1.7 * camera.world_to_camera[2][b] + 0.6 * camera.world_to_camera[0][b];
+        }
+        let axis = camera.optical_axis();
+        let row = camera.rotation()[2];
+        let row_norm = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!((0..3).any(|a| (axis[a] - row[a] / row_norm).abs() > 0.1));
+        let centre = camera.centre();
+        for (k, distance) in [0.5, 2.0].into_iter().enumerate() {
+            let point: [f64; 3] = std::array::from_fn(|a| centre[a] + distance * axis[a]);
+            let [u, v, z] = camera.project_point(point);
+            assert!(
+                (u - camera.cx).abs() < 1e-9 && (v - camera.cy).abs() < 1e-9,
+                "{k}: {u} {v}"
+            );
+            assert!(z > 0.0, "{k}: in front");
+        }
+        assert!((axis.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn look_at_puts_the_target_at_the_centre_with_up_up() {
