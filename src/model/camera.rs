@@ -433,13 +433,9 @@ impl Camera {
 mod tests {
     use super::*;
 
-    /// The optical axis is the ray through the principal point: points along it from the
-    /// centre project onto `(cx, cy)` at growing depth, for a rotation and for an `Rc` whose
-    /// third row is not orthogonal to the others (a shear: SPEC §3 allows any invertible
-    /// `Rc`), where the third row is not the axis.
-    #[test]
-    fn the_optical_axis_is_the_ray_through_the_principal_point() {
-        let mut camera = Camera::look_at(
+    /// A 64×48 camera at (1, 2, 3) looking at (0, 0.5, 0), y up, 60° vertically.
+    fn looking_at_target() -> Camera {
+        Camera::look_at(
             [1.0, 2.0, 3.0],
             [0.0, 0.5, 0.0],
             [0.0, 1.0, 0.0],
@@ -447,7 +443,16 @@ mod tests {
             64,
             48,
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    /// The optical axis is the ray through the principal point: points along it from the
+    /// centre project onto `(cx, cy)` at growing depth, for a rotation and for an `Rc` whose
+    /// third row is not orthogonal to the others (a shear: SPEC §3 allows any invertible
+    /// `Rc`), where the third row is not the axis.
+    #[test]
+    fn the_optical_axis_is_the_ray_through_the_principal_point() {
+        let mut camera = looking_at_target();
         let looking: [f64; 3] = std::array::from_fn(|a| [0.0, 0.5, 0.0][a] - [1.0, 2.0, 3.0][a]);
         let norm = looking.iter().map(|v| v * v).sum::<f64>().sqrt();
         let axis = camera.optical_axis();
@@ -478,15 +483,7 @@ mod tests {
 
     #[test]
     fn look_at_puts_the_target_at_the_centre_with_up_up() {
-        let camera = Camera::look_at(
-            [1.0, 2.0, 3.0],
-            [0.0, 0.5, 0.0],
-            [0.0, 1.0, 0.0],
-            60.0,
-            64,
-            48,
-        )
-        .unwrap();
+        let camera = looking_at_target();
         let [u, v, z] = camera.project_point([0.0, 0.5, 0.0]);
         assert!((u - 32.0).abs() < 1e-12 && (v - 24.0).abs() < 1e-12 && z > 0.0);
         // A point above the target appears higher in the image (smaller v: y is down).
