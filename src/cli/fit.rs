@@ -154,7 +154,8 @@ pub struct FitArgs {
     /// Largest fraction of the kernels densified in one round (default: 0.5 additive;
     /// alpha, 0.05 of the visible kernels, raised each round to what reaches a kernel
     /// budget in the rounds left: photos up to 0.1 for 0.2 kernels per pixel of the largest
-    /// training view, renders of an object up to 0.15 for 40 √pixels of it after the
+    /// training view, times (4.5°/spacing)² and never passed where still photos' axes are
+    /// more than 4.5° apart, renders of an object up to 0.15 for 40 √pixels of it after the
     /// pruning by score).
     #[arg(long, value_parser = super::args::finite, help_heading = BOTH)]
     max_growth: Option<f64>,

@@ -167,6 +167,10 @@ pub struct KernelBudget {
     pub max_per_pixel: f64,
     /// The largest growth per round it may ask for.
     pub max_growth: f64,
+    /// The view spacing, in degrees, above which the training views are sparse: the budget
+    /// is then multiplied by `(dense_spacing / spacing)²` and is a cap the density rounds
+    /// never pass ([`crate::fit::plan::view_spacing_degrees`]); `None`: never sparse.
+    pub dense_spacing: Option<f64>,
 }
 
 /// Which kernels of an alpha fit carry fitted SPEC §9 motion: an acceleration and an

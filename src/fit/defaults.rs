@@ -190,7 +190,26 @@ pub const DEFAULT_PHOTO_KERNEL_BUDGET: KernelBudget = KernelBudget {
     exponent: 1.0,
     max_per_pixel: 0.2,
     max_growth: 0.1,
+    dense_spacing: Some(DEFAULT_DENSE_VIEW_SPACING),
 };
+
+/// The view spacing (the median over the training views of the angle between a view's
+/// optical axis and its nearest other view's, [`crate::fit::plan::view_spacing_degrees`])
+/// above which photos of a still scene are sparse: [`DEFAULT_PHOTO_KERNEL_BUDGET`] shrinks by
+/// `(4.5° / spacing)²` there, as the views' density on the sphere of directions falls, and
+/// becomes a cap, at least twice the start ([`crate::fit::plan::SPARSE_VIEWS_LEAST_GROWTH`]).
+/// Kernels past it fit what only the training photos see.
+///
+/// Measured (2026-11-28, `docs/fitting.md`, "A real DSLR capture" and "A second real
+/// capture", one run each, 2 cores). Two real COLMAP captures are sparse and lose held-out
+/// PSNR to growth: a phone capture of a computer mouse (Myhan1023/mouse-3d-reconstruction,
+/// 56 photos, spacing 7.8°) at `--downscale 4`, 34 561 kernels (the budget) 21.01 dB held
+/// out per view in 660 s, 8640 kernels 21.85 dB in 350 s; the king figurine (23 photos,
+/// 10.4°), 11 796 kernels (the 5 % floor past the budget) 18.96 dB, 8250 kernels 19.51 dB,
+/// 4100 kernels 19.54 dB. This rule: the mouse 11 633 kernels, 21.77 dB; the king 5956
+/// kernels, 19.16 dB in 330 s. The dense ones gain from growth and keep the budget: instant-ngp's
+/// `fox` (3.2°), the phone-like proxy (3.9°), the DSLR-like proxy (1.1°).
+pub const DEFAULT_DENSE_VIEW_SPACING: f64 = 4.5;
 
 /// The kernel budget of an alpha fit of renders of an object (training views whose
 /// background is flat) where `--max-growth` is not given: 40 √P kernels for the `P` pixels
@@ -218,6 +237,7 @@ pub const DEFAULT_OBJECT_KERNEL_BUDGET: KernelBudget = KernelBudget {
     exponent: 0.5,
     max_per_pixel: 0.5,
     max_growth: 0.15,
+    dense_spacing: None,
 };
 
 /// The weight `λ` of `1 - SSIM` in the 3DGS loss (`--loss l1-dssim`; [`crate::fit::ssim`]):

@@ -568,6 +568,12 @@ impl FitPlan {
     }
 }
 
+/// The least a sparse-view cap (set by [`prepare_alpha`] for still photos from sparse
+/// views) lets the density rounds grow the start to, as a multiple of it: the king figurine's start of 2978 kernels (from 23
+/// photos 10.7° apart) fitted its held-out photos at 18.64 dB left as it was, 19.54 dB grown
+/// to 4100 and 19.51 dB to 8250 (`docs/fitting.md`, "A real DSLR capture").
+pub const SPARSE_VIEWS_LEAST_GROWTH: f64 = 2.0;
+
 /// Fewer points than this from the plane sweep, and an alpha fit starts at random instead.
 pub const MIN_SWEPT_POINTS: usize = 100;
 
@@ -619,10 +625,18 @@ pub fn prepare_alpha(
     };
     let target = growth_target(options, scene.len(), train);
     let mut training = options.training(&bounds);
+    let sparse = sparse_views_cap(options, scene.len(), train);
     if let (Some(target), Some(budget)) = (target, options.kernel_budget) {
-        notes.push(growth_note(target, budget, options, scene.len()));
+        let factor = sparse.as_ref().map(|&(_, factor, _)| factor);
+        notes.push(growth_note(target, budget, options, scene.len(), factor));
         if let Some(DensityRules::Alpha(rules)) = &mut training.density {
             rules.growth_target = Some(target);
+        }
+    }
+    if let Some((cap, _, note)) = sparse {
+        notes.push(note);
+        if let Some(DensityRules::Alpha(rules)) = &mut training.density {
+            rules.max_kernels = rules.max_kernels.min(cap);
         }
     }
     training.coarse = options.coarse.stages(train);
@@ -670,30 +684,108 @@ pub fn growth_target(
 }
 
 /// The kernels `budget` gives a fit of `train`: its coefficient times the pixels of the
-/// largest view to its exponent, at most its `max_per_pixel` of those pixels.
+/// largest view to its exponent, at most its `max_per_pixel` of those pixels, times the
+/// views' [`sparse_views_factor`].
 fn budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
     let largest = train
         .iter()
         .map(|v| f64::from(v.image.width) * f64::from(v.image.height))
         .fold(0.0, f64::max);
-    (budget.coefficient * largest.powf(budget.exponent)).min(budget.max_per_pixel * largest)
+    let kernels =
+        (budget.coefficient * largest.powf(budget.exponent)).min(budget.max_per_pixel * largest);
+    kernels * sparse_views_factor(budget, train).map_or(1.0, |(factor, _)| factor)
+}
+
+/// Where `budget` finds the views `train` sparse (their [`view_spacing_degrees`] above its
+/// `dense_spacing`): the share of the budget they keep, `(dense_spacing / spacing)²`, and
+/// the spacing; else `None`. Only photos of a still scene (every view at one time) are
+/// judged: the captures this was measured on; a video's kernels also span time.
+fn sparse_views_factor(budget: &KernelBudget, train: &[View]) -> Option<(f64, f64)> {
+    let dense = budget.dense_spacing?;
+    let first = train.first()?.time;
+    if train.iter().any(|v| v.time != first) {
+        return None;
+    }
+    let spacing = view_spacing_degrees(train)?;
+    (spacing > dense).then(|| ((dense / spacing).powi(2), spacing))
+}
+
+/// How far apart the views `train` look, in degrees: the median over the views of the
+/// angle between a view's optical axis ([`Camera::optical_axis`]) and the nearest axis of
+/// another view. Frames of one camera at several times count as one view. `None` with fewer
+/// than two distinct axes.
+#[must_use]
+pub fn view_spacing_degrees(train: &[View]) -> Option<f64> {
+    let mut axes: Vec<[f64; 3]> = Vec::new();
+    for view in train {
+        let axis = view.camera.optical_axis();
+        if axis != [0.0; 3] && !axes.contains(&axis) {
+            axes.push(axis);
+        }
+    }
+    if axes.len() < 2 {
+        return None;
+    }
+    let mut nearest: Vec<f64> = axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let closest = axes
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, b)| (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0))
+                .fold(-1.0, f64::max);
+            closest.acos().to_degrees()
+        })
+        .collect();
+    nearest.sort_by(f64::total_cmp);
+    Some(nearest[nearest.len() / 2])
+}
+
+/// The cap sparse views put on an alpha fit of `options` of `train` from `start` kernels
+/// ([`sparse_views_factor`] of its kernel budget): the budget, at least
+/// [`SPARSE_VIEWS_LEAST_GROWTH`] times the start, the share of the dense views' budget the
+/// budget is, and the note that says so; `None` where the budget finds the views dense, or
+/// without a budget or rounds.
+fn sparse_views_cap(
+    options: &AlphaFitOptions,
+    start: usize,
+    train: &[View],
+) -> Option<(usize, f64, String)> {
+    let budget = options.kernel_budget?;
+    let (factor, spacing) = sparse_views_factor(&budget, train)?;
+    if options.rules(1.0, 1.0).rounds_from(1, options.steps) == 0 {
+        return None;
+    }
+    let kept = 1.0 - options.prune_fraction.clamp(0.0, 1.0);
+    let budget_count = (budget_kernels(&budget, train) / kept.max(f64::MIN_POSITIVE)) as usize;
+    let least = (SPARSE_VIEWS_LEAST_GROWTH * start as f64) as usize;
+    let cap = budget_count.max(least).min(options.max_kernels);
+    let dense = budget.dense_spacing.unwrap_or(spacing);
+    let note = format!(
+        "sparse views: the training views' axes are {spacing:.1}° from their nearest (the median), above {dense}°, so the kernel budget is {factor:.2} of the dense views' and growth stops at {cap} kernels, the budget or twice the start (give `max_growth` to choose)"
+    );
+    Some((cap, factor, note))
 }
 
 /// The note on the growth target `target` that `budget` gives a fit of `options` from
 /// `start` kernels: its pruning by score, and the least share a round grows, which passes
 /// the target when `start` grown by it every round would (transparent kernels pruned on the
-/// way aside).
+/// way aside) unless sparse views made the budget a cap (`sparse`, the share of it they
+/// keep, [`sparse_views_cap`]).
 fn growth_note(
     target: GrowthTarget,
     budget: KernelBudget,
     options: &AlphaFitOptions,
     start: usize,
+    sparse: Option<f64>,
 ) -> String {
     let prune_fraction = options.prune_fraction;
     let least = options.densify_fraction;
     let rounds = options.rules(1.0, 1.0).rounds_from(1, options.steps);
     let at_least = start as f64 * (1.0 + least).powi(rounds.min(i32::MAX as usize) as i32);
-    let past = if at_least > target.kernels {
+    let past = if at_least > target.kernels && sparse.is_none() {
         format!(
             "; {} % a round from the start's {start} kernels passes it",
             percent(least)
@@ -708,6 +800,10 @@ fn growth_note(
             "{} times the largest view's pixels to the power {}, at most {} a pixel",
             budget.coefficient, budget.exponent, budget.max_per_pixel
         )
+    };
+    let size = match sparse {
+        Some(factor) => format!("{size}, times {factor:.2} for sparse views"),
+        None => size,
     };
     let pruned = if prune_fraction > 0.0 {
         format!(
@@ -1097,15 +1193,28 @@ mod tests {
         }
     }
 
-    /// `views()` with `width × height` images.
-    fn views_of(width: u32, height: u32) -> Vec<View> {
-        views()
-            .into_iter()
-            .map(|view| View {
-                image: Image::filled(width, height, [0.0; 3]).into(),
-                ..view
+    /// Four views of `width × height` images from cameras `step` degrees apart on a circle
+    /// about the origin, looking at it.
+    fn views_apart(step: f64, width: u32, height: u32) -> Vec<View> {
+        (0..4)
+            .map(|k| {
+                let angle = (step * k as f64).to_radians();
+                let eye = [3.0 * angle.sin(), 0.0, 3.0 * angle.cos()];
+                View {
+                    camera: Camera::look_at(eye, [0.0; 3], [0.0, 1.0, 0.0], 40.0, width, height)
+                        .unwrap(),
+                    time: 0.0,
+                    image: Image::filled(width, height, [0.0; 3]).into(),
+                    name: format!("view {k}"),
+                    weights: None,
+                }
             })
             .collect()
+    }
+
+    /// Four views of `width × height` images, 1° apart: dense, as a video's frames are.
+    fn views_of(width: u32, height: u32) -> Vec<View> {
+        views_apart(1.0, width, height)
     }
 
     /// The note says when the least growth a round passes the budget: from 2978 kernels
@@ -1117,7 +1226,7 @@ mod tests {
         let budget = DEFAULT_PHOTO_KERNEL_BUDGET;
         for (width, height, start, passes) in [(250, 164, 2978, true), (480, 270, 1132, false)] {
             let target = growth_target(&options, start, &views_of(width, height)).unwrap();
-            let note = growth_note(target, budget, &options, start);
+            let note = growth_note(target, budget, &options, start, None);
             assert!(
                 note.contains("by 5 to 10 % of the visible kernels"),
                 "{note}"
@@ -1125,6 +1234,94 @@ mod tests {
             let says = format!("5 % a round from the start's {start} kernels passes it");
             assert_eq!(note.contains(&says), passes, "{note}");
         }
+    }
+
+    /// The spacing is the median of each view's nearest axis: three views 2° apart and one
+    /// 30° from them give 2°; frames of one camera count once.
+    #[test]
+    fn the_view_spacing_is_the_median_angle_to_the_nearest_axis() {
+        let spacing = |views: &[View]| view_spacing_degrees(views).unwrap();
+        assert!((spacing(&views_apart(2.0, 8, 8)) - 2.0).abs() < 1e-9);
+        assert!((spacing(&views_apart(20.0, 8, 8)) - 20.0).abs() < 1e-9);
+        let mut apart = views_apart(2.0, 8, 8);
+        apart[3] = views_apart(34.0, 8, 8).remove(1);
+        // Nearest: 2, 2, 2 and 30 degrees.
+        assert!((spacing(&apart) - 2.0).abs() < 1e-9, "{}", spacing(&apart));
+        // One camera at several times: no spacing; a second camera gives its angle.
+        let one = views_apart(5.0, 8, 8).remove(0);
+        let frames = vec![
+            one.clone(),
+            View {
+                time: 1.0,
+                ..one.clone()
+            },
+        ];
+        assert_eq!(view_spacing_degrees(&frames), None);
+        let mut two = frames;
+        two.push(views_apart(5.0, 8, 8).remove(1));
+        assert!((spacing(&two) - 5.0).abs() < 1e-9);
+        assert_eq!(view_spacing_degrees(&[]), None);
+    }
+
+    /// Photos from views 9° apart keep a quarter of the budget, `(4.5 / 9)²`, and growth
+    /// stops there or at twice the start; from views 1° apart the budget is whole and no cap is set; without a
+    /// budget (`max_growth` given), or for a video's views, neither.
+    #[test]
+    fn sparse_photos_keep_a_share_of_the_budget_as_a_cap() {
+        let options = photo_options();
+        let (width, height) = (480, 270);
+        let dense = 0.2 * 480.0 * 270.0;
+        let sparse = views_apart(9.0, width, height);
+        let target = growth_target(&options, 1132, &sparse).unwrap();
+        assert!(
+            (target.kernels - dense / 4.0).abs() < 1e-6,
+            "{}",
+            target.kernels
+        );
+        let (cap, factor, note) = sparse_views_cap(&options, 1132, &sparse).unwrap();
+        assert!((factor - 0.25).abs() < 1e-12);
+        assert_eq!(cap, (dense / 4.0) as usize);
+        assert!(
+            note.contains("9.0°") && note.contains(&format!("stops at {cap} kernels")),
+            "{note}"
+        );
+        // The rounds may at least double the start.
+        assert_eq!(sparse_views_cap(&options, 4000, &sparse).unwrap().0, 8000);
+        // `max_kernels` bounds both.
+        let bounded = AlphaFitOptions {
+            max_kernels: 3000,
+            ..options
+        };
+        assert_eq!(sparse_views_cap(&bounded, 1132, &sparse).unwrap().0, 3000);
+        assert_eq!(sparse_views_cap(&bounded, 2000, &sparse).unwrap().0, 3000);
+        // Dense views: the whole budget, no cap.
+        let dense_views = views_apart(1.0, width, height);
+        assert_eq!(
+            growth_target(&options, 1132, &dense_views).unwrap().kernels,
+            dense
+        );
+        assert_eq!(sparse_views_cap(&options, 1132, &dense_views), None);
+        let no_budget = AlphaFitOptions {
+            kernel_budget: None,
+            ..options
+        };
+        assert_eq!(sparse_views_cap(&no_budget, 1132, &sparse), None);
+        // A video (views at several times) keeps the whole budget.
+        let mut video = sparse.clone();
+        video[1].time = 1.0;
+        assert_eq!(
+            growth_target(&options, 1132, &video).unwrap().kernels,
+            dense
+        );
+        assert_eq!(sparse_views_cap(&options, 1132, &video), None);
+        // A capped budget's note never says the least growth passes it.
+        let target = growth_target(&options, 1132, &sparse).unwrap();
+        let budget = DEFAULT_PHOTO_KERNEL_BUDGET;
+        let start = 2000;
+        let capped = growth_note(target, budget, &options, start, Some(0.25));
+        assert!(!capped.contains("passes it"), "{capped}");
+        assert!(capped.contains("times 0.25 for sparse views"), "{capped}");
+        assert!(growth_note(target, budget, &options, start, None).contains("passes it"));
     }
 
     #[test]
