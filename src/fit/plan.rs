@@ -683,17 +683,22 @@ pub fn growth_target(
     })
 }
 
-/// The kernels `budget` gives a fit of `train`: its coefficient times the pixels of the
-/// largest view to its exponent, at most its `max_per_pixel` of those pixels, times the
-/// views' [`sparse_views_factor`].
+/// The kernels `budget` gives a fit of `train`: [`dense_budget_kernels`] times the views'
+/// [`sparse_views_factor`].
 fn budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
+    dense_budget_kernels(budget, train)
+        * sparse_views_factor(budget, train).map_or(1.0, |(factor, _)| factor)
+}
+
+/// The kernels `budget` gives a fit of `train` whose views are dense: its coefficient times
+/// the pixels of the largest view to its exponent, at most its `max_per_pixel` of those
+/// pixels.
+fn dense_budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
     let largest = train
         .iter()
         .map(|v| f64::from(v.image.width) * f64::from(v.image.height))
         .fold(0.0, f64::max);
-    let kernels =
-        (budget.coefficient * largest.powf(budget.exponent)).min(budget.max_per_pixel * largest);
-    kernels * sparse_views_factor(budget, train).map_or(1.0, |(factor, _)| factor)
+    (budget.coefficient * largest.powf(budget.exponent)).min(budget.max_per_pixel * largest)
 }
 
 /// Where `budget` finds the views `train` sparse (their [`view_spacing_degrees`] above its
@@ -754,15 +759,16 @@ fn sparse_views_cap(
     train: &[View],
 ) -> Option<(usize, f64, String)> {
     let budget = options.kernel_budget?;
+    let dense = budget.dense_spacing?;
     let (factor, spacing) = sparse_views_factor(&budget, train)?;
     if options.rules(1.0, 1.0).rounds_from(1, options.steps) == 0 {
         return None;
     }
     let kept = 1.0 - options.prune_fraction.clamp(0.0, 1.0);
-    let budget_count = (budget_kernels(&budget, train) / kept.max(f64::MIN_POSITIVE)) as usize;
+    let shrunk = dense_budget_kernels(&budget, train) * factor;
+    let budget_count = (shrunk / kept.max(f64::MIN_POSITIVE)) as usize;
     let least = (SPARSE_VIEWS_LEAST_GROWTH * start as f64) as usize;
     let cap = budget_count.max(least).min(options.max_kernels);
-    let dense = budget.dense_spacing.unwrap_or(spacing);
     let note = format!(
         "sparse views: the training views' axes are {spacing:.1}° from their nearest (the median), above {dense}°, so the kernel budget is {factor:.2} of the dense views' and growth stops at {cap} kernels, the budget or twice the start (give `max_growth` to choose)"
     );
