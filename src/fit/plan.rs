@@ -707,12 +707,21 @@ fn dense_budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
 /// judged: the captures this was measured on; a video's kernels also span time.
 fn sparse_views_factor(budget: &KernelBudget, train: &[View]) -> Option<(f64, f64)> {
     let dense = budget.dense_spacing?;
+    let spacing = sparse_spacing(train, dense)?;
+    Some(((dense / spacing).powi(2), spacing))
+}
+
+/// The [`view_spacing_degrees`] of `train` where its views are still photos spaced more
+/// than `dense` degrees apart: every view at one time (the captures this was measured on;
+/// a video's kernels also span time). `None` where they are dense, span time, or are fewer
+/// than two.
+#[must_use]
+pub fn sparse_spacing(train: &[View], dense: f64) -> Option<f64> {
     let first = train.first()?.time;
     if train.iter().any(|v| v.time != first) {
         return None;
     }
-    let spacing = view_spacing_degrees(train)?;
-    (spacing > dense).then(|| ((dense / spacing).powi(2), spacing))
+    view_spacing_degrees(train).filter(|&spacing| spacing > dense)
 }
 
 /// How far apart the views `train` look, in degrees: the median over the views of the
@@ -887,21 +896,34 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
     }
 }
 
-/// The alpha fit's steps, density period and batch when the caller gives no step count:
-/// [`DEFAULT_OBJECT_SCHEDULE`] where the training views' background is flat
-/// (`flat_background`: renders of an object; twice the steps of half as many views took
-/// 0.55× the time within ±0.3 dB at 100×100 and gained at 400×400, `docs/fitting.md`,
-/// "Steps"), else [`DEFAULT_ALPHA`]'s (photos lost).
+/// The alpha fit's steps, density period and batch when the caller gives no step count,
+/// for training views `train`, and a note where the views chose them:
+/// [`DEFAULT_OBJECT_SCHEDULE`] where their background is flat (`flat_background`: renders
+/// of an object; twice the steps of half as many views took 0.55× the time within ±0.3 dB
+/// at 100×100 and gained at 400×400, `docs/fitting.md`, "Steps");
+/// [`DEFAULT_SPARSE_PHOTO_SCHEDULE`] for still photos from sparse views ([`sparse_spacing`]
+/// above [`DEFAULT_DENSE_VIEW_SPACING`]), whose held-out photos peak early; else
+/// [`DEFAULT_ALPHA`]'s (photos lost with the objects' schedule).
 #[must_use]
-pub fn alpha_schedule(flat_background: bool) -> AlphaSchedule {
+pub fn alpha_schedule(flat_background: bool, train: &[View]) -> (AlphaSchedule, Option<String>) {
     if flat_background {
-        DEFAULT_OBJECT_SCHEDULE
-    } else {
-        AlphaSchedule {
-            steps: DEFAULT_ALPHA.steps,
-            densify_every: DEFAULT_ALPHA.densify_every,
-            batch_size: DEFAULT_ALPHA.batch_size,
+        return (DEFAULT_OBJECT_SCHEDULE, None);
+    }
+    let photos = AlphaSchedule {
+        steps: DEFAULT_ALPHA.steps,
+        densify_every: DEFAULT_ALPHA.densify_every,
+        batch_size: DEFAULT_ALPHA.batch_size,
+    };
+    match sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING) {
+        Some(spacing) => {
+            let sparse = DEFAULT_SPARSE_PHOTO_SCHEDULE;
+            let note = format!(
+                "sparse views: {} steps where dense views take {}, as the training views' axes are {spacing:.1}° from their nearest (the median), above {DEFAULT_DENSE_VIEW_SPACING}°, and such fits match their held-out photos best early (give `steps` to choose)",
+                sparse.steps, photos.steps
+            );
+            (sparse, Some(note))
         }
+        None => (photos, None),
     }
 }
 
@@ -1267,6 +1289,40 @@ mod tests {
         two.push(views_apart(5.0, 8, 8).remove(1));
         assert!((spacing(&two) - 5.0).abs() < 1e-9);
         assert_eq!(view_spacing_degrees(&[]), None);
+    }
+
+    /// Without a step count, still photos from views 9° apart take the sparse photos'
+    /// schedule with a note naming their spacing; 1° apart, or a video's frames 9° apart,
+    /// the photos' default; renders of an object (a flat background) the objects' whatever
+    /// their spacing.
+    #[test]
+    fn sparse_still_photos_take_the_short_schedule() {
+        let sparse = views_apart(9.0, 48, 32);
+        let (schedule, note) = alpha_schedule(false, &sparse);
+        assert_eq!(schedule, DEFAULT_SPARSE_PHOTO_SCHEDULE);
+        assert!(schedule.steps < DEFAULT_ALPHA.steps);
+        let note = note.expect("a note on the sparse schedule");
+        assert!(
+            note.contains("9.0°") && note.contains(&format!("{} steps", schedule.steps)),
+            "{note}"
+        );
+        let photos = AlphaSchedule {
+            steps: DEFAULT_ALPHA.steps,
+            densify_every: DEFAULT_ALPHA.densify_every,
+            batch_size: DEFAULT_ALPHA.batch_size,
+        };
+        assert_eq!(
+            alpha_schedule(false, &views_apart(1.0, 48, 32)),
+            (photos, None)
+        );
+        let mut video = sparse.clone();
+        video[1].time = 0.5;
+        assert_eq!(sparse_spacing(&video, DEFAULT_DENSE_VIEW_SPACING), None);
+        assert_eq!(alpha_schedule(false, &video), (photos, None));
+        assert_eq!(
+            alpha_schedule(true, &sparse),
+            (DEFAULT_OBJECT_SCHEDULE, None)
+        );
     }
 
     /// Photos from views 9° apart keep a quarter of the budget, `(4.5 / 9)²`, and growth

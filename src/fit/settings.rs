@@ -558,7 +558,7 @@ impl FitSettings {
             ));
         }
         let by_background = background_defaults(&dataset.train, self.background);
-        let notes = self.photo_notes(by_background.flat);
+        let mut notes = self.photo_notes(by_background.flat);
         let prune_fraction = self.prune_fraction.unwrap_or(by_background.prune_fraction);
         self.check_prune_rounds(prune_fraction)?;
         let loss = self.training_loss(by_background.loss);
@@ -566,7 +566,8 @@ impl FitSettings {
         let (steps, densify_every, batch_size) = match self.steps {
             Some(_) => (options.steps, options.densify_every, options.batch_size),
             None => {
-                let schedule = alpha_schedule(by_background.flat);
+                let (schedule, note) = alpha_schedule(by_background.flat, &dataset.train);
+                notes.extend(note);
                 (
                     schedule.steps,
                     self.densify_every.unwrap_or(schedule.densify_every),

@@ -1251,7 +1251,7 @@ fn the_schedule_follows_the_background_when_no_step_count_is_given() {
         (ready.training.steps, rules.every, ready.training.batch_size)
     };
     let object = DEFAULT_OBJECT_SCHEDULE;
-    assert_eq!(alpha_schedule(true), object);
+    assert_eq!(alpha_schedule(true, &dataset.train), (object, None));
     assert_eq!(
         object.steps / object.densify_every,
         DEFAULT_ALPHA.steps / DEFAULT_ALPHA.densify_every
@@ -1278,8 +1278,10 @@ fn the_schedule_follows_the_background_when_no_step_count_is_given() {
         ..Default::default()
     };
     assert_eq!(schedule(given_period_and_batch), (object.steps, 50, 3));
-    // Photos (a background that is not flat) keep the default's schedule.
-    let photos = alpha_schedule(false);
+    // Photos (a background that is not flat) from dense views keep the default's schedule
+    // (the occluding data's views are a video's, never judged sparse).
+    let (photos, note) = alpha_schedule(false, &dataset.train);
+    assert_eq!(note, None);
     assert_eq!(
         (photos.steps, photos.densify_every, photos.batch_size),
         (
