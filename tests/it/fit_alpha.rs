@@ -1117,6 +1117,75 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
 /// the photos are textured to their borders (the same views
 /// with a checkered backdrop painted behind every pixel the scene leaves black), where
 /// `prune_rounds` and `dssim_weight` are then refused.
+/// `views` with their black (background) pixels painted as a checkerboard of 4-pixel
+/// squares: photos, whose background is not flat.
+fn on_a_checkerboard(mut views: Vec<splat4d::model::View>) -> Vec<splat4d::model::View> {
+    for view in &mut views {
+        let image = std::sync::Arc::make_mut(&mut view.image);
+        let width = image.width as usize;
+        for (p, pixel) in image.pixels.chunks_mut(3).enumerate() {
+            if pixel.iter().all(|&v| v == 0.0) {
+                let checker = ((p % width) / 4 + (p / width) / 4) % 2;
+                pixel.copy_from_slice(&[0.2 + 0.5 * checker as f32, 0.4, 0.3]);
+            }
+        }
+    }
+    views
+}
+
+/// Still photos from sparse views (the occluding data's cameras at one time, over a
+/// textured background) are planned with the sparse photos' schedule and its note; with
+/// a step count given, that count and no note; the same cameras at several times (a
+/// video) keep the photos' default.
+#[test]
+fn sparse_still_photos_are_planned_with_fewer_steps() {
+    use splat4d::fit::plan::{
+        DEFAULT_ALPHA, DEFAULT_DENSE_VIEW_SPACING, DEFAULT_SPARSE_PHOTO_SCHEDULE, Init,
+        view_spacing_degrees,
+    };
+    use splat4d::fit::settings::FitSettings;
+    let (dataset, _) = occluding_dataset(&occluding_scene());
+    let first = dataset.train[0].time;
+    let still: Vec<_> = dataset
+        .train
+        .iter()
+        .filter(|view| view.time == first)
+        .cloned()
+        .collect();
+    assert!(still.len() >= 4, "{} views at one time", still.len());
+    let spacing = view_spacing_degrees(&still).unwrap();
+    assert!(spacing > DEFAULT_DENSE_VIEW_SPACING, "{spacing}°");
+    let plan = |settings: FitSettings, train: Vec<splat4d::model::View>| {
+        let photos = splat4d::model::Dataset {
+            train: on_a_checkerboard(train),
+            ..dataset.clone()
+        };
+        let ready = settings
+            .prepare(None, Init::Auto, "auto", &photos, "<photos>")
+            .unwrap();
+        let says = format!(
+            "sparse views: {} steps",
+            DEFAULT_SPARSE_PHOTO_SCHEDULE.steps
+        );
+        let note = ready.notes.iter().any(|note| note.starts_with(&says));
+        (ready.training.steps, ready.training.batch_size, note)
+    };
+    let sparse = DEFAULT_SPARSE_PHOTO_SCHEDULE;
+    assert_eq!(
+        plan(FitSettings::default(), still.clone()),
+        (sparse.steps, sparse.batch_size, true)
+    );
+    let given = FitSettings {
+        steps: Some(300),
+        ..Default::default()
+    };
+    assert_eq!(plan(given, still), (300, DEFAULT_ALPHA.batch_size, false));
+    assert_eq!(
+        plan(FitSettings::default(), dataset.train.clone()),
+        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.batch_size, false)
+    );
+}
+
 #[test]
 fn the_default_pruning_share_and_loss_follow_the_background() {
     use splat4d::fit::plan::{
@@ -1153,17 +1222,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
             dssim_weight: 0.5
         })
     );
-    let mut photos = dataset.train.clone();
-    for view in &mut photos {
-        let image = std::sync::Arc::make_mut(&mut view.image);
-        let width = image.width as usize;
-        for (p, pixel) in image.pixels.chunks_mut(3).enumerate() {
-            if pixel.iter().all(|&v| v == 0.0) {
-                let checker = ((p % width) / 4 + (p / width) / 4) % 2;
-                pixel.copy_from_slice(&[0.2 + 0.5 * checker as f32, 0.4, 0.3]);
-            }
-        }
-    }
+    let photos = on_a_checkerboard(dataset.train.clone());
     assert_eq!(
         background_defaults(&photos, None),
         BackgroundDefaults {
