@@ -133,7 +133,7 @@ pub const DEFAULT_OBJECT_SCHEDULE: AlphaSchedule = AlphaSchedule {
 
 /// The schedule of still photos from sparse views (their axes more than
 /// [`DEFAULT_DENSE_VIEW_SPACING`] from their nearest, [`crate::fit::plan::sparse_spacing`]):
-/// a third of [`DEFAULT_ALPHA`]'s steps at its density period and batch, so the density
+/// a third of [`DEFAULT_PHOTO_SCHEDULE`]'s steps at its density period and batch, so the density
 /// rounds (5 % to 60 % of the steps) stop at step 1200, no opacity reset falls among them,
 /// SH reaches degree 1, and the last 800 steps polish what the rounds grew. Such photos'
 /// held-out PSNR peaks early and falls as the fit goes on: kernels grown and polished
@@ -151,8 +151,15 @@ pub const DEFAULT_OBJECT_SCHEDULE: AlphaSchedule = AlphaSchedule {
 ///   19.16 dB at 6000, 18.69 dB at 2000 (its held-out PSNR moves by ±0.5 dB between runs).
 pub const DEFAULT_SPARSE_PHOTO_SCHEDULE: AlphaSchedule = AlphaSchedule {
     steps: 2000,
-    densify_every: 100,
-    batch_size: 4,
+    ..DEFAULT_PHOTO_SCHEDULE
+};
+
+/// The schedule of photos from dense views (training views whose background is not flat):
+/// [`DEFAULT_ALPHA`]'s steps, density period and batch.
+pub const DEFAULT_PHOTO_SCHEDULE: AlphaSchedule = AlphaSchedule {
+    steps: DEFAULT_ALPHA.steps,
+    densify_every: DEFAULT_ALPHA.densify_every,
+    batch_size: DEFAULT_ALPHA.batch_size,
 };
 
 /// The early stop `--early-stop F` asks for, with its gain ([`crate::fit::train::EarlyStop`]).

@@ -703,8 +703,7 @@ fn dense_budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
 
 /// Where `budget` finds the views `train` sparse (their [`view_spacing_degrees`] above its
 /// `dense_spacing`): the share of the budget they keep, `(dense_spacing / spacing)²`, and
-/// the spacing; else `None`. Only photos of a still scene (every view at one time) are
-/// judged: the captures this was measured on; a video's kernels also span time.
+/// the spacing; else `None` (only still photos are judged, [`sparse_spacing`]).
 fn sparse_views_factor(budget: &KernelBudget, train: &[View]) -> Option<(f64, f64)> {
     let dense = budget.dense_spacing?;
     let spacing = sparse_spacing(train, dense)?;
@@ -903,17 +902,13 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
 /// at 100×100 and gained at 400×400, `docs/fitting.md`, "Steps");
 /// [`DEFAULT_SPARSE_PHOTO_SCHEDULE`] for still photos from sparse views ([`sparse_spacing`]
 /// above [`DEFAULT_DENSE_VIEW_SPACING`]), whose held-out photos peak early; else
-/// [`DEFAULT_ALPHA`]'s (photos lost with the objects' schedule).
+/// [`DEFAULT_PHOTO_SCHEDULE`] (photos lost with the objects' schedule).
 #[must_use]
 pub fn alpha_schedule(flat_background: bool, train: &[View]) -> (AlphaSchedule, Option<String>) {
     if flat_background {
         return (DEFAULT_OBJECT_SCHEDULE, None);
     }
-    let photos = AlphaSchedule {
-        steps: DEFAULT_ALPHA.steps,
-        densify_every: DEFAULT_ALPHA.densify_every,
-        batch_size: DEFAULT_ALPHA.batch_size,
-    };
+    let photos = DEFAULT_PHOTO_SCHEDULE;
     match sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING) {
         Some(spacing) => {
             let sparse = DEFAULT_SPARSE_PHOTO_SCHEDULE;
@@ -1306,11 +1301,8 @@ mod tests {
             note.contains("9.0°") && note.contains(&format!("{} steps", schedule.steps)),
             "{note}"
         );
-        let photos = AlphaSchedule {
-            steps: DEFAULT_ALPHA.steps,
-            densify_every: DEFAULT_ALPHA.densify_every,
-            batch_size: DEFAULT_ALPHA.batch_size,
-        };
+        let photos = DEFAULT_PHOTO_SCHEDULE;
+        assert_eq!(photos.steps, DEFAULT_ALPHA.steps);
         assert_eq!(
             alpha_schedule(false, &views_apart(1.0, 48, 32)),
             (photos, None)

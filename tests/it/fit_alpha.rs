@@ -1111,12 +1111,6 @@ fn a_fit_pruned_by_score_keeps_its_heldout_psnr_with_half_the_kernels() {
     );
 }
 
-/// The pruning by score's default share, the loss and the kernel budget follow the data:
-/// half the kernels, the 3DGS loss and the objects' budget where the views' background is
-/// flat (the occluding data over black), no pruning, the MSE and the photos' budget where
-/// the photos are textured to their borders (the same views
-/// with a checkered backdrop painted behind every pixel the scene leaves black), where
-/// `prune_rounds` and `dssim_weight` are then refused.
 /// `views` with their black (background) pixels painted as a checkerboard of 4-pixel
 /// squares: photos, whose background is not flat.
 fn on_a_checkerboard(mut views: Vec<splat4d::model::View>) -> Vec<splat4d::model::View> {
@@ -1186,6 +1180,12 @@ fn sparse_still_photos_are_planned_with_fewer_steps() {
     );
 }
 
+/// The pruning by score's default share, the loss and the kernel budget follow the data:
+/// half the kernels, the 3DGS loss and the objects' budget where the views' background is
+/// flat (the occluding data over black), no pruning, the MSE and the photos' budget where
+/// the photos are textured to their borders (the same views
+/// with a checkered backdrop painted behind every pixel the scene leaves black), where
+/// `prune_rounds` and `dssim_weight` are then refused.
 #[test]
 fn the_default_pruning_share_and_loss_follow_the_background() {
     use splat4d::fit::plan::{
