@@ -33,6 +33,7 @@ fn records(path: &str) -> Vec<StepRecord> {
                 train_loss: 0.0,
                 heldout_psnr: None,
                 kernels: r["kernels"].as_u64().expect("kernels") as usize,
+                pairs: r["pairs"].as_u64().unwrap_or(0),
                 downscale: r["downscale"].as_u64().unwrap_or(1) as u32,
             }
         })

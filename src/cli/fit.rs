@@ -45,7 +45,8 @@ pub struct FitArgs {
     /// Output scene JSON.
     #[arg(long)]
     out: PathBuf,
-    /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr).
+    /// Log file: one JSON object per step (step, seconds, train_loss, heldout_psnr, kernels,
+    /// pairs, downscale).
     #[arg(long)]
     log: Option<PathBuf>,
     /// Watch the fit in a web browser: serve `splat4d view`'s page on this loopback port

@@ -10,8 +10,8 @@
 //! order (the training loop's `batch_gradients`): `g = ((g₀ + g₁) + g₂) + …`, one term per kernel and field.
 //! Spread over `N` ranks, rank `r` renders and differentiates the views at the batch
 //! positions `p` with `p mod N = r` (balanced: every rank renders ⌈B/N⌉ or ⌊B/N⌋ views
-//! whatever views the seeded draw picked), and packs each view's MSE, its gradient and its
-//! screen-space gradients (`pack_view`). One all-gather hands every rank every view's
+//! whatever views the seeded draw picked), and packs each view's MSE, its (pixel, kernel)
+//! pairs, its gradient and its screen-space gradients (`pack_view`). One all-gather hands every rank every view's
 //! record; every rank then adds them in batch order exactly as one process does, feeds the
 //! density statistics in that order, and takes the same Adam step: the scenes of all ranks
 //! stay identical, and equal to the one-process scene, without any further message. The
@@ -21,7 +21,7 @@
 //! elsewhere, so `-0.0 + 0.0` comes out as one process has it.
 //!
 //! **What a step sends.** Each rank receives the records of the views it did not render:
-//! `(B - B/N) · 8 · (7 + (1 + F) · k_seen + 3 · k_projected)` bytes a step: `F` numbers per
+//! `(B - B/N) · 8 · (8 + (1 + F) · k_seen + 3 · k_projected)` bytes a step: `F` numbers per
 //! kernel (18 additive; alpha 19 + 3 per SH triplet), `k_seen` the kernels whose gradient in
 //! the view is not zero, `k_projected` those it projected (their screen gradients, for the
 //! density statistics). `docs/performance.md` measures it.
@@ -78,12 +78,14 @@ pub fn is_leader() -> bool {
 /// screen gradients `(kernel, ∂L/∂m2)`.
 pub(crate) fn pack_view(
     out: &mut Vec<f64>,
-    mse: f64,
+    (mse, pairs): (f64, u64),
     sees: bool,
     grads: &Gradients,
     screen: impl Iterator<Item = (usize, [f64; 2])>,
 ) {
     out.push(mse);
+    // Exact: a view's pairs are far below 2⁵³.
+    out.push(pairs as f64);
     out.push(f64::from(u8::from(sees)));
     let count_at = out.len();
     out.push(0.0);
@@ -183,6 +185,8 @@ fn add_kernel_row(grads: &mut Gradients, k: usize, row: &[f64]) {
 /// One view's record, read back ([`pack_view`]): its gradient kept sparse, as sent.
 pub(crate) struct ViewRecord {
     pub(crate) mse: f64,
+    /// The (pixel, kernel) pairs its render composited.
+    pub(crate) pairs: u64,
     pub(crate) sees: bool,
     /// `(kernel, start in `values`)` of each kernel sent, in kernel order.
     rows: Vec<(usize, usize)>,
@@ -195,6 +199,7 @@ impl ViewRecord {
     pub(crate) fn new() -> Self {
         ViewRecord {
             mse: 0.0,
+            pairs: 0,
             sees: false,
             rows: Vec::new(),
             values: Vec::new(),
@@ -212,8 +217,8 @@ impl ViewRecord {
             *at += n;
             Ok(part)
         };
-        let head = next(3)?;
-        let (mse, sees, rows) = (head[0], head[1] != 0.0, head[2] as usize);
+        let head = next(4)?;
+        let (mse, pairs, sees, rows) = (head[0], head[1] as u64, head[2] != 0.0, head[3] as usize);
         let width = row_width(grads);
         self.rows.clear();
         self.values.clear();
@@ -235,6 +240,7 @@ impl ViewRecord {
         self.screen
             .extend(part.chunks_exact(3).map(|c| (c[0] as usize, [c[1], c[2]])));
         self.mse = mse;
+        self.pairs = pairs;
         self.sees = sees;
         Ok(())
     }
@@ -332,7 +338,7 @@ pub(crate) fn run_share<S: Send>(
 /// in `slots` and packed with `pack` ([`pack_view`]), every record gathered, and in batch
 /// order each view's `weight · MSE` added to the loss, its gradient to `grads` and its sight
 /// handed to `each_view` (whether it saw a kernel, its screen gradients): the one-process
-/// sums, bit for bit. Returns the loss.
+/// sums, bit for bit. Returns the loss and the pairs.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn batch<S: Send>(
     ranks: &dyn Ranks,
@@ -343,18 +349,29 @@ pub(crate) fn batch<S: Send>(
     mut each_view: impl FnMut(bool, &mut dyn Iterator<Item = (usize, [f64; 2])>),
     run: impl Fn(&mut S, usize) -> Result<f64> + Sync,
     pack: impl FnMut(&mut Vec<f64>, &S, f64),
-) -> Result<f64> {
+) -> Result<BatchTotals> {
     let mine = run_share(ranks, count, slots, run, pack)?;
     let mut gathered = Gathered::new(ranks, &mine);
     let mut record = ViewRecord::new();
-    let mut loss = 0.0;
+    let mut totals = BatchTotals::default();
     for p in 0..count {
         gathered.read(p, grads, &mut record)?;
-        loss += weight * record.mse;
+        totals.loss += weight * record.mse;
+        totals.pairs += record.pairs;
         record.add_to(grads);
         each_view(record.sees, &mut record.screen.iter().copied());
     }
-    Ok(loss)
+    Ok(totals)
+}
+
+/// What a step's batch adds up to besides its gradient.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct BatchTotals {
+    /// The loss: the views' MSEs times their weight, summed in batch order.
+    pub(crate) loss: f64,
+    /// The (pixel, kernel) pairs the views' renders composited (SPEC §5): the work that
+    /// grows as kernels widen ([`crate::fit::time_left`]).
+    pub(crate) pairs: u64,
 }
 
 /// Mean MSE of `scene` over `views`, the views spread over `ranks` (each rank renders its
@@ -429,13 +446,13 @@ mod tests {
         let mut out = Vec::new();
         pack_view(
             &mut out,
-            0.125,
+            (0.125, 7),
             true,
             &grads,
             [(1, [2.0, -1.0])].into_iter(),
         );
         // Kernel 0 is all +0.0: left out.
-        assert_eq!(out.len(), 3 + (1 + 18) + 3 + 1 + 3);
+        assert_eq!(out.len(), 4 + (1 + 18) + 3 + 1 + 3);
         let mut record = ViewRecord::new();
         let mut at = 0;
         record.unpack(&grads, &out, &mut at).unwrap();
@@ -459,7 +476,7 @@ mod tests {
         };
         assert_eq!(bits(&sparse), bits(&dense));
         assert_eq!(record.screen, [(1, [2.0, -1.0])]);
-        assert!(record.sees && record.mse == 0.125);
+        assert!(record.sees && record.mse == 0.125 && record.pairs == 7);
     }
 
     #[test]

@@ -396,6 +396,7 @@ mod tests {
             train_loss: 0.0,
             heldout_psnr: None,
             kernels,
+            pairs: 0,
             downscale,
         }
     }

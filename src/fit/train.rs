@@ -36,7 +36,7 @@ use crate::fit::density::prune::{keep_kernels, kept_after_pruning, temporal_weig
 use crate::fit::density::{DensityRules, DensityStats, Line, ShapeBound, SpacetimePrune};
 use crate::fit::loss::{psnr, view_mse, view_mse_gradient};
 use crate::fit::regularise::Regularisers;
-use crate::fit::spread;
+use crate::fit::spread::{self, BatchTotals};
 use crate::fit::ssim::{L1Dssim, SsimScratch};
 use crate::fit::window::Windows;
 use crate::model::error::{Error, Result};
@@ -212,6 +212,10 @@ pub struct StepRecord {
     pub heldout_psnr: Option<f64>,
     /// Kernels after the step (and after a densify/prune round that followed it).
     pub kernels: usize,
+    /// The (pixel, kernel) pairs the step's training renders composited (SPEC §5; summed
+    /// over its batch): the work of its render and backward, which grows as kernels widen
+    /// as well as with their count ([`crate::fit::time_left`]).
+    pub pairs: u64,
     /// The downscale factor of the step's training views (1: full size;
     /// [`crate::fit::coarse`]).
     pub downscale: u32,
@@ -429,6 +433,8 @@ impl ViewDraws {
 pub(crate) struct ViewSlot {
     pub(crate) context: RenderContext,
     pub(crate) grads: Gradients,
+    /// The (pixel, kernel) pairs of the last view [`ViewSlot::run`] rendered.
+    pairs: u64,
     v_image: Vec<f32>,
     ssim: SsimScratch,
 }
@@ -438,13 +444,14 @@ impl ViewSlot {
         ViewSlot {
             context: RenderContext::new(),
             grads: Gradients::for_scene(scene),
+            pairs: 0,
             v_image: Vec::new(),
             ssim: SsimScratch::default(),
         }
     }
 
     /// Renders `view`, and sets `grads` to the gradient of its loss (`weight` times its
-    /// `loss`); returns the MSE.
+    /// `loss`) and `pairs` to its render's; returns the MSE.
     fn run(
         &mut self,
         scene: &Scene,
@@ -454,22 +461,21 @@ impl ViewSlot {
     ) -> Result<f64> {
         self.grads.reset_for_scene(scene);
         let (camera, tau) = (&view.camera, view.time);
-        match loss {
+        let stats = match loss {
             // The render and its backward in one pass over the tiles (the same bits as
             // `render_for_backward`, `view_mse_with_gradient` and `backward`).
-            TrainingLoss::Mse => {
-                self.context.render_and_backward(
-                    scene,
-                    camera,
-                    tau,
-                    options,
-                    &view_mse_gradient(view, weight),
-                    &mut self.v_image,
-                    &mut self.grads,
-                )?;
-            }
+            TrainingLoss::Mse => self.context.render_and_backward(
+                scene,
+                camera,
+                tau,
+                options,
+                &view_mse_gradient(view, weight),
+                &mut self.v_image,
+                &mut self.grads,
+            )?,
             TrainingLoss::L1Dssim(loss) => {
-                self.context
+                let stats = self
+                    .context
                     .render_for_backward(scene, camera, tau, options)?;
                 loss.loss_and_gradient(
                     self.context.image(),
@@ -480,8 +486,10 @@ impl ViewSlot {
                 );
                 self.context
                     .backward(scene, camera, tau, options, &self.v_image, &mut self.grads);
+                stats
             }
-        }
+        };
+        self.pairs = stats.pairs;
         Ok(view_mse(self.context.image(), view))
     }
 
@@ -525,7 +533,8 @@ pub(crate) fn view_slots(scene: &Scene, batch: usize) -> Vec<ViewSlot> {
 }
 
 /// Adds to `grads` the gradient of the batch's loss (the mean over the training views
-/// `drawn`, indices into `train`, of `objective`), and returns their mean MSE. The views run side by side in
+/// `drawn`, indices into `train`, of `objective`), and returns their mean MSE and their
+/// renders' (pixel, kernel) pairs. The views run side by side in
 /// `slots`, each rendered and differentiated on its own; then, in view order, each view's
 /// gradient is added to `grads` and `each_view` sees whether it saw a kernel and its screen
 /// gradients. Spread over MPI ranks ([`spread`]), each rank runs its share and every rank
@@ -540,7 +549,7 @@ pub(crate) fn batch_gradients(
     (options, objective): (&RenderOptions, &TrainingLoss),
     grads: &mut Gradients,
     mut each_view: impl FnMut(bool, &mut dyn Iterator<Item = (usize, [f64; 2])>),
-) -> Result<f64> {
+) -> Result<BatchTotals> {
     let weight = 1.0 / drawn.len() as f64;
     if let Some(ranks) = spread::ranks() {
         // The batch spread over the ranks, summed in view order on each ([`spread::batch`]).
@@ -555,7 +564,7 @@ pub(crate) fn batch_gradients(
             |out, slot, mse| {
                 spread::pack_view(
                     out,
-                    mse,
+                    (mse, slot.pairs),
                     slot.sees_a_kernel(),
                     &slot.grads,
                     slot.screen_gradients(),
@@ -563,7 +572,7 @@ pub(crate) fn batch_gradients(
             },
         );
     }
-    let mut loss = 0.0;
+    let mut totals = BatchTotals::default();
     for views in drawn.chunks(slots.len()) {
         let losses: Vec<Result<f64>> = slots
             .par_iter_mut()
@@ -571,12 +580,13 @@ pub(crate) fn batch_gradients(
             .map(|(slot, &view)| slot.run(scene, &train[view], (weight, objective), options))
             .collect();
         for (slot, mse) in slots.iter().zip(losses) {
-            loss += weight * mse?;
+            totals.loss += weight * mse?;
+            totals.pairs += slot.pairs;
             grads.add(&slot.grads);
             each_view(slot.sees_a_kernel(), &mut slot.screen_gradients());
         }
     }
-    Ok(loss)
+    Ok(totals)
 }
 
 /// Fits `scene` in place to `train`, evaluating on `heldout`, as `training` says; calls
@@ -632,7 +642,7 @@ pub fn fit(
             None => (train, &drawn[..]),
         };
         let weight = 1.0 / batch as f64;
-        let train_loss = batch_gradients(
+        let batch_totals = batch_gradients(
             &mut slots,
             scene,
             batch_views,
@@ -649,6 +659,7 @@ pub fn fit(
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
+        let train_loss = batch_totals.loss;
         adam_step_checked(&mut adam, scene, &mut grads, (step, train_loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
@@ -676,6 +687,7 @@ pub fn fit(
             train_loss,
             heldout_psnr,
             kernels: scene.len(),
+            pairs: batch_totals.pairs,
             downscale: staged.downscale(),
         };
         on_step(&record, scene);

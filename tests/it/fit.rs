@@ -228,3 +228,54 @@ fn an_adaptive_fit_is_the_same_bits_for_any_thread_count() {
         assert!(run(threads) == one, "{threads} threads differ from one");
     }
 }
+
+/// A step's record counts the (pixel, kernel) pairs its batch's renders composited: with
+/// every training view in the batch, the sum of what rendering each of them from the
+/// step's start scene reports, under either loss (the MSE's fused render and backward,
+/// and L1 + D-SSIM's render then backward).
+#[test]
+fn a_step_records_the_pairs_its_batch_rendered() {
+    use splat4d::fit::ssim::L1Dssim;
+    use splat4d::fit::train::TrainingLoss;
+    let truth = seed_blob();
+    let spec = DatasetSpec {
+        views: 3,
+        times: 2,
+        width: 24,
+        height: 20,
+        ..DatasetSpec::default()
+    };
+    let dataset = render_dataset(&truth, &spec, &RenderOptions::default(), || {}).unwrap();
+    let mut start = truth.clone();
+    start.means[0] = [0.52, 0.47, 0.5, 0.5];
+    let options = AdditiveFitOptions {
+        steps: 1,
+        batch_size: dataset.train.len(),
+        ..AdditiveFitOptions::default()
+    };
+    let mut context = RenderContext::new();
+    let expected: u64 = dataset
+        .train
+        .iter()
+        .map(|view| {
+            let stats = context
+                .render(&start, &view.camera, view.time, &options.render)
+                .unwrap();
+            stats.pairs
+        })
+        .sum();
+    assert!(expected > 0);
+    let losses = [
+        TrainingLoss::Mse,
+        TrainingLoss::L1Dssim(L1Dssim { dssim_weight: 0.2 }),
+    ];
+    for loss in losses {
+        let training = splat4d::fit::train::Training {
+            loss,
+            ..options.training()
+        };
+        let mut scene = start.clone();
+        let records = fit(&mut scene, &dataset.train, &[], &training, |_, _| {}).unwrap();
+        assert_eq!(records[0].pairs, expected, "{loss:?}");
+    }
+}
