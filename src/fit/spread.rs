@@ -16,7 +16,8 @@
 //! density statistics in that order, and takes the same Adam step: the scenes of all ranks
 //! stay identical, and equal to the one-process scene, without any further message. The
 //! held-out and density evaluations are spread the same way: per-view MSEs gathered and
-//! summed in view order. A record carries only the kernels whose gradient is not `+0.0` in
+//! summed in view order; so are the pruning by score's contributions, each view's
+//! `(kernel, Σ α̂ T)` pairs gathered and added per kernel in view order (`view_terms`). A record carries only the kernels whose gradient is not `+0.0` in
 //! every field (a view sees part of the scene); the receiver adds the dense gradient, zeros
 //! elsewhere, so `-0.0 + 0.0` comes out as one process has it.
 //!
@@ -300,13 +301,18 @@ impl Gathered {
 
     /// Reads position `p`'s single number.
     fn number(&mut self, p: usize) -> Result<f64> {
+        Ok(self.numbers(p, 1)?[0])
+    }
+
+    /// Reads the next `n` numbers of position `p`'s record.
+    fn numbers(&mut self, p: usize, n: usize) -> Result<&[f64]> {
         let rank = p % self.data.len();
         let at = &mut self.at[rank];
-        let value = *self.data[rank]
-            .get(*at)
+        let numbers = self.data[rank]
+            .get(*at..at.saturating_add(n))
             .ok_or_else(|| Error::Numeric("a rank's numbers are cut short".into()))?;
-        *at += 1;
-        Ok(value)
+        *at += n;
+        Ok(numbers)
     }
 }
 
@@ -401,6 +407,57 @@ pub(crate) fn evaluate(
         total += gathered.number(p)?;
     }
     Ok(total / views.len().max(1) as f64)
+}
+
+/// Per-view terms of `count` views spread over `ranks`, handed back in view order: each
+/// rank runs its share with `run` (side by side in `slots`) and sends each view's
+/// `(kernel, term)` pairs as `terms` lists them; every rank then hands `each_view` every
+/// view's position and pairs, in view order, as one process would list them. A kernel at
+/// or past `kernels` in a record is refused as a broken record.
+pub(crate) fn view_terms<S: Send>(
+    ranks: &dyn Ranks,
+    (count, kernels): (usize, usize),
+    slots: &mut [S],
+    run: impl Fn(&mut S, usize) -> Result<()> + Sync,
+    terms: impl Fn(&S, &mut dyn FnMut(usize, f64)),
+    mut each_view: impl FnMut(usize, &mut dyn Iterator<Item = (usize, f64)>),
+) -> Result<()> {
+    let mine = run_share(
+        ranks,
+        count,
+        slots,
+        |slot, p| run(slot, p).map(|()| 0.0),
+        |out, slot, _| {
+            let count_at = out.len();
+            out.push(0.0);
+            let mut listed = 0_u64;
+            terms(slot, &mut |k, term| {
+                out.extend_from_slice(&[k as f64, term]);
+                listed += 1;
+            });
+            out[count_at] = listed as f64;
+        },
+    )?;
+    let mut gathered = Gathered::new(ranks, &mine);
+    for p in 0..count {
+        let listed = gathered.number(p)? as usize;
+        let pairs = gathered.numbers(p, listed.saturating_mul(2))?;
+        if pairs
+            .chunks_exact(2)
+            .any(|pair| pair[0] as usize >= kernels)
+        {
+            return Err(Error::Numeric(
+                "a rank's view record names no kernel".into(),
+            ));
+        }
+        each_view(
+            p,
+            &mut pairs
+                .chunks_exact(2)
+                .map(|pair| (pair[0] as usize, pair[1])),
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -528,6 +585,65 @@ mod tests {
             });
             for mse in results {
                 assert_eq!(mse.to_bits(), one.to_bits(), "{size} ranks");
+            }
+        }
+    }
+
+    /// Spread over 2 and 3 ranks (threads here), every rank is handed every view's terms in
+    /// view order, each as the rank that ran it listed them; a record naming a kernel past
+    /// the scene's is refused.
+    #[test]
+    fn spread_view_terms_come_back_in_view_order() {
+        let count = 7;
+        // View p lists p % 3 + 1 terms: kernel (p + j) % 5, term p + j / 4.
+        let listed = |p: usize| -> Vec<(usize, f64)> {
+            (0..p % 3 + 1)
+                .map(|j| ((p + j) % 5, p as f64 + j as f64 / 4.0))
+                .collect()
+        };
+        // Each view's position and terms, as `each_view` is handed them.
+        type Seen = Vec<(usize, Vec<(usize, f64)>)>;
+        let one: Seen = (0..count).map(|p| (p, listed(p))).collect();
+        for (size, kernels) in [(2, 5), (3, 5), (2, 4)] {
+            let shared = Arc::new((Barrier::new(size), Mutex::new(vec![Vec::new(); size])));
+            let results: Vec<Result<Seen>> = std::thread::scope(|s| {
+                let handles: Vec<_> = (0..size)
+                    .map(|rank| {
+                        let ranks = Threads {
+                            size,
+                            rank,
+                            shared: Arc::clone(&shared),
+                        };
+                        s.spawn(move || {
+                            let mut slots = [usize::MAX; 2];
+                            let mut seen = Vec::new();
+                            view_terms(
+                                &ranks,
+                                (count, kernels),
+                                &mut slots,
+                                |slot, p| {
+                                    *slot = p;
+                                    Ok(())
+                                },
+                                |&slot, term| {
+                                    listed(slot).into_iter().for_each(|(k, t)| term(k, t))
+                                },
+                                |p, terms| seen.push((p, terms.collect())),
+                            )
+                            .map(|()| seen)
+                        })
+                    })
+                    .collect();
+                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            });
+            for result in results {
+                if kernels == 5 {
+                    assert_eq!(result.unwrap(), one, "{size} ranks");
+                } else {
+                    // View 2 names kernel 4, past the 4 kernels.
+                    let error = result.unwrap_err().to_string();
+                    assert!(error.contains("names no kernel"), "{error}");
+                }
             }
         }
     }

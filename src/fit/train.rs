@@ -507,6 +507,18 @@ impl ViewSlot {
         Ok(())
     }
 
+    /// The last view's `Σ_pixels α̂ T` ([`ViewSlot::contributions`]): `(kernel, its
+    /// colour gradient's first channel)` for every kernel it projected.
+    fn colour_contributions(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let colour = &self.context.backward.screen.v_amplitudes;
+        self.context
+            .projected
+            .kernel_from_proj
+            .iter()
+            .enumerate()
+            .map(|(p, &k)| (k as usize, colour[p][0]))
+    }
+
     /// Whether the last view rendered here projected some kernel onto its screen.
     fn sees_a_kernel(&self) -> bool {
         !self.context.projected.kernel_from_proj.is_empty()
@@ -761,7 +773,9 @@ pub fn spacetime_scores(scene: &Scene, views: &[View], render: &RenderOptions) -
     spacetime_scores_in(scene, views, render, &mut slots)
 }
 
-/// [`spacetime_scores`], the views rendered side by side in `slots`.
+/// [`spacetime_scores`], the views rendered side by side in `slots`; spread over MPI ranks
+/// ([`spread::view_terms`]), each rank renders its share and every rank adds the gathered
+/// contributions in view order, as one process adds them.
 fn spacetime_scores_in(
     scene: &Scene,
     views: &[View],
@@ -771,20 +785,31 @@ fn spacetime_scores_in(
     let times: Vec<f64> = views.iter().map(|v| v.time).collect();
     let spacing = time_spacing(&times);
     let mut scores = vec![0.0; scene.len()];
-    for group in views.chunks(slots.len()) {
-        let done: Vec<Result<()>> = slots
-            .par_iter_mut()
-            .zip(group)
-            .map(|(slot, view)| slot.contributions(scene, view, render))
-            .collect();
-        for ((slot, view), result) in slots.iter().zip(group).zip(done) {
-            result?;
-            let colour = &slot.context.backward.screen.v_amplitudes;
-            for (p, &k) in slot.context.projected.kernel_from_proj.iter().enumerate() {
-                let k = k as usize;
-                let weight =
-                    temporal_weight(scene.means[k][3], scene.scales[k][3], view.time, spacing);
-                scores[k] += colour[p][0] * weight;
+    let mut add_view = |view: &View, colours: &mut dyn Iterator<Item = (usize, f64)>| {
+        for (k, colour) in colours {
+            let weight = temporal_weight(scene.means[k][3], scene.scales[k][3], view.time, spacing);
+            scores[k] += colour * weight;
+        }
+    };
+    if let Some(ranks) = spread::ranks() {
+        spread::view_terms(
+            ranks,
+            (views.len(), scene.len()),
+            slots,
+            |slot, p| slot.contributions(scene, &views[p], render),
+            |slot, term| slot.colour_contributions().for_each(|(k, c)| term(k, c)),
+            |p, colours| add_view(&views[p], colours),
+        )?;
+    } else {
+        for group in views.chunks(slots.len()) {
+            let done: Vec<Result<()>> = slots
+                .par_iter_mut()
+                .zip(group)
+                .map(|(slot, view)| slot.contributions(scene, view, render))
+                .collect();
+            for ((slot, view), result) in slots.iter().zip(group).zip(done) {
+                result?;
+                add_view(view, &mut slot.colour_contributions());
             }
         }
     }
