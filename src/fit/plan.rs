@@ -623,17 +623,17 @@ pub fn prepare_alpha(
             scene
         }
     };
-    let target = growth_target(options, scene.len(), train);
     let mut training = options.training(&bounds);
-    let sparse = sparse_views_cap(options, scene.len(), train);
-    if let (Some(target), Some(budget)) = (target, options.kernel_budget) {
-        let factor = sparse.as_ref().map(|&(_, factor, _)| factor);
-        notes.push(growth_note(target, budget, options, scene.len(), factor));
+    let budget = BudgetOnViews::new(options, train);
+    if let Some(budget) = &budget
+        && let Some(target) = budget.growth_target(options, scene.len())
+    {
+        notes.push(budget.growth_note(target, options, scene.len()));
         if let Some(DensityRules::Alpha(rules)) = &mut training.density {
             rules.growth_target = Some(target);
         }
     }
-    if let Some((cap, _, note)) = sparse {
+    if let Some((cap, note)) = budget.and_then(|b| b.sparse_views_cap(options, scene.len())) {
         notes.push(note);
         if let Some(DensityRules::Alpha(rules)) = &mut training.density {
             rules.max_kernels = rules.max_kernels.min(cap);
@@ -672,22 +672,117 @@ pub fn growth_target(
     start: usize,
     train: &[View],
 ) -> Option<GrowthTarget> {
-    let budget = options.kernel_budget?;
-    let kept = 1.0 - options.prune_fraction.clamp(0.0, 1.0);
-    let kernels = (budget_kernels(&budget, train) / kept.max(f64::MIN_POSITIVE))
-        .min(options.max_kernels as f64);
-    let rounds = options.rules(1.0, 1.0).rounds_from(1, options.steps);
-    (rounds > 0 && kernels > start as f64).then_some(GrowthTarget {
-        kernels,
-        max_share: budget.max_growth,
-    })
+    BudgetOnViews::new(options, train)?.growth_target(options, start)
 }
 
-/// The kernels `budget` gives a fit of `train`: [`dense_budget_kernels`] times the views'
-/// [`sparse_views_factor`].
-fn budget_kernels(budget: &KernelBudget, train: &[View]) -> f64 {
-    dense_budget_kernels(budget, train)
-        * sparse_views_factor(budget, train).map_or(1.0, |(factor, _)| factor)
+/// An alpha fit's kernel budget measured once against its training views: what its growth
+/// target, its sparse-view cap and their notes read.
+struct BudgetOnViews {
+    budget: KernelBudget,
+    /// The density rounds the fit's schedule runs.
+    rounds: usize,
+    /// The share of the kernels the pruning by score keeps.
+    kept: f64,
+    /// The kernels the budget gives dense views ([`dense_budget_kernels`]).
+    dense_kernels: f64,
+    /// Where the budget finds the views sparse, the share of the dense views' budget they
+    /// keep and their spacing ([`sparse_views_factor`]).
+    sparse: Option<(f64, f64)>,
+}
+
+impl BudgetOnViews {
+    /// The budget of `options` against `train`; `None` without one.
+    fn new(options: &AlphaFitOptions, train: &[View]) -> Option<Self> {
+        let budget = options.kernel_budget?;
+        Some(BudgetOnViews {
+            budget,
+            rounds: options.rules(1.0, 1.0).rounds_from(1, options.steps),
+            kept: (1.0 - options.prune_fraction.clamp(0.0, 1.0)).max(f64::MIN_POSITIVE),
+            dense_kernels: dense_budget_kernels(&budget, train),
+            sparse: sparse_views_factor(&budget, train),
+        })
+    }
+
+    /// The kernels the budget gives the views before the pruning by score: the dense
+    /// views' count times the share sparse views keep, over the share the pruning keeps.
+    fn before_pruning(&self) -> f64 {
+        self.dense_kernels * self.sparse.map_or(1.0, |(factor, _)| factor) / self.kept
+    }
+
+    /// [`growth_target`] from `start` kernels.
+    fn growth_target(&self, options: &AlphaFitOptions, start: usize) -> Option<GrowthTarget> {
+        let kernels = self.before_pruning().min(options.max_kernels as f64);
+        (self.rounds > 0 && kernels > start as f64).then_some(GrowthTarget {
+            kernels,
+            max_share: self.budget.max_growth,
+        })
+    }
+
+    /// The cap sparse views put on a fit of `options` from `start` kernels (the budget's
+    /// [`sparse_views_factor`]): the budget, at least [`SPARSE_VIEWS_LEAST_GROWTH`] times the
+    /// start, and the note that says so; `None` where the budget finds the views dense, or
+    /// without rounds.
+    fn sparse_views_cap(&self, options: &AlphaFitOptions, start: usize) -> Option<(usize, String)> {
+        let dense = self.budget.dense_spacing?;
+        let (factor, spacing) = self.sparse?;
+        if self.rounds == 0 {
+            return None;
+        }
+        let least = (SPARSE_VIEWS_LEAST_GROWTH * start as f64) as usize;
+        let cap = (self.before_pruning() as usize)
+            .max(least)
+            .min(options.max_kernels);
+        let note = format!(
+            "sparse views: the training views' axes are {spacing:.1}° from their nearest (the median), above {dense}°, so the kernel budget is {factor:.2} of the dense views' and growth stops at {cap} kernels, the budget or twice the start (give `max_growth` to choose)"
+        );
+        Some((cap, note))
+    }
+
+    /// The note on the growth target `target` the budget gives a fit of `options` from
+    /// `start` kernels: its pruning by score, and the least share a round grows, which passes
+    /// the target when `start` grown by it every round would (transparent kernels pruned on the
+    /// way aside) unless sparse views made the budget a cap ([`Self::sparse_views_cap`]).
+    fn growth_note(&self, target: GrowthTarget, options: &AlphaFitOptions, start: usize) -> String {
+        let (budget, rounds) = (self.budget, self.rounds);
+        let sparse = self.sparse.map(|(factor, _)| factor);
+        let prune_fraction = options.prune_fraction;
+        let least = options.densify_fraction;
+        let at_least = start as f64 * (1.0 + least).powi(rounds.min(i32::MAX as usize) as i32);
+        let past = if at_least > target.kernels && sparse.is_none() {
+            format!(
+                "; {} % a round from the start's {start} kernels passes it",
+                percent(least)
+            )
+        } else {
+            String::new()
+        };
+        let size = if budget.exponent == 1.0 {
+            format!("{} a pixel of the largest view", budget.coefficient)
+        } else {
+            format!(
+                "{} times the largest view's pixels to the power {}, at most {} a pixel",
+                budget.coefficient, budget.exponent, budget.max_per_pixel
+            )
+        };
+        let size = match sparse {
+            Some(factor) => format!("{size}, times {factor:.2} for sparse views"),
+            None => size,
+        };
+        let pruned = if prune_fraction > 0.0 {
+            format!(
+                ", {:.0} after the pruning by score",
+                target.kernels * (1.0 - prune_fraction)
+            )
+        } else {
+            String::new()
+        };
+        format!(
+            "kernel budget: growing towards {:.0} kernels{pruned} ({size}), by {} to {} % of the visible kernels a density round{past} (give `max_growth` to choose)",
+            target.kernels,
+            percent(least),
+            percent(target.max_share.max(least))
+        )
+    }
 }
 
 /// The kernels `budget` gives a fit of `train` whose views are dense: its coefficient times
@@ -754,85 +849,6 @@ pub fn view_spacing_degrees(train: &[View]) -> Option<f64> {
         .collect();
     nearest.sort_by(f64::total_cmp);
     Some(nearest[nearest.len() / 2])
-}
-
-/// The cap sparse views put on an alpha fit of `options` of `train` from `start` kernels
-/// ([`sparse_views_factor`] of its kernel budget): the budget, at least
-/// [`SPARSE_VIEWS_LEAST_GROWTH`] times the start, the share of the dense views' budget the
-/// budget is, and the note that says so; `None` where the budget finds the views dense, or
-/// without a budget or rounds.
-fn sparse_views_cap(
-    options: &AlphaFitOptions,
-    start: usize,
-    train: &[View],
-) -> Option<(usize, f64, String)> {
-    let budget = options.kernel_budget?;
-    let dense = budget.dense_spacing?;
-    let (factor, spacing) = sparse_views_factor(&budget, train)?;
-    if options.rules(1.0, 1.0).rounds_from(1, options.steps) == 0 {
-        return None;
-    }
-    let kept = 1.0 - options.prune_fraction.clamp(0.0, 1.0);
-    let shrunk = dense_budget_kernels(&budget, train) * factor;
-    let budget_count = (shrunk / kept.max(f64::MIN_POSITIVE)) as usize;
-    let least = (SPARSE_VIEWS_LEAST_GROWTH * start as f64) as usize;
-    let cap = budget_count.max(least).min(options.max_kernels);
-    let note = format!(
-        "sparse views: the training views' axes are {spacing:.1}° from their nearest (the median), above {dense}°, so the kernel budget is {factor:.2} of the dense views' and growth stops at {cap} kernels, the budget or twice the start (give `max_growth` to choose)"
-    );
-    Some((cap, factor, note))
-}
-
-/// The note on the growth target `target` that `budget` gives a fit of `options` from
-/// `start` kernels: its pruning by score, and the least share a round grows, which passes
-/// the target when `start` grown by it every round would (transparent kernels pruned on the
-/// way aside) unless sparse views made the budget a cap (`sparse`, the share of it they
-/// keep, [`sparse_views_cap`]).
-fn growth_note(
-    target: GrowthTarget,
-    budget: KernelBudget,
-    options: &AlphaFitOptions,
-    start: usize,
-    sparse: Option<f64>,
-) -> String {
-    let prune_fraction = options.prune_fraction;
-    let least = options.densify_fraction;
-    let rounds = options.rules(1.0, 1.0).rounds_from(1, options.steps);
-    let at_least = start as f64 * (1.0 + least).powi(rounds.min(i32::MAX as usize) as i32);
-    let past = if at_least > target.kernels && sparse.is_none() {
-        format!(
-            "; {} % a round from the start's {start} kernels passes it",
-            percent(least)
-        )
-    } else {
-        String::new()
-    };
-    let size = if budget.exponent == 1.0 {
-        format!("{} a pixel of the largest view", budget.coefficient)
-    } else {
-        format!(
-            "{} times the largest view's pixels to the power {}, at most {} a pixel",
-            budget.coefficient, budget.exponent, budget.max_per_pixel
-        )
-    };
-    let size = match sparse {
-        Some(factor) => format!("{size}, times {factor:.2} for sparse views"),
-        None => size,
-    };
-    let pruned = if prune_fraction > 0.0 {
-        format!(
-            ", {:.0} after the pruning by score",
-            target.kernels * (1.0 - prune_fraction)
-        )
-    } else {
-        String::new()
-    };
-    format!(
-        "kernel budget: growing towards {:.0} kernels{pruned} ({size}), by {} to {} % of the visible kernels a density round{past} (give `max_growth` to choose)",
-        target.kernels,
-        percent(least),
-        percent(target.max_share.max(least))
-    )
 }
 
 /// `share` in percent, to a tenth (`0.15` → `15`, not `15.000000000000002`).
@@ -1246,10 +1262,11 @@ mod tests {
     #[test]
     fn the_budget_note_says_when_the_least_growth_passes_it() {
         let options = photo_options();
-        let budget = DEFAULT_PHOTO_KERNEL_BUDGET;
         for (width, height, start, passes) in [(250, 164, 2978, true), (480, 270, 1132, false)] {
-            let target = growth_target(&options, start, &views_of(width, height)).unwrap();
-            let note = growth_note(target, budget, &options, start, None);
+            let views = views_of(width, height);
+            let budget = BudgetOnViews::new(&options, &views).unwrap();
+            let target = budget.growth_target(&options, start).unwrap();
+            let note = budget.growth_note(target, &options, start);
             assert!(
                 note.contains("by 5 to 10 % of the visible kernels"),
                 "{note}"
@@ -1332,34 +1349,35 @@ mod tests {
             "{}",
             target.kernels
         );
-        let (cap, factor, note) = sparse_views_cap(&options, 1132, &sparse).unwrap();
-        assert!((factor - 0.25).abs() < 1e-12);
+        let budget = BudgetOnViews::new(&options, &sparse).unwrap();
+        assert!((budget.sparse.unwrap().0 - 0.25).abs() < 1e-12);
+        let (cap, note) = budget.sparse_views_cap(&options, 1132).unwrap();
         assert_eq!(cap, (dense / 4.0) as usize);
         assert!(
             note.contains("9.0°") && note.contains(&format!("stops at {cap} kernels")),
             "{note}"
         );
         // The rounds may at least double the start.
-        assert_eq!(sparse_views_cap(&options, 4000, &sparse).unwrap().0, 8000);
+        assert_eq!(cap_of(&options, 4000, &sparse).unwrap().0, 8000);
         // `max_kernels` bounds both.
         let bounded = AlphaFitOptions {
             max_kernels: 3000,
             ..options
         };
-        assert_eq!(sparse_views_cap(&bounded, 1132, &sparse).unwrap().0, 3000);
-        assert_eq!(sparse_views_cap(&bounded, 2000, &sparse).unwrap().0, 3000);
+        assert_eq!(cap_of(&bounded, 1132, &sparse).unwrap().0, 3000);
+        assert_eq!(cap_of(&bounded, 2000, &sparse).unwrap().0, 3000);
         // Dense views: the whole budget, no cap.
         let dense_views = views_apart(1.0, width, height);
         assert_eq!(
             growth_target(&options, 1132, &dense_views).unwrap().kernels,
             dense
         );
-        assert_eq!(sparse_views_cap(&options, 1132, &dense_views), None);
+        assert_eq!(cap_of(&options, 1132, &dense_views), None);
         let no_budget = AlphaFitOptions {
             kernel_budget: None,
             ..options
         };
-        assert_eq!(sparse_views_cap(&no_budget, 1132, &sparse), None);
+        assert_eq!(cap_of(&no_budget, 1132, &sparse), None);
         // A video (views at several times) keeps the whole budget.
         let mut video = sparse.clone();
         video[1].time = 1.0;
@@ -1367,15 +1385,27 @@ mod tests {
             growth_target(&options, 1132, &video).unwrap().kernels,
             dense
         );
-        assert_eq!(sparse_views_cap(&options, 1132, &video), None);
+        assert_eq!(cap_of(&options, 1132, &video), None);
         // A capped budget's note never says the least growth passes it.
-        let target = growth_target(&options, 1132, &sparse).unwrap();
-        let budget = DEFAULT_PHOTO_KERNEL_BUDGET;
+        let target = budget.growth_target(&options, 1132).unwrap();
         let start = 2000;
-        let capped = growth_note(target, budget, &options, start, Some(0.25));
+        let capped = budget.growth_note(target, &options, start);
         assert!(!capped.contains("passes it"), "{capped}");
         assert!(capped.contains("times 0.25 for sparse views"), "{capped}");
-        assert!(growth_note(target, budget, &options, start, None).contains("passes it"));
+        let uncapped = BudgetOnViews {
+            sparse: None,
+            ..budget
+        };
+        assert!(
+            uncapped
+                .growth_note(target, &options, start)
+                .contains("passes it")
+        );
+    }
+
+    /// The sparse-view cap of a fit of `options` of `train` from `start` kernels.
+    fn cap_of(options: &AlphaFitOptions, start: usize, train: &[View]) -> Option<(usize, String)> {
+        BudgetOnViews::new(options, train)?.sparse_views_cap(options, start)
     }
 
     #[test]
