@@ -11,13 +11,14 @@
 //! Spread over `N` ranks, rank `r` renders and differentiates the views at the batch
 //! positions `p` with `p mod N = r` (balanced: every rank renders ⌈B/N⌉ or ⌊B/N⌋ views
 //! whatever views the seeded draw picked), and packs each view's MSE, its (pixel, kernel)
-//! pairs, its gradient and its screen-space gradients (`pack_view`). One all-gather hands every rank every view's
-//! record; every rank then adds them in batch order exactly as one process does, feeds the
-//! density statistics in that order, and takes the same Adam step: the scenes of all ranks
-//! stay identical, and equal to the one-process scene, without any further message. The
-//! held-out and density evaluations are spread the same way: per-view MSEs gathered and
-//! summed in view order; so are the pruning by score's contributions, each view's
-//! `(kernel, Σ α̂ T)` pairs gathered and added per kernel in view order (`view_terms`). A record carries only the kernels whose gradient is not `+0.0` in
+//! pairs, its gradient and its screen-space gradients (`pack_view`). One all-gather hands
+//! every rank every view's record; every rank then adds them in batch order exactly as one
+//! process does, feeds the density statistics in that order, and takes the same Adam step:
+//! the scenes of all ranks stay identical, and equal to the one-process scene, without any
+//! further message. The held-out and density evaluations are spread the same way: per-view
+//! MSEs gathered and summed in view order; so are the pruning by score's contributions,
+//! each view's `(kernel, Σ α̂ T)` pairs gathered and added per kernel in view order
+//! (`view_terms`). A record carries only the kernels whose gradient is not `+0.0` in
 //! every field (a view sees part of the scene); the receiver adds the dense gradient, zeros
 //! elsewhere, so `-0.0 + 0.0` comes out as one process has it.
 //!
@@ -375,8 +376,7 @@ pub(crate) fn batch<S: Send>(
 pub(crate) struct BatchTotals {
     /// The loss: the views' MSEs times their weight, summed in batch order.
     pub(crate) loss: f64,
-    /// The (pixel, kernel) pairs the views' renders composited (SPEC §5): the work that
-    /// grows as kernels widen ([`crate::fit::time_left`]).
+    /// The (pixel, kernel) pairs the views' renders composited (SPEC §5).
     pub(crate) pairs: u64,
 }
 

@@ -214,7 +214,8 @@ pub struct StepRecord {
     pub kernels: usize,
     /// The (pixel, kernel) pairs the step's training renders composited (SPEC §5; summed
     /// over its batch): the work of its render and backward, which grows as kernels widen
-    /// as well as with their count ([`crate::fit::time_left`]).
+    /// as well as with their count (the time-left estimate, [`crate::fit::time_left`],
+    /// counts kernels only; `docs/fitting.md`, "Time left", says why).
     pub pairs: u64,
     /// The downscale factor of the step's training views (1: full size;
     /// [`crate::fit::coarse`]).
