@@ -489,6 +489,25 @@ mod tests {
         }
     }
 
+    /// `run` on each of `size` ranks (threads of this process), their results in rank order.
+    fn on_ranks<T: Send>(size: usize, run: impl Fn(&Threads) -> T + Sync) -> Vec<T> {
+        let shared = Arc::new((Barrier::new(size), Mutex::new(vec![Vec::new(); size])));
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..size)
+                .map(|rank| {
+                    let ranks = Threads {
+                        size,
+                        rank,
+                        shared: Arc::clone(&shared),
+                    };
+                    let run = &run;
+                    s.spawn(move || run(&ranks))
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        })
+    }
+
     #[test]
     fn a_record_reads_back_bit_for_bit() {
         let mut scene = crate::scenes::toy::blob_scene();
@@ -565,23 +584,9 @@ mod tests {
         }
         let one = total / dataset.train.len() as f64;
         for size in [2, 3] {
-            let shared = Arc::new((Barrier::new(size), Mutex::new(vec![Vec::new(); size])));
-            let results: Vec<f64> = std::thread::scope(|s| {
-                let handles: Vec<_> = (0..size)
-                    .map(|rank| {
-                        let ranks = Threads {
-                            size,
-                            rank,
-                            shared: Arc::clone(&shared),
-                        };
-                        let (moved, train) = (&moved, &dataset.train);
-                        s.spawn(move || {
-                            let mut context = RenderContext::new();
-                            evaluate(&ranks, moved, train, &options, &mut [&mut context]).unwrap()
-                        })
-                    })
-                    .collect();
-                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            let results = on_ranks(size, |ranks| {
+                let mut context = RenderContext::new();
+                evaluate(ranks, &moved, &dataset.train, &options, &mut [&mut context]).unwrap()
             });
             for mse in results {
                 assert_eq!(mse.to_bits(), one.to_bits(), "{size} ranks");
@@ -605,36 +610,21 @@ mod tests {
         type Seen = Vec<(usize, Vec<(usize, f64)>)>;
         let one: Seen = (0..count).map(|p| (p, listed(p))).collect();
         for (size, kernels) in [(2, 5), (3, 5), (2, 4)] {
-            let shared = Arc::new((Barrier::new(size), Mutex::new(vec![Vec::new(); size])));
-            let results: Vec<Result<Seen>> = std::thread::scope(|s| {
-                let handles: Vec<_> = (0..size)
-                    .map(|rank| {
-                        let ranks = Threads {
-                            size,
-                            rank,
-                            shared: Arc::clone(&shared),
-                        };
-                        s.spawn(move || {
-                            let mut slots = [usize::MAX; 2];
-                            let mut seen = Vec::new();
-                            view_terms(
-                                &ranks,
-                                (count, kernels),
-                                &mut slots,
-                                |slot, p| {
-                                    *slot = p;
-                                    Ok(())
-                                },
-                                |&slot, term| {
-                                    listed(slot).into_iter().for_each(|(k, t)| term(k, t))
-                                },
-                                |p, terms| seen.push((p, terms.collect())),
-                            )
-                            .map(|()| seen)
-                        })
-                    })
-                    .collect();
-                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            let results: Vec<Result<Seen>> = on_ranks(size, |ranks| {
+                let mut slots = [usize::MAX; 2];
+                let mut seen = Vec::new();
+                view_terms(
+                    ranks,
+                    (count, kernels),
+                    &mut slots,
+                    |slot, p| {
+                        *slot = p;
+                        Ok(())
+                    },
+                    |&slot, term| listed(slot).into_iter().for_each(|(k, t)| term(k, t)),
+                    |p, terms| seen.push((p, terms.collect())),
+                )
+                .map(|()| seen)
             });
             for result in results {
                 if kernels == 5 {
