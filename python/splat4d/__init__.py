@@ -203,7 +203,8 @@ def fit(
     ``window`` larger than every view, …), raise the command line's ``UsageError`` naming it.
 
     ``progress`` is called after every step with ``{"step", "steps", "seconds", "loss",
-    "heldout_psnr", "kernels", "seconds_left"}``; an exception it raises (or Ctrl-C) stops the fit and is
+    "heldout_psnr", "kernels", "pairs", "seconds_left"}`` (``pairs``: the (pixel, kernel)
+    pairs the step's training renders composited); an exception it raises (or Ctrl-C) stops the fit and is
     raised here. Notes go to ``sys.stderr`` as ``note: …``. With ``out`` the scene is written
     there too. Returns ``(scene, summary)``; ``summary`` has ``kernels``, ``steps``,
     ``seconds``, ``blend``, ``splits`` (per split: ``views``, ``mse``, ``psnr``) and

@@ -195,6 +195,7 @@ impl FitProgress for Progress {
                 event.set_item("loss", record.train_loss)?;
                 event.set_item("heldout_psnr", heldout_psnr)?;
                 event.set_item("kernels", record.kernels)?;
+                event.set_item("pairs", record.pairs)?;
                 event.set_item("seconds_left", seconds_left)?;
                 callback.call1(py, (event,)).map(drop)
             });

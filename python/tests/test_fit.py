@@ -34,6 +34,7 @@ def test_a_fit_lowers_its_loss_and_reports_each_step(dataset, tmp_path):
     )
     assert [r["step"] for r in records] == list(range(1, 41))
     assert records[-1]["loss"] < records[0]["loss"]
+    assert all(isinstance(r["pairs"], int) for r in records) and records[0]["pairs"] > 0
     assert summary["steps"] == 40 and summary["kernels"] == len(scene) == 20
     assert set(summary["splits"]) == {"train", "val", "test"}
     assert splat4d.load_scene(tmp_path / "fit.json").blend == "additive"
