@@ -319,17 +319,17 @@ impl Gathered {
 
 /// This rank's share of the batch positions `0..count`, rendered with `run` side by side
 /// (one per slot, `slots` of them) and packed in position order with `pack`.
-pub(crate) fn run_share<S: Send>(
+pub(crate) fn run_share<S: Send, R: Send>(
     ranks: &dyn Ranks,
     count: usize,
     slots: &mut [S],
-    run: impl Fn(&mut S, usize) -> Result<f64> + Sync,
-    mut pack: impl FnMut(&mut Vec<f64>, &S, f64),
+    run: impl Fn(&mut S, usize) -> Result<R> + Sync,
+    mut pack: impl FnMut(&mut Vec<f64>, &S, R),
 ) -> Result<Vec<f64>> {
     let mine = positions(count, ranks);
     let mut out = Vec::new();
     for group in mine.chunks(slots.len().max(1)) {
-        let results: Vec<Result<f64>> = slots
+        let results: Vec<Result<R>> = slots
             .par_iter_mut()
             .zip(group)
             .map(|(slot, &p)| run(slot, p))
@@ -422,22 +422,16 @@ pub(crate) fn view_terms<S: Send>(
     terms: impl Fn(&S, &mut dyn FnMut(usize, f64)),
     mut each_view: impl FnMut(usize, &mut dyn Iterator<Item = (usize, f64)>),
 ) -> Result<()> {
-    let mine = run_share(
-        ranks,
-        count,
-        slots,
-        |slot, p| run(slot, p).map(|()| 0.0),
-        |out, slot, _| {
-            let count_at = out.len();
-            out.push(0.0);
-            let mut listed = 0_u64;
-            terms(slot, &mut |k, term| {
-                out.extend_from_slice(&[k as f64, term]);
-                listed += 1;
-            });
-            out[count_at] = listed as f64;
-        },
-    )?;
+    let mine = run_share(ranks, count, slots, run, |out, slot, ()| {
+        let count_at = out.len();
+        out.push(0.0);
+        let mut listed = 0_u64;
+        terms(slot, &mut |k, term| {
+            out.extend_from_slice(&[k as f64, term]);
+            listed += 1;
+        });
+        out[count_at] = listed as f64;
+    })?;
     let mut gathered = Gathered::new(ranks, &mine);
     for p in 0..count {
         let listed = gathered.number(p)? as usize;

@@ -655,7 +655,7 @@ pub fn fit(
             None => (train, &drawn[..]),
         };
         let weight = 1.0 / batch as f64;
-        let batch_totals = batch_gradients(
+        let totals = batch_gradients(
             &mut slots,
             scene,
             batch_views,
@@ -672,8 +672,7 @@ pub fn fit(
             let windowed = windows.is_some();
             seen_any = whole_views_in_sight(windowed, scene, train, render, &mut slots, step)?;
         }
-        let train_loss = batch_totals.loss;
-        adam_step_checked(&mut adam, scene, &mut grads, (step, train_loss), training)?;
+        adam_step_checked(&mut adam, scene, &mut grads, (step, totals.loss), training)?;
         bound_shapes(scene, all_train, &training.shape_bound);
         if let Some(rules) = &training.density {
             stats.add_step(scene, &grads);
@@ -697,10 +696,10 @@ pub fn fit(
         let record = StepRecord {
             step,
             seconds: start.elapsed().as_secs_f64(),
-            train_loss,
+            train_loss: totals.loss,
             heldout_psnr,
             kernels: scene.len(),
-            pairs: batch_totals.pairs,
+            pairs: totals.pairs,
             downscale: staged.downscale(),
         };
         on_step(&record, scene);
