@@ -4,11 +4,12 @@
 //!
 //! `cargo run --release -p splat4d-benches --example time_left -- LOG.jsonl WIDTHxHEIGHT
 //! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]
-//! [--densify-every N] [--growth-target K]` (`G` the growth a round the fit took, or with
-//! `--growth-target` the largest it could take; `K` the kernels its budget grew towards: the
-//! note `kernel budget: growing towards K kernels … by at most G % …` gives both; photos
-//! take `--prune-fraction 0`; renders of an object with the default 12 000 steps
-//! `--densify-every 200`)
+//! [--densify-every N] [--growth-target K] [--max-kernels M]` (`G` the growth a round the fit
+//! took, or with `--growth-target` the largest it could take; `K` the kernels its budget grew
+//! towards: the note `kernel budget: growing towards K kernels … by at most G % …` gives
+//! both; `M` the count growth stopped at, as the note `sparse views: … growth stops at M
+//! kernels` gives it; photos take `--prune-fraction 0`; renders of an object with the
+//! default 12 000 steps `--densify-every 200`)
 //!
 //! The run's steps are the log's; its coarse stages are read from the log's `downscale`
 //! column; `WIDTHxHEIGHT` is the first training view's size at full size.
@@ -63,7 +64,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [log, size, options @ ..] = &args[..] else {
         panic!(
-            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F] [--densify-every N] [--growth-target K]"
+            "usage: time_left LOG.jsonl WIDTHxHEIGHT [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F] [--densify-every N] [--growth-target K] [--max-kernels M]"
         );
     };
     let (width, height) = size.split_once('x').expect("WIDTHxHEIGHT");
@@ -85,6 +86,9 @@ fn main() {
             }
             ("--max-growth", Some(share)) => max_growth = Some(share.parse().unwrap()),
             ("--growth-target", Some(kernels)) => growth_target = Some(kernels.parse().unwrap()),
+            ("--max-kernels", Some(kernels)) => {
+                options_of_fit.max_kernels = kernels.parse().unwrap();
+            }
             ("--densify-every", Some(steps)) => {
                 options_of_fit.densify_every = steps.parse().unwrap();
             }
