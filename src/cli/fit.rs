@@ -269,7 +269,7 @@ pub struct FitArgs {
     /// The loss the gradient is taken of: `mse` (SPEC §6), or `l1-dssim`, 3D Gaussian
     /// splatting's (1 - λ)·L1 + λ·(1 - SSIM) with an 11×11 Gaussian window (σ 1.5); the
     /// reported loss and PSNR stay the MSE's [default: l1-dssim where the training views'
-    /// background is flat, else mse].
+    /// background is flat or they are still photos from sparse views, else mse].
     #[arg(long, value_name = "mse|l1-dssim", help_heading = ALPHA)]
     loss: Option<LossName>,
     /// λ, the weight of 1 - SSIM in `--loss l1-dssim` (refused with the mse loss), in

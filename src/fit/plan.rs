@@ -882,7 +882,8 @@ pub struct BackgroundDefaults {
     /// time; `docs/fitting.md`).
     pub prune_fraction: f64,
     /// The training loss: [`DEFAULT_LOSS`] (3DGS's) over a flat background, else
-    /// [`DEFAULT_PHOTO_LOSS`].
+    /// [`DEFAULT_SPARSE_PHOTO_LOSS`] for still photos from sparse views ([`sparse_spacing`]
+    /// above [`DEFAULT_DENSE_VIEW_SPACING`]) and [`DEFAULT_PHOTO_LOSS`] for the others.
     pub loss: TrainingLoss,
     /// The kernel budget: [`DEFAULT_OBJECT_KERNEL_BUDGET`] over a flat background, else
     /// [`DEFAULT_PHOTO_KERNEL_BUDGET`].
@@ -902,10 +903,15 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
             kernel_budget: Some(DEFAULT_OBJECT_KERNEL_BUDGET),
         }
     } else {
+        let sparse = sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING).is_some();
         BackgroundDefaults {
             flat: false,
             prune_fraction: 0.0,
-            loss: DEFAULT_PHOTO_LOSS,
+            loss: if sparse {
+                DEFAULT_SPARSE_PHOTO_LOSS
+            } else {
+                DEFAULT_PHOTO_LOSS
+            },
             kernel_budget: Some(DEFAULT_PHOTO_KERNEL_BUDGET),
         }
     }
@@ -1332,6 +1338,38 @@ mod tests {
             alpha_schedule(true, &sparse),
             (DEFAULT_OBJECT_SCHEDULE, None)
         );
+    }
+
+    /// Still photos textured to their borders take the 3DGS loss from views 9° apart and
+    /// the MSE from views 1° apart (or a video's frames); renders of an object (a flat
+    /// background) the 3DGS loss either way.
+    #[test]
+    fn sparse_still_photos_take_the_3dgs_loss() {
+        let checkered = |mut views: Vec<View>| {
+            for view in &mut views {
+                let mut image = (*view.image).clone();
+                let width = image.width as usize;
+                for (i, value) in image.pixels.iter_mut().enumerate() {
+                    let (x, y) = ((i / 3) % width, (i / 3) / width);
+                    *value = ((x / 4 + y / 4) % 2) as f32;
+                }
+                view.image = image.into();
+            }
+            views
+        };
+        let loss = |views: &[View]| background_defaults(views, None).loss;
+        let sparse = checkered(views_apart(9.0, 48, 32));
+        assert_eq!(loss(&sparse), DEFAULT_SPARSE_PHOTO_LOSS);
+        assert_eq!(DEFAULT_SPARSE_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
+        assert_eq!(
+            loss(&checkered(views_apart(1.0, 48, 32))),
+            DEFAULT_PHOTO_LOSS
+        );
+        assert_ne!(DEFAULT_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
+        let mut video = sparse;
+        video[1].time = 0.5;
+        assert_eq!(loss(&video), DEFAULT_PHOTO_LOSS);
+        assert_eq!(loss(&views_apart(9.0, 48, 32)), DEFAULT_LOSS);
     }
 
     /// Photos from views 9° apart keep a quarter of the budget, `(4.5 / 9)²`, and growth

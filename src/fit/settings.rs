@@ -44,8 +44,8 @@ use crate::fit::defaults::{
 };
 use crate::fit::density::AdditiveRules;
 use crate::fit::plan::{
-    DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule, background_defaults, check_fit_numbers,
-    fit_blend, prepare_alpha,
+    BackgroundDefaults, DEFAULT_ALPHA, FitPlan, Init, ReadyFit, alpha_schedule,
+    background_defaults, check_fit_numbers, fit_blend, prepare_alpha,
 };
 use crate::fit::ssim::L1Dssim;
 use crate::fit::train::{EarlyStop, LossName, TrainingLoss};
@@ -558,7 +558,7 @@ impl FitSettings {
             ));
         }
         let by_background = background_defaults(&dataset.train, self.background);
-        let mut notes = self.photo_notes(by_background.flat);
+        let mut notes = self.photo_notes(&by_background);
         let prune_fraction = self.prune_fraction.unwrap_or(by_background.prune_fraction);
         self.check_prune_rounds(prune_fraction)?;
         let loss = self.training_loss(by_background.loss);
@@ -589,18 +589,22 @@ impl FitSettings {
         Ok((options, notes))
     }
 
-    /// The notes on what photos (training views whose background is not flat, `flat`
-    /// false) change in the defaults the caller left: no pruning by score, the MSE.
-    fn photo_notes(&self, flat: bool) -> Vec<String> {
+    /// The notes on what photos (training views whose background is not flat) change in
+    /// the defaults the caller left: no pruning by score, the MSE (the 3DGS loss from sparse
+    /// views).
+    fn photo_notes(&self, defaults: &BackgroundDefaults) -> Vec<String> {
         let mut notes = Vec::new();
-        if flat {
+        if defaults.flat {
             return notes;
         }
         if self.prune_fraction.is_none() {
             notes.push("no pruning by score: the photos' background is not flat, so every kernel carries part of the picture (give `prune_fraction` to prune)".into());
         }
         if self.loss.is_none() {
-            notes.push("training with the MSE: on photos, whose background is not flat, it measured better than the 3DGS loss (give `loss` l1-dssim for it)".into());
+            notes.push(match defaults.loss {
+                TrainingLoss::Mse => "training with the MSE: on photos, whose background is not flat, it measured better than the 3DGS loss (give `loss` l1-dssim for it)".into(),
+                TrainingLoss::L1Dssim(_) => "training with the 3DGS loss (L1 + D-SSIM): on still photos from sparse views it measured better held out than the MSE (give `loss` mse for it)".into(),
+            });
         }
         notes
     }
