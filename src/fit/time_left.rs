@@ -55,8 +55,10 @@
 //! elasticity of a step's time in the kernel count, the excess
 //! `ln(d₂/d₁) - β ln(k₂/k₁) = γ s ln(k₂/k₁)`, `γ` fitted by least squares through the origin
 //! over all such pairs so far. The kernels' share scales it to each stage ahead,
-//! `e(n) = γ s(n)`, clamped to `[0, 1]` (at most one more power of the kernel count; never
-//! cheaper than the model); only growth beyond the kernels now is scaled (`k(s) > k`). Before
+//! `e(n) = γ s(n)`, clamped to `[0, 0.8]` (never cheaper than the model; 1 left a sparse fit
+//! under the 3DGS loss 39 % long at a fifth, read from its first, noisiest intervals, and
+//! 0.7 the same capture under the MSE 21 % short); only growth beyond the kernels now is
+//! scaled (`k(s) > k`). Before
 //! two intervals have been timed, `e = 0`: the model alone (the first round of a
 //! 2000-step fit runs at a tenth of it, and a prior that served such fits broke those whose
 //! steps follow the model).
@@ -95,7 +97,7 @@ const KERNEL_COUNT_REFERENCE: f64 = 10_000.0;
 
 /// The most a step's time may grow faster with the kernels than the model has it, as an
 /// exponent of their growth (see the module docs).
-const MAX_EXCESS_ELASTICITY: f64 = 1.0;
+const MAX_EXCESS_ELASTICITY: f64 = 0.8;
 
 /// The least growth of the kernels between two intervals, as `|ln(k₂/k₁)|`, whose times
 /// are compared.
@@ -587,7 +589,7 @@ mod tests {
     /// and whose steps take `1 ms · (k / 1000)²`, far faster growth than the model's: once
     /// two intervals between rounds are timed the estimate is within 30 %, where the model
     /// alone, which counts most of a step of 50×50 views as its fixed cost, is short by more
-    /// than a third (the excess is clamped at one power, so it stays 12–21 % short while
+    /// than a third (the excess is clamped at 0.8 of a power, so it stays short while
     /// growth lasts).
     #[test]
     fn growth_dearer_than_the_model_is_timed_between_rounds() {
@@ -873,6 +875,12 @@ mod tests {
     fn sparse_photo_fits_are_estimated_within_thirty_percent_once_growth_is_timed() {
         let mouse = recorded(include_str!("../../tests/data/time_left/mouse4_sparse.txt"));
         let king = recorded(include_str!("../../tests/data/time_left/king4_sparse.txt"));
+        let mouse_dssim = recorded(include_str!(
+            "../../tests/data/time_left/mouse4_sparse_dssim.txt"
+        ));
+        let king_dssim = recorded(include_str!(
+            "../../tests/data/time_left/king4_sparse_dssim.txt"
+        ));
         // The mouse grew 10 % a round towards its sparse-view cap of 11 634 kernels, at ½
         // size until 60 %; the king 5 % a round from 2978 kernels (its budget was below its
         // start), under a cap of twice that, at full size throughout.
@@ -889,12 +897,23 @@ mod tests {
             cap: Some(5956),
             ..mouse_growth
         };
+        // Each under the MSE (`--loss mse`, the default before) and the 3DGS loss (the
+        // default now).
+        let (mse, dssim) = (TrainingLoss::Mse, crate::fit::defaults::DEFAULT_LOSS);
         let fits = [
-            (&mouse, &[(2, 0.6)][..], mouse_growth, [360, 480]),
-            (&king, &[][..], king_growth, [250, 164]),
+            (&mouse, &[(2, 0.6)][..], mouse_growth, [360, 480], mse),
+            (&king, &[][..], king_growth, [250, 164], mse),
+            (
+                &mouse_dssim,
+                &[(2, 0.6)][..],
+                mouse_growth,
+                [360, 480],
+                dssim,
+            ),
+            (&king_dssim, &[][..], king_growth, [250, 164], dssim),
         ];
-        for (records, stages, growth, size) in fits {
-            let training = default_training(records, stages, TrainingLoss::Mse, &growth);
+        for (records, stages, growth, size, loss) in fits {
+            let training = default_training(records, stages, loss, &growth);
             assert_estimated_within_thirty_percent(&training, size, records, 3);
             // At a tenth the first round has just run and none of its steps has been
             // timed: the model alone promises too little.
