@@ -299,7 +299,7 @@ pub const DEFAULT_PHOTO_LOSS: TrainingLoss = TrainingLoss::Mse;
 /// The alpha fit's training loss on still photos from sparse views (their axes more than
 /// [`DEFAULT_DENSE_VIEW_SPACING`] from their nearest, [`crate::fit::plan::sparse_spacing`]):
 /// the 3DGS loss, [`DEFAULT_LOSS`], whose SSIM term weighs local structure (the held-out
-/// SSIM rose in every run). Measured on two real COLMAP captures at ¼ size with their other defaults
+/// SSIM rose in every run measured both ways). Measured on two real COLMAP captures at ¼ size with their other defaults
 /// (2000 steps; `docs/fitting.md`, "Sparse views: the 3DGS loss"), mean held-out PSNR per
 /// photo, the MSE against the 3DGS loss: the king figurine 19.28 → 19.83 dB (seed 1: 18.69
 /// → 19.78 dB), SSIM 0.7496 → 0.7940; the mouse 23.68 → 24.00 dB (seed 1: 23.52 dB both),
