@@ -44,7 +44,7 @@ use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::rig_start::{find_rig, rig_alpha_scene, rig_bounds};
 use crate::fit::stereo::plane_sweep;
-use crate::fit::time_left::TimeLeft;
+use crate::fit::time_left::{SPARSE_PHOTO_GROWTH_EXCESS, TimeLeft};
 use crate::fit::train::{StepRecord, Training, TrainingLoss, fit};
 use crate::model::{
     Blend, Camera, Dataset, Error, Result, Scene, Up, View, check_non_negative_setting,
@@ -438,6 +438,10 @@ pub struct ReadyFit {
     pub notes: Vec<String>,
     /// What the fitted scene records of the data ([`ReadyFit::record_data`]).
     recorded: DataFacts,
+    /// Whether the training views are still photos from sparse views
+    /// ([`ReadyFit::of_sparse_photos`]), whose steps grow dearer with the kernels than the
+    /// time-left model has it.
+    sparse_photos: bool,
 }
 
 /// What a fitted scene records of its data, for the viewer and videos of it.
@@ -459,6 +463,19 @@ impl ReadyFit {
             training,
             notes,
             recorded: DataFacts::default(),
+            sparse_photos: false,
+        }
+    }
+
+    /// This fit, its training views still photos from sparse views ([`sparse_spacing`])
+    /// when `sparse` is true: its time-left estimate then expects a step's time to grow
+    /// with the kernels as such fits' did ([`SPARSE_PHOTO_GROWTH_EXCESS`]) until it has
+    /// timed it.
+    #[must_use]
+    pub fn of_sparse_photos(self, sparse: bool) -> Self {
+        ReadyFit {
+            sparse_photos: sparse,
+            ..self
         }
     }
 
@@ -504,7 +521,12 @@ impl ReadyFit {
         let size = train
             .first()
             .map_or([1, 1], |v| [v.image.width, v.image.height]);
-        TimeLeft::new(&self.training, size)
+        let estimate = TimeLeft::new(&self.training, size);
+        if self.sparse_photos {
+            estimate.expecting_dearer_growth(SPARSE_PHOTO_GROWTH_EXCESS)
+        } else {
+            estimate
+        }
     }
 
     /// Runs the fit ([`fit`]) on `train`, evaluating on `heldout`; `scene` is then the
@@ -888,6 +910,10 @@ pub struct BackgroundDefaults {
     /// The kernel budget: [`DEFAULT_OBJECT_KERNEL_BUDGET`] over a flat background, else
     /// [`DEFAULT_PHOTO_KERNEL_BUDGET`].
     pub kernel_budget: Option<crate::fit::alpha::KernelBudget>,
+    /// The views' spacing where they are still photos from sparse views ([`sparse_spacing`]
+    /// above [`DEFAULT_DENSE_VIEW_SPACING`]; decided once, for the loss, the schedule
+    /// [`alpha_schedule`] and the time-left estimate); `None` over a flat background.
+    pub sparse_spacing: Option<f64>,
 }
 
 /// The [`BackgroundDefaults`] of the training views `train`, `background` as the caller
@@ -901,24 +927,27 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS,
             kernel_budget: Some(DEFAULT_OBJECT_KERNEL_BUDGET),
+            sparse_spacing: None,
         }
     } else {
-        let sparse = sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING).is_some();
+        let spacing = sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING);
         BackgroundDefaults {
             flat: false,
             prune_fraction: 0.0,
-            loss: if sparse {
+            loss: if spacing.is_some() {
                 DEFAULT_SPARSE_PHOTO_LOSS
             } else {
                 DEFAULT_PHOTO_LOSS
             },
             kernel_budget: Some(DEFAULT_PHOTO_KERNEL_BUDGET),
+            sparse_spacing: spacing,
         }
     }
 }
 
 /// The alpha fit's steps, density period and batch when the caller gives no step count,
-/// for training views `train`, and a note where the views chose them:
+/// for training views whose background is flat or not and whose [`sparse_spacing`] is
+/// `sparse` ([`BackgroundDefaults`]), and a note where the views chose them:
 /// [`DEFAULT_OBJECT_SCHEDULE`] where their background is flat (`flat_background`: renders
 /// of an object; twice the steps of half as many views took 0.55× the time within ±0.3 dB
 /// at 100×100 and gained at 400×400, `docs/fitting.md`, "Steps");
@@ -926,12 +955,15 @@ pub fn background_defaults(train: &[View], background: Option<[f64; 3]>) -> Back
 /// above [`DEFAULT_DENSE_VIEW_SPACING`]), whose held-out photos peak early; else
 /// [`DEFAULT_PHOTO_SCHEDULE`] (photos lost with the objects' schedule).
 #[must_use]
-pub fn alpha_schedule(flat_background: bool, train: &[View]) -> (AlphaSchedule, Option<String>) {
+pub fn alpha_schedule(
+    flat_background: bool,
+    sparse: Option<f64>,
+) -> (AlphaSchedule, Option<String>) {
     if flat_background {
         return (DEFAULT_OBJECT_SCHEDULE, None);
     }
     let photos = DEFAULT_PHOTO_SCHEDULE;
-    match sparse_spacing(train, DEFAULT_DENSE_VIEW_SPACING) {
+    match sparse {
         Some(spacing) => {
             let sparse = DEFAULT_SPARSE_PHOTO_SCHEDULE;
             let note = format!(
@@ -1315,8 +1347,9 @@ mod tests {
     /// their spacing.
     #[test]
     fn sparse_still_photos_take_the_short_schedule() {
+        let spacing = |views: &[View]| sparse_spacing(views, DEFAULT_DENSE_VIEW_SPACING);
         let sparse = views_apart(9.0, 48, 32);
-        let (schedule, note) = alpha_schedule(false, &sparse);
+        let (schedule, note) = alpha_schedule(false, spacing(&sparse));
         assert_eq!(schedule, DEFAULT_SPARSE_PHOTO_SCHEDULE);
         assert!(schedule.steps < DEFAULT_ALPHA.steps);
         let note = note.expect("a note on the sparse schedule");
@@ -1327,15 +1360,15 @@ mod tests {
         let photos = DEFAULT_PHOTO_SCHEDULE;
         assert_eq!(photos.steps, DEFAULT_ALPHA.steps);
         assert_eq!(
-            alpha_schedule(false, &views_apart(1.0, 48, 32)),
+            alpha_schedule(false, spacing(&views_apart(1.0, 48, 32))),
             (photos, None)
         );
         let mut video = sparse.clone();
         video[1].time = 0.5;
-        assert_eq!(sparse_spacing(&video, DEFAULT_DENSE_VIEW_SPACING), None);
-        assert_eq!(alpha_schedule(false, &video), (photos, None));
+        assert_eq!(spacing(&video), None);
+        assert_eq!(alpha_schedule(false, spacing(&video)), (photos, None));
         assert_eq!(
-            alpha_schedule(true, &sparse),
+            alpha_schedule(true, spacing(&sparse)),
             (DEFAULT_OBJECT_SCHEDULE, None)
         );
     }

@@ -529,13 +529,14 @@ impl FitSettings {
     /// gave no step count ([`alpha_schedule`]), and every chosen setting that the data
     /// leaves without effect refused by name: `early_stop` without held-out views, a
     /// `window` that cuts no training view, `prune_rounds` where the data's pruning share
-    /// is 0.
+    /// is 0. Also whether the training views are still photos from sparse views (for the
+    /// time-left estimate, [`ReadyFit::of_sparse_photos`]).
     fn alpha_options_for(
         &self,
         options: AlphaFitOptions,
         dataset: &Dataset,
         origin: &str,
-    ) -> Result<(AlphaFitOptions, Vec<String>)> {
+    ) -> Result<(AlphaFitOptions, Vec<String>, bool)> {
         if matches!(self.early_stop, Some(Some(_)))
             && dataset.val.is_empty()
             && dataset.test.is_empty()
@@ -566,7 +567,8 @@ impl FitSettings {
         let (steps, densify_every, batch_size) = match self.steps {
             Some(_) => (options.steps, options.densify_every, options.batch_size),
             None => {
-                let (schedule, note) = alpha_schedule(by_background.flat, &dataset.train);
+                let (schedule, note) =
+                    alpha_schedule(by_background.flat, by_background.sparse_spacing);
                 notes.extend(note);
                 (
                     schedule.steps,
@@ -586,7 +588,7 @@ impl FitSettings {
             batch_size,
             ..options
         };
-        Ok((options, notes))
+        Ok((options, notes, by_background.sparse_spacing.is_some()))
     }
 
     /// The notes on what photos (training views whose background is not flat) change in
@@ -625,8 +627,10 @@ impl FitSettings {
             Blend::Alpha => {
                 let options = self.alpha_options(why)?;
                 self.check_start(blend, &init, init_name)?;
-                let (options, notes) = self.alpha_options_for(options, dataset, origin)?;
-                let mut ready = prepare_alpha(&options, init, dataset, self.background, origin)?;
+                let (options, notes, sparse_photos) =
+                    self.alpha_options_for(options, dataset, origin)?;
+                let mut ready = prepare_alpha(&options, init, dataset, self.background, origin)?
+                    .of_sparse_photos(sparse_photos);
                 ready.notes.extend(notes);
                 Ok(ready.record_data(dataset))
             }

@@ -1130,7 +1130,9 @@ fn on_a_checkerboard(mut views: Vec<splat4d::model::View>) -> Vec<splat4d::model
 /// Still photos from sparse views (the occluding data's cameras at one time, over a
 /// textured background) are planned with the sparse photos' schedule and its note; with
 /// a step count given, that count and no note; the same cameras at several times (a
-/// video) keep the photos' default.
+/// video) keep the photos' default. Still photos from sparse views, whatever their steps,
+/// get a time-left estimate that prices growth dearer than the model's until it is timed
+/// (more time left after three steps of 10 ms at 100 kernels).
 #[test]
 fn sparse_still_photos_are_planned_with_fewer_steps() {
     use splat4d::fit::plan::{
@@ -1138,6 +1140,8 @@ fn sparse_still_photos_are_planned_with_fewer_steps() {
         view_spacing_degrees,
     };
     use splat4d::fit::settings::FitSettings;
+    use splat4d::fit::time_left::TimeLeft;
+    use splat4d::fit::train::StepRecord;
     let (dataset, _) = occluding_dataset(&occluding_scene());
     let first = dataset.train[0].time;
     let still: Vec<_> = dataset
@@ -1162,21 +1166,46 @@ fn sparse_still_photos_are_planned_with_fewer_steps() {
             DEFAULT_SPARSE_PHOTO_SCHEDULE.steps
         );
         let note = ready.notes.iter().any(|note| note.starts_with(&says));
-        (ready.training.steps, ready.training.batch_size, note)
+        let image = &photos.train[0].image;
+        let mut plain = TimeLeft::new(&ready.training, [image.width, image.height]);
+        let mut planned = ready.time_left(&photos.train);
+        for step in 1..=3 {
+            let record = StepRecord {
+                step,
+                seconds: 0.01 * step as f64,
+                train_loss: 0.0,
+                heldout_psnr: None,
+                kernels: 100,
+                pairs: 0,
+                downscale: 1,
+            };
+            plain.record(&record);
+            planned.record(&record);
+        }
+        let dearer = planned.seconds_left().unwrap() > plain.seconds_left().unwrap();
+        (
+            ready.training.steps,
+            ready.training.batch_size,
+            note,
+            dearer,
+        )
     };
     let sparse = DEFAULT_SPARSE_PHOTO_SCHEDULE;
     assert_eq!(
         plan(FitSettings::default(), still.clone()),
-        (sparse.steps, sparse.batch_size, true)
+        (sparse.steps, sparse.batch_size, true, true)
     );
     let given = FitSettings {
         steps: Some(300),
         ..Default::default()
     };
-    assert_eq!(plan(given, still), (300, DEFAULT_ALPHA.batch_size, false));
+    assert_eq!(
+        plan(given, still),
+        (300, DEFAULT_ALPHA.batch_size, false, true)
+    );
     assert_eq!(
         plan(FitSettings::default(), dataset.train.clone()),
-        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.batch_size, false)
+        (DEFAULT_ALPHA.steps, DEFAULT_ALPHA.batch_size, false, false)
     );
 }
 
@@ -1201,6 +1230,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
             prune_fraction: DEFAULT_PRUNE_FRACTION,
             loss: DEFAULT_LOSS,
             kernel_budget: Some(DEFAULT_OBJECT_KERNEL_BUDGET),
+            sparse_spacing: None,
         }
     );
     // Over the flat background a chosen `dssim_weight` weighs the default 3DGS loss.
@@ -1230,6 +1260,7 @@ fn the_default_pruning_share_and_loss_follow_the_background() {
             prune_fraction: 0.0,
             loss: DEFAULT_PHOTO_LOSS,
             kernel_budget: Some(DEFAULT_PHOTO_KERNEL_BUDGET),
+            sparse_spacing: None,
         }
     );
     assert_ne!(DEFAULT_PHOTO_LOSS.name(), DEFAULT_LOSS.name());
@@ -1310,7 +1341,11 @@ fn the_schedule_follows_the_background_when_no_step_count_is_given() {
         (ready.training.steps, rules.every, ready.training.batch_size)
     };
     let object = DEFAULT_OBJECT_SCHEDULE;
-    assert_eq!(alpha_schedule(true, &dataset.train), (object, None));
+    let spacing = splat4d::fit::plan::sparse_spacing(
+        &dataset.train,
+        splat4d::fit::defaults::DEFAULT_DENSE_VIEW_SPACING,
+    );
+    assert_eq!(alpha_schedule(true, spacing), (object, None));
     assert_eq!(
         object.steps / object.densify_every,
         DEFAULT_ALPHA.steps / DEFAULT_ALPHA.densify_every
@@ -1339,7 +1374,7 @@ fn the_schedule_follows_the_background_when_no_step_count_is_given() {
     assert_eq!(schedule(given_period_and_batch), (object.steps, 50, 3));
     // Photos (a background that is not flat) from dense views keep the default's schedule
     // (the occluding data's views are a video's, never judged sparse).
-    let (photos, note) = alpha_schedule(false, &dataset.train);
+    let (photos, note) = alpha_schedule(false, spacing);
     assert_eq!(note, None);
     assert_eq!(
         (photos.steps, photos.densify_every, photos.batch_size),

@@ -254,19 +254,14 @@ impl DensityRules {
             if rules.motion_after_time_splits.is_some() || rules.motion_when_turning.is_some())
     }
 
-    /// The most the kernel count can grow in one step, as a factor: a round adds at most
-    /// its largest share of the kernels, `(1 + share)^(1/every)` a step (1 without rounds).
+    /// The largest share of the kernels one round may add (0 without rounds).
     #[must_use]
-    pub fn max_growth_per_step(&self) -> f64 {
+    pub fn max_round_share(&self) -> f64 {
         let (share, every) = match self {
             DensityRules::Additive(rules) => (rules.max_growth, rules.every),
             DensityRules::Alpha(rules) => (rules.max_share(), rules.every),
         };
-        if every == 0 {
-            1.0
-        } else {
-            (1.0 + share.max(0.0)).powf(1.0 / every as f64)
-        }
+        if every == 0 { 0.0 } else { share.max(0.0) }
     }
 
     /// The most kernels the rules may reach.
