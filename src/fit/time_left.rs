@@ -35,15 +35,16 @@
 //! rounds grew it by (their geometric mean over the rounds run in the window, at least the
 //! last round; never down: the pruning early in a fit is followed by growth), under alpha
 //! rules averaged with the share they add (additive rules grow only when the loss stalls,
-//! so their recent rounds are all there is). Rounds, not steps: the count grows geometrically at the
-//! rounds, and the recent growth per step, extrapolated, missed by a round whenever the
-//! window held one round fewer than its share of steps (35–44 % short between 10 and 13 %
-//! of three recorded fits, between the points every 5 % where they had been checked; a
-//! straight line fell 42–46 % short on a real capture whose budget grew it 20-fold). The
-//! rules' share weighs in because a round's net growth rises towards it as the start's
-//! transparent kernels are pruned away (the D-NeRF-like proxy with the objects' budget
-//! grew 6.6 and 8.5 % at its first two rounds, 10–11.6 % at the next six, the rules' 11.83 %;
-//! the recent share alone left it 30 % short at a tenth). Either way it grows until the last step at
+//! so their recent rounds are all there is). Rounds, not steps: the count grows
+//! geometrically at the rounds, and the recent growth per step, extrapolated, missed by a
+//! round whenever the window held one round fewer than its share of steps (38–44 % short
+//! between 10 and 13 % of three recorded fits, between the points every 5 % where they had
+//! been checked; a straight line fell 42–46 % short on a real capture whose budget grew it
+//! 20-fold). The alpha rules' share weighs in because a round's net growth rises towards it
+//! as the start's transparent kernels are pruned away (the D-NeRF-like proxy with the
+//! objects' budget grew 6.6 and 8.5 % at its first two rounds, 10–11.6 % at the next six,
+//! the rules' 11.83 %; the recent share alone left it 30 % short at a tenth, the last
+//! round's alone the `fox` 35 % short at 35 %). Either way it grows until the last step at
 //! which the density rules may add kernels (never beyond their budget), and is held after it
 //! (times the share the pruning by score keeps, [`crate::fit::density::prune`], while that
 //! is still to come):
