@@ -4,13 +4,13 @@
 //!
 //! `cargo run --release -p splat4d-benches --example time_left -- LOG.jsonl WIDTHxHEIGHT
 //! [--loss mse|l1-dssim] [--window N|off] [--max-growth G] [--prune-fraction F]
-//! [--densify-every N] [--growth-target K] [--max-kernels M] [--sparse-photos]` (`G` the growth a round the fit
-//! took, or with `--growth-target` the largest it could take; `K` the kernels its budget grew
-//! towards: the note `kernel budget: growing towards K kernels … by at most G % …` gives
-//! both; `M` the count growth stopped at, as the note `sparse views: … growth stops at M
-//! kernels` gives it, and `--sparse-photos` the estimate such a fit makes,
-//! [`splat4d::fit::time_left::SPARSE_PHOTO_GROWTH_EXCESS`]; photos take `--prune-fraction
-//! 0`; renders of an object with the default 12 000 steps `--densify-every 200`)
+//! [--densify-every N] [--growth-target K] [--max-kernels M] [--sparse-photos]` (`G` the
+//! growth a round the fit took, or with `--growth-target` the largest it could take; `K` the
+//! kernels its budget grew towards: the note `kernel budget: growing towards K kernels … by
+//! at most G % …` gives both; `M` the count growth stopped at, as the note `sparse views: …
+//! growth stops at M kernels` gives it, and `--sparse-photos` the estimate such a fit makes,
+//! `TimeLeft::for_sparse_photos`; photos take `--prune-fraction 0`; renders of an object
+//! with the default 12 000 steps `--densify-every 200`)
 //!
 //! The run's steps are the log's; its coarse stages are read from the log's `downscale`
 //! column; `WIDTHxHEIGHT` is the first training view's size at full size.
@@ -20,7 +20,7 @@ use splat4d::fit::defaults::{DEFAULT_ALPHA, DEFAULT_DSSIM_WEIGHT};
 use splat4d::fit::density::{DensityRules, GrowthTarget};
 use splat4d::fit::init::SpaceTimeBox;
 use splat4d::fit::ssim::L1Dssim;
-use splat4d::fit::time_left::{SPARSE_PHOTO_GROWTH_EXCESS, TimeLeft, replay};
+use splat4d::fit::time_left::{TimeLeft, replay};
 use splat4d::fit::train::{StepRecord, TrainingLoss};
 
 /// Every step record of a `fit --log` file.
@@ -125,12 +125,7 @@ fn main() {
     }
     training.coarse = stages(&records);
     let fractions: Vec<f64> = (2..=18).map(|i| f64::from(i) * 0.05).collect();
-    let estimate = TimeLeft::new(&training, view_size);
-    let estimate = if sparse_photos {
-        estimate.expecting_dearer_growth(SPARSE_PHOTO_GROWTH_EXCESS)
-    } else {
-        estimate
-    };
+    let estimate = TimeLeft::new(&training, view_size).for_sparse_photos(sparse_photos);
     let points = replay(estimate, &records, &fractions);
     // A straight line through the time so far, for comparison.
     let line_error = |steps: usize, truth: f64| {

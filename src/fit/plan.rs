@@ -44,7 +44,7 @@ use crate::fit::hull::{HULL_GRID, flat_background, is_foreground, visual_hull};
 use crate::fit::init::{SpaceTimeBox, box_from_cameras, centre_scene, random_scene};
 use crate::fit::rig_start::{find_rig, rig_alpha_scene, rig_bounds};
 use crate::fit::stereo::plane_sweep;
-use crate::fit::time_left::{SPARSE_PHOTO_GROWTH_EXCESS, TimeLeft};
+use crate::fit::time_left::TimeLeft;
 use crate::fit::train::{StepRecord, Training, TrainingLoss, fit};
 use crate::model::{
     Blend, Camera, Dataset, Error, Result, Scene, Up, View, check_non_negative_setting,
@@ -469,7 +469,7 @@ impl ReadyFit {
 
     /// This fit, its training views still photos from sparse views ([`sparse_spacing`])
     /// when `sparse` is true: its time-left estimate then expects a step's time to grow
-    /// with the kernels as such fits' did ([`SPARSE_PHOTO_GROWTH_EXCESS`]) until it has
+    /// with the kernels as such fits' did ([`TimeLeft::for_sparse_photos`]) until it has
     /// timed it.
     #[must_use]
     pub fn of_sparse_photos(self, sparse: bool) -> Self {
@@ -521,12 +521,7 @@ impl ReadyFit {
         let size = train
             .first()
             .map_or([1, 1], |v| [v.image.width, v.image.height]);
-        let estimate = TimeLeft::new(&self.training, size);
-        if self.sparse_photos {
-            estimate.expecting_dearer_growth(SPARSE_PHOTO_GROWTH_EXCESS)
-        } else {
-            estimate
-        }
+        TimeLeft::new(&self.training, size).for_sparse_photos(self.sparse_photos)
     }
 
     /// Runs the fit ([`fit`]) on `train`, evaluating on `heldout`; `scene` is then the

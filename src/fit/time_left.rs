@@ -111,7 +111,7 @@ const KERNEL_COUNT_REFERENCE: f64 = 10_000.0;
 const MAX_EXCESS_ELASTICITY: f64 = 0.8;
 
 /// The exponent `e` at which the growth ahead of a fit on still photos from sparse views is
-/// priced until its own steps have timed it ([`TimeLeft::expecting_dearer_growth`]): the
+/// priced until its own steps have timed it ([`TimeLeft::for_sparse_photos`]): the
 /// most the estimate allows, as the four recorded sparse fits needed (at 0.6 the mouse's was
 /// 35 % short at a tenth, at 0.4 44 %; see the module docs).
 pub const SPARSE_PHOTO_GROWTH_EXCESS: f64 = MAX_EXCESS_ELASTICITY;
@@ -130,9 +130,9 @@ pub struct TimeLeft {
     max_kernels: usize,
     /// The largest share of the kernels a density round may add.
     max_round_share: f64,
-    /// The share of the visible kernels alpha rules without a target add each round; `None`
-    /// for additive rules, whose rounds grow only when the loss stalls.
-    alpha_round_share: Option<f64>,
+    /// Whether each round adds the rules' share of the visible kernels (alpha rules; the
+    /// additive rules' rounds grow only when the loss stalls).
+    rounds_add_their_share: bool,
     /// Alpha rules that grow towards a kernel count: the count is then grown as their
     /// rounds ([`TimeLeft::rounds`]) will grow it.
     towards_target: Option<AlphaRules>,
@@ -149,7 +149,7 @@ pub struct TimeLeft {
     /// and those ahead grow the count towards a target.
     rounds: Vec<usize>,
     /// The exponent `e` of the growth ahead before the fit's own steps have timed it
-    /// ([`TimeLeft::expecting_dearer_growth`]; 0: the model's).
+    /// ([`TimeLeft::for_sparse_photos`]; 0: the model's).
     untimed_excess: f64,
     /// Each step so far.
     history: Vec<Past>,
@@ -185,10 +185,7 @@ impl TimeLeft {
                 .density
                 .as_ref()
                 .map_or(0.0, DensityRules::max_round_share),
-            alpha_round_share: match training.density {
-                Some(DensityRules::Alpha(rules)) => Some(rules.max_share()),
-                _ => None,
-            },
+            rounds_add_their_share: matches!(training.density, Some(DensityRules::Alpha(_))),
             towards_target: match training.density {
                 Some(DensityRules::Alpha(rules)) if rules.growth_target.is_some() => Some(rules),
                 _ => None,
@@ -212,14 +209,18 @@ impl TimeLeft {
         }
     }
 
-    /// This estimate for a fit whose steps are known to grow dearer with the kernels than
-    /// the model has it (still photos from sparse views): until two intervals between
-    /// rounds are timed, the growth ahead is priced as if timed at `exponent` (see the
-    /// module docs), at most 0.8.
+    /// This estimate for a fit on still photos from sparse views when `sparse` is true,
+    /// whose steps grow dearer with the kernels than the model has it: until two intervals
+    /// between rounds are timed, the growth ahead is priced at
+    /// [`SPARSE_PHOTO_GROWTH_EXCESS`] (see the module docs).
     #[must_use]
-    pub fn expecting_dearer_growth(self, exponent: f64) -> Self {
+    pub fn for_sparse_photos(self, sparse: bool) -> Self {
         TimeLeft {
-            untimed_excess: exponent.clamp(0.0, MAX_EXCESS_ELASTICITY),
+            untimed_excess: if sparse {
+                SPARSE_PHOTO_GROWTH_EXCESS
+            } else {
+                0.0
+            },
             ..self
         }
     }
@@ -308,14 +309,15 @@ impl TimeLeft {
     /// (additive). Rounds, not steps: a window of steps holds one round more or less than
     /// its share of them.
     fn recent_round_share(&self, now: usize, window: usize) -> f64 {
-        let done: Vec<usize> = self
-            .rounds
-            .iter()
-            .copied()
-            .filter(|&step| step >= 2 && step <= now)
-            .collect();
+        let rules = if self.rounds_add_their_share {
+            self.max_round_share
+        } else {
+            0.0
+        };
+        let done = &self.rounds[self.rounds.partition_point(|&step| step < 2)
+            ..self.rounds.partition_point(|&step| step <= now)];
         let Some(&last) = done.last() else {
-            return self.alpha_round_share.unwrap_or(0.0);
+            return rules;
         };
         let recent = &done[done.partition_point(|&step| step + window <= now)..];
         let first = recent.first().copied().unwrap_or(last);
@@ -323,12 +325,15 @@ impl TimeLeft {
         let before = self.history[first - 2].kernels as f64;
         let after = self.history[last - 1].kernels as f64;
         if before <= 0.0 {
-            return self.alpha_round_share.unwrap_or(0.0);
+            return rules;
         }
         let measured =
             ((after / before).powf(1.0 / rounds as f64) - 1.0).clamp(0.0, self.max_round_share);
-        self.alpha_round_share
-            .map_or(measured, |rules| 0.5 * (measured + rules))
+        if self.rounds_add_their_share {
+            0.5 * (measured + rules)
+        } else {
+            measured
+        }
     }
 
     /// Seconds per unit of [`TimeLeft::step_cost`] over the last `window` steps: the median
@@ -963,9 +968,7 @@ mod tests {
             let training = default_training(records, stages, loss, &growth);
             let estimate = TimeLeft::new(&training, size);
             assert_estimated_within_thirty_percent(
-                estimate
-                    .clone()
-                    .expecting_dearer_growth(SPARSE_PHOTO_GROWTH_EXCESS),
+                estimate.clone().for_sparse_photos(true),
                 size,
                 records,
                 0.1,
